@@ -1,0 +1,218 @@
+"""Every parameter of gpsdr with its default, documented in one place.
+
+The defaults are the TOML text below: it is what ``gpsdr fuse --print-config``
+starts from, and a user's ``--config PARAMS.toml`` overrides any subset of it.
+Units are in the names (see :mod:`gpsdr_cli.conventions`).  Defaults marked
+"(benchmark)" were chosen by ``benchmarks/accuracy.py``.
+
+``Params`` is a plain ``dict[str, dict[str, value]]`` (section -> key -> value),
+validated against the defaults: unknown sections or keys and wrong types are a
+:class:`~gpsdr_cli.errors.ConfigError`, never silently ignored.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from .errors import ConfigError
+
+Params = dict[str, dict[str, Any]]
+
+DEFAULTS_TOML = """\
+[filter]
+name = "aekf"            # ekf | aekf | fkf | fafkf
+smooth = false           # fixed-interval RTS smoother over the forward pass
+
+[frame]
+epsg = 0                 # 0: transverse Mercator centred on the first fix; else a projected EPSG code
+origin_lat_deg = nan     # DR-only drives (no GNSS): start position, degrees
+origin_lon_deg = nan
+initial_heading_deg = nan  # DR-only drives: start heading, clockwise from north
+
+[time]
+gnss_offset_s = 0.0      # added to every GNSS stamp; a positive value compensates receiver latency
+gyro_offset_s = 0.0      # added to every gyro stamp
+odo_offset_s = 0.0       # added to every odometer stamp
+outage_gap_s = 1.5       # no valid fix for longer than max(this, 2.5 x median fix interval) = outage
+
+[gnss]
+uere_m = 2.5             # base sigma = HDOP x UERE when the receiver gives no GST/covariance (benchmark)
+sigma_default_m = 5.0    # base sigma when neither GST, covariance nor HDOP is known
+sigma_min_m = 0.05       # floor on any base sigma (RTK receivers report centimetres)
+min_fix_quality = 1      # GGA quality >= this is used ...
+use_dr_fixes = false     # ... except quality 6 (the receiver's own dead reckoning) unless true
+pdop_mode = "regimes"    # regimes (seed 000's three) | continuous (log k interpolated over PDOP)
+pdop_good = 3.0          # PDOP < pdop_good: good
+pdop_poor = 6.0          # PDOP >= pdop_poor: poor; in between: medium
+k_good = 1.0             # R scale factor k1 = k2 per regime (seed 000, rescaled: see ALGORITHMS.md 1)
+k_medium = 3.0
+k_poor = 10.0
+ka_good = 1.0            # Q scale factor K_a per regime (seed 000)
+ka_medium = 0.9
+ka_poor = 0.003
+gate = true              # chi-square innovation gate on GNSS fixes
+gate_prob = 0.9999       # gate at this chi-square(2) quantile
+gate_reset_s = 10.0      # after this long with every fix rejected, accept again (no lock-out)
+
+[gyro]
+t_column = "t"
+column = "yaw_rate"
+units = "rad/s"          # rad/s | deg/s
+sign = "ccw"             # ccw: positive counter-clockwise seen from above (REP-103) | cw
+time = "posix"           # posix: UTC POSIX seconds | relative: seconds + start_posix_s
+start_posix_s = 0.0
+noise_sd_radps = 0.0017453  # 0.1 deg/s per sample (seed 000)
+bias_tau_s = 300.0       # Gauss-Markov correlation time of the gyro drift
+bias_sd_radps = 0.005    # steady-state sigma of the drift
+bias_init_sd_radps = 0.1 # initial sigma of the drift (covers a 4 deg/s bias)
+
+[odo]
+t_column = "t"
+kind = "auto"            # auto | speed (m/s) | distance (m since the previous row) | ticks (cumulative)
+column = ""              # empty: the column named like kind
+ticks_per_m = 0.0        # required for kind = ticks
+time = "posix"
+start_posix_s = 0.0
+noise_sd_mps = 0.1       # speed sigma; distance sigma over T is noise_sd_mps x T (seed 000: 0.1)
+scale_init_sd = 0.1      # initial sigma of the scale factor k_s (covers a 5 % error)
+scale_rw_sd = 0.0001     # random-walk sigma of k_s per sqrt(s)
+
+[standstill]
+enabled = true           # zero-velocity update and held position while stopped (seed 004)
+speed_mps = 0.05         # odometer speed below this = stopped
+zupt_sd_mps = 0.01       # sigma of the zero-velocity pseudo-measurement
+omega_min_speed_mps = 0.5  # below this the yaw-rate update is skipped (singular at standstill)
+
+[aekf]
+tau_a_s = 20.0           # correlation time of the manoeuvre acceleration (seed 000)
+a_max_mps2 = 3.0         # largest positive acceleration
+a_min_mps2 = 3.0         # magnitude of the most negative acceleration
+sigma_a_mps2 = 0.5       # fixed acceleration sigma (ekf), and sigma when a_hat ~ 0 (floor) in aekf
+init_pos_sd_m = 10.0
+init_vel_sd_mps = 5.0
+init_acc_sd_mps2 = 1.0
+
+[adaptive]
+innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)
+innovation_c = 0.9
+fading = false           # fading memory P(k|k-1) = lambda Phi P Phi^T + Q
+fading_lambda = 1.01
+sage_husa = false        # Sage-Husa estimation of the GNSS R
+sage_husa_b = 0.98       # forgetting factor of Sage-Husa
+
+[fkf]
+mode = "nr"              # nr: no reset (seed 002) | fr: fusion-reset (Carlson 1990)
+gnss_err_tau_s = 60.0    # correlation time of the GNSS position error states eps_e, eps_n
+gnss_err_sd_m = 1.0      # steady-state sigma of eps_e, eps_n
+heading_sd_rad = 0.01    # sigma of the gyro-integrated heading measurement
+heading_err_rw_sd = 0.001  # random walk of q_w, rad per sqrt(s)
+dist_err_rw_sd = 0.01    # random walk of q_s, m per sqrt(s)
+
+[fafkf]
+window = 20              # M residuals in the covariance-matching window
+r_min_factor = 0.1       # R_jj clamped to [r_min_factor, r_max_factor] x its initial value
+r_max_factor = 100.0
+weights = "block"        # scalar (seed 002) | block (per-state-block weights)
+normalisation = "share"  # share: value / sum over both filters | log
+"""
+
+
+def _parse_defaults() -> Params:
+    # tomllib does read nan; keep them as floats.
+    return tomllib.loads(DEFAULTS_TOML)
+
+
+DEFAULTS: Params = _parse_defaults()
+
+
+def defaults() -> Params:
+    """A fresh copy of the defaults."""
+    return copy.deepcopy(DEFAULTS)
+
+
+def merge(base: Params, overrides: dict[str, Any], source: str = "parameters") -> Params:
+    """Return ``base`` updated by ``overrides``, checking sections, keys and types."""
+    out = copy.deepcopy(base)
+    for section, values in overrides.items():
+        if section not in out:
+            raise ConfigError(f"{source}: unknown section [{section}]; "
+                              f"known: {', '.join(sorted(out))}")
+        if not isinstance(values, dict):
+            raise ConfigError(f"{source}: [{section}] must be a table of key = value")
+        for key, value in values.items():
+            if key not in out[section]:
+                raise ConfigError(f"{source}: unknown parameter {section}.{key}; "
+                                  f"known in [{section}]: {', '.join(sorted(out[section]))}")
+            out[section][key] = _coerce(out[section][key], value, f"{source}: {section}.{key}")
+    return out
+
+
+def _coerce(default: Any, value: Any, where: str) -> Any:
+    if isinstance(default, bool):
+        if isinstance(value, bool):
+            return value
+    elif isinstance(default, int):
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+    elif isinstance(default, float):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+    elif isinstance(default, str):
+        if isinstance(value, str):
+            return value
+    raise ConfigError(f"{where} = {value!r}: expected {type(default).__name__}")
+
+
+def load(path: str | Path | None, base: Params | None = None) -> Params:
+    """Defaults (or ``base``) overridden by a TOML file."""
+    params = defaults() if base is None else base
+    if path is None:
+        return params
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read the parameter file: {err.strerror}") from err
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not UTF-8 text: {err}") from err
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: invalid TOML: {err}") from err
+    return merge(params, data, str(path))
+
+
+def set_value(params: Params, dotted: str, value: Any) -> Params:
+    """Set ``section.key`` (from a command-line option) with the same checks."""
+    section, _, key = dotted.partition(".")
+    return merge(params, {section: {key: value}}, "option")
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return str(value)
+
+
+def to_toml(params: Params) -> str:
+    """The effective parameters as TOML (``--print-config``); loads back to the same values."""
+    lines: list[str] = []
+    for section, values in params.items():
+        lines.append(f"[{section}]")
+        lines.extend(f"{key} = {_fmt(v)}" for key, v in values.items())
+        lines.append("")
+    return "\n".join(lines)
+
+
+def flat(params: Params) -> dict[str, str]:
+    """``section.key -> value`` strings, for Parquet file metadata."""
+    return {f"{s}.{k}": _fmt(v) for s, vals in params.items() for k, v in vals.items()}

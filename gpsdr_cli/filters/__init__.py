@@ -1,0 +1,48 @@
+"""The filters, by registered name.
+
+A filter is a module that decorates its ``run(epochs, params) -> FilterResult``
+with ``@register("name")``; the per-epoch loop lives in a compiled kernel over
+arrays.  ``get(name)`` imports the filter modules lazily (numba is slow to
+import, and ``gpsdr --help`` must stay fast).
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+
+from ..errors import UsageError
+from .base import FilterResult
+
+RunFn = Callable[..., FilterResult]
+
+_REGISTRY: dict[str, RunFn] = {}
+
+#: name -> module that registers it (imported on first use)
+MODULES: dict[str, str] = {
+    "ekf": "gpsdr_cli.filters.ekf",
+    "aekf": "gpsdr_cli.filters.aekf",
+    "fkf": "gpsdr_cli.filters.fkf",
+    "fafkf": "gpsdr_cli.filters.fafkf",
+}
+
+NAMES: tuple[str, ...] = tuple(MODULES)
+
+
+def register(name: str) -> Callable[[RunFn], RunFn]:
+    def deco(fn: RunFn) -> RunFn:
+        _REGISTRY[name] = fn
+        return fn
+    return deco
+
+
+def get(name: str) -> RunFn:
+    """The ``run`` function of filter ``name``."""
+    if name not in MODULES:
+        raise UsageError(f"unknown filter {name!r}; choose one of {', '.join(NAMES)}")
+    if name not in _REGISTRY:
+        importlib.import_module(MODULES[name])
+    return _REGISTRY[name]
+
+
+__all__ = ["FilterResult", "NAMES", "get", "register"]
