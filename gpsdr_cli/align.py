@@ -121,8 +121,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
             e = n = np.full(len(keep), np.nan)
         usable &= np.isfinite(e) & np.isfinite(n)
         sd_e, sd_n = base_sigma(g.sigma_e_m[keep], g.sigma_n_m[keep], g.hdop[keep], params)
-        g_rec = dict(usable=usable, e=e, n=n, sd_e=sd_e, sd_n=sd_n, pdop=g.pdop[keep],
-                     speed=g.speed_mps[keep], course=np.deg2rad(g.course_deg[keep]))
+        g_rec = {"usable": usable, "e": e, "n": n, "sd_e": sd_e, "sd_n": sd_n, "pdop": g.pdop[keep],
+                     "speed": g.speed_mps[keep], "course": np.deg2rad(g.course_deg[keep])}
         parts.append(gnss_t)
 
     gyro_t = np.zeros(0, np.int64)

@@ -161,9 +161,8 @@ def _coerce(default: Any, value: Any, where: str) -> Any:
     elif isinstance(default, float):
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)
-    elif isinstance(default, str):
-        if isinstance(value, str):
-            return value
+    elif isinstance(default, str) and isinstance(value, str):
+        return value
     raise ConfigError(f"{where} = {value!r}: expected {type(default).__name__}")
 
 

@@ -45,4 +45,4 @@ def get(name: str) -> RunFn:
     return _REGISTRY[name]
 
 
-__all__ = ["FilterResult", "NAMES", "get", "register"]
+__all__ = ["NAMES", "FilterResult", "get", "register"]
