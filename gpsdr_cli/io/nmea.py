@@ -1,0 +1,765 @@
+"""NMEA 0183 reader: GGA, GSA, RMC, VTG, GST and ZDA from any talker -> :class:`GnssFixes`.
+
+Why hand-written instead of pynmea2 / pynmeagps: those parse one sentence at a
+time into Python objects (tens of microseconds per sentence), and they raise or
+silently drop on the oddities real logs carry.  This reader works on the whole
+file at once with numpy (a few microseconds per sentence, see
+``benchmarks/read_nmea.py``):
+
+1. Find every sentence start (``$``, or ``!`` before a letter) anywhere in a
+   line, so logger prefixes, binary bytes before the ``$``, ``$$`` doubled
+   starts and two sentences spliced on one line all work.  A sentence ends at
+   the next start or line end; its checksum is the first ``*hh`` in it.
+2. Verify every checksum at once (``np.bitwise_xor.reduceat``); hex digits
+   upper or lower case.
+3. Classify sentences by their first bytes (``np.unique`` over the addresses),
+   locate the fields of each known type by comma offsets, gather each wanted
+   field of all sentences into one fixed-width bytes array and convert it with
+   one numpy cast; only a column holding a non-number falls back to a
+   per-value loop, which marks that field bad.
+4. Group sentences into receiver epochs: a sentence with a time of day
+   (GGA, RMC, GST, ZDA) whose time differs from the previous timed sentence
+   opens a new epoch; sentences without a time (GSA, VTG) belong to the epoch
+   of the timed sentence before them (the first epoch if none precedes).  One
+   row per epoch that has a GGA or an RMC; within an epoch the last non-empty
+   value of each field wins (so one GSA per constellation merges into one row).
+
+Conventions (see :mod:`gpsdr_cli.conventions`): ``t_ns`` int64 ns UTC;
+lat/lon degrees WGS84 (``ddmm.mmmm`` + hemisphere converted); speeds m/s.
+
+Field choices, documented here once:
+
+- Position, fix quality, satellites, HDOP: GGA.  An epoch without a GGA takes
+  its position from RMC (status ``A``; the NMEA 2.3 mode letter gives the
+  quality: A/blank -> 1, D -> 2, P -> 3, R -> 4, F -> 5, E -> 6, N/M/S -> 0).
+  When a GGA exists its quality wins over the RMC status.
+- No fix (GGA quality 0, RMC status ``V``, empty or ``0,0`` coordinates) gives a
+  row with NaN lat/lon/alt and ``fix_quality`` 0, never zero coordinates.
+- ``alt_m``: ellipsoidal height = GGA altitude above mean sea level + geoid
+  separation (GGA field 11).  When a receiver leaves the separation empty the
+  MSL altitude is kept and ``meta['alt_without_geoid_sep']`` counts those rows.
+- ``pdop``/``vdop`` (and ``hdop`` when GGA has none): GSA, last non-empty of the
+  epoch; the DOPs are the last three fields, before the NMEA 4.1 system id.
+  A GSA reporting fix type 1 (no fix) contributes no DOPs.
+- ``sigma_n_m``/``sigma_e_m``: GST fields 6 and 7 (1-sigma latitude and
+  longitude error, metres).
+- ``speed_mps``/``course_deg``: RMC (status ``A``), else VTG (mode not ``N``);
+  knots * 1852/3600.
+- Date: RMC (``ddmmyy``; years 80-99 read as 19xx) or ZDA, per epoch; epochs
+  between dated ones take the previous date plus midnight rollovers (time of
+  day decreasing by more than 12 h is the next day).  The ``date`` argument is
+  only used when the log has no RMC/ZDA date at all: a date in the log always
+  wins.  Dates before 2000 or in the future (GPS week-rollover bugs) are kept
+  as given and counted in ``meta['warnings']``.
+
+Everything that is skipped is counted by reason in the :class:`SkipReport`
+with the first ``name:line`` where it occurred; ``strict=True`` raises
+:class:`ParseError` (or :class:`ChecksumError`) for the first such line
+instead.  Unknown but well-formed sentences (GSV, proprietary ``$P...``, AIS
+``!AIVDM``, numeric talkers, six-letter addresses) are counted and never fatal.
+"""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+import re
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from gpsdr_cli.errors import ChecksumError, InputError, NoDataError, ParseError
+from gpsdr_cli.io.drive import Drive, GnssFixes, SkipReport, Source
+
+__all__ = ["looks_like_nmea", "parse_nmea", "read_nmea"]
+
+KNOT_MPS = 1852.0 / 3600.0  # 1 international knot in m/s
+_US_PER_DAY = 86_400_000_000
+_HALF_DAY_US = _US_PER_DAY // 2
+
+# kind codes of the sentences this reader uses
+_GGA, _RMC, _GSA, _VTG, _GST, _ZDA = range(6)
+_KNOWN = {b"GGA": _GGA, b"RMC": _RMC, b"GSA": _GSA, b"VTG": _VTG, b"GST": _GST, b"ZDA": _ZDA}
+_TYPE_NAME = {v: k.decode() for k, v in _KNOWN.items()}
+_TIMED = (_GGA, _RMC, _GST, _ZDA)
+
+# hex digit value of each byte, -1 if not a hex digit (upper or lower case)
+_HEX = np.full(256, -1, np.int16)
+for _c in b"0123456789":
+    _HEX[_c] = _c - 48
+for _c in b"ABCDEF":
+    _HEX[_c] = _c - 55
+    _HEX[_c + 32] = _c - 55
+
+#: RMC/GNS mode indicator (NMEA 2.3+) -> GGA-style fix quality.
+_MODE_QUALITY = {b"": 1, b"A": 1, b"D": 2, b"P": 3, b"R": 4, b"F": 5, b"E": 6,
+                 b"N": 0, b"M": 0, b"S": 0}
+
+_MAX_FIELD = 40  # bytes; longer fields are never valid numbers or letters here
+_UTF16_HINT = "UTF-16 encoded; convert to ASCII/UTF-8 with iconv -f UTF-16 -t UTF-8"
+
+
+class _Problems:
+    """Skipped things by reason: count, first byte offset, and whether strict mode raises."""
+
+    def __init__(self) -> None:
+        self.items: dict[str, list] = {}
+
+    def add(self, reason: str, pos: np.ndarray | int, *, fatal: bool = True,
+            exc: type[ParseError] = ParseError, n: int | None = None) -> None:
+        """Count ``n`` (default: one per offset in ``pos``) skips of ``reason``."""
+        pos = np.atleast_1d(np.asarray(pos, dtype=np.int64))
+        if len(pos) == 0:
+            return
+        count = len(pos) if n is None else n
+        first = int(pos.min())
+        item = self.items.get(reason)
+        if item is None:
+            self.items[reason] = [count, first, fatal, exc]
+        else:
+            item[0] += count
+            item[1] = min(item[1], first)
+
+
+class _Lines:
+    """Byte offset -> 1-based line number (LF, CRLF or lone CR line ends)."""
+
+    def __init__(self, arr: np.ndarray) -> None:
+        cr = arr == 13
+        lf = arr == 10
+        lone_cr = cr.copy()
+        lone_cr[:-1] &= ~lf[1:]
+        self.breaks = np.flatnonzero(lf | lone_cr)
+        self.count = len(self.breaks) + int(len(arr) > 0 and arr[-1] not in (10, 13))
+
+    def __call__(self, pos: np.ndarray | int) -> np.ndarray:
+        return np.searchsorted(self.breaks, pos, side="right") + 1
+
+
+# ------------------------------------------------------------------ sniffing and encoding
+_SNIFF = re.compile(rb"[$!]([A-Za-z0-9]{2,12}[^*$!\r\n]*)\*([0-9A-Fa-f]{2})")
+
+
+def _utf16_kind(head: bytes) -> str | None:
+    """'le'/'be' when ``head`` is UTF-16 text (BOM, or NULs interleaved with ASCII)."""
+    if head[:2] == b"\xff\xfe":
+        return "le"
+    if head[:2] == b"\xfe\xff":
+        return "be"
+    sample = np.frombuffer(head[:4096], np.uint8)
+    if len(sample) < 16:
+        return None
+    even, odd = sample[0::2], sample[1::2]
+    n = min(len(even), len(odd))
+    even, odd = even[:n], odd[:n]
+    if np.mean(odd == 0) > 0.4 and np.mean(even == 0) < 0.05:
+        return "le"
+    if np.mean(even == 0) > 0.4 and np.mean(odd == 0) < 0.05:
+        return "be"
+    return None
+
+
+def looks_like_nmea(head: bytes) -> bool:
+    """True when ``head`` (the first bytes of a file) holds NMEA sentences with valid checksums.
+
+    Needs two checksum-valid sentences in the first KB (one if the head is a single
+    short line).  UTF-16 NMEA also answers True, so that :func:`read_nmea` can say
+    how to convert it.
+    """
+    kind = _utf16_kind(head)
+    if kind is not None:
+        head = head[2:] if head[:2] in (b"\xff\xfe", b"\xfe\xff") else head
+        head = head.decode("utf-16-le" if kind == "le" else "utf-16-be",
+                            errors="replace").encode("ascii", errors="replace")
+    head = head[:1024].replace(b"\x00", b"")
+    found = 0
+    for m in _SNIFF.finditer(head):
+        body = m.group(1)
+        ck = 0
+        for b in body:
+            ck ^= b
+        if ck == int(m.group(2), 16):
+            found += 1
+            if found >= 2:
+                return True
+    return found == 1 and head.count(b"$") + head.count(b"!") <= 1
+
+
+def _is_binary(data: bytes) -> bool:
+    """More than 10 % of the first 64 KB are neither printable ASCII nor whitespace."""
+    sample = np.frombuffer(data[:65536], np.uint8)
+    if len(sample) == 0:
+        return False
+    text = ((sample >= 32) & (sample < 127)) | (sample == 9) | (sample == 10) | (sample == 13)
+    return float(np.mean(~text)) > 0.10
+
+
+# ------------------------------------------------------------------ field conversion
+def _num(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bytes field array -> (float64 values, NaN where empty or bad; mask of bad non-empty)."""
+    empty = a == b""
+    try:
+        v = np.where(empty, b"nan", a).astype(np.float64)
+    except ValueError:
+        v = np.full(len(a), np.nan)
+        for i, s in enumerate(a.tolist()):
+            if s:
+                try:
+                    v[i] = float(s)
+                except ValueError:
+                    v[i] = np.inf  # marks bad below
+    bad = ~empty & ~np.isfinite(v)
+    v[bad] = np.nan
+    return v, bad
+
+
+def _int_part_len(a: np.ndarray) -> np.ndarray:
+    dot = np.strings.find(a, b".")
+    return np.where(dot >= 0, dot, np.strings.str_len(a))
+
+
+def _time_of_day_us(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``hhmmss[.sss]`` -> (microseconds of day, -1 where missing/bad; empty mask; bad mask).
+
+    A trailing dot (``222509.``) is accepted; the integer part must have six digits.
+    """
+    v, bad = _num(a)
+    empty = a == b""
+    hh = np.floor(v / 10000.0)
+    mm = np.floor(v / 100.0) - hh * 100.0
+    ss = v - hh * 10000.0 - mm * 100.0
+    ok = (np.isfinite(v) & (_int_part_len(a) == 6) & (v >= 0) & (hh < 24) & (mm < 60)
+          & (ss < 61))
+    bad = bad | (~empty & ~ok)
+    with np.errstate(invalid="ignore"):
+        us = np.where(ok, np.rint((hh * 3600.0 + mm * 60.0) * 1e6 + ss * 1e6), -1.0)
+    return us.astype(np.int64), empty, bad
+
+
+def _days_from_civil(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Days since 1970-01-01 of proleptic Gregorian dates (H. Hinnant's algorithm)."""
+    y = y - (m <= 2)
+    era = y // 400
+    yoe = y - era * 400
+    mp = (m + 9) % 12
+    doy = (153 * mp + 2) // 5 + d - 1
+    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
+    return era * 146097 + doe - 719468
+
+
+def _valid_ymd(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
+    leap = (y % 4 == 0) & ((y % 100 != 0) | (y % 400 == 0))
+    dim = np.array([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31])[np.clip(m, 0, 12)]
+    dim = dim + ((m == 2) & leap)
+    return (m >= 1) & (m <= 12) & (d >= 1) & (d <= dim) & (y >= 1900) & (y <= 2200)
+
+
+def _ymd_days(y: np.ndarray, m: np.ndarray, d: np.ndarray, ok: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """(days since epoch as float, NaN where invalid; mask of invalid among ``ok``)."""
+    yi = np.where(ok, y, 2000).astype(np.int64)
+    mi = np.where(ok, m, 1).astype(np.int64)
+    di = np.where(ok, d, 1).astype(np.int64)
+    valid = ok & _valid_ymd(yi, mi, di)
+    days = np.where(valid, _days_from_civil(yi, mi, di), 0).astype(np.float64)
+    days[~valid] = np.nan
+    return days, ok & ~valid
+
+
+def _rmc_date(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``ddmmyy`` -> (days since epoch, NaN where missing/bad; bad mask)."""
+    v, bad = _num(a)
+    empty = a == b""
+    digits = (np.strings.str_len(a) == 6) & np.strings.isdigit(a)
+    ok = digits & np.isfinite(v)
+    vi = np.where(ok, v, 0).astype(np.int64)
+    yy = vi % 100
+    days, invalid = _ymd_days(np.where(yy < 80, 2000 + yy, 1900 + yy), (vi // 100) % 100,
+                              vi // 10000, ok)
+    return days, bad | (~empty & ~ok) | invalid
+
+
+def _lat_lon(val: np.ndarray, hemi: np.ndarray, pos_letter: bytes, neg_letter: bytes,
+             max_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(d)ddmm.mmmm`` + hemisphere -> (degrees, NaN where empty/bad; empty mask; bad mask)."""
+    v, bad = _num(val)
+    empty = (val == b"") & (hemi == b"")
+    deg = np.floor(v / 100.0)
+    minutes = v - deg * 100.0
+    out = deg + minutes / 60.0
+    sign = np.where(hemi == neg_letter, -1.0, 1.0)
+    ok = (np.isfinite(v) & (v >= 0) & (minutes < 60.0) & (out <= max_deg)
+          & ((hemi == pos_letter) | (hemi == neg_letter)))
+    bad = bad | (~empty & ~ok)
+    return np.where(ok, sign * out, np.nan), empty, bad
+
+
+# ------------------------------------------------------------------ the parser
+def _classify(head: bytes, bang: bool) -> int | str:
+    """Kind code of a sentence from the first bytes of its body, or the skip reason."""
+    addr = head.split(b",", 1)[0]
+    if bang:
+        return "unknown sentence (encapsulated !" + addr[:5].decode("ascii", "replace") + ", e.g. AIS)"
+    if len(addr) == 5 and addr.isalpha() and addr.isupper():
+        talker, typ = addr[:2], addr[2:]
+        kind = _KNOWN.get(typ)
+        if kind is not None and (talker[:1] != b"P" or (talker == b"PQ" and kind == _GSA)):
+            return kind
+        if talker[:1] == b"P":
+            return "unknown sentence (proprietary $P...)"
+        return f"unknown sentence {typ.decode()}"
+    if addr[:1] == b"P" and addr.isalnum():
+        return "unknown sentence (proprietary $P...)"
+    if addr[:2].isdigit():
+        return "unknown sentence (numeric talker)"
+    if len(addr) == 6 and addr.isalpha() and addr.isupper():
+        return "unknown sentence (six-letter address)"
+    label = "".join(chr(c) if 32 < c < 127 else "?" for c in addr[:6])
+    return f"unknown sentence {label!r}"
+
+
+class _Sentences:
+    """The valid sentences of one kind, their fields located by comma offsets (no splitting).
+
+    ``f(k)`` gathers field ``k`` (0 = address) of every sentence into a fixed-width
+    bytes array in one numpy operation; fields longer than ``_MAX_FIELD`` bytes
+    become ``b"?"`` (never a valid value).
+    """
+
+    def __init__(self, arr: np.ndarray, commas: np.ndarray, pos: np.ndarray, s1: np.ndarray,
+                 st: np.ndarray) -> None:
+        self.arr, self.commas, self.pos, self.s1, self.st = arr, commas, pos, s1, st
+        self.n = len(pos)
+        self.c0 = np.searchsorted(commas, s1)
+        self.nf = np.searchsorted(commas, st) - self.c0 + 1  # fields including the address
+
+    def f(self, k: int | np.ndarray) -> np.ndarray:
+        k = np.broadcast_to(np.asarray(k, np.int64), (self.n,))
+        has = (k < self.nf) & (k >= 0)
+        nc = len(self.commas)
+        ci = np.clip(self.c0 + k - 1, 0, max(nc - 1, 0))
+        ce = np.clip(self.c0 + k, 0, max(nc - 1, 0))
+        if nc:
+            a = np.where(k == 0, self.s1, self.commas[ci] + 1)
+            b = np.where(k == self.nf - 1, self.st, self.commas[ce])
+        else:
+            a, b = self.s1, self.st
+        length = np.where(has, b - a, 0)
+        w = int(min(length.max(initial=0), _MAX_FIELD))
+        if w == 0:
+            return np.zeros(self.n, dtype="S1")
+        j = np.arange(w)
+        idx = a[:, None] + j[None, :]
+        g = self.arr[np.minimum(idx, len(self.arr) - 1)]
+        g[j[None, :] >= length[:, None]] = 0
+        out = np.ascontiguousarray(g).view(f"S{w}").ravel()
+        long = length > _MAX_FIELD
+        if long.any():
+            out = out.astype(f"S{max(w, 1)}")
+            out[long] = b"?"
+        return out
+
+
+def _last_per_epoch(out: np.ndarray, epoch: np.ndarray, values: np.ndarray,
+                    use: np.ndarray | None = None) -> None:
+    """out[e] = the last (in file order) value with ``use`` of each epoch ``e``."""
+    m = np.isfinite(values) if use is None else use
+    e, v = epoch[m], values[m]
+    if len(e) == 0:
+        return
+    last = np.r_[e[1:] != e[:-1], True]
+    out[e[last]] = v[last]
+
+
+def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None = None,
+               strict: bool = False) -> tuple[GnssFixes, SkipReport, dict]:
+    """Parse NMEA text (whole file content as bytes).
+
+    Returns fixes (one row per receiver epoch, in file order), the skipped-line
+    report (reasons counted, first ``name:line`` of each) and a meta dict
+    (``sentences``, ``talkers``, ``lines``, ``epochs``, ``dates``, ``date_source``,
+    ``warnings``, ...).  ``date`` is used only when the log holds no RMC/ZDA date.
+    ``strict`` raises :class:`ParseError` at the first bad line instead of skipping it.
+    Raises :class:`InputError` for empty, UTF-16 or binary input and
+    :class:`NoDataError` when no epoch with a time (and a date) can be built.
+    """
+    if len(data) == 0:
+        raise InputError(name, "empty file (expected NMEA 0183 text lines like $GPGGA,...*hh)")
+    if _utf16_kind(data[:4096]) is not None:
+        raise InputError(name, _UTF16_HINT)
+    # NUL padding: drop it (line numbers count line ends only, so they do not move)
+    buf = data.replace(b"\x00", b"") if b"\x00" in data else data
+    if not buf.strip():
+        raise InputError(name, "file holds only NUL bytes or whitespace (expected NMEA 0183 text)")
+    arr = np.frombuffer(buf, np.uint8)
+    n = len(arr)
+    lines = _Lines(arr)
+    probs = _Problems()
+    meta: dict = {"lines": lines.count}
+
+    # ---- 1. sentence candidates: from a start to the next start or line end
+    is_start = arr == 36  # '$'
+    bang = arr == 33  # '!' followed by an upper-case letter (AIS and other encapsulation)
+    if n > 1:
+        nxt = arr[1:]
+        bang[:-1] &= (nxt >= 65) & (nxt <= 90)
+    bang[-1:] = False
+    starts = np.flatnonzero(is_start | bang)
+    eol = np.flatnonzero((arr == 10) | (arr == 13))
+    stars = np.flatnonzero(arr == 42)
+    next_start = np.r_[starts[1:], n]
+    i_eol = np.searchsorted(eol, starts)
+    next_eol = np.r_[eol, n][i_eol]
+    end = np.minimum(next_start, next_eol)
+    i_star = np.searchsorted(stars, starts)
+    star = np.r_[stars, n][i_star]
+    has_ck = star + 3 <= end
+    star_c = np.minimum(star, n - 1)
+    h1 = _HEX[arr[np.minimum(star_c + 1, n - 1)]]
+    h2 = _HEX[arr[np.minimum(star_c + 2, n - 1)]]
+    has_ck &= (h1 >= 0) & (h2 >= 0) & (star > starts + 1)
+
+    doubled = (end == starts + 1) & (next_start == starts + 1)  # '$$': ignore the first
+    meta["doubled_starts"] = int(doubled.sum())
+    no_ck = ~has_ck & ~doubled
+    probs.add("no checksum (truncated sentence)", starts[no_ck])
+
+    # ---- 2. checksums, all at once
+    s1 = starts[has_ck] + 1
+    st = star[has_ck]
+    if len(s1):
+        idx = np.empty(2 * len(s1), np.int64)
+        idx[0::2] = s1
+        idx[1::2] = st
+        xor = np.bitwise_xor.reduceat(arr, idx)[0::2]
+        given = h1[has_ck] * 16 + h2[has_ck]
+        good = xor == given
+    else:
+        good = np.zeros(0, bool)
+    probs.add("bad checksum", starts[has_ck][~good], exc=ChecksumError)
+    ok_start = starts[has_ck][good]
+
+    # lines that hold no sentence start at all but are not blank: free text, JSON, comments
+    line_first = np.r_[0, lines.breaks + 1]
+    line_first = line_first[line_first < n]
+    if len(line_first):
+        nonblank = np.logical_or.reduceat(
+            ~((arr == 32) | (arr == 9) | (arr == 10) | (arr == 13)), line_first)
+        with_start = np.zeros(len(line_first), bool)
+        with_start[np.searchsorted(line_first, starts, side="right") - 1] = True
+        text_lines = line_first[nonblank & ~with_start]
+        probs.add("not a sentence (no $ on the line)", text_lines)
+
+    if len(ok_start) == 0 and _is_binary(buf):
+        raise InputError(name, "binary file with no NMEA sentence (expected text lines like "
+                               "$GPGGA,...*hh; is this a UBX/RTCM/SBF log?)")
+
+    # ---- 3. classify by the first 7 bytes ('$'/'!' + address + ','), once per distinct head
+    ok_s1_a = s1[good]
+    ok_st_a = st[good]
+    j = np.arange(7)
+    gidx = ok_start[:, None] + j[None, :]
+    heads = arr[np.minimum(gidx, n - 1)].copy()
+    heads[gidx >= ok_st_a[:, None]] = 0  # bytes past the body: NUL (dropped by the S view)
+    heads = np.ascontiguousarray(heads).view("S7").ravel()
+    uniq, first_i, inverse, counts = np.unique(heads, return_index=True, return_inverse=True,
+                                               return_counts=True)
+    kind_of_uniq = np.empty(len(uniq), np.int64)
+    talker_counts: Counter = Counter()
+    for u, head in enumerate(uniq.tolist()):
+        k = _classify(head[1:], head[:1] == b"!")
+        if isinstance(k, int):
+            kind_of_uniq[u] = k
+            talker_counts[head[1:3].decode("ascii", "replace")] += int(counts[u])
+        else:
+            kind_of_uniq[u] = -1
+            probs.add(k, int(ok_start[first_i[u]]), fatal=False, n=int(counts[u]))
+    kind_arr = kind_of_uniq[inverse.ravel()] if len(uniq) else np.zeros(0, np.int64)
+
+    sent: dict[int, _Sentences] = {}
+    commas = np.flatnonzero(arr == 44)
+    sentences: Counter = Counter()
+    for kind in range(6):
+        sel = np.flatnonzero(kind_arr == kind)
+        if len(sel) == 0:
+            continue
+        sent[kind] = _Sentences(arr, commas, ok_start[sel], ok_s1_a[sel], ok_st_a[sel])
+        sentences[_TYPE_NAME[kind]] = len(sel)
+    meta["sentences"] = dict(sentences)
+    meta["talkers"] = dict(talker_counts)
+
+    # ---- 4. fields per kind; each returns (keep mask, sod_us) and its arrays
+    parsed: dict[int, dict[str, np.ndarray]] = {}
+    alt_without_sep = 0
+    for kind, s in sent.items():
+        tname = _TYPE_NAME[kind]
+        p: dict[str, np.ndarray] = {}
+        keep = np.ones(s.n, bool)
+        if kind in _TIMED:
+            sod, empty_t, bad_t = _time_of_day_us(s.f(1))
+            probs.add(f"malformed time in {tname}", s.pos[bad_t])
+            probs.add(f"{tname} without time (receiver not synchronised)", s.pos[empty_t],
+                      fatal=False)
+            keep &= sod >= 0
+            p["sod"] = sod
+        if kind == _GGA:
+            lat, _, b1 = _lat_lon(s.f(2), s.f(3), b"N", b"S", 90.0)
+            lon, _, b2 = _lat_lon(s.f(4), s.f(5), b"E", b"W", 180.0)
+            q, bq = _num(s.f(6))
+            bq |= np.isfinite(q) & ((q != np.floor(q)) | (q < 0) | (q > 9))
+            badpos = b1 | b2
+            probs.add("malformed position in GGA", s.pos[badpos & keep])
+            probs.add("malformed fix quality in GGA", s.pos[bq & keep & ~badpos])
+            keep &= ~badpos & ~bq
+            qi = np.where(np.isfinite(q), q, 0).astype(np.int64)
+            fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+            nsat, bs = _num(s.f(7))
+            hdop, bh = _num(s.f(8))
+            alt, ba = _num(s.f(9))
+            sep, bsep = _num(s.f(11))
+            for bad, fld in ((bs, "satellites"), (bh, "HDOP"), (ba, "altitude"),
+                             (bsep, "geoid separation")):
+                probs.add(f"malformed {fld} in GGA (field ignored)", s.pos[bad & keep])
+            alt_without_sep += int((fix & keep & np.isfinite(alt) & np.isnan(sep)).sum())
+            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan),
+                     alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
+                     q=np.where(fix, qi, 0).astype(np.float64),
+                     nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
+                     hdop=np.where(hdop > 0, hdop, np.nan))
+        elif kind == _RMC:
+            status = s.f(2)
+            lat, _, b1 = _lat_lon(s.f(3), s.f(4), b"N", b"S", 90.0)
+            lon, _, b2 = _lat_lon(s.f(5), s.f(6), b"E", b"W", 180.0)
+            badpos = (b1 | b2) & (status == b"A")
+            probs.add("malformed position in RMC", s.pos[badpos & keep])
+            keep &= ~badpos
+            mode = s.f(12)
+            mq = np.array([_MODE_QUALITY.get(m, -1) for m in mode.tolist()], np.int64)
+            probs.add("malformed mode in RMC (field ignored)", s.pos[(mq < 0) & keep])
+            mq[mq < 0] = 1
+            valid = status == b"A"
+            fix = valid & (mq > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0)
+                                                                              & (lon == 0))
+            spd, bsp = _num(s.f(7))
+            crs, bc = _num(s.f(8))
+            probs.add("malformed speed in RMC (field ignored)", s.pos[bsp & keep])
+            probs.add("malformed course in RMC (field ignored)", s.pos[bc & keep])
+            days, bd = _rmc_date(s.f(9))
+            probs.add("malformed date in RMC (field ignored)", s.pos[bd & keep])
+            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan),
+                     q=np.where(fix, mq, 0).astype(np.float64),
+                     speed=np.where(valid & (spd >= 0), spd * KNOT_MPS, np.nan),
+                     course=np.where(valid & (crs >= 0) & (crs <= 360), crs % 360.0, np.nan),
+                     days=days)
+        elif kind == _GSA:
+            nf = s.nf
+            last = s.f(nf - 1)
+            sysid = (nf >= 19) & (np.strings.find(last, b".") < 0) & (np.strings.str_len(last) <= 2)
+            k0 = np.where(sysid, nf - 4, nf - 3)
+            short = k0 < 3
+            probs.add("GSA with too few fields", s.pos[short])
+            keep &= ~short
+            k0 = np.maximum(k0, 3)
+            dops = []
+            for j in range(3):
+                kk = k0 + j
+                v, b = _num(s.f(kk))
+                probs.add("malformed DOP in GSA (field ignored)", s.pos[b & keep])
+                dops.append(np.where(v > 0, v, np.nan))
+            nofix = s.f(2) == b"1"
+            p.update(pdop=np.where(nofix, np.nan, dops[0]), hdop=np.where(nofix, np.nan, dops[1]),
+                     vdop=np.where(nofix, np.nan, dops[2]))
+        elif kind == _VTG:
+            crs, bc = _num(s.f(1))
+            spd, bsp = _num(s.f(5))
+            probs.add("malformed speed in VTG (field ignored)", s.pos[bsp])
+            probs.add("malformed course in VTG (field ignored)", s.pos[bc])
+            valid = s.f(9) != b"N"
+            p.update(speed=np.where(valid & (spd >= 0), spd * KNOT_MPS, np.nan),
+                     course=np.where(valid & (crs >= 0) & (crs <= 360), crs % 360.0, np.nan))
+        elif kind == _GST:
+            sn, b1 = _num(s.f(6))
+            se, b2 = _num(s.f(7))
+            probs.add("malformed sigma in GST (field ignored)", s.pos[(b1 | b2) & keep])
+            p.update(sig_n=np.where(sn >= 0, sn, np.nan), sig_e=np.where(se >= 0, se, np.nan))
+        elif kind == _ZDA:
+            d, bd = _num(s.f(2))
+            mo, bm = _num(s.f(3))
+            y, by = _num(s.f(4))
+            have = np.isfinite(d) & np.isfinite(mo) & np.isfinite(y)
+            ok = have & (_int_part_len(s.f(4)) == 4)
+            days, invalid = _ymd_days(y, mo, d, ok)
+            bad_date = bd | bm | by | (have & ~ok) | invalid
+            probs.add("malformed date in ZDA (field ignored)", s.pos[bad_date & keep])
+            p["days"] = days
+        p["pos"] = s.pos
+        parsed[kind] = {k: v[keep] for k, v in p.items()}
+    meta["alt_without_geoid_sep"] = alt_without_sep
+
+    # ---- 5. epochs
+    report = _report(probs, name, lines, strict)
+    pos_all = np.concatenate([parsed[k]["pos"] for k in parsed] or [np.zeros(0, np.int64)])
+    sod_all = np.concatenate([parsed[k]["sod"] if k in _TIMED else
+                              np.full(len(parsed[k]["pos"]), -1, np.int64) for k in parsed]
+                             or [np.zeros(0, np.int64)])
+    timed = sod_all >= 0
+    if not timed.any():
+        if not sentences:
+            raise NoDataError(name, "no GGA/RMC/GSA/VTG/GST/ZDA sentence with a valid checksum "
+                                    f"({_summary(report)})")
+        raise NoDataError(name, "no GGA or RMC sentence with a time of day "
+                                f"({_summary(report)})")
+    order = np.argsort(pos_all, kind="stable")
+    s_sorted = sod_all[order]
+    t_mask = s_sorted >= 0
+    ts = s_sorted[t_mask]
+    new = np.r_[True, ts[1:] != ts[:-1]]
+    ep_timed = np.cumsum(new) - 1
+    epoch_sod = ts[new]
+    n_ep = len(epoch_sod)
+    last_timed = np.maximum.accumulate(np.where(t_mask, np.arange(len(s_sorted)), -1))
+    rank = np.cumsum(t_mask) - 1
+    ep_sorted = np.where(last_timed >= 0, ep_timed[rank[np.maximum(last_timed, 0)]], 0)
+    ep_all = np.empty_like(ep_sorted)
+    ep_all[order] = ep_sorted
+    off = 0
+    for g in parsed.values():
+        m = len(g["pos"])
+        g["ep"] = ep_all[off:off + m]
+        off += m
+
+    # ---- 6. merge fields per epoch
+    def field(kinds_fields: list[tuple[int, str]]) -> np.ndarray:
+        out = np.full(n_ep, np.nan)
+        for kind, fld in kinds_fields:
+            if kind in parsed:
+                _last_per_epoch(out, parsed[kind]["ep"], parsed[kind][fld])
+        return out
+
+    has_gga = np.zeros(n_ep, bool)
+    has_rmc = np.zeros(n_ep, bool)
+    if _GGA in parsed:
+        has_gga[parsed[_GGA]["ep"]] = True
+    if _RMC in parsed:
+        has_rmc[parsed[_RMC]["ep"]] = True
+    lat = np.full(n_ep, np.nan)
+    lon = np.full(n_ep, np.nan)
+    alt = np.full(n_ep, np.nan)
+    qual = np.zeros(n_ep)
+    for kind, src_mask in ((_RMC, ~has_gga), (_GGA, has_gga)):
+        if kind not in parsed:
+            continue
+        g = parsed[kind]
+        use = np.isfinite(g["lat"]) & src_mask[g["ep"]]
+        _last_per_epoch(lat, g["ep"], g["lat"], use)
+        _last_per_epoch(lon, g["ep"], g["lon"], use)
+        _last_per_epoch(qual, g["ep"], g["q"], use)
+        if kind == _GGA:
+            _last_per_epoch(alt, g["ep"], g["alt"], use)
+    nsat = field([(_GGA, "nsat")])
+    hdop = field([(_GSA, "hdop"), (_GGA, "hdop")])  # GGA's HDOP wins: written last
+    pdop = field([(_GSA, "pdop")])
+    vdop = field([(_GSA, "vdop")])
+    sig_n = field([(_GST, "sig_n")])
+    sig_e = field([(_GST, "sig_e")])
+    speed = field([(_VTG, "speed"), (_RMC, "speed")])  # RMC wins
+    course = field([(_VTG, "course"), (_RMC, "course")])
+
+    # ---- 7. dates: from RMC/ZDA per epoch, carried over rollovers; else the argument
+    day_of_epoch = np.full(n_ep, np.nan)
+    for kind in (_RMC, _ZDA):
+        if kind in parsed:
+            g = parsed[kind]
+            use = np.isfinite(g["days"])
+            # ZDA (4-digit year) overrides RMC within an epoch
+            day_of_epoch_k = np.full(n_ep, np.nan)
+            _last_per_epoch(day_of_epoch_k, g["ep"], g["days"], use)
+            fill = np.isfinite(day_of_epoch_k)
+            day_of_epoch[fill] = day_of_epoch_k[fill]
+    d_sod = np.diff(epoch_sod)
+    roll = np.r_[0, np.cumsum((d_sod < -_HALF_DAY_US).astype(np.int64)
+                              - (d_sod > _HALF_DAY_US).astype(np.int64))]
+    dated = np.isfinite(day_of_epoch)
+    row = has_gga | has_rmc
+    if dated.any():
+        meta["date_source"] = "log (RMC/ZDA)"
+        offset = np.where(dated, day_of_epoch - roll, 0).astype(np.int64)
+        src = np.maximum.accumulate(np.where(dated, np.arange(n_ep), -1))
+        src[src < 0] = int(np.flatnonzero(dated)[0])
+        day = offset[src] + roll
+    elif date is not None:
+        meta["date_source"] = "argument"
+        day = (date - datetime.date(1970, 1, 1)).days + roll
+    else:
+        if (qual[row] > 0).any():
+            raise NoDataError(name, "no date in the log (no RMC or ZDA sentence with a date); "
+                                    "pass --date YYYY-MM-DD (the UTC date of the first fix)")
+        raise NoDataError(name, "no fix and no date in the log (only no-fix epochs without "
+                                "RMC/ZDA dates)")
+    if not row.any():
+        raise NoDataError(name, "no GGA or RMC sentence with a time of day "
+                                f"({_summary(report)})")
+
+    t_us = day[row].astype(np.int64) * _US_PER_DAY + epoch_sod[row]
+    fixes = GnssFixes(
+        t_ns=t_us * 1000, lat_deg=lat[row], lon_deg=lon[row], alt_m=alt[row],
+        fix_quality=qual[row].astype(np.int8),
+        n_sats=np.where(np.isfinite(nsat[row]), nsat[row], -1).astype(np.int16),
+        hdop=hdop[row], pdop=pdop[row], vdop=vdop[row], sigma_e_m=sig_e[row],
+        sigma_n_m=sig_n[row], speed_mps=speed[row], course_deg=course[row])
+    meta["epochs"] = len(fixes)
+    meta["epochs_without_gga_rmc"] = int((~row).sum())
+    udays = np.unique(day[row])
+    dates = [datetime.date(1970, 1, 1) + datetime.timedelta(days=int(d)) for d in udays]
+    meta["dates"] = [d.isoformat() for d in dates]
+    today = datetime.datetime.now(datetime.UTC).date()
+    suspicious = [d.isoformat() for d in dates
+                  if d.year < 2000 or d > today + datetime.timedelta(days=1)]
+    meta["warnings"] = {}
+    if suspicious:
+        meta["warnings"]["suspicious date"] = len(suspicious)
+        meta["suspicious_dates"] = suspicious
+    return fixes, report, meta
+
+
+def _report(probs: _Problems, name: str, lines: _Lines, strict: bool) -> SkipReport:
+    """Turn the problems into a SkipReport, or raise the first fatal one when strict."""
+    if strict:
+        fatal = [(v[1], r, v[3]) for r, v in probs.items.items() if v[2]]
+        if fatal:
+            pos, reason, exc = min(fatal, key=lambda t: t[0])
+            raise exc(name, f"{reason} (strict mode)", line=int(lines(pos)))
+    report = SkipReport()
+    for reason, (count, first, _fatal, _exc) in sorted(probs.items.items(), key=lambda kv: kv[1][1]):
+        report.add(reason, f"{name}:{int(lines(first))}", count)
+    return report
+
+
+def _summary(report: SkipReport) -> str:
+    if not report.counts:
+        return "nothing skipped"
+    parts = [f"{n} {r}" for r, n in report.counts.most_common(4)]
+    return "skipped: " + "; ".join(parts)
+
+
+def read_nmea(path: str | Path, *, date: datetime.date | None = None) -> Drive:
+    """Read an NMEA file (``'-'`` = standard input bytes) into a :class:`Drive`.
+
+    The drive has ``gnss``, ``skipped``, ``sources=[Source(path, sha256, ('gnss',))]``
+    and ``meta`` (see :func:`parse_nmea`).
+    """
+    name = str(path)
+    try:
+        if name == "-":
+            data = sys.stdin.buffer.read()
+        else:
+            data = Path(path).read_bytes()
+    except OSError as err:
+        raise InputError(name, f"cannot read: {err.strerror or err}") from err
+    fixes, report, meta = parse_nmea(data, name=name, date=date)
+    sha = hashlib.sha256(data).hexdigest()
+    return Drive(gnss=fixes, skipped=report, sources=[Source(name, sha, ("gnss",))],
+                 meta=meta)
+
