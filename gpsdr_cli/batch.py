@@ -1,0 +1,382 @@
+"""Many drives at once: find them, fuse each in a worker, write one report.
+
+A *drive* is either an MCAP file, or a folder holding an NMEA file and gyro /
+odometer CSVs (named ``gps.nmea``, ``gyro.csv``, ``odo.csv``, or found by
+sniffing the files' contents); a ``truth.csv`` next to it (``<stem>.truth.csv``
+for an MCAP) is used as the reference.  A folder that holds an NMEA + CSV set
+is one drive even if it also holds an MCAP of the same recording (as
+``gpsdr simulate`` writes); MCAPs are drives of their own elsewhere.
+
+Workers: a ``concurrent.futures.ProcessPoolExecutor`` (the default; processes
+because the filters hold the GIL between numba kernels and pandas), or a
+dask.distributed cluster (``scheduler="tcp://host:8786"``) with
+``client.map`` / ``as_completed``: the same function runs on every worker, so
+every worker needs gpsdr installed and the input and output paths visible
+(a shared filesystem).  One failing drive never stops the batch: its row in
+the report says why.
+
+Resumable: a drive whose outputs exist, are newer than all its inputs and were
+made with the same parameters is skipped unless ``force``.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import time
+import traceback
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .config import Params
+
+REPORT_NAME = "batch_report.parquet"
+REPORT_UNITS = {
+    "drive": "drive name (output file stem)",
+    "status": "ok, failed, or up to date (skipped: outputs newer than inputs)",
+    "error": "one-line error message of a failed drive",
+    "duration_s": "s, wall-clock time to process the drive",
+    "epochs": "count of filter epochs",
+    "rmse_m": "m, horizontal RMS error against the reference (null without one)",
+    "cep95_m": "m, 95th percentile horizontal error against the reference",
+    "max_m": "m, largest horizontal error against the reference",
+    "track": "path of the track file",
+    "stats": "path of the statistics file",
+    "inputs": "input files, ; separated",
+}
+GPS_NAMES = ("gps.nmea", "gnss.nmea")
+GYRO_NAMES = ("gyro.csv", "imu.csv")
+ODO_NAMES = ("odo.csv", "odometer.csv", "speed.csv", "wheel.csv")
+TRUTH_NAMES = ("truth.csv", "reference.csv")
+NMEA_SUFFIXES = (".nmea", ".txt", ".log")
+
+
+@dataclass
+class DriveSpec:
+    """One drive to process: its files, and the stem its outputs are named by."""
+
+    name: str
+    log: str | None = None
+    gps: str | None = None
+    gyro: str | None = None
+    odo: str | None = None
+    reference: str | None = None
+
+    @property
+    def inputs(self) -> list[str]:
+        return [p for p in (self.log, self.gps, self.gyro, self.odo, self.reference) if p]
+
+
+@dataclass
+class BatchOptions:
+    out_dir: str
+    params: Params
+    fmt: str = "parquet"
+    force: bool = False
+    extra_meta: dict[str, str] = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- discovery
+
+def _csv_kind(path: Path) -> str | None:
+    """gyro | odo | truth by the CSV header, None when it is none of them."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.readline(4096).decode("utf-8", "replace").lstrip("\ufeff").lower()
+    except OSError:
+        return None
+    cols = {c.strip() for c in head.split(",")}
+    if "yaw_rate" in cols:
+        return "gyro"
+    if cols & {"speed", "distance", "ticks"}:
+        return "odo"
+    if {"lat", "lon"} <= cols:
+        return "truth"
+    return None
+
+
+def _is_nmea(path: Path) -> bool:
+    try:
+        from .io.nmea import looks_like_nmea
+
+        with open(path, "rb") as fh:
+            return bool(looks_like_nmea(fh.read(4096)))
+    except (OSError, ImportError):
+        return path.suffix.lower() == ".nmea"
+
+
+def _folder_drive(folder: Path, root: Path) -> DriveSpec | None:
+    """The NMEA + CSV drive in ``folder``, or None if it holds none."""
+    files = sorted(p for p in folder.iterdir() if p.is_file())
+    by_name = {p.name.lower(): p for p in files}
+    gps = next((by_name[n] for n in GPS_NAMES if n in by_name), None)
+    if gps is None:
+        gps = next((p for p in files if p.suffix.lower() in NMEA_SUFFIXES and _is_nmea(p)), None)
+    if gps is None:
+        return None
+    found: dict[str, Path] = {}
+    for kind, names in (("gyro", GYRO_NAMES), ("odo", ODO_NAMES), ("truth", TRUTH_NAMES)):
+        hit = next((by_name[n] for n in names if n in by_name), None)
+        if hit is not None:
+            found[kind] = hit
+    for p in files:
+        if p.suffix.lower() == ".csv" and p not in found.values():
+            kind = _csv_kind(p)
+            if kind and kind not in found and "uncalibrated" not in p.name:
+                found[kind] = p
+    return DriveSpec(name=_name_for(folder, root), gps=str(gps),
+                     gyro=str(found["gyro"]) if "gyro" in found else None,
+                     odo=str(found["odo"]) if "odo" in found else None,
+                     reference=str(found["truth"]) if "truth" in found else None)
+
+
+def _mcap_drive(path: Path, root: Path) -> DriveSpec:
+    ref: str | None = None
+    own = path.with_name(f"{path.stem}.truth.csv")
+    plain = path.with_name("truth.csv")
+    if own.exists():
+        ref = str(own)
+    elif plain.exists() and not [p for p in path.parent.glob("*.mcap") if p != path]:
+        ref = str(plain)
+    rel = _name_for(path.parent, root)
+    name = path.stem if path.parent.resolve() == root.resolve() else f"{rel}__{path.stem}"
+    return DriveSpec(name=name, log=str(path), reference=ref)
+
+
+def _name_for(folder: Path, root: Path) -> str:
+    try:
+        rel = folder.resolve().relative_to(root.resolve())
+    except ValueError:
+        rel = Path(folder.name)
+    parts = [p for p in rel.parts if p not in ("", ".")]
+    return "__".join(parts) if parts else folder.resolve().name
+
+
+def _scan_dir(root: Path, base: Path) -> list[DriveSpec]:
+    out: list[DriveSpec] = []
+    for folder, dirs, _files in os.walk(root):
+        dirs[:] = sorted(d for d in dirs if not d.startswith("."))
+        f = Path(folder)
+        spec = _folder_drive(f, base)
+        if spec is not None:
+            out.append(spec)
+            continue
+        for mcap in sorted(f.glob("*.mcap")):
+            out.append(_mcap_drive(mcap, base))
+    return out
+
+
+def find_drives(target: str) -> list[DriveSpec]:
+    """Drives under a directory (recursively) or matching a glob pattern."""
+    from .errors import InputError
+
+    p = Path(target)
+    if p.is_dir():
+        specs = _scan_dir(p, p)
+    else:
+        matches = sorted(glob.glob(target, recursive=True))
+        if not matches:
+            raise InputError(target, "no such file or directory, and no file matches the pattern")
+        base = Path(os.path.commonpath([os.path.abspath(m) for m in matches]))
+        if base.is_file():
+            base = base.parent
+        specs = []
+        seen: set[str] = set()
+        for m in map(Path, matches):
+            if m.is_dir():
+                new = _scan_dir(m, base)
+            elif m.suffix.lower() == ".mcap":
+                new = [_mcap_drive(m, base)]
+            else:
+                spec = _folder_drive(m.parent, base)
+                new = [spec] if spec is not None and spec.gps == str(m) else []
+            for s in new:
+                if s.name not in seen:
+                    seen.add(s.name)
+                    specs.append(s)
+    names: dict[str, int] = {}
+    for s in specs:  # unique output stems
+        k = names.get(s.name, 0)
+        names[s.name] = k + 1
+        if k:
+            s.name = f"{s.name}_{k}"
+    return specs
+
+
+# --------------------------------------------------------------------------- one drive
+
+def output_paths(spec: DriveSpec, out_dir: str, fmt: str) -> tuple[Path, Path]:
+    ext = "parquet" if fmt == "parquet" else "csv"
+    d = Path(out_dir)
+    return d / f"{spec.name}.fused.{ext}", d / f"{spec.name}.stats.{ext}"
+
+
+def _up_to_date(spec: DriveSpec, track: Path, stats: Path, params: Params, fmt: str) -> bool:
+    from . import config
+
+    try:
+        newest_in = max(Path(p).stat().st_mtime for p in spec.inputs)
+        oldest_out = min(track.stat().st_mtime, stats.stat().st_mtime)
+    except (OSError, ValueError):
+        return False
+    if oldest_out < newest_in:
+        return False
+    if fmt != "parquet":
+        return True
+    import pyarrow.parquet as pq
+
+    try:
+        meta = pq.read_schema(track).metadata or {}
+    except OSError:
+        return False
+    return meta.get(b"params_toml", b"").decode() == config.to_toml(params)
+
+
+def _row(spec: DriveSpec, status: str, error: str = "", duration_s: float = 0.0,
+         summary: dict[str, float] | None = None, track: str = "", stats: str = "") -> dict[str, Any]:
+    s = summary or {}
+    nan = float("nan")
+    return {"drive": spec.name, "status": status, "error": error, "duration_s": duration_s,
+            "epochs": int(s["epochs"]) if s.get("epochs", nan) == s.get("epochs", nan) else -1,
+            "rmse_m": s.get("rmse_m", nan), "cep95_m": s.get("cep95_m", nan),
+            "max_m": s.get("max_m", nan), "track": track, "stats": stats,
+            "inputs": ";".join(spec.inputs)}
+
+
+def process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
+    """Fuse one drive and write its outputs; never raises (errors become the row)."""
+    from .errors import GpsdrError
+
+    t0 = time.perf_counter()
+    track_p, stats_p = output_paths(spec, opts.out_dir, opts.fmt)
+    try:
+        if not opts.force and _up_to_date(spec, track_p, stats_p, opts.params, opts.fmt):
+            summary = _existing_summary(stats_p, opts.fmt)
+            return _row(spec, "up to date", "", time.perf_counter() - t0, summary,
+                        str(track_p), str(stats_p))
+        from .io.parquet import write_table
+        from .io.readers import read_drive
+        from .pipeline import TRACK_UNITS, fuse, stats_units
+
+        drive = read_drive(spec.log, gps=spec.gps, gyro=spec.gyro, odo=spec.odo,
+                           params=opts.params)
+        ref = None
+        if spec.reference:
+            from .io.reference import read_reference
+
+            ref = read_reference(spec.reference)
+        res = fuse(drive, opts.params, ref)
+        meta = {**res.metadata, **opts.extra_meta, "drive": spec.name}
+        write_table(res.stats, stats_p, metadata=meta, units=stats_units(res.stats), fmt=opts.fmt)
+        write_table(res.track, track_p, metadata=meta, units=TRACK_UNITS, fmt=opts.fmt)
+        return _row(spec, "ok", "", time.perf_counter() - t0, res.summary(),
+                    str(track_p), str(stats_p))
+    except GpsdrError as err:
+        return _row(spec, "failed", str(err), time.perf_counter() - t0)
+    except Exception as err:  # noqa: BLE001 - one bad drive never stops the batch: a report row
+        tb = traceback.extract_tb(err.__traceback__)
+        where = f" at {Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else ""
+        msg = " ".join(str(err).split())
+        return _row(spec, "failed", f"internal error: {type(err).__name__}: {msg}{where}",
+                    time.perf_counter() - t0)
+
+
+def _existing_summary(stats_p: Path, fmt: str) -> dict[str, float]:
+    from .errors import GpsdrError
+    from .io.parquet import read_track
+    from .pipeline import summary_of
+
+    try:
+        df, _ = read_track(stats_p)
+    except (GpsdrError, OSError):  # a stale stats file only costs the RMSE column of the report
+        return {}
+    return summary_of(df)
+
+
+# --------------------------------------------------------------------------- many drives
+
+OnDone = Callable[[dict[str, Any]], None]
+
+
+def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
+              on_done: OnDone | None = None) -> list[dict[str, Any]]:
+    """Process drives in a process pool (``jobs`` workers; 1 = in this process)."""
+    specs = list(specs)
+    rows: list[dict[str, Any]] = []
+
+    def done(row: dict[str, Any]) -> None:
+        rows.append(row)
+        if on_done:
+            on_done(row)
+
+    if jobs <= 1 or len(specs) <= 1:
+        for spec in specs:
+            done(process_drive(spec, opts))
+        return rows
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    # forkserver: workers do not inherit this process's threads (rich's refresh thread)
+    method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context(method)) as pool:
+        futures = {pool.submit(process_drive, s, opts): s for s in specs}
+        for fut in as_completed(futures):
+            spec = futures[fut]
+            try:
+                row = fut.result()
+            except BrokenProcessPool as err:
+                row = _row(spec, "failed", f"worker process died: {err}")
+            done(row)
+    return rows
+
+
+def run_dask(specs: Iterable[DriveSpec], opts: BatchOptions, scheduler: Any,
+             on_done: OnDone | None = None) -> list[dict[str, Any]]:
+    """Process drives on a dask.distributed cluster (address ``tcp://host:port`` or a Client)."""
+    from dask.distributed import Client, as_completed
+
+    from .errors import UsageError
+
+    specs = list(specs)
+    own = not isinstance(scheduler, Client)
+    try:
+        client = Client(scheduler, timeout="10s") if own else scheduler
+    except (OSError, TimeoutError, ValueError) as err:
+        raise UsageError(f"cannot connect to the dask scheduler {scheduler}: {err}") from err
+    rows: list[dict[str, Any]] = []
+    try:
+        futures = client.map(process_drive, specs, opts=opts, pure=False)
+        by_key = {f.key: s for f, s in zip(futures, specs, strict=True)}
+        for fut in as_completed(futures):
+            spec = by_key[fut.key]
+            try:
+                row = fut.result()
+            except Exception as err:  # noqa: BLE001 - worker died / task lost: that drive failed
+                row = _row(spec, "failed", f"dask task failed: {type(err).__name__}: {err}")
+            rows.append(row)
+            if on_done:
+                on_done(row)
+    finally:
+        if own:
+            client.close()
+    return rows
+
+
+def report_frame(rows: list[dict[str, Any]]) -> Any:
+    import pandas as pd
+
+    cols = list(REPORT_UNITS)
+    df = pd.DataFrame(rows, columns=cols)
+    if len(df):
+        df = df.sort_values("drive", kind="stable").reset_index(drop=True)
+    df["epochs"] = df["epochs"].astype("int64")
+    for c in ("duration_s", "rmse_m", "cep95_m", "max_m"):
+        df[c] = df[c].astype("float64")
+    return df
+
+
+def spec_dict(spec: DriveSpec) -> dict[str, Any]:
+    return asdict(spec)

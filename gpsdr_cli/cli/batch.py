@@ -1,0 +1,153 @@
+"""``gpsdr batch``: fuse many drives in parallel (process pool or dask.distributed)."""
+
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any, Self
+
+import click
+
+from .options import common_options, config_option, filter_options, format_option, make_params
+
+
+@click.command()
+@click.argument("target", metavar="DIR_OR_GLOB")
+@click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
+              metavar="OUT_DIR", help="Where each drive's track and stats go (created).")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Worker processes (default: the number of CPUs).")
+@filter_options
+@config_option
+@format_option
+@click.option("--force", is_flag=True,
+              help="Process every drive, also those whose outputs are up to date.")
+@click.option("--scheduler", metavar="tcp://HOST:PORT",
+              help="Run on a dask.distributed cluster instead of local processes.")
+@common_options
+def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
+          smooth: bool | None, config_path: str | None, fmt: str, force: bool,
+          scheduler: str | None, quiet: bool) -> None:
+    """Fuse every drive under a directory or matching a glob.
+
+    A drive is an MCAP file, or a folder with an NMEA file and gyro/odometer CSVs
+    (gps.nmea, gyro.csv, odo.csv or found by content); a truth.csv beside it is
+    used as the reference.  Writes DRIVE.fused.parquet and DRIVE.stats.parquet
+    per drive and batch_report.parquet (drive, status, error, duration, RMSE) in
+    OUT_DIR, and prints the report.  Drives whose outputs are newer than their
+    inputs are skipped unless --force.  Exit status 1 if any drive failed.
+
+    \b
+    Examples:
+      gpsdr batch logs/ -o out/ --jobs 8 --filter fafkf --smooth
+      gpsdr batch 'logs/**/*.mcap' -o out/
+      gpsdr batch logs/ -o out/ --scheduler tcp://10.0.0.5:8786
+    """
+    import os
+    from pathlib import Path
+
+    from ..batch import (
+        REPORT_NAME,
+        REPORT_UNITS,
+        BatchOptions,
+        find_drives,
+        report_frame,
+        run_dask,
+        run_local,
+    )
+    from ..io.parquet import write_table
+
+    params = make_params(config_path, filter_name=filter_name, smooth=smooth)
+    specs = find_drives(target)
+    if not specs:
+        from ..errors import InputError
+
+        raise InputError(target, "no drive found (MCAP files, or folders with an NMEA file "
+                                 "and gyro/odometer CSVs)")
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    opts = BatchOptions(out_dir=out_dir, params=params, fmt=fmt, force=force)
+    n_jobs = jobs or os.cpu_count() or 1
+
+    with _Bar(len(specs), quiet) as bar:
+        if scheduler:
+            rows = run_dask(specs, opts, scheduler, on_done=bar.advance)
+        else:
+            rows = run_local(specs, opts, n_jobs, on_done=bar.advance)
+    report = report_frame(rows)
+    write_table(report, Path(out_dir) / REPORT_NAME,
+                metadata={"target": target, "filter": str(params["filter"]["name"])},
+                units=REPORT_UNITS)
+    _print_report(report, quiet)
+    failed = int((report["status"] == "failed").sum())
+    if failed:
+        click.echo(f"gpsdr: {failed} of {len(report)} drives failed "
+                   f"(see {Path(out_dir) / REPORT_NAME})", err=True)
+        sys.exit(1)
+
+
+class _Bar:
+    """A rich progress bar with ETA on stderr (only on a terminal and without -q)."""
+
+    def __init__(self, total: int, quiet: bool) -> None:
+        self.total = total
+        self.quiet = quiet
+        self._progress: Any = None
+        self._task: Any = None
+
+    def __enter__(self) -> Self:
+        if not self.quiet:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
+
+            console = Console(stderr=True)
+            if console.is_terminal:
+                self._progress = Progress(
+                    TextColumn("[bold]batch"), BarColumn(), MofNCompleteColumn(),
+                    TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                    TextColumn("{task.description}"), console=console)
+                self._progress.__enter__()
+                self._task = self._progress.add_task("", total=self.total)
+        return self
+
+    def advance(self, row: dict[str, Any]) -> None:
+        if self._progress is not None:
+            self._progress.update(self._task, advance=1,
+                                  description=f"{row['drive']}: {row['status']}")
+
+    def __exit__(self, *exc: object) -> None:
+        if self._progress is not None:
+            self._progress.__exit__(*exc)
+
+
+def _fmt(v: Any, spec: str) -> str:
+    if isinstance(v, float) and not math.isfinite(v):
+        return "-"
+    return format(v, spec)
+
+
+def _print_report(report: Any, quiet: bool) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="gpsdr batch", show_lines=False)
+    for col, justify in (("drive", "left"), ("status", "left"), ("duration s", "right"),
+                         ("RMSE m", "right"), ("CEP95 m", "right"), ("error", "left")):
+        table.add_column(col, justify=justify, overflow="fold")
+    for r in report.itertuples(index=False):
+        style = {"ok": "green", "failed": "red"}.get(r.status, "dim")
+        table.add_row(r.drive, f"[{style}]{r.status}[/]", _fmt(r.duration_s, ".1f"),
+                      _fmt(r.rmse_m, ".2f"), _fmt(r.cep95_m, ".2f"), r.error)
+    ok = int((report["status"] == "ok").sum())
+    skipped = int((report["status"] == "up to date").sum())
+    failed = int((report["status"] == "failed").sum())
+    console = Console(width=160) if not sys.stdout.isatty() else Console()
+    if not quiet:
+        console.print(table)
+    console.print(f"{len(report)} drives: {ok} ok, {skipped} up to date, {failed} failed")

@@ -1,0 +1,220 @@
+"""``gpsdr fuse``: one drive in, a track Parquet and a statistics Parquet out."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any, Self
+
+import click
+
+from ..errors import UsageError
+from .options import (
+    STATE,
+    common_options,
+    config_option,
+    filter_options,
+    format_option,
+    make_params,
+    reader_options,
+)
+
+#: Logs with more epochs than this get a progress display (on a terminal, unless -q).
+LONG_LOG_BYTES = 20_000_000
+
+
+def default_outputs(base: str, fmt: str) -> tuple[Path, Path]:
+    """``LOG.mcap`` -> ``LOG.fused.parquet``, ``LOG.stats.parquet`` (next to the log)."""
+    p = Path(base)
+    stem = p.name
+    for suffix in (".gz",):
+        stem = stem.removesuffix(suffix)
+    stem = Path(stem).stem if Path(stem).suffix else stem
+    ext = "parquet" if fmt == "parquet" else "csv"
+    return p.with_name(f"{stem}.fused.{ext}"), p.with_name(f"{stem}.stats.{ext}")
+
+
+def stats_next_to(track: Path, fmt: str) -> Path:
+    """``-o run.parquet`` -> ``run.stats.parquet``; ``x.fused.parquet`` -> ``x.stats.parquet``."""
+    stem = track.name
+    for suffix in (".parquet", ".csv"):
+        stem = stem.removesuffix(suffix)
+    stem = stem.removesuffix(".fused")
+    return track.with_name(f"{stem}.stats.{'parquet' if fmt == 'parquet' else 'csv'}")
+
+
+@click.command()
+@click.argument("log", required=False, metavar="[LOG]")
+@click.option("--gps", type=str, metavar="G.nmea", help="NMEA 0183 log (or - for stdin).")
+@click.option("--gyro", type=str, metavar="Y.csv", help="Gyro CSV: t, yaw_rate.")
+@click.option("--odo", type=str, metavar="O.csv", help="Odometer CSV: t and speed|distance|ticks.")
+@filter_options
+@click.option("--reference", type=str, metavar="TRUTH.csv",
+              help="Reference trajectory (CSV t,lat,lon[,alt], NMEA or a track Parquet): "
+                   "adds error statistics and prints RMSE, CEP95 and max to stderr.")
+@click.option("-o", "--output", type=str, metavar="TRACK.parquet",
+              help="Track output (- = stdout).  Default: LOG.fused.parquet next to the log.")
+@click.option("--stats", "stats_path", type=str, metavar="STATS.parquet",
+              help="Statistics output.  Default: next to the track, .stats.parquet.")
+@config_option
+@click.option("--print-config", is_flag=True,
+              help="Print the effective parameters as TOML (a --config file) and exit.")
+@format_option
+@reader_options
+@common_options
+def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
+         filter_name: str | None, smooth: bool | None, reference: str | None,
+         output: str | None, stats_path: str | None, config_path: str | None,
+         print_config: bool, fmt: str, date: Any, gnss_offset: str | float | None,
+         epsg: int | None, topics: dict[str, str] | None, log_time: bool,
+         gyro_units: str | None, gyro_sign: str | None, odo_kind: str | None,
+         ticks_per_m: float | None, quiet: bool) -> None:
+    """Fuse one drive's GNSS, gyro and odometer logs into a track.
+
+    LOG is an MCAP file (or an NMEA file; - reads NMEA from stdin).  Or give the
+    streams as --gps/--gyro/--odo.  Writes the track (one row per filter epoch:
+    time, lat, lon, e, n, v_e, v_n, speed, heading_deg, sigma_e, sigma_n,
+    gnss_used, pdop, ...) and the statistics table.
+
+    \b
+    Examples:
+      gpsdr fuse drive.mcap
+      gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --filter fafkf --smooth \\
+                 --reference truth.csv -o track.parquet
+      cat gps.nmea | gpsdr fuse - -o - --format csv > track.csv
+      gpsdr fuse --print-config > params.toml
+    """
+    params = make_params(config_path, filter_name=filter_name, smooth=smooth,
+                         gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
+                         gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m)
+    if print_config:
+        from .. import config
+
+        click.echo(config.to_toml(params), nl=False)
+        return
+    if log is None and gps is None and gyro is None and odo is None:
+        raise click.UsageError("give a LOG file, or the streams as --gps/--gyro/--odo "
+                               "(see gpsdr fuse --help)")
+    if log is not None and gps is not None:
+        raise click.UsageError("give either LOG or --gps, not both")
+    stdin_input = "-" in (log, gps)
+    track_path, stats_out = _outputs(log or gps or gyro or odo or "-", output, stats_path, fmt,
+                                     stdin_input)
+    inputs = [p for p in (log, gps, gyro, odo, reference) if p and p != "-"]
+    for out in (track_path, stats_out):
+        if out is not None and out != "-" and any(_same(out, p) for p in inputs):
+            raise UsageError(f"{out}: refusing to overwrite an input file; give another -o/--stats")
+    if track_path == "-" and fmt == "parquet" and sys.stdout.isatty():
+        raise UsageError("refusing to write binary Parquet to a terminal; "
+                         "redirect stdout, give -o FILE or --format csv")
+
+    show = _progress_wanted(quiet, [log, gps, gyro, odo])
+    with _Stages(show) as stages:
+        stages("reading inputs")
+        drive = _read(log, gps, gyro, odo, params, topics, date, log_time)
+        ref = None
+        if reference:
+            from ..io.reference import read_reference
+
+            ref = read_reference(reference)
+        from ..pipeline import TRACK_UNITS, stats_units
+        from ..pipeline import fuse as run_fuse
+
+        res = run_fuse(drive, params, ref, auto_gnss_offset=gnss_offset == "auto",
+                       progress=stages)
+        stages("writing outputs")
+        from ..io.parquet import write_table
+
+        if stats_out is not None:
+            write_table(res.stats, stats_out, metadata=res.metadata,
+                        units=stats_units(res.stats), fmt=fmt)
+        write_table(res.track, track_path, metadata=res.metadata, units=TRACK_UNITS, fmt=fmt)
+
+    if not quiet:
+        _report(res, track_path, stats_out, reference, gnss_offset == "auto")
+
+
+def _same(a: str | Path, b: str | Path) -> bool:
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return False
+
+
+def _outputs(base: str, output: str | None, stats_path: str | None, fmt: str,
+             stdin_input: bool) -> tuple[str, str | None]:
+    """Track and stats destinations (stats None: not written)."""
+    if output is None:
+        if stdin_input:
+            return "-", stats_path  # reading a pipe: the track goes down the pipe
+        track, stats = default_outputs(base, fmt)
+        return str(track), stats_path or str(stats)
+    if output == "-":
+        return "-", stats_path
+    return output, stats_path or str(stats_next_to(Path(output), fmt))
+
+
+def _read(log: str | None, gps: str | None, gyro: str | None, odo: str | None, params: Any,
+          topics: dict[str, str] | None, date: Any, log_time: bool) -> Any:
+    from ..io.readers import read_drive
+
+    if log == "-":
+        gps, log = "-", None
+    return read_drive(log, gps=gps, gyro=gyro, odo=odo, params=params, topics=topics,
+                      date=date, use_log_time=log_time)
+
+
+def _progress_wanted(quiet: bool, paths: list[str | None]) -> bool:
+    if quiet or STATE["quiet"] or not sys.stderr.isatty():
+        return False
+    size = 0
+    for p in paths:
+        if p and p != "-":
+            try:
+                size += Path(p).stat().st_size
+            except OSError:
+                pass
+    return size >= LONG_LOG_BYTES
+
+
+class _Stages:
+    """A rich status line on stderr naming the current stage (long logs on a terminal)."""
+
+    def __init__(self, show: bool) -> None:
+        self.show = show
+        self._status: Any = None
+
+    def __enter__(self) -> Self:
+        if self.show:
+            from rich.console import Console
+
+            self._status = Console(stderr=True).status("gpsdr fuse: starting")
+            self._status.__enter__()
+        return self
+
+    def __call__(self, stage: str) -> None:
+        if self._status is not None:
+            self._status.update(f"gpsdr fuse: {stage}")
+
+    def __exit__(self, *exc: object) -> None:
+        if self._status is not None:
+            self._status.__exit__(*exc)
+
+
+def _report(res: Any, track_path: str, stats_out: str | None, reference: str | None,
+            auto: bool) -> None:
+    """Summary on stderr (stdout stays clean for -o -)."""
+    info = res.metadata
+    err = sys.stderr
+    where = "stdout" if track_path == "-" else track_path
+    click.echo(f"{info['filter']}{' + RTS' if info.get('smoothed') == 'true' else ''}: "
+               f"{len(res.track)} epochs, {info['gnss_used']} GNSS fixes used, "
+               f"{info['skipped_total']} input records skipped -> {where}"
+               + (f", {stats_out}" if stats_out else ""), file=err)
+    if auto:
+        click.echo(f"GNSS time offset (auto): {res.gnss_offset_s:+.3f} s", file=err)
+    if reference:
+        s = res.summary()
+        click.echo(f"error vs {reference}: RMSE {s['rmse_m']:.2f} m, CEP95 {s['cep95_m']:.2f} m, "
+                   f"max {s['max_m']:.2f} m over {int(s['epochs']) if s['epochs'] == s['epochs'] else 0} epochs",
+                   file=err)

@@ -1,0 +1,110 @@
+"""The ``gpsdr`` command group, and the one place library exceptions become messages.
+
+Exit status: 0 success; 1 a processing failure (any :class:`GpsdrError`, or an
+internal error); 2 a usage error (click's, :class:`UsageError`,
+:class:`ConfigError`).  Every error is one line on stderr; ``--debug`` adds the
+traceback.  Command modules import only click at import time, so ``gpsdr
+--help`` stays fast; the work is imported inside each command.
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+from typing import Any
+
+import click
+
+from ..errors import GpsdrError, UsageError
+from .options import STATE
+
+EPILOG = """\b
+Examples:
+  gpsdr fuse drive.mcap
+  gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --reference truth.csv
+  gpsdr info gps.nmea
+  gpsdr batch 'logs/*' -o out/ --jobs 4
+"""
+
+
+class GpsdrException(click.ClickException):
+    """A one-line error with gpsdr's exit status."""
+
+    def __init__(self, message: str, exit_code: int = 1) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
+
+    def show(self, file: Any = None) -> None:
+        click.echo(f"gpsdr: error: {self.format_message()}", err=True)
+
+
+def to_click_exception(err: BaseException) -> click.ClickException:
+    """Turn a library exception into the one line the user sees."""
+    if isinstance(err, UsageError):
+        return GpsdrException(str(err), 2)
+    if isinstance(err, GpsdrError):
+        return GpsdrException(str(err) or type(err).__name__, 1)
+    if isinstance(err, MemoryError):
+        return GpsdrException("out of memory", 1)
+    text = " ".join(str(err).split()) or type(err).__name__
+    return GpsdrException(f"internal error: {type(err).__name__}: {text} "
+                          "(rerun with --debug for the traceback)", 1)
+
+
+class GpsdrGroup(click.Group):
+    """Group whose ``invoke`` maps exceptions (also under CliRunner) in one place."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
+            raise
+        except BrokenPipeError:
+            # the reader of our stdout went away (e.g. `| head`): not an error of ours
+            sys.stderr.close()
+            raise click.exceptions.Exit(1) from None
+        except KeyboardInterrupt:
+            raise click.exceptions.Abort() from None
+        except Exception as err:
+            if STATE["debug"]:
+                traceback.print_exc(file=sys.stderr)
+            raise to_click_exception(err) from err
+
+
+@click.group(cls=GpsdrGroup, epilog=EPILOG, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="gpsdr", prog_name="gpsdr")
+def cli() -> None:
+    """Post-process vehicle GNSS + gyro + odometer logs with adaptive Kalman filters.
+
+    Reads NMEA, CSV and MCAP logs, fuses them with an EKF, AEKF, FKF or FAFKF
+    (optionally RTS-smoothed) and writes a track Parquet and a statistics
+    Parquet.  Every command has --help with an example.
+    """
+    STATE["debug"] = False
+    STATE["quiet"] = False
+
+
+def _register() -> None:
+    from .batch import batch
+    from .fuse import fuse
+    from .info import info
+    from .plot import plot
+    from .simulate import simulate
+    from .stats import stats
+
+    for cmd in (fuse, info, stats, simulate, plot, batch):
+        cli.add_command(cmd)
+
+
+_register()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console-script entry point (``gpsdr``)."""
+    if "--debug" in (sys.argv[1:] if argv is None else argv):
+        STATE["debug"] = True
+    cli.main(args=argv, prog_name="gpsdr")
+
+
+if __name__ == "__main__":
+    main()

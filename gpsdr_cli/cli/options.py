@@ -1,0 +1,150 @@
+"""Shared click option groups, as decorators (the sqlite-utils pattern).
+
+Only click and the standard library are imported here: ``gpsdr --help`` must
+answer without loading numpy, pandas or numba.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+from collections.abc import Callable
+from typing import Any
+
+import click
+
+#: The registered filter names (gpsdr_cli.filters.NAMES; repeated here because importing the
+#: registry loads numpy; tests/test_cli.py checks the two agree).
+FILTER_NAMES: tuple[str, ...] = ("ekf", "aekf", "fkf", "fafkf")
+
+#: Process-wide flags set by the options below and read by main.py's error handler.
+STATE: dict[str, bool] = {"debug": False, "quiet": False}
+
+F = Callable[..., Any]
+
+
+def _set_flag(name: str) -> Callable[[click.Context, click.Parameter, bool], bool]:
+    def callback(ctx: click.Context, param: click.Parameter, value: bool) -> bool:
+        if value:
+            STATE[name] = True
+        return value
+    return callback
+
+
+def common_options(fn: F) -> F:
+    """--debug and -q/--quiet, accepted by every command."""
+    fn = click.option("--debug", is_flag=True, expose_value=False, is_eager=True,
+                      callback=_set_flag("debug"),
+                      help="Show the full traceback of an error.")(fn)
+    fn = click.option("-q", "--quiet", is_flag=True, callback=_set_flag("quiet"),
+                      help="No progress bars or summaries on stderr.")(fn)
+    return fn
+
+
+def config_option(fn: F) -> F:
+    return click.option("--config", "config_path", type=click.Path(dir_okay=False),
+                        metavar="PARAMS.toml",
+                        help="Parameter file overriding the defaults "
+                             "(see `gpsdr fuse --print-config`).")(fn)
+
+
+def filter_options(fn: F) -> F:
+    """--filter and --smooth/--no-smooth (default: from the parameters)."""
+    fn = click.option("--smooth/--no-smooth", default=None,
+                      help="Run the RTS smoother over the forward filter "
+                           "(default: [filter] smooth).")(fn)
+    fn = click.option("--filter", "filter_name", type=click.Choice(FILTER_NAMES),
+                      default=None, help="Filter to run (default: [filter] name, aekf).")(fn)
+    return fn
+
+
+def format_option(fn: F) -> F:
+    return click.option("--format", "fmt", type=click.Choice(("parquet", "csv")),
+                        default="parquet", show_default=True,
+                        help="Output table format.")(fn)
+
+
+def parse_date(ctx: click.Context, param: click.Parameter, value: str | None) -> _dt.date | None:
+    if value is None:
+        return None
+    try:
+        return _dt.date.fromisoformat(value)
+    except ValueError as err:
+        raise click.BadParameter(f"{value!r} is not a date YYYY-MM-DD") from err
+
+
+def parse_offset(ctx: click.Context, param: click.Parameter, value: str | None) -> str | float | None:
+    if value is None or value == "auto":
+        return value
+    try:
+        return float(value)
+    except ValueError as err:
+        raise click.BadParameter(f"{value!r}: expected seconds (e.g. 0.1) or auto") from err
+
+
+def parse_topics(ctx: click.Context, param: click.Parameter,
+                 value: tuple[str, ...]) -> dict[str, str] | None:
+    topics: dict[str, str] = {}
+    for item in value:
+        kind, sep, name = item.partition("=")
+        if not sep or not kind or not name:
+            raise click.BadParameter(f"{item!r}: expected KIND=TOPIC, e.g. gnss=/ublox/fix")
+        topics[kind.strip()] = name.strip()
+    return topics or None
+
+
+def reader_options(fn: F) -> F:
+    """How to read the inputs: date, time offset, frame, MCAP topics, CSV conventions."""
+    opts = [
+        click.option("--date", type=str, callback=parse_date, metavar="YYYY-MM-DD",
+                     help="UTC date for NMEA logs without RMC/ZDA dates."),
+        click.option("--gnss-offset", type=str, callback=parse_offset, metavar="SECONDS|auto",
+                     help="Add SECONDS to every GNSS time stamp (receiver latency), or "
+                          "estimate it: auto runs twice and reports the value."),
+        click.option("--epsg", type=int, default=None, metavar="CODE",
+                     help="Local frame = this projected CRS (e.g. 32610 for UTM 10N) "
+                          "instead of a transverse Mercator on the first fix."),
+        click.option("--topic", "topics", multiple=True, callback=parse_topics,
+                     metavar="KIND=NAME",
+                     help="MCAP: take stream KIND (gnss, gyro, odo) from topic NAME; repeatable."),
+        click.option("--log-time", is_flag=True,
+                     help="MCAP: use the log time instead of the message header stamp."),
+        click.option("--gyro-units", type=click.Choice(("rad/s", "deg/s")), default=None,
+                     help="Units of the gyro column (default rad/s)."),
+        click.option("--gyro-sign", type=click.Choice(("ccw", "cw")), default=None,
+                     help="ccw: positive counter-clockwise seen from above (default); cw: the "
+                          "opposite."),
+        click.option("--odo-kind", type=click.Choice(("auto", "speed", "distance", "ticks")),
+                     default=None, help="What the odometer CSV holds (default: by column name)."),
+        click.option("--ticks-per-m", type=float, default=None, metavar="TICKS",
+                     help="Wheel ticks per metre, for --odo-kind ticks."),
+    ]
+    for opt in reversed(opts):
+        fn = opt(fn)
+    return fn
+
+
+def make_params(config_path: str | None = None, *, filter_name: str | None = None,
+                smooth: bool | None = None, gnss_offset: str | float | None = None,
+                epsg: int | None = None, gyro_units: str | None = None,
+                gyro_sign: str | None = None, odo_kind: str | None = None,
+                ticks_per_m: float | None = None) -> Any:
+    """Defaults, then the --config file, then the command-line options (last wins)."""
+    from .. import config
+
+    params = config.load(config_path)
+    overrides: dict[str, dict[str, Any]] = {}
+
+    def put(section: str, key: str, value: Any) -> None:
+        if value is not None:
+            overrides.setdefault(section, {})[key] = value
+
+    put("filter", "name", filter_name)
+    put("filter", "smooth", smooth)
+    if isinstance(gnss_offset, float):
+        put("time", "gnss_offset_s", gnss_offset)
+    put("frame", "epsg", epsg)
+    put("gyro", "units", gyro_units)
+    put("gyro", "sign", gyro_sign)
+    put("odo", "kind", odo_kind)
+    put("odo", "ticks_per_m", ticks_per_m)
+    return config.merge(params, overrides, "command line")

@@ -1,0 +1,203 @@
+"""Write and read gpsdr's tables (track, statistics, batch report) as Parquet or CSV.
+
+Parquet via pyarrow: the meaning and unit of every column go into that field's
+metadata (``unit``, ``description``), and the run's facts (filter, parameters,
+frame, version, inputs with SHA-256) into the file's schema metadata, so a
+track file explains itself.  CSV cannot carry metadata; it is for pipes and
+spreadsheets.
+
+Writes are atomic: the table goes to a temporary file in the target's
+directory, is flushed and fsync'ed, then ``os.replace``d over the target, so a
+killed process leaves the old file or none, never half a file.  The path ``-``
+means stdout (writing) or stdin (reading).
+
+Conventions: :mod:`gpsdr_cli.conventions` (``time`` is timestamp[ns, UTC]).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import BinaryIO
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+
+from ..errors import InputError, UsageError
+
+FORMATS = ("parquet", "csv")
+PARQUET_MAGIC = b"PAR1"
+
+
+def _unit_of(text: str) -> str:
+    """``"m, east in the local frame"`` -> ``"m"`` (the part before the first comma)."""
+    return text.split(",", 1)[0].strip()
+
+
+def to_arrow(df: pd.DataFrame, *, metadata: dict[str, str] | None = None,
+             units: dict[str, str] | None = None) -> pa.Table:
+    """The DataFrame as an Arrow table with field and schema metadata.
+
+    Float NaN becomes a Parquet null (``from_pandas`` semantics), as the
+    conventions charter asks for "not measured".
+    """
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    units = units or {}
+    fields = []
+    for fld in table.schema:
+        if fld.name in units:
+            fld = fld.with_metadata({"unit": _unit_of(units[fld.name]),
+                                     "description": units[fld.name]})
+        fields.append(fld)
+    schema_meta = dict(table.schema.metadata or {})
+    for key, value in (metadata or {}).items():
+        schema_meta[str(key).encode()] = str(value).encode()
+    schema = pa.schema(fields, metadata=schema_meta)
+    return table.cast(schema)
+
+
+def _write_to(table: pa.Table, fh: BinaryIO, fmt: str) -> None:
+    if fmt == "parquet":
+        pq.write_table(table, fh, compression="zstd")
+    else:
+        pacsv.write_csv(table, fh)
+
+
+def write_table(df: pd.DataFrame, path: str | os.PathLike, *, metadata: dict[str, str] | None = None,
+                units: dict[str, str] | None = None, fmt: str = "parquet") -> None:
+    """Write ``df`` to ``path`` (``-`` = stdout) atomically, as Parquet or CSV.
+
+    ``units``: column -> "unit, meaning" (Parquet field metadata);
+    ``metadata``: file-level key -> value strings (Parquet schema metadata).
+    """
+    if fmt not in FORMATS:
+        raise UsageError(f"unknown output format {fmt!r}; choose parquet or csv")
+    table = to_arrow(df, metadata=metadata, units=units)
+    if str(path) == "-":
+        buf = io.BytesIO()
+        _write_to(table, buf, fmt)
+        out = sys.stdout.buffer
+        out.write(buf.getvalue())
+        out.flush()
+        return
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    if not directory.is_dir():
+        raise InputError(target, f"cannot write: directory {directory} does not exist")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    try:
+        os.chmod(tmp_name, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual mode
+        with os.fdopen(fd, "wb") as fh:
+            _write_to(table, fh, fmt)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp_name, target)
+    except OSError as err:
+        _unlink_quietly(tmp_name)
+        raise InputError(target, f"cannot write: {err.strerror or err}") from err
+    except BaseException:
+        _unlink_quietly(tmp_name)
+        raise
+    _fsync_dir(directory)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _unlink_quietly(name: str) -> None:
+    try:
+        os.unlink(name)
+    except FileNotFoundError:
+        pass
+
+
+def _fsync_dir(directory: Path) -> None:
+    """Make the rename durable (POSIX); a no-op where directories cannot be opened."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _decode_meta(schema: pa.Schema) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for key, value in (schema.metadata or {}).items():
+        k = key.decode("utf-8", "replace")
+        if k == "pandas":
+            continue
+        out[k] = value.decode("utf-8", "replace")
+    return out
+
+
+def field_units(path_or_table: str | os.PathLike | pa.Table) -> dict[str, str]:
+    """Column -> unit string from a Parquet file's field metadata."""
+    schema = (path_or_table.schema if isinstance(path_or_table, pa.Table)
+              else pq.read_schema(path_or_table))
+    return {f.name: f.metadata[b"unit"].decode() for f in schema
+            if f.metadata and b"unit" in f.metadata}
+
+
+def read_table_bytes(data: bytes, name: str = "<stdin>") -> tuple[pd.DataFrame, dict[str, str]]:
+    """A Parquet or CSV table held in memory (sniffed by the Parquet magic)."""
+    if not data.strip():
+        raise InputError(name, "empty input; expected a track Parquet or CSV")
+    if data[:4] == PARQUET_MAGIC:
+        try:
+            table = pq.read_table(io.BytesIO(data))
+        except (pa.ArrowException, OSError) as err:
+            raise InputError(name, f"not a readable Parquet file: {err}") from err
+        return _track_df(table.to_pandas(), name), _decode_meta(table.schema)
+    try:
+        df = pd.read_csv(io.BytesIO(data))
+    except (ValueError, UnicodeDecodeError) as err:
+        raise InputError(name, f"neither Parquet nor CSV: {err}") from err
+    return _track_df(df, name), {}
+
+
+def read_track(path: str | os.PathLike) -> tuple[pd.DataFrame, dict[str, str]]:
+    """A track (or any gpsdr table) and its file metadata; ``-`` reads stdin."""
+    if str(path) == "-":
+        return read_table_bytes(sys.stdin.buffer.read(), "<stdin>")
+    p = Path(path)
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(4)
+    except FileNotFoundError as err:
+        raise InputError(p, "no such file") from err
+    except IsADirectoryError as err:
+        raise InputError(p, "is a directory, expected a track Parquet or CSV") from err
+    except OSError as err:
+        raise InputError(p, f"cannot read: {err.strerror}") from err
+    if head == PARQUET_MAGIC:
+        try:
+            table = pq.read_table(p)
+        except (pa.ArrowException, OSError) as err:
+            raise InputError(p, f"not a readable Parquet file: {err}") from err
+        return _track_df(table.to_pandas(), str(p)), _decode_meta(table.schema)
+    return read_table_bytes(p.read_bytes(), str(p))
+
+
+def _track_df(df: pd.DataFrame, name: str) -> pd.DataFrame:
+    """Normalise the ``time`` column to datetime64[ns, UTC] (CSV reads it as text)."""
+    if "time" in df.columns and not isinstance(df["time"].dtype, pd.DatetimeTZDtype):
+        try:
+            df["time"] = pd.to_datetime(df["time"], utc=True).astype("datetime64[ns, UTC]")
+        except (ValueError, TypeError) as err:
+            raise InputError(name, f"column time: not timestamps: {err}") from err
+    elif "time" in df.columns:
+        df["time"] = df["time"].astype("datetime64[ns, UTC]")
+    return df

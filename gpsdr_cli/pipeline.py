@@ -1,0 +1,499 @@
+"""The whole job for one drive: frame -> align -> filter (+ smooth) -> track -> statistics.
+
+``fuse(drive, params, reference)`` is what ``gpsdr fuse`` and ``gpsdr batch``
+call; reading and writing stay in the callers so the pipeline is a pure
+function of its inputs (it never changes the ``Drive`` it is given).
+
+Conventions: :mod:`gpsdr_cli.conventions` (int64 ns UTC, metres in the local
+east/north frame, heading clockwise from north, NaN = not measured; outputs
+never hold NaN/inf in a column that is not documented as nullable).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+from . import __version__, config
+from .config import Params
+from .conventions import NS_PER_S, STATS_COLUMNS, TRACK_COLUMNS, TRACK_EXTRA_COLUMNS
+from .errors import GpsdrError, InputError, NoDataError, UsageError
+from .geodesy import LocalFrame
+
+if TYPE_CHECKING:
+    from .align import Epochs
+    from .filters.base import FilterResult
+    from .io.drive import Drive
+    from .io.reference import Reference
+
+#: Track columns that may hold nulls (everything else must be finite).
+NULLABLE_TRACK_COLUMNS = frozenset({"pdop", "gnss_e", "gnss_n", "nis"})
+
+#: Column -> "unit, meaning" for the track file's field metadata.
+TRACK_UNITS: dict[str, str] = {**TRACK_COLUMNS, **TRACK_EXTRA_COLUMNS}
+
+Progress = Callable[[str], None]
+
+
+class NonFiniteOutputError(GpsdrError):
+    """A filter produced NaN or infinity where the output contract forbids it."""
+
+
+@dataclass
+class FuseResult:
+    """Everything one run produced; ``metadata`` is what the track file carries."""
+
+    track: pd.DataFrame
+    stats: pd.DataFrame
+    frame: LocalFrame
+    epochs: Epochs
+    result: FilterResult
+    metadata: dict[str, str]
+    reference_en: pd.DataFrame | None = None
+    #: GNSS time offset used (s); estimated when ``auto_gnss_offset`` was asked for
+    gnss_offset_s: float = 0.0
+    #: the parameters actually used (with an estimated offset filled in)
+    params: Params = field(default_factory=dict)
+
+    def summary(self) -> dict[str, float]:
+        """Figures of the ``all`` segment: rmse_m, cep95_m, max_m, epochs (NaN when unknown)."""
+        return summary_of(self.stats)
+
+
+def summary_of(stats: pd.DataFrame) -> dict[str, float]:
+    rows = stats[stats["segment"] == "all"] if "segment" in stats else stats.iloc[:0]
+    out: dict[str, float] = {}
+    for col in ("rmse_m", "cep95_m", "max_m", "mean_m", "epochs", "nis_in_95_share",
+                "gnss_separation_rmse_m"):
+        out[col] = float(rows[col].iloc[0]) if len(rows) and col in rows else math.nan
+    return out
+
+
+# --------------------------------------------------------------------------- frame
+
+def choose_frame(drive: Drive, params: Params) -> LocalFrame:
+    """The local frame: EPSG on request, else centred on the first usable fix, else on the
+    configured origin (dead-reckoning-only drives)."""
+    fp = params["frame"]
+    epsg = int(fp["epsg"]) or None
+    lat = lon = np.zeros(0)
+    if drive.gnss is not None and len(drive.gnss):
+        ok = drive.gnss.valid
+        lat, lon = drive.gnss.lat_deg[ok], drive.gnss.lon_deg[ok]
+    if len(lat):
+        return LocalFrame.for_fixes(lat, lon, epsg)
+    olat, olon = float(fp["origin_lat_deg"]), float(fp["origin_lon_deg"])
+    if math.isfinite(olat) and math.isfinite(olon):
+        if epsg is not None:
+            return LocalFrame.from_epsg(epsg, olat, olon)
+        return LocalFrame.centred_on(olat, olon)
+    where = drive.sources[0].path if drive.sources else None
+    raise NoDataError(where, "no valid GNSS fix in the drive; for dead reckoning alone set "
+                             "[frame] origin_lat_deg, origin_lon_deg and initial_heading_deg")
+
+
+def frame_from_metadata(meta: dict[str, str]) -> LocalFrame | None:
+    """Rebuild the local frame a track file was written in (None if it does not say)."""
+    wkt = meta.get("frame.crs_wkt")
+    if not wkt:
+        return None
+    from pyproj import CRS
+
+    return LocalFrame(CRS.from_wkt(wkt), float(meta.get("frame.origin_lat_deg", "nan")),
+                      float(meta.get("frame.origin_lon_deg", "nan")))
+
+
+# --------------------------------------------------------------------------- track
+
+def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame) -> pd.DataFrame:
+    """The track table: TRACK_COLUMNS then TRACK_EXTRA_COLUMNS, one row per epoch."""
+    n_ep = len(epochs)
+    if len(result) != n_ep:
+        raise GpsdrError(f"filter returned {len(result)} epochs for {n_ep} input epochs")
+    e = np.asarray(result.e, float)
+    n = np.asarray(result.n, float)
+    v_e = np.asarray(result.v_e, float)
+    v_n = np.asarray(result.v_n, float)
+    lat, lon = frame.inverse(e, n)
+    # heading clockwise from north: psi = atan2(v_e, v_n)  (conventions charter)
+    heading = np.degrees(np.arctan2(v_e, v_n)) % 360.0
+    pdop = pd.Series(np.asarray(epochs.pdop, float)).ffill().to_numpy()  # latest GNSS record
+    cols: dict[str, Any] = {
+        "time": pd.to_datetime(np.asarray(epochs.t_ns, np.int64), unit="ns", utc=True),
+        "lat": lat,
+        "lon": lon,
+        "e": e,
+        "n": n,
+        "v_e": v_e,
+        "v_n": v_n,
+        "speed": np.hypot(v_e, v_n),
+        "heading_deg": heading,
+        "sigma_e": _sd(result.var_e),
+        "sigma_n": _sd(result.var_n),
+        "gnss_used": np.asarray(result.gnss_used, bool),
+        "pdop": pdop,
+        "gnss_e": np.asarray(epochs.gnss_e, float),
+        "gnss_n": np.asarray(epochs.gnss_n, float),
+        "gnss_rejected": np.asarray(result.gnss_rejected, bool),
+        "gnss_outage": np.asarray(epochs.gnss_outage, bool),
+        "static": np.asarray(result.static, bool),
+        "nis": np.asarray(result.nis, float),
+    }
+    df = pd.DataFrame(cols)
+    df["time"] = df["time"].astype("datetime64[ns, UTC]")
+    return df[list(TRACK_UNITS)]
+
+
+def _sd(var: np.ndarray) -> np.ndarray:
+    """1-sigma from a variance; rounding may leave -1e-12, a real negative stays NaN (caught)."""
+    v = np.asarray(var, float)
+    v = np.where((v < 0) & (v > -1e-9), 0.0, v)
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(v)
+
+
+def check_finite(track: pd.DataFrame, stats: pd.DataFrame | None = None) -> None:
+    """Raise :class:`NonFiniteOutputError` if NaN/inf reached a non-nullable column."""
+    for col in track.columns:
+        if col in NULLABLE_TRACK_COLUMNS or col == "time" or track[col].dtype == bool:
+            continue
+        vals = track[col].to_numpy(float)
+        bad = ~np.isfinite(vals)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise NonFiniteOutputError(
+                f"filter output: column {col} is {vals[k]} at epoch {k} "
+                f"({track['time'].iloc[k]}); {int(bad.sum())} epochs affected "
+                "(the filter diverged; try --filter ekf or check the input streams)")
+    for col in TRACK_UNITS:
+        if col in NULLABLE_TRACK_COLUMNS and col in track:
+            vals = track[col].to_numpy(float)
+            if np.isinf(vals).any():
+                raise NonFiniteOutputError(f"filter output: column {col} holds infinity")
+    if stats is not None:
+        for col in stats.columns:
+            if pd.api.types.is_float_dtype(stats[col]) and np.isinf(stats[col].to_numpy()).any():
+                raise NonFiniteOutputError(f"statistics: column {col} holds infinity")
+
+
+# --------------------------------------------------------------------------- metadata
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    if isinstance(value, np.ndarray):
+        return f"array{value.shape}"
+    return str(value)
+
+
+def build_metadata(drive: Drive, params: Params, frame: LocalFrame, epochs: Epochs,
+                   result: FilterResult, skipped: Any, reference: Reference | None,
+                   gnss_offset_auto_s: float | None) -> dict[str, str]:
+    """File metadata: tool version, filter and every parameter, frame, inputs with SHA-256,
+    skipped records by reason."""
+    meta: dict[str, str] = {
+        "gpsdr.version": __version__,
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "filter": str(params["filter"]["name"]),
+        "smoothed": "true" if params["filter"]["smooth"] else "false",
+        "params_toml": config.to_toml(params),
+    }
+    meta.update({f"param.{k}": v for k, v in config.flat(params).items()})
+    meta.update({f"frame.{k}": v for k, v in frame.describe().items()})
+    meta["inputs"] = json.dumps([{"path": s.path, "sha256": s.sha256, "streams": list(s.streams)}
+                                 for s in drive.sources])
+    for i, s in enumerate(drive.sources):
+        meta[f"input.{i}.path"] = s.path
+        meta[f"input.{i}.sha256"] = s.sha256
+    meta["skipped"] = json.dumps({reason: {"count": int(c), "first": skipped.first.get(reason, "")}
+                                  for reason, c in sorted(skipped.counts.items())})
+    meta["skipped_total"] = str(skipped.total)
+    meta["epochs"] = str(len(epochs))
+    meta["gnss_epochs"] = str(epochs.n_gnss)
+    meta["gnss_used"] = str(int(np.asarray(result.gnss_used, bool).sum()))
+    meta["filter_info"] = json.dumps(_jsonable(result.info))
+    if reference is not None:
+        meta["reference"] = str(getattr(reference, "source", ""))
+    if gnss_offset_auto_s is not None:
+        meta["gnss_offset_auto_s"] = repr(gnss_offset_auto_s)
+    return meta
+
+
+# --------------------------------------------------------------------------- fuse
+
+def _run_once(drive: Drive, params: Params, frame: LocalFrame,
+              progress: Progress | None) -> tuple[Epochs, FilterResult, pd.DataFrame, Any]:
+    from . import filters
+    from .align import build_epochs
+
+    # build_epochs counts what it drops into the drive's SkipReport: work on a copy so
+    # a second run (auto offset, batch retry) does not count twice.
+    work = dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped))
+    if progress:
+        progress("aligning streams")
+    epochs = build_epochs(work, frame, params)
+    if len(epochs) == 0:
+        where = drive.sources[0].path if drive.sources else None
+        raise NoDataError(where, "no GNSS, gyro or odometer record to process")
+    run = filters.get(params["filter"]["name"])
+    if progress:
+        progress(f"running {params['filter']['name']}"
+                 + (" + RTS smoother" if params["filter"]["smooth"] else ""))
+    result = run(epochs, params)
+    return epochs, result, track_frame(epochs, result, frame), work.skipped
+
+
+def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
+         auto_gnss_offset: bool = False, progress: Progress | None = None) -> FuseResult:
+    """Fuse one drive.  ``reference`` (optional) is projected into the same local frame
+    and the statistics are taken against it; without one, only the health rows.
+
+    ``auto_gnss_offset``: run once, estimate the GNSS time offset from the along-track
+    residuals (:func:`gpsdr_cli.latency.estimate_gnss_offset_s`), add it to
+    ``[time] gnss_offset_s`` and run again.
+    """
+    from . import evaluation
+
+    if drive.gnss is None and drive.gyro is None and drive.odo is None:
+        where = drive.sources[0].path if drive.sources else None
+        raise NoDataError(where, "no GNSS, gyro or odometer stream found")
+    params = copy.deepcopy(params)
+    frame = choose_frame(drive, params)
+    epochs, result, track, skipped = _run_once(drive, params, frame, progress)
+    offset_auto: float | None = None
+    if auto_gnss_offset:
+        from .latency import estimate_gnss_offset_s
+
+        if progress:
+            progress("estimating the GNSS time offset")
+        est = float(estimate_gnss_offset_s(track))
+        if not math.isfinite(est):
+            raise InputError(drive.sources[0].path if drive.sources else None,
+                             "cannot estimate the GNSS time offset (too few moving GNSS "
+                             "epochs); give --gnss-offset SECONDS")
+        params["time"]["gnss_offset_s"] = float(params["time"]["gnss_offset_s"]) + est
+        offset_auto = params["time"]["gnss_offset_s"]
+        epochs, result, track, skipped = _run_once(drive, params, frame, progress)
+
+    if progress:
+        progress("statistics")
+    ref_en = evaluation.reference_en(reference, frame) if reference is not None else None
+    name = str(params["filter"]["name"])
+    stats = evaluation.error_statistics(track, ref_en, name, params)
+    stats = order_stats(stats)
+    check_finite(track, stats)
+    meta = build_metadata(drive, params, frame, epochs, result, skipped, reference, offset_auto)
+    return FuseResult(track=track, stats=stats, frame=frame, epochs=epochs, result=result,
+                      metadata=meta, reference_en=ref_en,
+                      gnss_offset_s=float(params["time"]["gnss_offset_s"]), params=params)
+
+
+def order_stats(stats: pd.DataFrame) -> pd.DataFrame:
+    """Documented statistics columns first, in the charter's order; others after."""
+    first = [c for c in STATS_COLUMNS if c in stats.columns]
+    rest = [c for c in stats.columns if c not in STATS_COLUMNS]
+    return stats[first + rest].reset_index(drop=True)
+
+
+def stats_units(stats: pd.DataFrame) -> dict[str, str]:
+    return {c: STATS_COLUMNS[c] for c in stats.columns if c in STATS_COLUMNS}
+
+
+# --------------------------------------------------------------------------- stats of a file
+
+def params_from_metadata(meta: dict[str, str]) -> Params:
+    """The parameters a track was made with (defaults when the file does not say)."""
+    text = meta.get("params_toml")
+    if not text:
+        return config.defaults()
+    import tomllib
+
+    try:
+        return config.merge(config.defaults(), tomllib.loads(text), "track metadata")
+    except (tomllib.TOMLDecodeError, UsageError):
+        return config.defaults()
+
+
+def prepare_track(track: pd.DataFrame, meta: dict[str, str], reference: Reference | None,
+                  name: str = "track") -> tuple[pd.DataFrame, LocalFrame, pd.DataFrame | None]:
+    """An existing track ready for evaluation: its own frame from its metadata, else a frame
+    centred on its first position (e/n recomputed from lat/lon); the reference in that frame."""
+    from . import evaluation
+
+    missing = [c for c in ("time", "lat", "lon") if c not in track.columns]
+    if missing:
+        raise InputError(name, f"not a gpsdr track: missing column(s) {', '.join(missing)}")
+    if len(track) == 0:
+        raise NoDataError(name, "the track has no rows")
+    track = track.copy()
+    frame = frame_from_metadata(meta)
+    if frame is None or "e" not in track or "n" not in track:
+        lat = track["lat"].to_numpy(float)
+        lon = track["lon"].to_numpy(float)
+        frame = LocalFrame.for_fixes(lat, lon)
+        track["e"], track["n"] = frame.forward(lat, lon)
+        if "gnss_e" in track and "gnss_n" in track:
+            track["gnss_e"] = np.nan
+            track["gnss_n"] = np.nan
+    for col, unit in TRACK_UNITS.items():
+        if col not in track.columns:
+            track[col] = False if unit.startswith("bool") else np.nan
+    ref_en = evaluation.reference_en(reference, frame) if reference is not None else None
+    return track, frame, ref_en
+
+
+def track_statistics(track: pd.DataFrame, meta: dict[str, str], reference: Reference | None,
+                     name: str = "track") -> tuple[pd.DataFrame, pd.DataFrame | None]:
+    """Statistics of an existing track (``gpsdr stats``) and the reference in its frame."""
+    from . import evaluation
+
+    track, _, ref_en = prepare_track(track, meta, reference, name)
+    params = params_from_metadata(meta)
+    stats = evaluation.error_statistics(track, ref_en, meta.get("filter", "track"), params)
+    return order_stats(stats), ref_en
+
+
+def time_span_s(t_ns: np.ndarray) -> float:
+    return float((t_ns[-1] - t_ns[0]) / NS_PER_S) if len(t_ns) > 1 else 0.0
+
+
+# --------------------------------------------------------------------------- what a log holds
+
+def _iso(t_ns: int) -> str:
+    return pd.Timestamp(int(t_ns), unit="ns", tz="UTC").isoformat()
+
+
+def _stream_row(name: str, t_ns: np.ndarray) -> dict[str, Any]:
+    t = np.sort(np.asarray(t_ns, np.int64))
+    span = time_span_s(t)
+    row: dict[str, Any] = {"stream": name, "records": len(t), "rate_hz": math.nan,
+                           "start": _iso(t[0]) if len(t) else "", "end": _iso(t[-1]) if len(t) else "",
+                           "duration_s": span}
+    if len(t) > 1 and span > 0:
+        row["rate_hz"] = (len(t) - 1) / span
+    return row
+
+
+def _distribution(values: np.ndarray) -> dict[str, float] | None:
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return None
+    return {"min": float(v.min()), "median": float(np.median(v)),
+            "p95": float(np.percentile(v, 95)), "max": float(v.max()), "count": len(v)}
+
+
+def gnss_outages(t_valid_ns: np.ndarray, params: Params) -> tuple[list[dict[str, Any]], float]:
+    """Gaps between usable fixes longer than max(outage_gap_s, 2.5 x median fix interval)."""
+    t = np.sort(np.asarray(t_valid_ns, np.int64))
+    gap_s = float(params["time"]["outage_gap_s"])
+    if len(t) > 2:
+        gap_s = max(gap_s, 2.5 * float(np.median(np.diff(t))) / NS_PER_S)
+    out = []
+    if len(t) > 1:
+        d = np.diff(t) / NS_PER_S
+        for k in np.flatnonzero(d > gap_s):
+            out.append({"start": _iso(t[k]), "length_s": float(d[k])})
+    return out, gap_s
+
+
+def describe_drive(drive: Drive, params: Params) -> dict[str, Any]:
+    """Streams with record counts, rates and time spans; GNSS fix quality, outages and
+    DOP distributions; skipped records by reason (``gpsdr info``)."""
+    desc: dict[str, Any] = {"streams": [], "sources": [s.path for s in drive.sources]}
+    g = drive.gnss
+    if g is not None and len(g):
+        desc["streams"].append(_stream_row("gnss", g.t_ns))
+        valid = g.valid
+        quality = pd.Series(np.asarray(g.fix_quality, int)).value_counts().sort_index()
+        outages, gap_s = gnss_outages(g.t_ns[valid], params)
+        desc["gnss"] = {
+            "fixes": len(g), "valid": int(valid.sum()),
+            "fix_quality": {int(k): int(v) for k, v in quality.items()},
+            "outage_threshold_s": gap_s, "outages": outages,
+            "pdop": _distribution(g.pdop), "hdop": _distribution(g.hdop),
+            "sigma_e_m": _distribution(g.sigma_e_m), "n_sats": _distribution(
+                np.where(g.n_sats >= 0, g.n_sats, np.nan)),
+        }
+    if drive.gyro is not None and len(drive.gyro):
+        desc["streams"].append(_stream_row("gyro", drive.gyro.t_ns))
+        desc["gyro"] = {"yaw_rate_radps": _distribution(drive.gyro.yaw_rate_radps)}
+    if drive.odo is not None and len(drive.odo):
+        desc["streams"].append(_stream_row("odo", drive.odo.t_ns))
+        desc["odo"] = {"speed_mps": _distribution(drive.odo.speed_mps)}
+    desc["skipped"] = {r: {"count": int(c), "first": drive.skipped.first.get(r, "")}
+                       for r, c in sorted(drive.skipped.counts.items())}
+    desc["meta"] = _jsonable(drive.meta)
+    return desc
+
+
+def describe_log(path: str, params: Params, *, topics: dict[str, str] | None = None,
+                 date: Any = None, use_log_time: bool = False) -> dict[str, Any]:
+    """Describe one file of any kind gpsdr reads (``gpsdr info``)."""
+    from .io.readers import sniff
+
+    kind = sniff(path)
+    if kind == "parquet":
+        from .io.parquet import read_track
+
+        df, meta = read_track(path)
+        desc: dict[str, Any] = {"streams": [], "skipped": {}}
+        if "time" in df and len(df):
+            desc["streams"].append(_stream_row("track", df["time"].astype("int64").to_numpy()))
+        desc["track"] = {"rows": len(df), "columns": ", ".join(map(str, df.columns)),
+                         "filter": meta.get("filter", "-"), "gpsdr": meta.get("gpsdr.version", "-")}
+        return {"path": str(path), "kind": kind, **desc}
+    if kind == "mcap":
+        from .io.mcap import read_mcap
+
+        drive = read_mcap(path, topics=topics, use_log_time=use_log_time, date=date)
+    elif kind == "nmea":
+        from .io.nmea import read_nmea
+
+        drive = read_nmea(path, date=date)
+    else:
+        drive, ref = _read_csv_any(path, params)
+        if ref is not None:
+            desc = {"streams": [_stream_row("reference", ref.t_ns)], "skipped": {},
+                    "reference": {"lat_deg": _distribution(ref.lat_deg),
+                                  "lon_deg": _distribution(ref.lon_deg)}}
+            return {"path": str(path), "kind": "reference csv", **desc}
+    return {"path": str(path), "kind": kind, **describe_drive(drive, params)}
+
+
+def _read_csv_any(path: str, params: Params) -> tuple[Drive | None, Any]:
+    """A CSV is a gyro log, an odometer log or a reference, told apart by its header."""
+    from .io.csv import read_gyro_csv, read_odo_csv
+
+    with open(path, "rb") as fh:
+        header = fh.readline().decode("utf-8", "replace").lstrip("\ufeff")
+    cols = {c.strip().lower() for c in header.split(",")}
+    if params["gyro"]["column"].lower() in cols:
+        return read_gyro_csv(path, params["gyro"]), None
+    odo_cols = {"speed", "distance", "ticks", params["odo"]["column"].lower()} - {""}
+    if cols & odo_cols:
+        return read_odo_csv(path, params["odo"]), None
+    if {"lat", "lon"} <= cols:
+        from .io.reference import read_reference
+
+        return None, read_reference(path)
+    raise InputError(path, f"line 1: CSV header {header.strip()!r} is neither a gyro log "
+                           f"({params['gyro']['column']}), an odometer log (speed, distance, "
+                           "ticks) nor a reference (t, lat, lon)")
