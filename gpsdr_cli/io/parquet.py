@@ -50,6 +50,9 @@ def to_arrow(df: pd.DataFrame, *, metadata: dict[str, str] | None = None,
     units = units or {}
     fields = []
     for fld in table.schema:
+        if pa.types.is_timestamp(fld.type) and fld.type.unit != "ns":
+            # the contract: timestamp[ns, UTC] whatever resolution pandas chose
+            fld = fld.with_type(pa.timestamp("ns", tz=fld.type.tz))
         if fld.name in units:
             fld = fld.with_metadata({"unit": _unit_of(units[fld.name]),
                                      "description": units[fld.name]})
