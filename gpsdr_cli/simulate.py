@@ -1,0 +1,849 @@
+"""Drives with known truth: a vehicle, its GNSS receiver, gyro and odometer.
+
+Why hand-written: no maintained Python package simulates a *vehicle* log
+(odometer ticks, a yaw gyro and an NMEA receiver with PDOP-dependent noise and
+multipath) with the error models gpsdr's filters assume; the pieces are short.
+
+Conventions (:mod:`gpsdr_cli.conventions`): int64 ns UTC time, local frame
+east/north in metres (a transverse Mercator centred on the scenario's origin
+city, :class:`~gpsdr_cli.geodesy.LocalFrame`), heading ``psi`` clockwise from
+north, yaw rate positive counter-clockwise so ``d(psi)/dt = -yaw_rate``.
+
+The vehicle
+    A route is a curvature profile ``kappa(s)`` over path length ``s`` (straights,
+    clothoid-ramped corners and curves; ``kappa > 0`` turns right, i.e. heading
+    increases) plus stop lines with dwell times.  A driver model at 100 Hz
+    follows the largest speed that respects the cruise speed, the lateral
+    acceleration in curves (``v <= sqrt(a_lat / |kappa|)``) and braking to the
+    next stop (``v <= sqrt(2 a_brake d)``), with limited acceleration and jerk.
+    Heading rate ``d(psi)/dt = kappa v``; heading and position are the
+    trapezoidal integrals of heading rate and velocity, so the truth is
+    consistent to integration round-off.
+
+The GNSS receiver (per epoch, per axis e/n)
+    ``fix = truth(t + stamp_offset) + w + b + jump`` with white noise
+    ``w ~ N(0, (gnss_sd_per_pdop_m * PDOP)^2)``, multipath ``b`` a first-order
+    Gauss-Markov process whose sigma and correlation time depend on the
+    environment (open, suburban, urban canyon), rare outlier jumps, and outages
+    (fix quality 0) in tunnels or random drop-outs.  PDOP is a log-normal
+    Gauss-Markov series around the environment's mean.  The receiver reports a
+    sigma (NMEA GST / NavSatFix covariance) that includes the white part and only
+    a share of the multipath sigma (all of it in open sky, 30 % in an urban
+    canyon), as real receivers underestimate multipath.
+    ``stamp_offset`` > 0 means the fix holds the position of a *later* instant than
+    its stamp (the comma2k19 situation); the correction is
+    ``[time] gnss_offset_s = stamp_offset``.
+
+The gyro: ``(1 + scale_error) * yaw_rate + bias(t) + white``, bias a stationary
+Gauss-Markov process (the filters' own drift model).  The odometer: wheel ticks
+``floor(ticks_per_m * (1 + scale_error) * distance)`` turned into speed over a
+moving window, plus white noise.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numba import njit
+
+from .config import DEFAULTS, Params
+from .conventions import FIX_GPS, FIX_NONE, NS_PER_S
+from .errors import UsageError
+from .geodesy import LocalFrame
+from .io.drive import Drive, GnssFixes, Odometry, Source, YawRates
+
+SCENARIOS: tuple[str, ...] = ("open_sky", "urban_canyon", "tunnels", "stop_and_go", "one_hour")
+
+TRUTH_RATE_HZ = 100
+DT_S = 1.0 / TRUTH_RATE_HZ
+#: every drive starts at this UTC instant (a Tuesday morning)
+START_NS = int(_dt.datetime(2024, 5, 14, 8, 0, 0, tzinfo=_dt.UTC).timestamp()) * NS_PER_S
+
+# Environments: index -> name, and their GNSS error parameters.
+ENV_NAMES = ("open", "suburban", "urban")
+_ENV = {
+    #          pdop_mean pdop_log_sd mp_sd_m mp_tau_s gst_mp_share outlier_p dropout_p
+    "open": (1.5, 0.12, 0.4, 60.0, 1.0, 0.0, 0.0),
+    "suburban": (2.2, 0.2, 1.2, 30.0, 0.7, 0.001, 0.0005),
+    "urban": (3.8, 0.3, 4.0, 20.0, 0.3, 0.006, 0.002),
+}
+
+
+@dataclass
+class _Scenario:
+    route: str                 # "open" | "city" | "highway" | "stop_and_go" | "mixed"
+    duration_s: float
+    origin: tuple[float, float, float]  # lat deg, lon deg, ellipsoidal height m
+    env: str | None            # one environment for the whole drive, or None: by route kind
+    short_dropouts: bool = False
+
+
+_SCENARIOS: dict[str, _Scenario] = {
+    "open_sky": _Scenario("open", 600.0, (48.7665, 11.4258, 410.0), "open"),
+    "urban_canyon": _Scenario("city", 600.0, (50.1109, 8.6821, 150.0), "urban", True),
+    "tunnels": _Scenario("highway", 600.0, (48.7758, 9.1829, 300.0), "open"),
+    "stop_and_go": _Scenario("stop_and_go", 900.0, (48.1372, 11.5756, 520.0), "suburban"),
+    "one_hour": _Scenario("mixed", 3600.0, (52.5200, 13.4050, 40.0), None, True),
+}
+
+#: route kind code per distance grid point -> environment
+_KIND_ENV = {0: "open", 1: "urban", 2: "suburban"}
+
+
+@dataclass
+class SimDrive:
+    """A simulated drive: the sensor logs (``drive``) and what really happened.
+
+    ``truth``: one row per 10 ms, columns t_ns (int64), lat, lon (deg), e, n (m),
+    v_e, v_n, speed (m/s), heading_deg (clockwise from north), yaw_rate (rad/s,
+    CCW+), alt (m).  ``noise``: the true error parameters (JSON-able).
+    ``gnss_errors``: per GNSS epoch t_ns, pdop, hdop, env, white_e/n,
+    multipath_e/n, jump_e/n (m), outlier, no_fix, true_sd_m (per axis, white and
+    multipath stationary sigma) - what the receiver really did.
+    """
+
+    drive: Drive
+    truth: pd.DataFrame
+    frame: LocalFrame
+    noise: dict
+    scenario: str
+    seed: int
+    gnss_errors: pd.DataFrame = field(default_factory=pd.DataFrame)
+
+
+# --------------------------------------------------------------------------- route
+
+def _pieces_city(rng: np.random.Generator, length_m: float, long_stops: bool
+                 ) -> tuple[list[tuple[float, float, float]], list[tuple[float, float]], float]:
+    """City blocks: straights, 90-degree corners at intersections, traffic lights."""
+    pieces: list[tuple[float, float, float]] = [(30.0, 0.0, 0.0)]
+    stops: list[tuple[float, float]] = []
+    s = 30.0
+    while s < length_m:
+        L = float(rng.uniform(80.0, 250.0))
+        pieces.append((L, 0.0, 0.0))
+        s += L
+        if rng.random() < (0.3 if long_stops else 0.25):
+            dwell = float(rng.uniform(120.0, 240.0)) if long_stops and rng.random() < 0.5 \
+                else float(rng.uniform(8.0, 35.0))
+            stops.append((s - 3.0, dwell))
+        if rng.random() < 0.5:
+            radius = float(rng.uniform(10.0, 18.0))
+            sign = 1.0 if rng.random() < 0.5 else -1.0
+            s += _add_turn(pieces, sign * math.pi / 2, radius, 5.0)
+        elif rng.random() < 0.2:  # a gentle bend in the street
+            s += _add_turn(pieces, float(rng.uniform(-0.4, 0.4)), float(rng.uniform(60, 150)), 10.0)
+    return pieces, stops, 13.9
+
+
+def _pieces_open(rng: np.random.Generator, length_m: float
+                 ) -> tuple[list[tuple[float, float, float]], list[tuple[float, float]], float]:
+    """Rural road: long straights, curves of 60-400 m radius, a few junctions."""
+    pieces: list[tuple[float, float, float]] = [(50.0, 0.0, 0.0)]
+    stops: list[tuple[float, float]] = []
+    s = 50.0
+    while s < length_m:
+        L = float(rng.uniform(150.0, 600.0))
+        pieces.append((L, 0.0, 0.0))
+        s += L
+        if rng.random() < 0.15:  # a junction: stop, then turn
+            stops.append((s - 3.0, float(rng.uniform(5.0, 30.0))))
+            s += _add_turn(pieces, (1 if rng.random() < 0.5 else -1) * math.pi / 2,
+                           float(rng.uniform(12.0, 20.0)), 5.0)
+        else:
+            ang = float(rng.uniform(0.3, 1.6)) * (1 if rng.random() < 0.5 else -1)
+            s += _add_turn(pieces, ang, float(rng.uniform(60.0, 400.0)), 20.0)
+    return pieces, stops, 22.0
+
+
+def _pieces_highway(rng: np.random.Generator, length_m: float
+                    ) -> tuple[list[tuple[float, float, float]], list[tuple[float, float]], float,
+                               list[tuple[float, float]]]:
+    """Highway with three tunnels (30, 60, 120 s at cruise speed); the 60 s one holds a curve.
+
+    Returns pieces, stops, cruise speed and the tunnels as (start s in m, duration s).
+    """
+    v = 22.0
+    pieces: list[tuple[float, float, float]] = []
+
+    def total() -> float:
+        return sum(p[0] for p in pieces)
+
+    pieces.append((1000.0 + float(rng.uniform(-100.0, 100.0)), 0.0, 0.0))
+    _add_turn(pieces, 0.35, 800.0, 40.0)
+    pieces.append((800.0, 0.0, 0.0))
+    tunnels = [(total(), 30.0)]
+    pieces.append((30.0 * v + 1500.0, 0.0, 0.0))
+    tunnels.append((total(), 60.0))
+    pieces.append((200.0, 0.0, 0.0))
+    _add_turn(pieces, -1.2, 550.0, 60.0)  # about 660 m of curve inside the 1320 m tunnel
+    pieces.append((60.0 * v - (total() - tunnels[1][0]) + 1800.0, 0.0, 0.0))
+    tunnels.append((total(), 120.0))
+    pieces.append((900.0, 0.0, 0.0))
+    _add_turn(pieces, 0.25, 1500.0, 60.0)
+    while total() < length_m:
+        pieces.append((1200.0, 0.0, 0.0))
+        _add_turn(pieces, float(rng.uniform(-0.5, 0.5)), float(rng.uniform(600, 1500)), 60.0)
+    return pieces, [], v, tunnels
+
+
+def _add_turn(pieces: list[tuple[float, float, float]], dpsi_rad: float, radius_m: float,
+              ramp_m: float) -> float:
+    """Append a clothoid-ramped arc turning by ``dpsi_rad`` (> 0: right); return its length."""
+    kappa = math.copysign(1.0 / radius_m, dpsi_rad)
+    ramp = min(ramp_m, 0.5 * abs(dpsi_rad) * radius_m)
+    arc = abs(dpsi_rad) * radius_m - ramp  # two half-ramps turn by kappa*ramp in total
+    pieces.extend([(ramp, 0.0, kappa), (arc, kappa, kappa), (ramp, kappa, 0.0)])
+    return 2 * ramp + arc
+
+
+def _grid(pieces: list[tuple[float, float, float]], kinds: list[int], ds: float
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Curvature and route kind on a distance grid of step ``ds`` metres."""
+    total = sum(p[0] for p in pieces)
+    s = np.arange(0.0, total + ds, ds)
+    kappa = np.zeros_like(s)
+    kind = np.zeros(len(s), np.int8)
+    start = 0.0
+    for (L, k0, k1), kd in zip(pieces, kinds, strict=True):
+        m = (s >= start) & (s < start + L)
+        kappa[m] = k0 + (k1 - k0) * (s[m] - start) / L
+        kind[m] = kd
+        start += L
+    kind[s >= start] = kinds[-1]
+    return s, kappa, kind
+
+
+@njit(cache=True)
+def _drive_kernel(s_grid: np.ndarray, v_allow: np.ndarray, kappa: np.ndarray,
+                  stop_s: np.ndarray, dwell_s: np.ndarray, n_steps: int, dt: float,
+                  a_acc: float, a_brake: float, jerk: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """The driver: speed and heading rate at every step (100 Hz)."""
+    ds = s_grid[1] - s_grid[0]
+    n_grid = len(s_grid)
+    v_out = np.zeros(n_steps)
+    psidot = np.zeros(n_steps)
+    s_out = np.zeros(n_steps)
+    s = 0.0
+    v = 0.0
+    a = 0.0
+    j = 0           # next stop
+    dwell = -1.0    # > 0 while standing at stop j
+    floor_s = 0.0   # look up the allowed speed no earlier than this (after a stop)
+    for k in range(n_steps):
+        if dwell > 0.0:
+            dwell -= dt
+            v = 0.0
+            a = 0.0
+            if dwell <= 0.0:
+                floor_s = stop_s[j] + ds
+                j += 1
+        else:
+            look = max(s + 0.3 * v, floor_s)
+            i = min(int(look / ds), n_grid - 2)
+            w = look / ds - i
+            w = min(w, 1.0)
+            v_t = v_allow[i] * (1.0 - w) + v_allow[i + 1] * w
+            a_cmd = 1.5 * (v_t - v)
+            a_cmd = min(a_cmd, a_acc)
+            a_cmd = max(a_cmd, -2.0 * a_brake)
+            da = a_cmd - a
+            lim = jerk * dt
+            da = min(da, lim)
+            da = max(da, -lim)
+            a += da
+            near_stop = j < len(stop_s) and s > stop_s[j] - 4.0
+            if near_stop and (v < 0.8 or s > stop_s[j] - 1.0):
+                # final metres: brake to stand still at the line (overshoot < 1 m)
+                gap = max(stop_s[j] - s, 0.3)
+                a = -min(4.0, max(0.8, v * v / (2.0 * gap)))
+            v += a * dt
+            if v <= 0.0:
+                v = 0.0
+                a = max(a, 0.0)
+                if near_stop:
+                    dwell = dwell_s[j]
+            if s >= s_grid[n_grid - 1] - 1.0:
+                v = 0.0
+                a = 0.0
+        i = min(int(s / ds), n_grid - 2)
+        w = s / ds - i
+        w = min(w, 1.0)
+        kap = kappa[i] * (1.0 - w) + kappa[i + 1] * w
+        v_out[k] = v
+        psidot[k] = kap * v
+        s_out[k] = s
+        s += v * dt
+    return v_out, psidot, s_out
+
+
+def _allowed_speed(s: np.ndarray, kappa: np.ndarray, v_cap: np.ndarray, stops: np.ndarray,
+                   a_lat: float, a_brake: float) -> np.ndarray:
+    """Largest speed at each grid point: cruise cap, curve limit, braking to the next stop."""
+    v = np.minimum(v_cap, np.sqrt(a_lat / np.maximum(np.abs(kappa), 1e-9)))
+    for st in stops:
+        v[np.searchsorted(s, st):np.searchsorted(s, st) + 1] = 0.0
+    v[-1] = 0.0
+    ds = s[1] - s[0]
+    for i in range(len(v) - 2, -1, -1):  # backward pass: braking distance (v^2 = v1^2 + 2 a d)
+        v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2.0 * a_brake * ds))
+    return v
+
+
+def _route(sc: _Scenario, rng: np.random.Generator, duration_s: float) -> dict:
+    """Pieces and stops for the scenario's route, long enough for ``duration_s``."""
+    tunnels: list[tuple[float, float]] = []
+    if sc.route == "highway":
+        pieces, stops, v_cruise, tunnels = _pieces_highway(rng, 22.0 * duration_s + 2000.0)
+        kinds = [0] * len(pieces)
+    elif sc.route == "open":
+        pieces, stops, v_cruise = _pieces_open(rng, 22.0 * duration_s + 2000.0)
+        kinds = [0] * len(pieces)
+    elif sc.route in ("city", "stop_and_go"):
+        pieces, stops, v_cruise = _pieces_city(rng, 14.0 * duration_s + 1000.0,
+                                               sc.route == "stop_and_go")
+        kinds = [1] * len(pieces)
+    else:  # mixed: alternate city (urban), suburban and open-road blocks
+        pieces, stops, kinds = [], [], []
+        s0 = 0.0
+        block = 0
+        while s0 < 16.0 * duration_s + 2000.0:
+            kind = (1, 2, 0)[block % 3]
+            if kind == 0:
+                p, st, _ = _pieces_open(rng, 5000.0)
+            else:
+                p, st, _ = _pieces_city(rng, 3000.0, False)
+            stops.extend((s0 + a, d) for a, d in st)
+            pieces.extend(p)
+            kinds.extend([kind] * len(p))
+            s0 += sum(x[0] for x in p)
+            block += 1
+        v_cruise = 22.0
+    return {"pieces": pieces, "stops": stops, "v_cruise": v_cruise, "kinds": kinds,
+            "tunnels": tunnels}
+
+
+def _vehicle(sc: _Scenario, rng: np.random.Generator, duration_s: float
+             ) -> tuple[dict[str, np.ndarray], dict]:
+    route = _route(sc, rng, duration_s)
+    ds = 0.5
+    s_grid, kappa, kind = _grid(route["pieces"], route["kinds"], ds)
+    v_cap = np.full(len(s_grid), route["v_cruise"])
+    if sc.route == "mixed":
+        v_cap = np.where(kind == 0, 22.0, np.where(kind == 1, 13.9, 16.7))
+    # per-straight speed variation (drivers do not hold the limit exactly)
+    wobble = 1.0 + 0.06 * np.sin(2 * np.pi * s_grid / float(rng.uniform(700, 1300)) + rng.uniform(0, 6))
+    v_cap = v_cap * wobble
+    a_lat = 1.5 if sc.route == "highway" else 2.0
+    stops = np.array([s for s, _ in route["stops"]], float)
+    dwell = np.array([d for _, d in route["stops"]], float)
+    a_brake = 1.5
+    v_allow = _allowed_speed(s_grid, kappa, v_cap, stops, a_lat, a_brake)
+    n_steps = round(duration_s * TRUTH_RATE_HZ) + 1
+    v, psidot, s = _drive_kernel(s_grid, v_allow, kappa, stops, dwell, n_steps, DT_S,
+                                 1.5, a_brake, 2.0)
+    return {"v": v, "psidot": psidot, "s": s, "kind": kind[np.minimum(
+        (s / ds).astype(np.int64), len(kind) - 1)]}, route
+
+
+def _cumtrapz(y: np.ndarray, dt: float, y0: float = 0.0) -> np.ndarray:
+    out = np.empty_like(y)
+    out[0] = y0
+    out[1:] = y0 + np.cumsum(0.5 * (y[1:] + y[:-1]) * dt)
+    return out
+
+
+# --------------------------------------------------------------------------- sensors
+
+def _gauss_markov(rng: np.random.Generator, n: int, dt: float, tau: np.ndarray | float,
+                  sd: np.ndarray | float, shape: tuple[int, ...] = ()) -> np.ndarray:
+    """First-order Gauss-Markov samples, stationary from the start (x0 ~ N(0, sd^2)).
+
+    ``x[k] = phi x[k-1] + sd sqrt(1 - phi^2) w``, ``phi = exp(-dt/tau)``; ``tau`` and
+    ``sd`` may vary per step.
+    """
+    tau_a = np.broadcast_to(np.asarray(tau, float), (n,))
+    sd_a = np.broadcast_to(np.asarray(sd, float), (n,))
+    phi = np.exp(-dt / tau_a)
+    w = rng.standard_normal((n, *shape))
+    x = np.empty((n, *shape))
+    x[0] = sd_a[0] * w[0]
+    drive_sd = sd_a * np.sqrt(1.0 - phi * phi)
+    for k in range(1, n):
+        x[k] = phi[k] * x[k - 1] + drive_sd[k] * w[k]
+    return x
+
+
+def simulate_drive(scenario: str = "urban_canyon", seed: int = 0, duration_s: float | None = None,
+                   *, gnss_rate_hz: float = 5.0, gyro_rate_hz: float = 100.0,
+                   odo_rate_hz: float = 100.0, gnss_stamp_offset_s: float = 0.0) -> SimDrive:
+    """Simulate one drive of ``scenario`` with random generator ``seed``.
+
+    ``duration_s`` defaults to the scenario's length (600 s; stop_and_go 900 s;
+    one_hour 3600 s).  ``gnss_rate_hz`` 1-10 Hz; gyro and odometer rates must
+    divide 100 Hz.  ``gnss_stamp_offset_s``: each fix holds the true position at
+    ``stamp + offset`` (> 0: fixes ahead of their stamps, as in comma2k19).
+    Same arguments, same drive (bit for bit).
+    """
+    if scenario not in _SCENARIOS:
+        raise UsageError(f"unknown scenario {scenario!r}; choose one of {', '.join(SCENARIOS)}")
+    if not 0.5 <= gnss_rate_hz <= 20.0:
+        raise UsageError(f"gnss_rate_hz = {gnss_rate_hz}: expected 0.5 to 20 Hz")
+    for name, rate in (("gyro_rate_hz", gyro_rate_hz), ("odo_rate_hz", odo_rate_hz)):
+        step = TRUTH_RATE_HZ / rate
+        if rate <= 0 or abs(step - round(step)) > 1e-9:
+            raise UsageError(f"{name} = {rate}: expected a divisor of {TRUTH_RATE_HZ} Hz")
+    sc = _SCENARIOS[scenario]
+    dur = float(sc.duration_s if duration_s is None else duration_s)
+    if not dur >= 10.0:
+        raise UsageError(f"duration_s = {duration_s}: expected at least 10 s")
+    rng = np.random.default_rng(seed)
+    rng_route, rng_gnss, rng_gyro, rng_odo = (np.random.default_rng(s)
+                                              for s in rng.spawn(4))
+
+    veh, route = _vehicle(sc, rng_route, dur)
+    n = len(veh["v"])
+    t_ns = START_NS + np.arange(n, dtype=np.int64) * (NS_PER_S // TRUTH_RATE_HZ)
+    v = veh["v"]
+    psidot = veh["psidot"]
+    psi0 = float(rng_route.uniform(0.0, 2 * np.pi))
+    psi = _cumtrapz(psidot, DT_S, psi0)
+    v_e = v * np.sin(psi)
+    v_n = v * np.cos(psi)
+    e = _cumtrapz(v_e, DT_S)
+    nn = _cumtrapz(v_n, DT_S)
+    lat0, lon0, alt0 = sc.origin
+    frame = LocalFrame.centred_on(lat0, lon0)
+    lat, lon = frame.inverse(e, nn)
+    alt = alt0 + 3.0 * np.sin(veh["s"] / 1500.0)
+    truth = pd.DataFrame({
+        "t_ns": t_ns, "lat": lat, "lon": lon, "e": e, "n": nn, "v_e": v_e, "v_n": v_n,
+        "speed": v, "heading_deg": np.mod(np.degrees(psi), 360.0), "yaw_rate": -psidot,
+        "alt": alt,
+    })
+
+    # environment per truth step
+    if sc.env is not None:
+        env_idx = np.full(n, ENV_NAMES.index(sc.env), np.int8)
+    else:
+        env_idx = np.array([ENV_NAMES.index(_KIND_ENV[int(k)]) for k in range(3)],
+                           np.int8)[veh["kind"]]
+    outages = _outages(sc, route, veh["s"], dur, rng_gnss)
+
+    gnss, gerr, gnss_noise = _gnss(rng_gnss, truth, frame, env_idx, outages, gnss_rate_hz,
+                                   gnss_stamp_offset_s, sc.short_dropouts)
+    gyro, gyro_noise = _gyro(rng_gyro, truth, gyro_rate_hz)
+    odo, odo_noise = _odo(rng_odo, truth, odo_rate_hz)
+
+    noise = {
+        "scenario": scenario, "seed": int(seed), "duration_s": dur,
+        "origin_lat_deg": lat0, "origin_lon_deg": lon0, "origin_alt_m": alt0,
+        "start_utc": _dt.datetime.fromtimestamp(START_NS / NS_PER_S, _dt.UTC).isoformat(),
+        "truth_rate_hz": TRUTH_RATE_HZ,
+        **gnss_noise, **gyro_noise, **odo_noise,
+    }
+    drive = Drive(gnss=gnss, gyro=gyro, odo=odo,
+                  sources=[Source(f"<simulated {scenario} seed {seed}>", "", ("gnss", "gyro", "odo"))],
+                  meta={"simulated": scenario, "seed": int(seed)})
+    return SimDrive(drive=drive, truth=truth, frame=frame, noise=noise, scenario=scenario,
+                    seed=int(seed), gnss_errors=gerr)
+
+
+def _outages(sc: _Scenario, route: dict, s_path: np.ndarray, dur: float,
+             rng: np.random.Generator) -> list[tuple[float, float]]:
+    """GNSS outages as (start s since the drive start, duration s)."""
+    out: list[tuple[float, float]] = []
+    for s_start, d in route["tunnels"]:
+        i = int(np.searchsorted(s_path, s_start))
+        if i < len(s_path) - 1:
+            out.append((i * DT_S, d))
+    if sc.route == "mixed":  # tunnels on the open-road blocks: 30 s and 60 s, alternating
+        for k, t0 in enumerate(np.arange(500.0, dur - 200.0, 900.0)):
+            out.append((float(t0 + rng.uniform(0, 200)), (30.0, 60.0)[k % 2]))
+    if sc.route == "city":  # under bridges / dense high-rise: a few short no-fix stretches
+        for t0 in rng.uniform(30.0, max(dur - 30.0, 31.0), size=max(1, int(dur / 200))):
+            out.append((float(t0), float(rng.uniform(4.0, 10.0))))
+    return sorted((t0, d) for t0, d in out if t0 < dur)
+
+
+def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_idx: np.ndarray,
+          outages: list[tuple[float, float]], rate_hz: float, stamp_offset_s: float,
+          dropouts: bool) -> tuple[GnssFixes, pd.DataFrame, dict]:
+    t_truth = truth["t_ns"].to_numpy()
+    dur = (t_truth[-1] - t_truth[0]) / NS_PER_S
+    step_ns = round(NS_PER_S / rate_hz)
+    t_fix = np.arange(t_truth[0], t_truth[-1] + 1, step_ns, dtype=np.int64)
+    m = len(t_fix)
+    dt = 1.0 / rate_hz
+    rel = (t_fix - t_truth[0]) / NS_PER_S
+    k_truth = np.minimum(np.searchsorted(t_truth, t_fix), len(t_truth) - 1)
+    env = env_idx[k_truth]
+    par = np.array([_ENV[name] for name in ENV_NAMES])[env]  # (m, 7)
+    pdop_mean, pdop_lsd, mp_sd, mp_tau, gst_share, p_out, p_drop = par.T
+
+    # PDOP: log-normal Gauss-Markov around the environment's mean (tau 30 s), floor 1
+    pdop = np.maximum(pdop_mean * np.exp(_gauss_markov(rng, m, dt, 30.0, pdop_lsd)), 1.0)
+    hdop = pdop * np.clip(0.62 + 0.04 * _gauss_markov(rng, m, dt, 120.0, 1.0), 0.5, 0.75)
+    vdop = np.sqrt(np.maximum(pdop**2 - hdop**2, 0.01))
+    n_sats = np.clip(np.round(4 + 18 / pdop), 4, 24).astype(np.int16)
+
+    sd_per_pdop = 0.6
+    white_sd = sd_per_pdop * pdop  # per axis
+    white = rng.standard_normal((m, 2)) * white_sd[:, None]
+    mp = _gauss_markov(rng, m, dt, mp_tau, mp_sd, (2,))  # seed-free model: first-order GM
+    jump = np.zeros((m, 2))
+    outlier = np.zeros(m, bool)
+    k = 0
+    u = rng.random(m)
+    while k < m:
+        if u[k] < p_out[k]:
+            length = int(rng.integers(1, int(3 * rate_hz) + 1))
+            mag = float(rng.uniform(10.0, 40.0))
+            ang = float(rng.uniform(0, 2 * np.pi))
+            jump[k:k + length] = mag * np.array([math.sin(ang), math.cos(ang)])
+            outlier[k:k + length] = True
+            k += length
+        k += 1
+
+    no_fix = np.zeros(m, bool)
+    for t0, d in outages:
+        no_fix |= (rel >= t0) & (rel < t0 + d)
+    if dropouts:
+        k = 0
+        u = rng.random(m)
+        while k < m:
+            if u[k] < p_drop[k]:
+                length = int(rng.uniform(1.0, 4.0) * rate_hz)
+                no_fix[k:k + length] = True
+                k += length
+            k += 1
+
+    # the fix: truth at stamp + offset, plus the errors
+    t_true = (t_fix - t_truth[0]) / NS_PER_S + stamp_offset_s
+    tt = (t_truth - t_truth[0]) / NS_PER_S
+    e_true = np.interp(t_true, tt, truth["e"].to_numpy())
+    n_true = np.interp(t_true, tt, truth["n"].to_numpy())
+    ve = np.interp(t_true, tt, truth["v_e"].to_numpy())
+    vn = np.interp(t_true, tt, truth["v_n"].to_numpy())
+    err = white + mp + jump
+    lat, lon = frame.inverse(e_true + err[:, 0], n_true + err[:, 1])
+    alt = np.interp(t_true, tt, truth["alt"].to_numpy()) + rng.standard_normal(m) * 1.6 * white_sd
+    vel_sd = 0.03 * pdop  # Doppler velocity, per axis
+    ve_m = ve + rng.standard_normal(m) * vel_sd
+    vn_m = vn + rng.standard_normal(m) * vel_sd
+    speed = np.hypot(ve_m, vn_m)
+    course = np.where(speed > 0.2, np.mod(np.degrees(np.arctan2(ve_m, vn_m)), 360.0), np.nan)
+    reported_sd = np.sqrt(white_sd**2 + (gst_share * mp_sd) ** 2)
+
+    q = np.where(no_fix, FIX_NONE, FIX_GPS).astype(np.int8)
+    nan_if = np.where(no_fix, np.nan, 1.0)
+    fixes = GnssFixes(
+        t_ns=t_fix, lat_deg=lat * nan_if, lon_deg=lon * nan_if, alt_m=alt * nan_if,
+        fix_quality=q, n_sats=np.where(no_fix, 0, n_sats).astype(np.int16),
+        hdop=hdop * nan_if, pdop=pdop * nan_if, vdop=vdop * nan_if,
+        sigma_e_m=reported_sd * nan_if, sigma_n_m=reported_sd * nan_if,
+        speed_mps=speed * nan_if, course_deg=course * nan_if,
+    )
+    gerr = pd.DataFrame({
+        "t_ns": t_fix, "pdop": pdop, "hdop": hdop, "env": np.array(ENV_NAMES)[env],
+        "white_e": white[:, 0], "white_n": white[:, 1], "multipath_e": mp[:, 0],
+        "multipath_n": mp[:, 1], "jump_e": jump[:, 0], "jump_n": jump[:, 1],
+        "outlier": outlier, "no_fix": no_fix,
+        "white_sd_m": white_sd, "true_sd_m": np.sqrt(white_sd**2 + mp_sd**2),
+        "reported_sd_m": reported_sd,
+    })
+    valid = ~no_fix
+    used_env = sorted({ENV_NAMES[i] for i in np.unique(env[valid])}) if valid.any() else []
+    mp_rms = float(np.sqrt(np.mean(mp_sd[valid] ** 2))) if valid.any() else 0.0
+    mp_tau_mean = float(np.mean(mp_tau[valid])) if valid.any() else 60.0
+    noise = {
+        "gnss_rate_hz": float(rate_hz),
+        "gnss_stamp_offset_s": float(stamp_offset_s),
+        "gnss_sd_per_pdop_m": sd_per_pdop,
+        "gnss_sd_note": "white noise 1-sigma per axis (east, north) = gnss_sd_per_pdop_m x PDOP",
+        "gnss_environments": {name: dict(zip(
+            ("pdop_mean", "pdop_log_sd", "multipath_sd_m", "multipath_tau_s", "gst_multipath_share",
+             "outlier_prob", "dropout_prob"), _ENV[name], strict=True)) for name in used_env},
+        "multipath_sd_m": mp_rms, "multipath_tau_s": mp_tau_mean,
+        "gnss_true_sd_rms_m": float(np.sqrt(np.mean((white_sd**2 + mp_sd**2)[valid])))
+        if valid.any() else 0.0,
+        "outlier_jump_m": [10.0, 40.0], "outlier_epochs": int(outlier[valid].sum()),
+        "outages": [{"start_s": float(t0), "duration_s": float(min(d, dur - t0))}
+                    for t0, d in outages],
+        "no_fix_epochs": int(no_fix.sum()),
+    }
+    return fixes, gerr, noise
+
+
+def _gyro(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tuple[YawRates, dict]:
+    step = round(TRUTH_RATE_HZ / rate_hz)
+    t = truth["t_ns"].to_numpy()[::step]
+    omega = truth["yaw_rate"].to_numpy()[::step]
+    m = len(t)
+    dt = step * DT_S
+    noise_sd = math.radians(0.1)       # white noise per sample, rad/s
+    bias_sd = math.radians(0.3)        # stationary sigma of the Gauss-Markov bias
+    bias_tau = 300.0
+    scale_sd = 0.005
+    scale = float(rng.normal(0.0, scale_sd))
+    bias = _gauss_markov(rng, m, dt, bias_tau, bias_sd)
+    meas = (1.0 + scale) * omega + bias + rng.standard_normal(m) * noise_sd
+    noise = {"gyro_rate_hz": float(rate_hz), "gyro_noise_sd_radps": noise_sd,
+             "gyro_bias_sd_radps": bias_sd, "gyro_bias_tau_s": bias_tau,
+             "gyro_bias_initial_radps": float(bias[0]), "gyro_scale_error": scale,
+             "gyro_scale_sd": scale_sd}
+    return YawRates(t_ns=t, yaw_rate_radps=meas), noise
+
+
+def _odo(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tuple[Odometry, dict]:
+    step = round(TRUTH_RATE_HZ / rate_hz)
+    ticks_per_m = 40.0
+    scale_sd = 0.02
+    scale = float(rng.normal(0.0, scale_sd))
+    dist = _cumtrapz(truth["speed"].to_numpy(), DT_S)
+    ticks = np.floor(ticks_per_m * (1.0 + scale) * dist + rng.uniform())
+    window = 10  # steps of 10 ms: speed over the last 0.1 s
+    spd = np.zeros(len(ticks))
+    spd[window:] = (ticks[window:] - ticks[:-window]) / (ticks_per_m * window * DT_S)
+    spd[:window] = ticks[:window] / (ticks_per_m * window * DT_S)
+    white_sd = 0.02
+    meas = np.maximum(spd + rng.standard_normal(len(spd)) * white_sd * (spd > 0), 0.0)
+    t = truth["t_ns"].to_numpy()[::step]
+    q_sd = 1.0 / (ticks_per_m * window * DT_S) / math.sqrt(6.0)  # difference of two uniform roundings
+    noise = {"odo_rate_hz": float(rate_hz), "odo_scale_error": scale, "odo_scale_sd": scale_sd,
+             "odo_noise_sd_mps": white_sd, "odo_ticks_per_m": ticks_per_m,
+             "odo_window_s": window * DT_S,
+             "odo_effective_sd_mps": float(math.hypot(white_sd, q_sd))}
+    return Odometry(t_ns=t, speed_mps=meas[::step]), noise
+
+
+# --------------------------------------------------------------------------- oracle
+
+def oracle_params(noise: dict, params: Params) -> Params:
+    """``params`` with the true noise of a simulated drive written into the filter model.
+
+    Gyro: white noise, Gauss-Markov drift (the simulator's drift *is* the model's);
+    odometer: effective speed sigma and scale-factor prior; FKF: the GNSS error
+    states get the multipath sigma and correlation time; the PDOP regime factors
+    become 1 (feed :func:`oracle_drive`'s fixes, whose sigmas are the true ones).
+    Only keys that exist in the defaults are set.
+    """
+    import copy
+
+    out = copy.deepcopy(params)
+    want = {
+        "gyro": {"noise_sd_radps": noise.get("gyro_noise_sd_radps"),
+                 "bias_tau_s": noise.get("gyro_bias_tau_s"),
+                 "bias_sd_radps": noise.get("gyro_bias_sd_radps"),
+                 "bias_init_sd_radps": noise.get("gyro_bias_sd_radps")},
+        "odo": {"noise_sd_mps": noise.get("odo_effective_sd_mps"),
+                "scale_init_sd": noise.get("odo_scale_sd"),
+                "scale_rw_sd": 1e-5},
+        "gnss": {"k_good": 1.0, "k_medium": 1.0, "k_poor": 1.0},
+        "fkf": {"gnss_err_tau_s": noise.get("multipath_tau_s"),
+                "gnss_err_sd_m": noise.get("multipath_sd_m")},
+        "time": {"gnss_offset_s": noise.get("gnss_stamp_offset_s", 0.0)},
+    }
+    for section, values in want.items():
+        if section not in DEFAULTS:
+            continue
+        for key, value in values.items():
+            if key in DEFAULTS[section] and value is not None:
+                out.setdefault(section, {})[key] = float(value)
+    return out
+
+
+def oracle_drive(sim: SimDrive) -> Drive:
+    """The drive with every fix's sigma replaced by its true sigma (white and multipath)."""
+    g = sim.drive.gnss
+    if g is None:
+        raise UsageError(f"simulated drive {sim.scenario!r} has no GNSS stream")
+    true_sd = sim.gnss_errors["true_sd_m"].to_numpy() * np.where(g.valid, 1.0, np.nan)
+    fixes = GnssFixes(**{**g.__dict__, "sigma_e_m": true_sd.copy(), "sigma_n_m": true_sd.copy()})
+    return Drive(gnss=fixes, gyro=sim.drive.gyro, odo=sim.drive.odo,
+                 sources=list(sim.drive.sources), meta=dict(sim.drive.meta))
+
+
+# --------------------------------------------------------------------------- writers
+
+def _nmea(body: str) -> str:
+    cs = 0
+    for ch in body.encode("ascii"):
+        cs ^= ch
+    return f"${body}*{cs:02X}\r\n"
+
+
+def _lat_str(lat: float) -> tuple[str, str]:
+    a = abs(lat)
+    d = int(a)
+    return f"{d:02d}{(a - d) * 60:09.6f}", "N" if lat >= 0 else "S"
+
+
+def _lon_str(lon: float) -> tuple[str, str]:
+    a = abs(lon)
+    d = int(a)
+    return f"{d:03d}{(a - d) * 60:09.6f}", "E" if lon >= 0 else "W"
+
+
+def nmea_lines(fixes: GnssFixes) -> list[str]:
+    """RMC, GGA, GSA and GST per epoch (talker GN), NMEA 0183 with checksums."""
+    out: list[str] = []
+    for k in range(len(fixes)):
+        t = _dt.datetime.fromtimestamp(int(fixes.t_ns[k]) / NS_PER_S, _dt.UTC)
+        hms = f"{t:%H%M%S}.{t.microsecond // 10000:02d}"
+        dmy = f"{t:%d%m%y}"
+        if fixes.fix_quality[k] == FIX_NONE or not np.isfinite(fixes.lat_deg[k]):
+            out.append(_nmea(f"GNRMC,{hms},V,,,,,,,{dmy},,,N"))
+            out.append(_nmea(f"GNGGA,{hms},,,,,0,00,99.99,,M,,M,,"))
+            out.append(_nmea("GNGSA,A,1,,,,,,,,,,,,,99.99,99.99,99.99"))
+            continue
+        la, ns = _lat_str(float(fixes.lat_deg[k]))
+        lo, ew = _lon_str(float(fixes.lon_deg[k]))
+        kn = float(fixes.speed_mps[k]) / 0.514444
+        crs = "" if not np.isfinite(fixes.course_deg[k]) else f"{fixes.course_deg[k]:.2f}"
+        out.append(_nmea(f"GNRMC,{hms},A,{la},{ns},{lo},{ew},{kn:.3f},{crs},{dmy},,,A"))
+        out.append(_nmea(f"GNGGA,{hms},{la},{ns},{lo},{ew},{int(fixes.fix_quality[k])},"
+                         f"{int(fixes.n_sats[k]):02d},{fixes.hdop[k]:.2f},{fixes.alt_m[k]:.3f},M,0.0,M,,"))
+        ids = [str(i) for i in (2, 5, 6, 9, 12, 13, 15, 17, 19, 24, 25, 28)[:min(12, int(fixes.n_sats[k]))]]
+        ids += [""] * (12 - len(ids))
+        out.append(_nmea(f"GNGSA,A,3,{','.join(ids)},{fixes.pdop[k]:.2f},{fixes.hdop[k]:.2f},"
+                         f"{fixes.vdop[k]:.2f}"))
+        sd_e, sd_n = float(fixes.sigma_e_m[k]), float(fixes.sigma_n_m[k])
+        out.append(_nmea(f"GNGST,{hms},{math.hypot(sd_e, sd_n):.3f},{max(sd_e, sd_n):.3f},"
+                         f"{min(sd_e, sd_n):.3f},0.0,{sd_n:.3f},{sd_e:.3f},{1.6 * sd_n:.3f}"))
+    return out
+
+
+_TIME = "int32 sec\nuint32 nanosec\n"
+_HEADER = "builtin_interfaces/Time stamp\nstring frame_id\n"
+_SEP = "\n" + "=" * 80 + "\n"
+_NAVSATSTATUS = ("int8 STATUS_NO_FIX = -1\nint8 STATUS_FIX = 0\nint8 STATUS_SBAS_FIX = 1\n"
+                 "int8 STATUS_GBAS_FIX = 2\nint8 status\nuint16 SERVICE_GPS = 1\n"
+                 "uint16 SERVICE_GLONASS = 2\nuint16 SERVICE_COMPASS = 4\n"
+                 "uint16 SERVICE_GALILEO = 8\nuint16 service\n")
+MSGDEF_NAVSATFIX = (
+    "uint8 COVARIANCE_TYPE_UNKNOWN = 0\nuint8 COVARIANCE_TYPE_APPROXIMATED = 1\n"
+    "uint8 COVARIANCE_TYPE_DIAGONAL_KNOWN = 2\nuint8 COVARIANCE_TYPE_KNOWN = 3\n"
+    "std_msgs/Header header\nNavSatStatus status\nfloat64 latitude\nfloat64 longitude\n"
+    "float64 altitude\nfloat64[9] position_covariance\nuint8 position_covariance_type\n"
+    + _SEP + "MSG: std_msgs/Header\n" + _HEADER
+    + _SEP + "MSG: builtin_interfaces/Time\n" + _TIME
+    + _SEP + "MSG: sensor_msgs/NavSatStatus\n" + _NAVSATSTATUS
+)
+_VEC3 = "float64 x\nfloat64 y\nfloat64 z\n"
+MSGDEF_IMU = (
+    "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n"
+    "float64[9] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n"
+    "float64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n"
+    "float64[9] linear_acceleration_covariance\n"
+    + _SEP + "MSG: std_msgs/Header\n" + _HEADER
+    + _SEP + "MSG: builtin_interfaces/Time\n" + _TIME
+    + _SEP + "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
+    + _SEP + "MSG: geometry_msgs/Vector3\n" + _VEC3
+)
+MSGDEF_TWISTSTAMPED = (
+    "std_msgs/Header header\nTwist twist\n"
+    + _SEP + "MSG: std_msgs/Header\n" + _HEADER
+    + _SEP + "MSG: builtin_interfaces/Time\n" + _TIME
+    + _SEP + "MSG: geometry_msgs/Twist\nVector3 linear\nVector3 angular\n"
+    + _SEP + "MSG: geometry_msgs/Vector3\n" + _VEC3
+)
+
+
+def _stamp(t_ns: int, frame_id: str) -> dict:
+    return {"stamp": {"sec": int(t_ns // NS_PER_S), "nanosec": int(t_ns % NS_PER_S)},
+            "frame_id": frame_id}
+
+
+def write_mcap(drive: Drive, path: str | Path) -> Path:
+    """ROS 2 CDR MCAP: /gnss/fix NavSatFix, /imu Imu, /vehicle/twist TwistStamped (zstd chunks)."""
+    from mcap_ros2.writer import Writer
+
+    path = Path(path)
+    g, y, o = drive.gnss, drive.gyro, drive.odo
+    events: list[tuple[int, int, int]] = []  # (t_ns, stream, index)
+    for code, stream in enumerate((g, y, o)):
+        if stream is not None:
+            events.extend((int(t), code, i) for i, t in enumerate(stream.t_ns))
+    events.sort()
+    zero9 = [0.0] * 9
+    gyro_var = math.radians(0.1) ** 2
+    with path.open("wb") as fh:
+        w = Writer(fh)
+        s_fix = w.register_msgdef("sensor_msgs/msg/NavSatFix", MSGDEF_NAVSATFIX)
+        s_imu = w.register_msgdef("sensor_msgs/msg/Imu", MSGDEF_IMU)
+        s_tw = w.register_msgdef("geometry_msgs/msg/TwistStamped", MSGDEF_TWISTSTAMPED)
+        for t, code, i in events:
+            if code == 0:
+                ok = bool(g.fix_quality[i] > 0 and np.isfinite(g.lat_deg[i]))
+                var_e = float(g.sigma_e_m[i]) ** 2 if ok else 0.0
+                var_n = float(g.sigma_n_m[i]) ** 2 if ok else 0.0
+                var_u = (1.6 * float(g.sigma_n_m[i])) ** 2 if ok else 0.0
+                msg = {"header": _stamp(t, "gnss"),
+                       "status": {"status": 0 if ok else -1, "service": 1},
+                       "latitude": float(g.lat_deg[i]), "longitude": float(g.lon_deg[i]),
+                       "altitude": float(g.alt_m[i]),
+                       "position_covariance": [var_e, 0.0, 0.0, 0.0, var_n, 0.0, 0.0, 0.0, var_u],
+                       "position_covariance_type": 2 if ok else 0}
+                w.write_message("/gnss/fix", s_fix, msg, log_time=t, publish_time=t)
+            elif code == 1:
+                msg = {"header": _stamp(t, "imu"),
+                       "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+                       "orientation_covariance": [-1.0] + [0.0] * 8,
+                       "angular_velocity": {"x": 0.0, "y": 0.0, "z": float(y.yaw_rate_radps[i])},
+                       "angular_velocity_covariance": [0.0] * 8 + [gyro_var],
+                       "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 0.0},
+                       "linear_acceleration_covariance": [-1.0] + zero9[1:]}
+                w.write_message("/imu", s_imu, msg, log_time=t, publish_time=t)
+            else:
+                msg = {"header": _stamp(t, "base_link"),
+                       "twist": {"linear": {"x": float(o.speed_mps[i]), "y": 0.0, "z": 0.0},
+                                 "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}}
+                w.write_message("/vehicle/twist", s_tw, msg, log_time=t, publish_time=t)
+        w.finish()
+    return path
+
+
+def write_drive(sim: SimDrive, out_dir: str | Path, *, truth_rate_hz: float = 20.0,
+                mcap: bool = True) -> dict[str, Path]:
+    """Write the drive's logs and truth into ``out_dir`` (created if missing).
+
+    Files: gps.nmea, gyro.csv (t,yaw_rate), odo.csv (t,speed), drive.mcap,
+    truth.csv (t,lat,lon,alt,heading at ``truth_rate_hz``), noise.json.
+    ``t`` is UTC POSIX seconds.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    d = sim.drive
+    paths = {name: out / name for name in
+             ("gps.nmea", "gyro.csv", "odo.csv", "drive.mcap", "truth.csv", "noise.json")}
+    paths["gps.nmea"].write_text("".join(nmea_lines(d.gnss)), encoding="ascii", newline="")
+    pd.DataFrame({"t": d.gyro.t_ns / NS_PER_S, "yaw_rate": d.gyro.yaw_rate_radps}).to_csv(
+        paths["gyro.csv"], index=False, float_format="%.7f")
+    pd.DataFrame({"t": d.odo.t_ns / NS_PER_S, "speed": d.odo.speed_mps}).to_csv(
+        paths["odo.csv"], index=False, float_format="%.6f")
+    step = max(1, round(TRUTH_RATE_HZ / truth_rate_hz))
+    tr = sim.truth.iloc[::step]
+    with paths["truth.csv"].open("w", encoding="ascii") as fh:
+        fh.write("t,lat,lon,alt,heading\n")
+        for t, la, lo, al, hd in zip(tr["t_ns"].to_numpy() / NS_PER_S, tr["lat"], tr["lon"],
+                                     tr["alt"], tr["heading_deg"], strict=True):
+            fh.write(f"{t:.3f},{la:.9f},{lo:.9f},{al:.3f},{hd:.3f}\n")
+    paths["noise.json"].write_text(json.dumps(sim.noise, indent=2, sort_keys=True) + "\n",
+                                   encoding="utf-8")
+    if mcap:
+        write_mcap(d, paths["drive.mcap"])
+    else:
+        del paths["drive.mcap"]
+    return paths
+
+
+__all__ = ["SCENARIOS", "SimDrive", "oracle_drive", "oracle_params", "simulate_drive",
+           "write_drive", "write_mcap"]

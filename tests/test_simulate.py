@@ -1,0 +1,226 @@
+"""The simulator: determinism, truth consistency, sensor error statistics, writers."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gpsdr_cli.config import DEFAULTS, defaults
+from gpsdr_cli.conventions import NS_PER_S
+from gpsdr_cli.errors import UsageError
+from gpsdr_cli.simulate import (
+    SCENARIOS,
+    oracle_drive,
+    oracle_params,
+    simulate_drive,
+    write_drive,
+)
+
+
+@pytest.fixture(scope="module")
+def urban():
+    return simulate_drive("urban_canyon", seed=7, duration_s=300.0)
+
+
+@pytest.fixture(scope="module")
+def tunnels():
+    return simulate_drive("tunnels", seed=3)
+
+
+def test_same_seed_same_drive_other_seed_other_drive():
+    a = simulate_drive("stop_and_go", seed=11, duration_s=120.0)
+    b = simulate_drive("stop_and_go", seed=11, duration_s=120.0)
+    c = simulate_drive("stop_and_go", seed=12, duration_s=120.0)
+    assert a.truth.equals(b.truth)
+    np.testing.assert_array_equal(a.drive.gnss.lat_deg, b.drive.gnss.lat_deg)
+    np.testing.assert_array_equal(a.drive.gyro.yaw_rate_radps, b.drive.gyro.yaw_rate_radps)
+    np.testing.assert_array_equal(a.drive.odo.speed_mps, b.drive.odo.speed_mps)
+    assert a.noise == b.noise
+    assert not np.allclose(a.truth["e"], c.truth["e"])
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_every_scenario_runs_and_moves(scenario):
+    sim = simulate_drive(scenario, seed=1, duration_s=200.0)
+    tr = sim.truth
+    assert len(tr) == 200 * 100 + 1
+    dist_m = float(np.sum(tr["speed"]) * 0.01)
+    assert dist_m > 500.0
+    assert tr["speed"].max() < 26.0  # m/s, below the 22 m/s cruise plus wobble
+    assert np.all(tr["speed"] >= 0.0)
+    lat_acc = np.abs(tr["speed"] * tr["yaw_rate"])
+    assert lat_acc.max() < 3.0  # m/s^2, the driver respects curve speed
+
+
+def test_truth_is_consistent(urban):
+    tr = urban.truth
+    dt = 0.01
+    # position is the integral of velocity (trapezoid) to within 1 cm over the drive
+    e_int = np.concatenate(([0.0], np.cumsum(0.5 * (tr["v_e"].to_numpy()[1:] + tr["v_e"].to_numpy()[:-1]) * dt)))
+    n_int = np.concatenate(([0.0], np.cumsum(0.5 * (tr["v_n"].to_numpy()[1:] + tr["v_n"].to_numpy()[:-1]) * dt)))
+    assert np.max(np.abs(e_int - tr["e"])) < 0.01
+    assert np.max(np.abs(n_int - tr["n"])) < 0.01
+    # speed and heading agree with the velocity components
+    np.testing.assert_allclose(np.hypot(tr["v_e"], tr["v_n"]), tr["speed"], atol=1e-9)
+    moving = tr["speed"].to_numpy() > 0.5
+    hd = np.degrees(np.arctan2(tr["v_e"], tr["v_n"])) % 360.0
+    d = (hd - tr["heading_deg"] + 180.0) % 360.0 - 180.0
+    assert np.max(np.abs(d[moving])) < 1e-6
+    # yaw rate (CCW+) = -d(heading)/dt: heading is the integral of -yaw_rate (1e-6 rad) ...
+    psi = np.unwrap(np.radians(tr["heading_deg"].to_numpy()))
+    w = tr["yaw_rate"].to_numpy()
+    psi_int = psi[0] - np.concatenate(([0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * dt)))
+    assert np.max(np.abs(psi_int - psi)) < 1e-6
+    # ... and central differences agree within 3e-3 rad/s (the driver's jerk limit)
+    dpsi = np.gradient(psi, dt)
+    assert np.max(np.abs(dpsi[1:-1] + w[1:-1])) < 3e-3
+    assert np.sqrt(np.mean((dpsi[1:-1] + w[1:-1]) ** 2)) < 1e-4
+    # lat/lon are the local frame's inverse of e/n (1 mm)
+    e, n = urban.frame.forward(tr["lat"], tr["lon"])
+    assert np.max(np.hypot(e - tr["e"], n - tr["n"])) < 1e-3
+    assert tr["t_ns"].dtype == np.int64
+    assert np.all(np.diff(tr["t_ns"]) == NS_PER_S // 100)
+
+
+def test_urban_drive_turns_corners_and_stops(urban):
+    tr = urban.truth
+    heading_change = np.sum(np.abs(tr["yaw_rate"])) * 0.01
+    assert heading_change > np.radians(360.0)  # several 90-degree corners in 5 minutes
+    assert np.mean(tr["speed"] < 0.01) > 0.05  # stops at lights
+
+
+def test_gnss_white_noise_matches_stated_sigma():
+    sim = simulate_drive("open_sky", seed=5, duration_s=600.0)
+    g = sim.drive.gnss
+    ge = sim.gnss_errors
+    e, n = sim.frame.forward(g.lat_deg, g.lon_deg)
+    t = sim.truth["t_ns"].to_numpy()
+    e_true = np.interp(g.t_ns, t, sim.truth["e"])
+    n_true = np.interp(g.t_ns, t, sim.truth["n"])
+    sd = sim.noise["gnss_sd_per_pdop_m"] * g.pdop
+    ok = g.valid & ~ge["outlier"].to_numpy()
+    # what is left after removing the recorded multipath is the white part: unit variance
+    z_e = (e - e_true - ge["multipath_e"])[ok] / sd[ok]
+    z_n = (n - n_true - ge["multipath_n"])[ok] / sd[ok]
+    assert abs(np.std(z_e) - 1.0) < 0.10
+    assert abs(np.std(z_n) - 1.0) < 0.10
+    # total error sigma: white plus multipath, as stated in true_sd_m (10 %)
+    tot = np.concatenate([(e - e_true)[ok] / ge["true_sd_m"][ok], (n - n_true)[ok] / ge["true_sd_m"][ok]])
+    assert abs(np.std(tot) - 1.0) < 0.15
+    # open sky: the receiver's sigma is honest (within 10 % of the true one)
+    ratio = g.sigma_e_m[ok] / ge["true_sd_m"].to_numpy()[ok]
+    assert abs(np.median(ratio) - 1.0) < 0.10
+
+
+def test_urban_multipath_is_underreported(urban):
+    g = urban.drive.gnss
+    ge = urban.gnss_errors
+    ok = g.valid
+    e, n = urban.frame.forward(g.lat_deg, g.lon_deg)
+    t = urban.truth["t_ns"].to_numpy()
+    err = np.hypot(e - np.interp(g.t_ns, t, urban.truth["e"]), n - np.interp(g.t_ns, t, urban.truth["n"]))
+    rms_err = np.sqrt(np.mean(err[ok] ** 2))
+    rms_rep = np.sqrt(np.mean(2 * g.sigma_e_m[ok] ** 2))
+    assert rms_err > 1.3 * rms_rep  # the receiver claims better than it is
+    assert (ge["multipath_e"].std()) > 2.0  # m: urban multipath is metres
+
+
+def test_outages_where_declared(tunnels):
+    g = tunnels.drive.gnss
+    rel = (g.t_ns - g.t_ns[0]) / NS_PER_S
+    outs = tunnels.noise["outages"]
+    assert [round(o["duration_s"]) for o in outs] == [30, 60, 120]
+    inside = np.zeros(len(g), bool)
+    for o in outs:
+        m = (rel >= o["start_s"]) & (rel < o["start_s"] + o["duration_s"])
+        inside |= m
+        assert not g.valid[m].any()
+        assert np.all(g.fix_quality[m] == 0)
+        assert np.all(np.isnan(g.lat_deg[m]))
+    assert g.valid[~inside].all()  # open sky elsewhere: every fix present
+    # the 60 s tunnel holds a curve: heading changes by more than 30 degrees inside it
+    o = outs[1]
+    tr = tunnels.truth
+    rel_t = (tr["t_ns"] - tr["t_ns"].iloc[0]) / NS_PER_S
+    m = (rel_t >= o["start_s"]) & (rel_t < o["start_s"] + o["duration_s"])
+    assert np.degrees(np.sum(np.abs(tr["yaw_rate"][m])) * 0.01) > 30.0
+
+
+def test_gyro_and_odometer_error_models(urban):
+    tr = urban.truth
+    y = urban.drive.gyro
+    nz = urban.noise
+    truth_rate = tr["yaw_rate"].to_numpy()
+    resid = y.yaw_rate_radps - (1 + nz["gyro_scale_error"]) * truth_rate
+    # residual = bias + white; the bias moves slowly, so first differences are white
+    d = np.diff(resid)
+    assert abs(np.std(d) / np.sqrt(2) / nz["gyro_noise_sd_radps"] - 1.0) < 0.05
+    assert abs(np.mean(resid[:500]) - nz["gyro_bias_initial_radps"]) < 3e-4  # rad/s
+    o = urban.drive.odo
+    moving = tr["speed"].to_numpy() > 3.0
+    ratio = np.median(o.speed_mps[moving] / tr["speed"].to_numpy()[moving])
+    assert abs(ratio - (1 + nz["odo_scale_error"])) < 0.01
+    q = 1.0 / (nz["odo_ticks_per_m"] * nz["odo_window_s"])  # m/s per tick in the window
+    assert q > 0.1
+
+
+def test_gnss_rate_and_stamp_offset():
+    sim = simulate_drive("open_sky", seed=2, duration_s=60.0, gnss_rate_hz=10.0,
+                         gnss_stamp_offset_s=0.1)
+    g = sim.drive.gnss
+    assert np.all(np.diff(g.t_ns) == NS_PER_S // 10)
+    assert sim.noise["gnss_stamp_offset_s"] == 0.1
+    with pytest.raises(UsageError):
+        simulate_drive("nowhere")
+    with pytest.raises(UsageError):
+        simulate_drive("open_sky", gyro_rate_hz=30.0)
+
+
+def test_write_drive(tmp_path):
+    sim = simulate_drive("urban_canyon", seed=4, duration_s=40.0)
+    paths = write_drive(sim, tmp_path)
+    assert set(paths) == {"gps.nmea", "gyro.csv", "odo.csv", "drive.mcap", "truth.csv", "noise.json"}
+    lines = paths["gps.nmea"].read_text().splitlines()
+    assert len(lines) == 4 * len(sim.drive.gnss) - sum(sim.drive.gnss.fix_quality == 0)
+    for line in lines:
+        body, cs = line[1:].split("*")
+        x = 0
+        for ch in body.encode():
+            x ^= ch
+        assert int(cs, 16) == x
+    assert {ln[3:6] for ln in lines} == {"RMC", "GGA", "GSA", "GST"}
+    gyro = np.loadtxt(paths["gyro.csv"], delimiter=",", skiprows=1)
+    np.testing.assert_allclose(gyro[:, 1], sim.drive.gyro.yaw_rate_radps, atol=1e-7)
+    truth = np.loadtxt(paths["truth.csv"], delimiter=",", skiprows=1)
+    assert truth.shape[1] == 5
+    assert json.loads(paths["noise.json"].read_text())["seed"] == 4
+
+    from mcap_ros2.reader import read_ros2_messages
+
+    topics = {}
+    for m in read_ros2_messages(str(paths["drive.mcap"])):
+        topics.setdefault(m.channel.topic, []).append(m.ros_msg)
+    assert len(topics["/imu"]) == len(sim.drive.gyro)
+    assert len(topics["/vehicle/twist"]) == len(sim.drive.odo)
+    fixes = topics["/gnss/fix"]
+    assert len(fixes) == len(sim.drive.gnss)
+    ok = sim.drive.gnss.valid
+    lat = np.array([f.latitude for f in fixes])
+    np.testing.assert_allclose(lat[ok], sim.drive.gnss.lat_deg[ok], atol=1e-12)
+    var_e = np.array([f.position_covariance[0] for f in fixes])
+    np.testing.assert_allclose(np.sqrt(var_e[ok]), sim.drive.gnss.sigma_e_m[ok], rtol=1e-9)
+
+
+def test_oracle_params_only_known_keys(urban):
+    p = oracle_params(urban.noise, defaults())
+    for section, values in p.items():
+        assert set(values) == set(DEFAULTS[section])
+    assert p["gyro"]["noise_sd_radps"] == pytest.approx(urban.noise["gyro_noise_sd_radps"])
+    assert p["gyro"]["bias_tau_s"] == pytest.approx(300.0)
+    assert p["fkf"]["gnss_err_sd_m"] == pytest.approx(urban.noise["multipath_sd_m"])
+    od = oracle_drive(urban)
+    ok = od.gnss.valid
+    np.testing.assert_allclose(od.gnss.sigma_e_m[ok], urban.gnss_errors["true_sd_m"][ok])
+    assert np.all(od.gnss.sigma_e_m[ok] >= urban.drive.gnss.sigma_e_m[ok] - 1e-12)
