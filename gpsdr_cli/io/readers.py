@@ -1,0 +1,151 @@
+"""Which reader a file needs, and one call that reads a whole drive.
+
+:func:`sniff` decides by content, not by file name: the MCAP magic, the Parquet
+magic, NMEA sentences with valid checksums, else a delimited text table with a
+header row.  Empty, binary and UTF-16 files are an :class:`InputError` naming
+the file.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+from pathlib import Path
+
+from ..config import Params
+from ..errors import InputError, NoDataError, UsageError
+from .csv import _parse_header, read_gyro_csv, read_odo_csv, text_problem
+from .drive import Drive
+from .mcap import MAGIC as MCAP_MAGIC
+from .mcap import read_mcap
+
+PARQUET_MAGIC = b"PAR1"
+_HEAD_BYTES = 65536
+
+
+def _head(path: str | Path) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            return f.read(_HEAD_BYTES)
+    except IsADirectoryError as err:
+        raise InputError(path, "is a directory, expected a file") from err
+    except FileNotFoundError as err:
+        raise InputError(path, "no such file") from err
+    except OSError as err:
+        raise InputError(path, f"cannot read: {err.strerror or err}") from err
+
+
+def sniff(path: str | Path) -> str:
+    """``"mcap"``, ``"nmea"``, ``"csv"`` or ``"parquet"``, by the file's first bytes."""
+    from .nmea import looks_like_nmea
+
+    head = _head(path)
+    if not head:
+        raise InputError(path, "empty file")
+    if head.startswith(MCAP_MAGIC):
+        return "mcap"
+    if head.startswith(PARQUET_MAGIC):
+        return "parquet"
+    problem = text_problem(head)
+    if problem and problem.startswith("UTF-16"):
+        raise InputError(path, problem)
+    if looks_like_nmea(head):
+        return "nmea"
+    if problem:
+        raise InputError(path, f"{problem}; expected MCAP, NMEA, CSV or Parquet")
+    if b"$GP" in head[:4096] or b"$GN" in head[:4096]:
+        return "nmea"  # NMEA whose first sentences are damaged: the NMEA reader counts them
+    first = head.split(b"\n", 1)[0].decode("utf-8", "replace").strip()
+    if any(d in first for d in (",", ";", "\t")):
+        _parse_header(path, head)  # raises when the first line is not a header
+        return "csv"
+    raise InputError(path, f"unrecognised format (first line {first[:60]!r}); "
+                     "expected MCAP, NMEA, CSV with a header row, or Parquet", line=1)
+
+
+def sha256_file(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes, read in 1 MB blocks."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    except OSError as err:
+        raise InputError(path, f"cannot read: {err.strerror or err}") from err
+    return h.hexdigest()
+
+
+def _read_log(path: str | Path, *, role: str, topics: dict[str, str] | None,
+              date: dt.date | None, use_log_time: bool) -> Drive:
+    kind = sniff(path)
+    if kind == "mcap":
+        return read_mcap(path, topics=topics, use_log_time=use_log_time, date=date)
+    if kind == "nmea":
+        from .nmea import read_nmea
+
+        return read_nmea(path, date=date)
+    raise UsageError(f"{path}: a {kind.upper()} file cannot be the {role}; "
+                     "expected an MCAP or NMEA log")
+
+
+def _only(drive: Drive, stream: str) -> Drive:
+    """Keep one stream of a drive read from an MCAP given for that stream only."""
+    for name in ("gnss", "gyro", "odo"):
+        if name != stream:
+            setattr(drive, name, None)
+    for src in drive.sources:
+        src.streams = tuple(s for s in src.streams if s == stream)
+    return drive
+
+
+def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
+               gyro: str | Path | None = None, odo: str | Path | None = None, params: Params,
+               topics: dict[str, str] | None = None, date: dt.date | None = None,
+               use_log_time: bool = False) -> Drive:
+    """Read a drive from a LOG (MCAP or NMEA) and/or separate GNSS, gyro and odometer files.
+
+    Streams from ``gps``/``gyro``/``odo`` take precedence over the same stream in
+    ``log``; the rest of ``log`` merges in (:meth:`Drive.merge`).  ``gps = '-'``
+    reads NMEA from standard input.  A gyro or odometer file may be a CSV
+    (options from ``params["gyro"]``/``params["odo"]``) or an MCAP.
+    """
+    if log is None and gps is None and gyro is None and odo is None:
+        raise UsageError("no input: give a LOG (MCAP or NMEA) or --gps/--gyro/--odo files")
+    drive = Drive()
+    warnings: list[str] = []
+
+    def add(part: Drive) -> None:
+        warnings.extend(part.meta.get("warnings", []))
+        drive.merge(part)
+
+    if gps is not None:
+        if str(gps) == "-":
+            from .nmea import read_nmea
+
+            part = read_nmea("-", date=date)
+        else:
+            part = _read_log(gps, role="GNSS input (--gps)", topics=topics, date=date,
+                             use_log_time=use_log_time)
+            part = _only(part, "gnss")
+        if part.gnss is None:
+            raise NoDataError(str(gps), "no GNSS fixes")
+        add(part)
+    for path, stream, reader, section in ((gyro, "gyro", read_gyro_csv, "gyro"),
+                                          (odo, "odo", read_odo_csv, "odo")):
+        if path is None:
+            continue
+        if sniff(path) == "mcap":
+            part = _only(read_mcap(path, topics=topics, use_log_time=use_log_time, date=date), stream)
+            if getattr(part, stream) is None:
+                raise NoDataError(str(path), f"no {stream} messages in the MCAP")
+        else:
+            part = reader(path, params[section])
+        add(part)
+    if log is not None:
+        add(_read_log(log, role="LOG", topics=topics, date=date, use_log_time=use_log_time))
+    if drive.gnss is None and drive.gyro is None and drive.odo is None:
+        names = ", ".join(str(p) for p in (log, gps, gyro, odo) if p is not None)
+        raise NoDataError(names, "no GNSS, gyro or odometer data")
+    if warnings:
+        drive.meta["warnings"] = warnings
+    return drive
