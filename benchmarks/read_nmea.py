@@ -33,7 +33,7 @@ def _ddmm(deg: float, lat: bool) -> tuple[str, str]:
 def generate_log(hours: float = 1.0, rate_hz: float = 5.0, seed: int = 0) -> bytes:
     """A realistic NMEA log: a vehicle driving a circle, GGA, RMC, GSA, GST every epoch."""
     rng = np.random.default_rng(seed)
-    n = int(round(hours * 3600 * rate_hz))
+    n = round(hours * 3600 * rate_hz)
     out: list[str] = []
     t0 = 12 * 3600.0  # noon UTC, 2024-05-17
     lat0, lon0 = 48.1173, 11.5167

@@ -604,6 +604,9 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     sod_all = np.concatenate([parsed[k]["sod"] if k in _TIMED else
                               np.full(len(parsed[k]["pos"]), -1, np.int64) for k in parsed]
                              or [np.zeros(0, np.int64)])
+    days_all = np.concatenate([parsed[k]["days"] if "days" in parsed[k] else
+                               np.full(len(parsed[k]["pos"]), np.nan) for k in parsed]
+                              or [np.zeros(0)])
     timed = sod_all >= 0
     if not timed.any():
         if not sentences:
@@ -615,7 +618,13 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     s_sorted = sod_all[order]
     t_mask = s_sorted >= 0
     ts = s_sorted[t_mask]
-    new = np.r_[True, ts[1:] != ts[:-1]]
+    # a new epoch: the time of day changes, or a date differs from the last date seen
+    # (a multi-day log sampled at the same time of day)
+    td = days_all[order][t_mask]
+    last_d = np.maximum.accumulate(np.where(np.isfinite(td), np.arange(len(td)), -1))
+    d_ff = np.where(last_d >= 0, td[np.maximum(last_d, 0)], np.nan)
+    date_change = np.isfinite(td[1:]) & np.isfinite(d_ff[:-1]) & (td[1:] != d_ff[:-1])
+    new = np.r_[True, (ts[1:] != ts[:-1]) | date_change]
     ep_timed = np.cumsum(new) - 1
     epoch_sod = ts[new]
     n_ep = len(epoch_sod)

@@ -1,0 +1,380 @@
+"""NMEA reader on hand-written logs whose every number is known.
+
+Tolerances: positions 1e-9 deg (exact ddmm arithmetic), speeds 1e-9 m/s, times exact (ns).
+"""
+
+from __future__ import annotations
+
+import datetime
+import io
+import sys
+
+import numpy as np
+import pytest
+
+from gpsdr_cli.errors import ChecksumError, InputError, NoDataError, ParseError
+from gpsdr_cli.io.nmea import KNOT_MPS, looks_like_nmea, parse_nmea, read_nmea
+
+DAY = datetime.date(2024, 5, 17)
+
+
+def ck(body: str, lower: bool = False) -> str:
+    """``$body*hh`` with the XOR checksum (upper-case hex unless ``lower``)."""
+    x = 0
+    for c in body.encode():
+        x ^= c
+    h = f"{x:02x}" if lower else f"{x:02X}"
+    return f"${body}*{h}"
+
+
+def log(*lines: str, eol: str = "\r\n") -> bytes:
+    return (eol.join(lines) + eol).encode()
+
+
+def t_ns(day: datetime.date, hh: int, mm: int, ss: float) -> int:
+    dt = datetime.datetime(day.year, day.month, day.day, tzinfo=datetime.UTC)
+    return int(dt.timestamp()) * 1_000_000_000 + round((hh * 3600 + mm * 60 + ss) * 1e9)
+
+
+GGA = "GPGGA,123519.00,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,"
+RMC = "GPRMC,123519.00,A,4807.038,N,01131.000,E,022.4,084.4,170524,003.1,W,A"
+LAT = 48 + 7.038 / 60
+LON = 11 + 31.0 / 60
+
+
+def gga(tod: str, q: int = 1, lat: str = "4807.038,N", lon: str = "01131.000,E",
+        talker: str = "GP") -> str:
+    return ck(f"{talker}GGA,{tod},{lat},{lon},{q},08,0.9,545.4,M,46.9,M,,")
+
+
+def rmc(tod: str, date: str = "170524", status: str = "A", talker: str = "GP") -> str:
+    return ck(f"{talker}RMC,{tod},{status},4807.038,N,01131.000,E,022.4,084.4,{date},003.1,W,A")
+
+
+# ------------------------------------------------------------------ basic fields
+def test_gga_rmc_gst_merge_into_one_epoch() -> None:
+    data = log(ck(RMC), ck(GGA), ck("GPGST,123519.00,1.2,2.1,1.5,35.0,1.8,1.6,3.2"),
+               ck("GPVTG,090.0,T,,M,010.0,N,018.5,K,A"))
+    fixes, report, meta = parse_nmea(data)
+    assert len(fixes) == 1
+    assert fixes.t_ns[0] == t_ns(DAY, 12, 35, 19)
+    assert fixes.lat_deg[0] == pytest.approx(LAT, abs=1e-9)
+    assert fixes.lon_deg[0] == pytest.approx(LON, abs=1e-9)
+    assert fixes.alt_m[0] == pytest.approx(545.4 + 46.9, abs=1e-9)  # MSL + geoid separation
+    assert fixes.fix_quality[0] == 1 and fixes.n_sats[0] == 8
+    assert fixes.hdop[0] == pytest.approx(0.9)
+    assert fixes.sigma_n_m[0] == pytest.approx(1.8)  # GST field 6: latitude sd
+    assert fixes.sigma_e_m[0] == pytest.approx(1.6)  # GST field 7: longitude sd
+    assert fixes.speed_mps[0] == pytest.approx(22.4 * 1852 / 3600, abs=1e-9)  # RMC beats VTG
+    assert fixes.course_deg[0] == pytest.approx(84.4)
+    assert report.total == 0
+    assert meta["sentences"] == {"RMC": 1, "GGA": 1, "GST": 1, "VTG": 1}
+    assert meta["talkers"] == {"GP": 4}
+    assert meta["dates"] == ["2024-05-17"]
+
+
+def test_southern_western_hemispheres_and_vtg_speed() -> None:
+    data = log(gga("010203.5", lat="3345.1200,S", lon="07036.6000,W"),
+               ck("GPVTG,271.5,T,,M,005.0,N,009.3,K,D"))
+    fixes, _, _ = parse_nmea(data, date=DAY)
+    assert fixes.lat_deg[0] == pytest.approx(-(33 + 45.12 / 60), abs=1e-9)
+    assert fixes.lon_deg[0] == pytest.approx(-(70 + 36.6 / 60), abs=1e-9)
+    assert fixes.speed_mps[0] == pytest.approx(5 * KNOT_MPS, abs=1e-9)
+    assert fixes.course_deg[0] == pytest.approx(271.5)
+    assert fixes.t_ns[0] == t_ns(DAY, 1, 2, 3.5)
+
+
+def test_rmc_only_epochs_use_rmc_position_and_mode() -> None:
+    data = log(rmc("000001"), ck("GNRMC,000002,A,4807.038,N,01131.000,E,0.0,,170524,,,D"),
+               ck("GNRMC,000003,A,4807.038,N,01131.000,E,0.0,,170524,,,E"), rmc("000004", status="V"))
+    fixes, _, _ = parse_nmea(data)
+    assert fixes.fix_quality.tolist() == [1, 2, 6, 0]
+    assert np.isfinite(fixes.lat_deg[:3]).all() and np.isnan(fixes.lat_deg[3])
+    assert np.isnan(fixes.speed_mps[3])  # status V: no speed either
+
+
+# ------------------------------------------------------------------ no fix / qualities
+def test_no_fix_rows_are_nan_never_zero() -> None:
+    data = log(rmc("100000"), ck("GPGGA,100000,,,,,0,00,99.99,,,,,,"),
+               rmc("100001"), gga("100001", q=1, lat=",", lon=","),  # quality 1 but empty position
+               rmc("100002"), gga("100002", q=0),  # quality 0 with a (stale) position
+               rmc("100003"), gga("100003", lat="0000.000,N", lon="00000.000,E"),
+               rmc("100004"), gga("100004"))
+    fixes, _, _ = parse_nmea(data)
+    assert len(fixes) == 5
+    assert fixes.fix_quality.tolist() == [0, 0, 0, 0, 1]
+    assert np.isnan(fixes.lat_deg[:4]).all() and np.isnan(fixes.lon_deg[:4]).all()
+    assert not (fixes.lat_deg == 0).any()
+    assert fixes.valid.tolist() == [False] * 4 + [True]
+
+
+@pytest.mark.parametrize("q", [2, 4, 5, 6])
+def test_dgps_rtk_and_dead_reckoning_qualities_kept(q: int) -> None:
+    fixes, _, _ = parse_nmea(log(gga("120000", q=q)), date=DAY)
+    assert fixes.fix_quality[0] == q and fixes.valid[0]
+
+
+def test_gga_with_13_and_15_fields() -> None:
+    g13 = ck("GPGGA,120000,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M")
+    g15 = ck("GPGGA,120001,4807.038,N,01131.000,E,4,08,0.9,545.4,M,46.9,M,1.0,0000,")
+    fixes, report, _ = parse_nmea(log(g13, g15), date=DAY)
+    assert fixes.fix_quality.tolist() == [1, 4]
+    assert np.allclose(fixes.lat_deg, LAT, atol=1e-9)
+    assert report.total == 0
+
+
+# ------------------------------------------------------------------ GSA
+def test_gsa_per_constellation_merges_last_non_empty() -> None:
+    data = log(rmc("120000"), gga("120000"),
+               ck("GNGSA,A,3,01,02,03,,,,,,,,,,1.9,0.95,1.6,1"),
+               ck("GNGSA,A,3,65,66,,,,,,,,,,,1.8,0.95,1.5,2"),
+               ck("GNGSA,A,3,,,,,,,,,,,,,1.7,0.95,1.4,3"),
+               ck("GNGSA,A,3,,,,,,,,,,,,,,,,4"),  # empty DOPs: do not erase the others
+               rmc("120001"), gga("120001"),
+               ck("GNGSA,A,3,01,02,03,,,,,,,,,,2.5,1.1,2.2,1"))
+    fixes, report, meta = parse_nmea(data)
+    assert fixes.pdop.tolist() == [1.7, 2.5]
+    assert fixes.vdop.tolist() == [1.4, 2.2]
+    assert fixes.hdop.tolist() == [0.9, 0.9]  # GGA's HDOP wins over GSA's
+    assert meta["sentences"]["GSA"] == 5 and report.total == 0
+
+
+def test_gsa_hdop_used_when_gga_has_none_and_no_fix_gsa_ignored() -> None:
+    data = log(rmc("120000"), ck("GPGSA,A,3,01,02,03,04,,,,,,,,,2.0,1.2,1.6"),
+               rmc("120001"), ck("GPGSA,A,1,,,,,,,,,,,,,99.99,99.99,99.99"))
+    fixes, _, _ = parse_nmea(data)
+    assert fixes.hdop[0] == pytest.approx(1.2) and fixes.pdop[0] == pytest.approx(2.0)
+    assert np.isnan(fixes.pdop[1]) and np.isnan(fixes.hdop[1])
+
+
+def test_pqgsa_is_quectel_qzss_gsa_not_proprietary() -> None:
+    data = log(rmc("120000"), ck("PQGSA,A,3,193,194,,,,,,,,,,,1.6,0.8,1.3,5"))
+    fixes, report, meta = parse_nmea(data)
+    assert fixes.pdop[0] == pytest.approx(1.6) and fixes.vdop[0] == pytest.approx(1.3)
+    assert report.total == 0 and meta["talkers"]["PQ"] == 1
+
+
+def test_nmea41_fields_and_gsa_with_29_fields() -> None:
+    sats = ",".join(f"{i:02d}" for i in range(1, 23))  # 22 satellite ids
+    gsa29 = ck(f"GNGSA,A,3,{sats},1.4,0.7,1.2,1")
+    assert gsa29.count(",") + 1 == 29  # 29 fields, the address included
+    rmc41 = ck("GNRMC,120000.00,A,4807.038,N,01131.000,E,0.5,,170524,,,R,S")  # mode R, nav status S
+    fixes, report, _ = parse_nmea(log(rmc41, gsa29))
+    assert fixes.fix_quality[0] == 4
+    assert (fixes.pdop[0], fixes.hdop[0], fixes.vdop[0]) == (1.4, 0.7, 1.2)
+    assert report.total == 0
+
+
+def test_gsa_before_first_timed_sentence_attaches_to_first_epoch() -> None:
+    data = log(ck("GPGSA,A,3,01,02,03,04,,,,,,,,,2.0,1.2,1.6"), gga("120000"), rmc("120000"))
+    fixes, _, _ = parse_nmea(data)
+    assert len(fixes) == 1 and fixes.pdop[0] == pytest.approx(2.0)
+
+
+# ------------------------------------------------------------------ dates
+def test_midnight_rollover_without_dates_uses_argument() -> None:
+    data = log(gga("235958.0"), gga("235959.0"), gga("000000.0"), gga("000001.0"))
+    fixes, _, meta = parse_nmea(data, date=DAY)
+    expected = t_ns(DAY, 23, 59, 58) + np.arange(4) * 1_000_000_000
+    assert fixes.t_ns.tolist() == expected.tolist()
+    assert meta["date_source"] == "argument"
+    assert meta["dates"] == ["2024-05-17", "2024-05-18"]
+
+
+def test_rollover_after_last_dated_epoch_and_before_first() -> None:
+    # GGA before the first RMC (date back-filled), then GGAs after the last RMC roll over
+    data = log(gga("235957"), rmc("235958", date="170524"), gga("235959"), gga("000000"))
+    fixes, _, _ = parse_nmea(data, date=datetime.date(2000, 1, 1))  # log date wins
+    expected = t_ns(DAY, 23, 59, 57) + np.arange(4) * 1_000_000_000
+    assert fixes.t_ns.tolist() == expected.tolist()
+
+
+def test_multi_day_log_with_dates() -> None:
+    lines = []
+    for date in ("170524", "180524", "190524"):
+        lines += [rmc("120000", date=date), gga("120000")]
+    lines += [rmc("235959", date="190524"), rmc("000000", date="200524")]
+    fixes, _, meta = parse_nmea(log(*lines))
+    days = [datetime.date(2024, 5, d) for d in (17, 18, 19)]
+    expected = [t_ns(d, 12, 0, 0) for d in days] + [t_ns(days[2], 23, 59, 59),
+                                                    t_ns(datetime.date(2024, 5, 20), 0, 0, 0)]
+    assert fixes.t_ns.tolist() == expected
+    assert meta["dates"] == ["2024-05-17", "2024-05-18", "2024-05-19", "2024-05-20"]
+
+
+def test_zda_gives_the_date() -> None:
+    data = log(gga("120000"), ck("GPZDA,120000.00,17,05,2024,00,00"))
+    fixes, _, _ = parse_nmea(data)
+    assert fixes.t_ns[0] == t_ns(DAY, 12, 0, 0)
+
+
+def test_no_date_source_asks_for_date_option() -> None:
+    with pytest.raises(NoDataError, match="--date YYYY-MM-DD"):
+        parse_nmea(log(gga("120000")), name="x.nmea")
+    with pytest.raises(NoDataError, match="no fix"):
+        parse_nmea(log(gga("120000", q=0)), name="x.nmea")
+
+
+def test_week_rollover_date_kept_and_warned() -> None:
+    fixes, _, meta = parse_nmea(log(rmc("120000", date="021099")))
+    assert fixes.t_ns[0] == t_ns(datetime.date(1999, 10, 2), 12, 0, 0)
+    assert meta["warnings"] == {"suspicious date": 1}
+    assert meta["suspicious_dates"] == ["1999-10-02"]
+
+
+def test_malformed_date_and_trailing_dot_time() -> None:
+    data = log(rmc("222508", date="2208-1"), rmc("222509."), gga("22251"))
+    fixes, report, _ = parse_nmea(data, name="m.nmea")
+    assert fixes.t_ns.tolist() == [t_ns(DAY, 22, 25, 8), t_ns(DAY, 22, 25, 9)]  # date back-filled
+    assert report.counts["malformed date in RMC (field ignored)"] == 1
+    assert report.first["malformed date in RMC (field ignored)"] == "m.nmea:1"
+    assert report.counts["malformed time in GGA"] == 1
+    assert report.first["malformed time in GGA"] == "m.nmea:3"
+
+
+# ------------------------------------------------------------------ framing oddities
+def test_doubled_dollar_binary_prefix_logger_prefix_and_nul_padding() -> None:
+    data = (b"$" + log(rmc("120000"))
+            + b"\xb5b\x01\x07\x5c\x00\xff\xfe" + log(gga("120000"))
+            + b"2024-05-17T12:00:01.003Z " + log(rmc("120001"))
+            + log(gga("120001")).replace(b"\r\n", b"\x00\x00\x00\r\n"))
+    fixes, report, meta = parse_nmea(data)
+    assert len(fixes) == 2 and fixes.valid.all()
+    assert report.total == 0
+    assert meta["doubled_starts"] == 1
+
+
+def test_spliced_lines() -> None:
+    truncated = gga("120000")[:30]
+    data = log(rmc("120000") + gga("120000"),  # two full sentences on one line
+               truncated + rmc("120001"),  # a cut-off sentence then a full one
+               gga("120001"))
+    fixes, report, meta = parse_nmea(data, name="s.nmea")
+    assert len(fixes) == 2 and fixes.valid.all()
+    assert meta["sentences"] == {"RMC": 2, "GGA": 2}
+    assert report.counts == {"no checksum (truncated sentence)": 1}
+    assert report.first["no checksum (truncated sentence)"] == "s.nmea:2"
+
+
+def test_lower_case_checksum_hex() -> None:
+    body = "GPRMC,120000,A,4807.038,N,01131.000,E,0.0,,170524,,,A"  # checksum has letters
+    assert any(c in "abcdef" for c in ck(body, lower=True)[-2:])
+    fixes, report, _ = parse_nmea(log(ck(body, lower=True)))
+    assert len(fixes) == 1 and report.total == 0
+
+
+def test_crlf_lf_and_cr_mixed_with_comments_json_text() -> None:
+    data = (rmc("120000").encode() + b"\r\n" + gga("120000").encode() + b"\n"
+            + b"# comment line\n" + b'{"event": "start", "t": 1}\r\n'
+            + b"free text from the logger\n" + b"\n   \n"
+            + rmc("120001").encode() + b"\r" + gga("120001").encode() + b"\n")
+    fixes, report, meta = parse_nmea(data, name="c.nmea")
+    assert len(fixes) == 2
+    assert report.counts == {"not a sentence (no $ on the line)": 3}
+    assert report.first["not a sentence (no $ on the line)"] == "c.nmea:3"
+    assert meta["lines"] == 9
+
+
+def test_skip_counts_by_reason_with_first_line() -> None:
+    bad = rmc("120001")[:-2] + ("00" if not rmc("120001").endswith("00") else "11")
+    data = log(rmc("120000"), gga("120000"),
+               ck("GPGSV,3,1,11,01,06,014,08,12,43,207,28,14,06,049,,15,44,171,23"),  # 3
+               ck("PGRME,15.0,M,45.0,M,25.0,M"),  # 4
+               "!" + ck("AIVDM,1,1,,B,13aENmgP1CPH`N`NJ2L0Mwwb2@Nj,0")[1:],  # 5
+               ck("02MWV,327.6,R,1.89,N"),  # 6
+               ck("GNGGAH,073346.00,4004.73874301,N,11614.19077585,E,1,28,0.6,64.2,M,8.4,M,,"),
+               bad,  # 8
+               "$GPGGA,120002,4807.038,N,01131.000,E,1,08",  # 9: truncated, no checksum
+               ck("GPGSV,3,2,11,01,06,014,08,12,43,207,28,14,06,049,,15,44,171,23"))
+    fixes, report, _ = parse_nmea(data, name="r.nmea")
+    assert len(fixes) == 1
+    assert report.counts["unknown sentence GSV"] == 2
+    assert report.first["unknown sentence GSV"] == "r.nmea:3"
+    assert report.counts["unknown sentence (proprietary $P...)"] == 1
+    assert report.counts["unknown sentence (numeric talker)"] == 1
+    assert report.counts["unknown sentence (six-letter address)"] == 1
+    assert report.counts["bad checksum"] == 1 and report.first["bad checksum"] == "r.nmea:8"
+    assert report.counts["no checksum (truncated sentence)"] == 1
+    assert report.first["no checksum (truncated sentence)"] == "r.nmea:9"
+    assert report.counts["unknown sentence (encapsulated !AIVDM, e.g. AIS)"] == 1
+    assert report.total == 8
+
+
+def test_malformed_field_blanks_only_that_field() -> None:
+    data = log(ck("GPRMC,120000,A,4807.038,N,01131.000,E,X.138,12.0,170524,,,A"))
+    fixes, report, _ = parse_nmea(data, name="f.nmea")
+    assert np.isnan(fixes.speed_mps[0]) and fixes.course_deg[0] == pytest.approx(12.0)
+    assert fixes.valid[0]
+    assert report.counts == {"malformed speed in RMC (field ignored)": 1}
+
+
+def test_bad_latitude_drops_the_sentence() -> None:
+    data = log(rmc("120000"), gga("120000", lat="4867.000,N"))  # 67 minutes
+    fixes, report, _ = parse_nmea(data)
+    assert fixes.valid[0] and fixes.lat_deg[0] == pytest.approx(LAT)  # from RMC
+    assert report.counts == {"malformed position in GGA": 1}
+
+
+# ------------------------------------------------------------------ strict mode
+def test_strict_raises_at_first_bad_line() -> None:
+    data = log(rmc("120000"), ck("GPGSV,1,1,00"), "# note", gga("120000"))
+    with pytest.raises(ParseError, match=r"^s\.nmea:3: not a sentence"):
+        parse_nmea(data, name="s.nmea", strict=True)
+    body = rmc("120001")
+    data = log(rmc("120000"), body[:-2] + ("00" if body[-2:] != "00" else "11"))
+    with pytest.raises(ChecksumError, match=r"^s\.nmea:2: bad checksum"):
+        parse_nmea(data, name="s.nmea", strict=True)
+    fixes, _, _ = parse_nmea(log(rmc("120000"), ck("GPGSV,1,1,00")), strict=True)  # unknown: fine
+    assert len(fixes) == 1
+
+
+# ------------------------------------------------------------------ input errors
+def test_input_errors_name_the_file(tmp_path) -> None:
+    with pytest.raises(InputError, match=r"^e\.nmea: empty file"):
+        parse_nmea(b"", name="e.nmea")
+    text = log(rmc("120000"), gga("120000")).decode()
+    for enc in ("utf-16", "utf-16-le", "utf-16-be"):
+        with pytest.raises(InputError, match="UTF-16 encoded; convert .* iconv -f UTF-16 -t UTF-8"):
+            parse_nmea(text.encode(enc), name="u.nmea")
+    rng = np.random.default_rng(1)
+    binary = rng.integers(0, 256, 4000, dtype=np.uint8).tobytes().replace(b"$", b"")
+    with pytest.raises(InputError, match=r"^b\.bin: binary file with no NMEA"):
+        parse_nmea(binary, name="b.bin")
+    with pytest.raises(NoDataError, match="no GGA/RMC"):
+        parse_nmea(log(ck("GPGSV,1,1,00"), "hello"), name="g.nmea")
+    with pytest.raises(InputError, match="cannot read"):
+        read_nmea(tmp_path / "missing.nmea")
+    with pytest.raises(InputError, match="cannot read"):
+        read_nmea(tmp_path)  # a directory
+
+
+def test_read_nmea_file_and_stdin(tmp_path, monkeypatch) -> None:
+    import hashlib
+
+    data = log(rmc("120000"), gga("120000"))
+    p = tmp_path / "a.nmea"
+    p.write_bytes(data)
+    drive = read_nmea(p)
+    assert len(drive.gnss) == 1
+    assert drive.sources[0].path == str(p)
+    assert drive.sources[0].sha256 == hashlib.sha256(data).hexdigest()
+    assert drive.sources[0].streams == ("gnss",)
+    assert drive.meta["sentences"] == {"RMC": 1, "GGA": 1}
+
+    class FakeStdin:
+        buffer = io.BytesIO(data)
+
+    monkeypatch.setattr(sys, "stdin", FakeStdin())
+    d2 = read_nmea("-")
+    assert d2.gnss.t_ns.tolist() == drive.gnss.t_ns.tolist()
+    assert d2.sources[0].path == "-"
+
+
+def test_looks_like_nmea() -> None:
+    text = log(rmc("120000"), gga("120000"), rmc("120001"))
+    assert looks_like_nmea(text)
+    assert looks_like_nmea(b"\xb5b\x01\x07junk" + text)
+    assert looks_like_nmea(text.decode().encode("utf-16"))
+    assert not looks_like_nmea(b"t,yaw_rate\n1.0,0.01\n2.0,0.02\n")
+    assert not looks_like_nmea(b"$GPGGA,no checksum here\n$GPRMC,nor here\n")
+    assert not looks_like_nmea(bytes(range(256)) * 4)
