@@ -646,7 +646,7 @@ def track_problems(track: pd.DataFrame, *, n_epochs: int | None = None) -> list[
         if t.isna().any():
             problems.append(f"time: {int(t.isna().sum())} nulls")
         elif len(t) > 1:
-            tv = t.to_numpy().astype("datetime64[ns]").astype(np.int64)
+            tv = _time_ns(t)
             if np.any(np.diff(tv) <= 0):
                 problems.append(f"time: {int(np.sum(np.diff(tv) <= 0))} steps not increasing")
     for c in REQUIRED_FINITE:
@@ -704,9 +704,444 @@ def track_t_ns(track: pd.DataFrame) -> np.ndarray:
     """The track's ``time`` as int64 ns since the epoch."""
     if "t_ns" in track:
         return track["t_ns"].to_numpy(np.int64)
-    return track["time"].to_numpy().astype("datetime64[ns]").astype(np.int64)
+    return _time_ns(track["time"])
+
+
+def _time_ns(t: pd.Series) -> np.ndarray:
+    naive = pd.to_datetime(t, utc=True).dt.tz_localize(None)
+    return naive.to_numpy(dtype="datetime64[ns]").view(np.int64)
 
 
 def nmea_fix_checksums(data: bytes) -> bytes:
     """Every ``$...*hh`` sentence given its correct checksum (so fuzzed fields reach the parser)."""
     return nmea_map_sentences(data, lambda f: f)
+
+
+# --------------------------------------------------------------------------------------------
+# Running gpsdr on a damaged drive, and judging the outcome
+# --------------------------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class Outcome:
+    """What one run produced.
+
+    ``status``: exit status (0/1/2; in-memory runs: 0 or 1); ``stderr`` the
+    error text; ``escape``: the name of an exception that is not a
+    GpsdrError (a bug), or of an "internal error" the CLI caught; ``track``
+    the track read back (None on failure); ``epochs`` from its metadata.
+    """
+
+    status: int
+    stderr: str = ""
+    escape: str | None = None
+    track: pd.DataFrame | None = None
+    epochs: int | None = None
+    meta: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    @property
+    def kind(self) -> str:
+        """``track`` | ``error<status>`` | ``escape:<name>``."""
+        if self.escape:
+            return f"escape:{self.escape}"
+        return "track" if self.status == 0 else f"error{self.status}"
+
+
+def stream_args(paths: dict[str, Any], *, mcap: bool = False) -> list[str]:
+    """``gpsdr fuse`` arguments for the files :func:`gpsdr_cli.simulate.write_drive` made."""
+    if mcap:
+        return [str(paths["drive.mcap"])]
+    return ["--gps", str(paths["gps.nmea"]), "--gyro", str(paths["gyro.csv"]),
+            "--odo", str(paths["odo.csv"])]
+
+
+def run_cli(args: Sequence[str], out_dir: Any, *, filter_name: str | None = None,
+            subprocess_exe: str | None = None, track_name: str = "track.parquet") -> Outcome:
+    """Run ``gpsdr fuse ARGS -o OUT_DIR/track.parquet --stats ...`` and read the track back.
+
+    In process with click's CliRunner (fast), or as a real process when
+    ``subprocess_exe`` names the ``gpsdr`` executable.  A failed run's stderr
+    holding "internal error" (an exception gpsdr did not raise on purpose) or a
+    traceback is reported as an escape.
+    """
+    import pathlib
+
+    out = pathlib.Path(out_dir)
+    track_path = out / track_name
+    argv = ["fuse", *map(str, args), "-o", str(track_path),
+            "--stats", str(out / (track_name + ".stats.parquet")), "-q"]
+    if filter_name:
+        argv += ["--filter", filter_name]
+    if subprocess_exe:
+        import subprocess
+
+        proc = subprocess.run([subprocess_exe, *argv], capture_output=True, text=True,
+                              timeout=600, check=False)
+        status, stderr = proc.returncode, proc.stderr
+        escape = None
+    else:
+        from click.testing import CliRunner
+
+        from ..cli.main import cli
+
+        res = CliRunner().invoke(cli, argv, catch_exceptions=True)
+        status, stderr = res.exit_code, res.stderr
+        escape = None
+        if res.exception is not None and not isinstance(res.exception, SystemExit):
+            escape = type(res.exception).__name__
+    if escape is None and status != 0:
+        if "internal error" in stderr:
+            m = re.search(r"internal error: (\w+)", stderr)
+            escape = m.group(1) if m else "internal"
+        elif "Traceback" in stderr:
+            escape = "traceback"
+        elif "NonFiniteOutputError" in stderr or "filter output: column" in stderr:
+            escape = "NonFiniteOutput"
+    outcome = Outcome(status=status, stderr=stderr, escape=escape)
+    if status == 0:
+        import pyarrow.parquet as pq
+
+        outcome.track = pd.read_parquet(track_path)
+        raw = pq.read_schema(track_path).metadata or {}
+        outcome.meta = {k.decode(): v.decode() for k, v in raw.items()}
+        if "epochs" in outcome.meta:
+            outcome.epochs = int(outcome.meta["epochs"])
+    return outcome
+
+
+def run_inmemory(drive: Drive, params: dict) -> Outcome:
+    """``pipeline.fuse`` on a Drive: a track, a GpsdrError (status 1/2) or an escape."""
+    from ..errors import GpsdrError, UsageError
+    from ..pipeline import fuse
+
+    try:
+        res = fuse(drive, params)
+    except UsageError as err:
+        return Outcome(status=2, stderr=str(err))
+    except GpsdrError as err:
+        name = type(err).__name__
+        return Outcome(status=1, stderr=str(err),
+                       escape="NonFiniteOutput" if name == "NonFiniteOutputError" else None)
+    except Exception as err:  # noqa: BLE001 - anything else escaping is the bug we report
+        return Outcome(status=1, stderr=f"{type(err).__name__}: {err}", escape=type(err).__name__)
+    return Outcome(status=0, track=res.track, epochs=len(res.epochs), meta=res.metadata)
+
+
+def outcome_problems(outcome: Outcome, expect: str) -> list[str]:
+    """Why an outcome breaks the contract.
+
+    ``expect``: ``track`` (must succeed), ``error`` (must fail cleanly) or
+    ``either``.  A success must give a complete finite track with one row per
+    epoch; a failure exactly one stderr line (CLI) and no escape.
+    """
+    problems: list[str] = []
+    if outcome.escape:
+        problems.append(f"escape {outcome.escape}: {outcome.stderr.strip()[:200]}")
+    if outcome.status == 0:
+        if expect == "error":
+            problems.append("succeeded where an error was expected")
+        if outcome.track is not None:
+            problems += track_problems(outcome.track, n_epochs=outcome.epochs)
+    else:
+        if expect == "track":
+            problems.append(f"exit {outcome.status} where a track was expected: "
+                            f"{outcome.stderr.strip()[:200]}")
+        if "\n" in outcome.stderr.strip() or "Traceback" in outcome.stderr:
+            problems += error_line_problems(outcome.stderr)
+    return problems
+
+
+# --------------------------------------------------------------------------------------------
+# The fault catalogue: what tests/test_faults.py and benchmarks/fault_table.py run
+# --------------------------------------------------------------------------------------------
+
+#: The base drive of the file cases: seconds, and the simulator's DR rates (Hz).
+BASE_DURATION_S = 120.0
+BASE_RATES = {"gnss_rate_hz": 5.0, "gyro_rate_hz": 20.0, "odo_rate_hz": 10.0}
+
+
+@dataclasses.dataclass
+class CaseInputs:
+    """A damaged drive ready to run: CLI ``args`` (file cases) or a ``drive`` (in-memory cases).
+
+    ``sim``: the SimDrive whose truth holds for the damaged drive; ``focus_ns``:
+    the time window where the fault acts (for the window metrics); ``config``:
+    parameter overrides (written to a ``--config`` TOML for file cases).
+    """
+
+    sim: Any
+    args: list[str] = dataclasses.field(default_factory=list)
+    drive: Drive | None = None
+    focus_ns: tuple[int, int] | None = None
+    config: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class FaultCase:
+    """One fault: how to make it from a base SimDrive into a directory, and what must happen.
+
+    ``expect``: ``track`` (a complete finite track), ``error`` (one clear error
+    line, exit 1/2) or ``either``.  ``base``: ``short`` (the 120 s file drive)
+    or ``long`` (built by the case itself, in memory).
+    """
+
+    name: str
+    description: str
+    expect: str
+    make: Callable[[Any, Any], CaseInputs]
+    base: str = "short"
+
+
+def base_sim(seed: int = 7, duration_s: float = BASE_DURATION_S, scenario: str = "open_sky",
+             **rates: float) -> Any:
+    """The simulated drive faults are injected into (open sky: every error is the fault's)."""
+    from ..simulate import simulate_drive
+
+    return simulate_drive(scenario, seed, duration_s, **{**BASE_RATES, **rates})
+
+
+def _files(sim: Any, out_dir: Any) -> dict[str, Any]:
+    from ..simulate import write_drive
+
+    return write_drive(sim, out_dir)
+
+
+def _rel_ns(sim: Any, start_s: float, duration_s: float) -> tuple[int, int]:
+    t0 = start_ns(sim.drive)
+    return t0 + round(start_s * NS_PER_S), t0 + round((start_s + duration_s) * NS_PER_S)
+
+
+def _drive_case(fault: Callable[[Drive], Drive], focus: tuple[float, float] | None = None,
+                mcap: bool = False) -> Callable[[Any, Any], CaseInputs]:
+    """A case made by an in-memory fault on the drive, then written as files."""
+    def make(sim: Any, out_dir: Any) -> CaseInputs:
+        bad = with_drive(sim, fault(sim.drive))
+        paths = _files(bad, out_dir)
+        return CaseInputs(sim=bad, args=stream_args(paths, mcap=mcap),
+                          focus_ns=None if focus is None else _rel_ns(sim, *focus))
+    return make
+
+
+def _file_case(name: str, fault: Callable[[bytes], bytes], *, mcap: bool = False,
+               focus: tuple[float, float] | None = None,
+               extra: Sequence[str] = ()) -> Callable[[Any, Any], CaseInputs]:
+    """A case made by damaging one written file's bytes."""
+    def make(sim: Any, out_dir: Any) -> CaseInputs:
+        paths = _files(sim, out_dir)
+        p = paths[name]
+        p.write_bytes(fault(p.read_bytes()))
+        return CaseInputs(sim=sim, args=[*stream_args(paths, mcap=mcap), *extra],
+                          focus_ns=None if focus is None else _rel_ns(sim, *focus))
+    return make
+
+
+def _subset_case(streams: Sequence[str], config: Callable[[Any], dict] | None = None
+                 ) -> Callable[[Any, Any], CaseInputs]:
+    """Only some of the streams given on the command line."""
+    def make(sim: Any, out_dir: Any) -> CaseInputs:
+        paths = _files(sim, out_dir)
+        flag = {"gnss": ("--gps", "gps.nmea"), "gyro": ("--gyro", "gyro.csv"),
+                "odo": ("--odo", "odo.csv")}
+        args: list[str] = []
+        for s in streams:
+            args += [flag[s][0], str(paths[flag[s][1]])]
+        return CaseInputs(sim=sim, args=args, config=config(sim) if config else {})
+    return make
+
+
+def _origin_config(sim: Any) -> dict[str, dict[str, Any]]:
+    tr = sim.truth
+    return {"frame": {"origin_lat_deg": float(tr["lat"].iloc[0]),
+                      "origin_lon_deg": float(tr["lon"].iloc[0]),
+                      "initial_heading_deg": float(tr["heading_deg"].iloc[0])}}
+
+
+def _midnight_case(before_s: float, day: str | None, *, drop: Sequence[str] = (),
+                   with_date: bool = False) -> Callable[[Any, Any], CaseInputs]:
+    def make(sim: Any, out_dir: Any) -> CaseInputs:
+        moved = sim_cross_midnight(sim, before_s, day=day)
+        paths = _files(moved, out_dir)
+        extra: list[str] = []
+        if drop:
+            p = paths["gps.nmea"]
+            p.write_bytes(nmea_drop_sentences(p.read_bytes(), drop))
+        if with_date:
+            d0 = pd.Timestamp(start_ns(moved.drive), unit="ns", tz="UTC").date()
+            extra = ["--date", d0.isoformat()]
+        t_mid = start_ns(moved.drive) + round(before_s * NS_PER_S)
+        return CaseInputs(sim=moved, args=[*stream_args(paths), *extra],
+                          focus_ns=(t_mid - 5 * NS_PER_S, t_mid + 5 * NS_PER_S))
+    return make
+
+
+def long_sim(duration_s: float = 780.0, seed: int = 11) -> Any:
+    """The in-memory base for long faults: DR block-averaged to 10 Hz to keep epochs few."""
+    sim = base_sim(seed, duration_s, gnss_rate_hz=1.0, gyro_rate_hz=10.0, odo_rate_hz=10.0)
+    return sim
+
+
+def _outage_long(duration_s: float) -> Callable[[Any, Any], CaseInputs]:
+    def make(_sim: Any, _out_dir: Any) -> CaseInputs:
+        sim = long_sim(duration_s + 180.0)
+        drive = gnss_outage(sim.drive, 90.0, duration_s)
+        return CaseInputs(sim=with_drive(sim, drive), drive=drive,
+                          focus_ns=_rel_ns(sim, 90.0, duration_s))
+    return make
+
+
+def _standstill_long(duration_s: float, gnss: bool) -> Callable[[Any, Any], CaseInputs]:
+    def make(_sim: Any, _out_dir: Any) -> CaseInputs:
+        sim = long_sim(120.0)
+        moved, t_stop = insert_standstill(sim, 60.0, duration_s, gnss=gnss, dr_rate_hz=10.0)
+        return CaseInputs(sim=moved, drive=moved.drive,
+                          focus_ns=(t_stop, t_stop + round(duration_s * NS_PER_S)))
+    return make
+
+
+def _mcap_case(fault: Callable[[bytes], bytes]) -> Callable[[Any, Any], CaseInputs]:
+    return _file_case("drive.mcap", fault, mcap=True)
+
+
+CATALOGUE: tuple[FaultCase, ...] = (
+    FaultCase("clean", "no fault (baseline)", "track", _drive_case(lambda d: d)),
+    FaultCase("outage_10s", "GNSS outage 10 s (fix quality 0)", "track",
+              _drive_case(lambda d: gnss_outage(d, 40.0, 10.0), (40.0, 10.0))),
+    FaultCase("outage_60s", "GNSS outage 60 s (no records)", "track",
+              _drive_case(lambda d: gnss_outage(d, 30.0, 60.0, mode="drop"), (30.0, 60.0))),
+    FaultCase("outage_10min", "GNSS outage 600 s, in memory, 10 Hz DR", "track",
+              _outage_long(600.0), base="long"),
+    FaultCase("standstill_30min", "30 min stop with GNSS, in memory, 10 Hz DR", "track",
+              _standstill_long(1800.0, True), base="long"),
+    FaultCase("standstill_30min_nognss", "30 min stop without GNSS (garage)", "track",
+              _standstill_long(1800.0, False), base="long"),
+    FaultCase("gnss_clock_back", "GNSS clock steps back 2 s for good at 50 s", "track",
+              _drive_case(lambda d: time_step_backwards(d, "gnss", 50.0, 2.0), (50.0, 4.0))),
+    FaultCase("gyro_clock_glitch", "5 gyro records stamped 1 s early at 50 s", "track",
+              _drive_case(lambda d: time_step_backwards(d, "gyro", 50.0, 1.0, count=5))),
+    FaultCase("duplicates", "every 7th record of each stream twice, copy off by +1", "track",
+              _drive_case(lambda d: duplicate_records(duplicate_records(duplicate_records(
+                  d, "gnss", 7, value_offset=1e-4), "gyro", 7, value_offset=1.0),
+                  "odo", 7, value_offset=5.0))),
+    FaultCase("swapped_lines", "20 adjacent gyro CSV line pairs swapped", "track",
+              _file_case("gyro.csv", lambda b: swap_lines(b, 20, seed=1))),
+    FaultCase("nan_values", "5 % of gyro, odometer and GNSS values NaN", "track",
+              _drive_case(lambda d: nan_values(nan_values(nan_values(d, "gyro", 0.05), "odo",
+                                                          0.05, seed=1), "gnss", 0.05, seed=2))),
+    FaultCase("csv_nan_text", "5 % of odometer CSV cells 'nan'", "track",
+              _file_case("odo.csv", lambda b: csv_fields(b, 0.05, seed=3, value=b"nan"))),
+    FaultCase("csv_inf_text", "2 % of gyro CSV cells 'inf'", "track",
+              _file_case("gyro.csv", lambda b: csv_fields(b, 0.02, seed=4, value=b"inf"))),
+    FaultCase("csv_empty", "5 % of gyro CSV cells empty", "track",
+              _file_case("gyro.csv", lambda b: csv_fields(b, 0.05, seed=5))),
+    FaultCase("nmea_empty_fields", "5 % of NMEA fields empty (valid checksums)", "track",
+              _file_case("gps.nmea", lambda b: nmea_empty_fields(b, 0.05, seed=6))),
+    FaultCase("jump_100m", "GNSS fixes 100 m east for 1 s at 60 s", "track",
+              _drive_case(lambda d: gnss_jump(d, 60.0, distance_m=100.0), (60.0, 1.0))),
+    FaultCase("gyro_saturation", "gyro clips at 0.05 rad/s (2.9 deg/s)", "track",
+              _drive_case(lambda d: gyro_saturation(d, 0.05))),
+    FaultCase("odo_dropout", "no odometer records for 30 s", "track",
+              _drive_case(lambda d: odo_dropout(d, 40.0, 30.0), (40.0, 30.0))),
+    FaultCase("odo_zero", "odometer reads 0 m/s for 10 s while moving", "track",
+              _drive_case(lambda d: odo_dropout(d, 40.0, 10.0, mode="zero"), (40.0, 10.0))),
+    FaultCase("no_gnss", "no GNSS and no origin configured", "error", _subset_case(("gyro", "odo"))),
+    FaultCase("no_gnss_origin", "no GNSS, origin and heading configured (pure DR)", "track",
+              _subset_case(("gyro", "odo"), _origin_config)),
+    FaultCase("no_dr", "GNSS only (no gyro, no odometer)", "track", _subset_case(("gnss",))),
+    FaultCase("midnight", "drive crosses UTC midnight 30 s in", "track",
+              _midnight_case(30.0, None)),
+    FaultCase("new_year", "drive crosses 2024-12-31/2025-01-01", "track",
+              _midnight_case(30.0, "2024-12-31")),
+    FaultCase("leap_day", "drive crosses 2024-02-28/29", "track",
+              _midnight_case(30.0, "2024-02-28")),
+    FaultCase("midnight_gga_date", "crosses midnight, GGA only (no RMC/ZDA), --date", "track",
+              _midnight_case(30.0, None, drop=("RMC", "ZDA"), with_date=True)),
+    FaultCase("midnight_gga_nodate", "crosses midnight, GGA only, no date given", "either",
+              _midnight_case(30.0, None, drop=("RMC", "ZDA"))),
+    FaultCase("mcap_clean", "the same drive as MCAP", "track", _mcap_case(lambda b: b)),
+    FaultCase("mcap_trunc_99", "MCAP cut at 99 % (no summary, no footer)", "track",
+              _mcap_case(lambda b: truncate(b, 0.99))),
+    FaultCase("mcap_trunc_50", "MCAP cut at 50 %", "either", _mcap_case(lambda b: truncate(b, 0.5))),
+    FaultCase("mcap_trunc_head", "MCAP cut after 40 bytes (magic + part of header)", "error",
+              _mcap_case(lambda b: truncate(b, 40 / len(b)))),
+    FaultCase("mcap_corrupt", "200 random bytes overwritten in the middle of the MCAP", "either",
+              _mcap_case(lambda b: corrupt(b, 200, seed=8, start_frac=0.3, end_frac=0.7))),
+    FaultCase("mcap_empty", "MCAP of 0 bytes", "error", _mcap_case(lambda b: b"")),
+    FaultCase("nmea_garbage_lines", "50 binary garbage lines between NMEA sentences", "track",
+              _file_case("gps.nmea", lambda b: insert_garbage(b, 50, seed=9, inside_lines=False))),
+    FaultCase("nmea_garbage_inline", "50 binary chunks inside NMEA lines", "track",
+              _file_case("gps.nmea", lambda b: insert_garbage(b, 50, seed=10))),
+    FaultCase("nmea_all_garbage", "the NMEA file is 64 kB of random bytes", "error",
+              _file_case("gps.nmea", lambda b: np.random.default_rng(12).integers(
+                  0, 256, 65536, dtype=np.uint8).tobytes())),
+)
+
+CASES: dict[str, FaultCase] = {c.name: c for c in CATALOGUE}
+
+
+def write_config(config: dict[str, dict[str, Any]], path: Any) -> list[str]:
+    """Write parameter overrides as TOML; the ``--config`` arguments (none when empty)."""
+    if not config:
+        return []
+    lines = []
+    for section, values in config.items():
+        lines.append(f"[{section}]")
+        for k, v in values.items():
+            lines.append(f"{k} = {v!r}" if not isinstance(v, str) else f'{k} = "{v}"')
+    import pathlib
+
+    pathlib.Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return ["--config", str(path)]
+
+
+def run_case(case: FaultCase, filter_name: str, out_dir: Any, sim: Any | None = None,
+             *, subprocess_exe: str | None = None) -> tuple[CaseInputs, Outcome]:
+    """Make the case's inputs in ``out_dir`` and run gpsdr on them with ``filter_name``."""
+    import pathlib
+
+    from .. import config as cfg
+
+    out = pathlib.Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    inputs = case.make(sim, out)
+    if inputs.drive is not None:
+        params = cfg.merge(cfg.defaults(), {"filter": {"name": filter_name}, **inputs.config})
+        return inputs, run_inmemory(inputs.drive, params)
+    args = [*inputs.args, *write_config(inputs.config, out / "params.toml")]
+    return inputs, run_cli(args, out, filter_name=filter_name, subprocess_exe=subprocess_exe)
+
+
+def case_metrics(inputs: CaseInputs, outcome: Outcome) -> dict[str, float]:
+    """Figures of a successful run against the truth (m), NaN where they do not apply.
+
+    ``rmse_m``: whole track; ``focus_max_m``: largest error inside the fault's
+    window; ``sigma_growth``: horizontal sigma at the window's last epoch over
+    the one at its first; ``rejected``: fixes rejected inside the window;
+    ``drift_m``: largest displacement of the track inside the window from its
+    position 5 s after the window opens (a standstill's drift).
+    """
+    nan = float("nan")
+    m = {"rmse_m": nan, "focus_max_m": nan, "sigma_growth": nan, "rejected": nan,
+         "drift_m": nan}
+    tr = outcome.track
+    if tr is None or not len(tr) or track_problems(tr):
+        return m
+    err = horizontal_error_m(tr, inputs.sim.truth)
+    m["rmse_m"] = float(np.sqrt(np.mean(err ** 2)))
+    if inputs.focus_ns is None:
+        return m
+    t = track_t_ns(tr)
+    lo, hi = inputs.focus_ns
+    w = (t >= lo) & (t < hi)
+    if not w.any():
+        return m
+    m["focus_max_m"] = float(err[w].max())
+    sig = np.hypot(tr["sigma_e"].to_numpy(float), tr["sigma_n"].to_numpy(float))
+    k = np.flatnonzero(w)
+    m["sigma_growth"] = float(sig[k[-1]] / sig[k[0]]) if sig[k[0]] > 0 else nan
+    if "gnss_rejected" in tr:
+        m["rejected"] = float(tr["gnss_rejected"].to_numpy(bool)[w].sum())
+    settle = w & (t >= lo + 5 * NS_PER_S)
+    if settle.any():
+        e, n = tr["e"].to_numpy(float), tr["n"].to_numpy(float)
+        k0 = int(np.flatnonzero(settle)[0])
+        m["drift_m"] = float(np.hypot(e[settle] - e[k0], n[settle] - n[k0]).max())
+    return m
