@@ -421,7 +421,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     h2 = _HEX[arr[np.minimum(star_c + 2, n - 1)]]
     has_ck &= (h1 >= 0) & (h2 >= 0) & (star > starts + 1)
 
-    doubled = (end == starts + 1) & (next_start == starts + 1)  # '$$': ignore the first
+    doubled = (next_start == starts + 1) & (next_start < n)  # "$$": ignore the first
     meta["doubled_starts"] = int(doubled.sum())
     no_ck = ~has_ck & ~doubled
     probs.add("no checksum (truncated sentence)", starts[no_ck])
