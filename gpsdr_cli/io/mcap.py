@@ -269,6 +269,9 @@ class _Walker:
         elif len(data) >= 8 + 29 + 8 and data.endswith(MAGIC) and data[-37] == _OP_FOOTER:
             # Footer: opcode, length, summary_start u64, summary_offset_start u64, crc u32; magic.
             self.has_summary = _U64.unpack_from(data, len(data) - 28)[0] != 0
+        else:
+            self.damage.append(f"{self.path}: summary or footer truncated (no closing magic); "
+                               "every data record was read")
 
     # decoding --------------------------------------------------------------
     def _flush(self, buf: bytes, ch_l: list[int], lt_l: list[int], off_l: list[int],

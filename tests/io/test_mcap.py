@@ -1,0 +1,450 @@
+"""MCAP reader: the real u-blox recording, generated logs with known values, the CDR
+fast path against mcap_ros2's generic decoder, JSON/protobuf, damage and overrides."""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gpsdr_cli.conventions import FIX_DGPS, FIX_GPS, FIX_NONE
+from gpsdr_cli.errors import InputError, NoDataError, UsageError
+from gpsdr_cli.io import ros2_fast
+from gpsdr_cli.io.mcap import read_mcap
+
+REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "mcap_samples" / "ublox_gps_ros2.mcap"
+DATA = Path(__file__).resolve().parents[1] / "data" / "mcap"
+T0 = 1_700_000_000_000_000_000
+
+
+def write_mcap(path: Path | io.BytesIO, channels: list[tuple[str, str, list[tuple[int, int, bytes]]]],
+               *, compression: str = "zstd", chunk_size: int = 1024 * 1024, index: bool = True,
+               schemas: dict[str, tuple[str, str, bytes]] | None = None) -> bytes:
+    """Write channels ``(topic, layout_or_schema_key, [(log_time_ns, publish_ns, data)])``.
+
+    ``layout`` keys are ros2_fast layouts (ROS 2 CDR); other keys are looked up in
+    ``schemas`` as ``(schema_name, schema_encoding, schema_data)`` with the message
+    encoding given after a colon in the key, e.g. ``"locfix:json"``.
+    Messages are written in time order across channels.
+    """
+    from mcap.writer import CompressionType, IndexType, Writer
+
+    buf = io.BytesIO()
+    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "": CompressionType.NONE}[compression]
+    w = Writer(buf, compression=comp, chunk_size=chunk_size,
+               index_types=IndexType.ALL if index else IndexType.NONE,
+               use_summary_offsets=index, use_statistics=index, repeat_channels=index,
+               repeat_schemas=index)
+    w.start(profile="ros2", library="gpsdr tests")
+    events = []
+    for topic, key, msgs in channels:
+        if key in ros2_fast.SCHEMAS:
+            name, text = ros2_fast.SCHEMAS[key]
+            sid = w.register_schema(name, "ros2msg", text.encode())
+            cid = w.register_channel(topic, "cdr", sid)
+        else:
+            assert schemas is not None
+            name, s_enc, s_data = schemas[key]
+            sid = w.register_schema(name, s_enc, s_data)
+            cid = w.register_channel(topic, key.split(":")[1], sid)
+        events += [(lt, cid, pt, data) for lt, pt, data in msgs]
+    events.sort(key=lambda e: e[0])
+    for lt, cid, pt, data in events:
+        w.add_message(cid, log_time=lt, data=data, publish_time=pt)
+    w.finish()
+    raw = buf.getvalue()
+    if isinstance(path, Path):
+        path.write_bytes(raw)
+    return raw
+
+
+def _drive_channels(n_gnss: int = 50, n_imu: int = 500, frame: str = "gps_link"):
+    """A 10 s drive: 5 Hz NavSatFix, 50 Hz Imu and TwistStamped, known values."""
+    rng = np.random.default_rng(7)
+    tg = T0 + np.arange(n_gnss, dtype=np.int64) * 200_000_000
+    ti = T0 + np.arange(n_imu, dtype=np.int64) * 20_000_000
+    lat = 54.4 + rng.uniform(-0.01, 0.01, n_gnss)
+    lon = 18.6 + rng.uniform(-0.01, 0.01, n_gnss)
+    sig = rng.uniform(0.5, 3.0, n_gnss)
+    wz = rng.normal(0, 0.1, n_imu)
+    v = rng.uniform(0, 30, n_imu)
+    gnss = [(int(t) + 5_000_000, int(t), ros2_fast.encode(
+        "navsatfix", int(t), frame[:i % 9], lat=lat[i], lon=lon[i], alt=30.0 + i,
+        cov=(sig[i] ** 2, 0, 0, 0, (2 * sig[i]) ** 2, 0, 0, 0, 9.0), cov_type=2, status=i % 3))
+        for i, t in enumerate(tg)]
+    imu = [(int(t) + 3_000_000, int(t), ros2_fast.encode("imu", int(t), frame[:i % 7], wz=wz[i]))
+           for i, t in enumerate(ti)]
+    twist = [(int(t) + 4_000_000, int(t), ros2_fast.encode("twist", int(t), "base", vx=v[i]))
+             for i, t in enumerate(ti)]
+    truth = {"tg": tg, "lat": lat, "lon": lon, "sig": sig, "ti": ti, "wz": wz, "v": v}
+    return [("/fix", "navsatfix", gnss), ("/imu", "imu", imu), ("/vel", "twist", twist)], truth
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    path = tmp_path_factory.mktemp("mcap") / "drive.mcap"
+    channels, truth = _drive_channels()
+    write_mcap(path, channels, chunk_size=4096)
+    return path, truth
+
+
+# --------------------------------------------------------------------------- real file
+
+def test_real_ublox_recording_counts_and_ranges():
+    d = read_mcap(REAL)
+    g = d.gnss
+    assert len(g) == 3364 and len(d.odo) == 3364
+    assert d.meta["mcap"]["messages"] == 3 * 3364
+    assert {c["topic"]: c["messages"] for c in d.meta["mcap"]["channels"]} == {
+        "/gps/fix": 3364, "/gps/fix_velocity": 3364, "/gps/navheading": 3364}
+    # Gdansk: 54.37 N 18.61 E; the antenna barely moves (spread < 100 m = 0.001 deg).
+    assert np.all(g.valid)
+    assert 54.370 < np.min(g.lat_deg) and np.max(g.lat_deg) < 54.372
+    assert 18.613 < np.min(g.lon_deg) and np.max(g.lon_deg) < 18.615
+    # First fix from the generic decoder: lat 54.3709248, cov diag 0.012321 -> sigma 0.111 m.
+    assert g.lat_deg[0] == 54.3709248 and g.lon_deg[0] == 18.6138034
+    assert g.sigma_e_m[0] == pytest.approx(0.111, abs=1e-12)
+    assert g.t_ns[0] == 1616425418_800331612  # the header stamp, not the log time
+    assert set(np.unique(g.fix_quality)) <= {FIX_GPS, FIX_DGPS}
+    # 339 s of 10 Hz stamps, strictly increasing
+    assert np.all(np.diff(g.t_ns) > 0)
+    assert (g.t_ns[-1] - g.t_ns[0]) / 1e9 == pytest.approx(339.3, abs=0.5)
+    # The Imu is /gps/navheading: angular velocity covariance[0] = -1 (not provided).
+    assert d.gyro is None
+    assert d.skipped.counts["Imu without angular velocity (angular_velocity_covariance[0] = -1)"] == 3364
+    # ENU fix velocity: speed is the horizontal norm, a walking-pace antenna: < 2 m/s
+    assert np.all(d.odo.speed_mps >= 0) and np.max(d.odo.speed_mps) < 2.0
+    assert "/gps/fix_velocity" in d.meta["mcap"]["twist_frame"]
+    assert d.sources[0].streams == ("gnss", "odo")
+
+
+def test_real_file_fast_path_matches_generic_decoder():
+    """Every message of the real file: fast path == mcap_ros2's generic decoder, bit for bit."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    by_topic: dict[str, list] = {}
+    with open(REAL, "rb") as f:
+        for schema, channel, message, decoded in make_reader(
+                f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            by_topic.setdefault(channel.topic, []).append((schema.name, message.data, decoded))
+    for topic, msgs in by_topic.items():
+        layout = ros2_fast.LAYOUTS[msgs[0][0]]
+        blob = b"".join(m[1] for m in msgs)
+        sizes = np.array([len(m[1]) for m in msgs])
+        offs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        fields, ok = ros2_fast.decode(layout, np.frombuffer(blob, np.uint8), offs, sizes)
+        assert ok.all(), topic
+        for i, (_, _, m) in enumerate(msgs):
+            assert fields["stamp_ns"][i] == m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+            if layout == "navsatfix":
+                assert (fields["lat"][i], fields["lon"][i], fields["alt"][i]) == (
+                    m.latitude, m.longitude, m.altitude)
+                assert fields["cov_e"][i] == m.position_covariance[0]
+                assert fields["cov_n"][i] == m.position_covariance[4]
+                assert fields["status"][i] == m.status.status
+                assert fields["cov_type"][i] == m.position_covariance_type
+            elif layout == "imu":
+                assert fields["wz"][i] == m.angular_velocity.z
+                assert fields["wz_cov0"][i] == m.angular_velocity_covariance[0]
+            else:
+                assert (fields["vx"][i], fields["vy"][i]) == (m.twist.twist.linear.x,
+                                                             m.twist.twist.linear.y)
+
+
+# --------------------------------------------------------------------------- generated
+
+@pytest.mark.parametrize("layout", sorted(ros2_fast.SCHEMAS))
+def test_encode_decode_matches_generic_for_every_frame_id_length(layout):
+    """Alignment after frame_id lengths 0..9 (all residues mod 8), fast vs generic."""
+    from mcap_ros2._dynamic import generate_dynamic
+
+    name, text = ros2_fast.SCHEMAS[layout]
+    generic = generate_dynamic(name, text)[name]
+    rng = np.random.default_rng(3)
+    msgs, kws = [], []
+    for k in range(10):
+        kw = {"navsatfix": {"lat": rng.uniform(-90, 90), "lon": rng.uniform(-180, 180), "alt": rng.normal(),
+                                "cov": tuple(rng.uniform(0, 9, 9)), "cov_type": k % 4, "status": k % 4 - 2},
+              "imu": {"wz": rng.normal(), "wz_cov0": rng.uniform()},
+              "twist": {"vx": rng.normal(), "vy": rng.normal()},
+              "twistcov": {"vx": rng.normal(), "vy": rng.normal()},
+              "odometry": {"vx": rng.normal(), "vy": rng.normal(), "child_frame_id": "c" * (9 - k)},
+              "sentence": {"text": "$GPGGA," + "1" * k + "*00"}}[layout]
+        stamp = T0 + int(rng.integers(0, 10**9))
+        msgs.append(ros2_fast.encode(layout, stamp, "f" * k, **kw))
+        kws.append((stamp, kw))
+    blob = b"".join(msgs)
+    sizes = np.array([len(m) for m in msgs])
+    offs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    fields, ok = ros2_fast.decode(layout, np.frombuffer(blob, np.uint8), offs, sizes)
+    assert ok.all()
+    for i, raw in enumerate(msgs):
+        m = generic(raw)
+        stamp, kw = kws[i]
+        assert fields["stamp_ns"][i] == stamp == m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+        assert m.header.frame_id == "f" * i
+        if layout == "navsatfix":
+            assert fields["lat"][i] == m.latitude == kw["lat"]
+            assert fields["cov_n"][i] == m.position_covariance[4] == kw["cov"][4]
+            assert fields["status"][i] == m.status.status == kw["status"]
+        elif layout == "imu":
+            assert fields["wz"][i] == m.angular_velocity.z == kw["wz"]
+        elif layout == "twist":
+            assert fields["vx"][i] == m.twist.linear.x == kw["vx"]
+        elif layout in ("twistcov", "odometry"):
+            assert fields["vx"][i] == m.twist.twist.linear.x == kw["vx"]
+            assert fields["vy"][i] == m.twist.twist.linear.y == kw["vy"]
+        else:
+            o, n = fields["text_off"][i], fields["text_len"][i]
+            assert blob[o:o + n].decode() == m.sentence == kw["text"]
+
+
+def test_generated_drive_values(generated):
+    path, truth = generated
+    d = read_mcap(path)
+    g = d.gnss
+    np.testing.assert_array_equal(g.t_ns, truth["tg"])
+    status = np.arange(len(truth["tg"])) % 3
+    np.testing.assert_array_equal(g.fix_quality, np.where(status == 0, FIX_GPS, FIX_DGPS))
+    np.testing.assert_array_equal(g.lat_deg, truth["lat"])
+    np.testing.assert_array_equal(g.lon_deg, truth["lon"])
+    np.testing.assert_allclose(g.sigma_e_m, truth["sig"], rtol=1e-15)
+    np.testing.assert_allclose(g.sigma_n_m, 2 * truth["sig"], rtol=1e-15)
+    np.testing.assert_array_equal(d.gyro.t_ns, truth["ti"])
+    np.testing.assert_array_equal(d.gyro.yaw_rate_radps, truth["wz"])
+    np.testing.assert_array_equal(d.odo.speed_mps, truth["v"])
+    assert d.meta["mcap"]["chunks"] > 10 and d.meta["mcap"]["indexed"]
+    assert "warnings" not in d.meta and d.skipped.total == 0
+
+
+def test_use_log_time(generated):
+    path, truth = generated
+    d = read_mcap(path, use_log_time=True)
+    np.testing.assert_array_equal(d.gnss.t_ns, truth["tg"] + 5_000_000)
+    np.testing.assert_array_equal(d.gyro.t_ns, truth["ti"] + 3_000_000)
+
+
+@pytest.mark.parametrize("compression", ["", "lz4", "zstd"])
+def test_compressions_and_unindexed(tmp_path, compression):
+    channels, truth = _drive_channels(20, 100)
+    path = tmp_path / "x.mcap"
+    write_mcap(path, channels, compression=compression, chunk_size=2048, index=False)
+    d = read_mcap(path)
+    np.testing.assert_array_equal(d.gyro.yaw_rate_radps, truth["wz"])
+    assert len(d.gnss) == 20 and "warnings" not in d.meta
+
+
+def test_no_fix_status_nan_and_covariance_type(tmp_path):
+    msgs = []
+    for i, (status, lat, cov_type) in enumerate([(0, 54.0, 2), (-1, 54.0, 2), (0, float("nan"), 2),
+                                                 (0, 54.0, 0), (2, 54.0, 1), (0, 95.0, 2)]):
+        t = T0 + i * 10**8
+        msgs.append((t, t, ros2_fast.encode("navsatfix", t, "gps", lat=lat, lon=18.0, status=status,
+                                            cov=(4.0, 0, 0, 0, 9.0, 0, 0, 0, 1.0), cov_type=cov_type)))
+    path = tmp_path / "s.mcap"
+    write_mcap(path, [("/fix", "navsatfix", msgs)])
+    g = read_mcap(path).gnss
+    np.testing.assert_array_equal(g.fix_quality, [FIX_GPS, FIX_NONE, FIX_NONE, FIX_GPS, FIX_DGPS, FIX_NONE])
+    assert np.isnan(g.lat_deg[[1, 2, 5]]).all() and g.lat_deg[0] == 54.0
+    np.testing.assert_array_equal(g.sigma_e_m[[0, 4]], [2.0, 2.0])
+    np.testing.assert_array_equal(g.sigma_n_m[[0, 4]], [3.0, 3.0])
+    assert np.isnan(g.sigma_e_m[3])  # covariance type 0: unknown
+
+
+def test_most_messages_wins_and_topic_override(tmp_path):
+    ch1, _ = _drive_channels(10, 40)
+    ch2, _truth2 = _drive_channels(10, 80)
+    channels = ch1 + [("/imu2", "imu", ch2[1][2])]
+    path = tmp_path / "m.mcap"
+    write_mcap(path, channels)
+    d = read_mcap(path)
+    assert d.meta["mcap"]["chosen"]["gyro"] == "/imu2" and len(d.gyro) == 80
+    assert d.meta["mcap"]["alternatives"]["gyro"] == ["/imu"]
+    assert any("2 gyro channels" in w for w in d.meta["warnings"])
+    d = read_mcap(path, topics={"gyro": "/imu"})
+    assert len(d.gyro) == 40 and d.meta["mcap"]["chosen"]["gyro"] == "/imu"
+    with pytest.raises(UsageError, match="no topic '/nope'.*/imu2"):
+        read_mcap(path, topics={"gyro": "/nope"})
+    with pytest.raises(UsageError, match="cannot read as gyro"):
+        read_mcap(path, topics={"gyro": "/fix"})
+
+
+def test_odometry_twistcov_and_zero_stamp_fallback(tmp_path):
+    odo, tw = [], []
+    for i in range(20):
+        t = T0 + i * 10**8
+        stamp = 0 if i == 3 else t
+        odo.append((t, t, ros2_fast.encode("odometry", stamp, "odom", vx=float(i), vy=0.01,
+                                           child_frame_id="base_link")))
+        tw.append((t, t, ros2_fast.encode("twistcov", t, "b", vx=-float(i))))
+    path = tmp_path / "o.mcap"
+    write_mcap(path, [("/odom", "odometry", odo)])
+    d = read_mcap(path)
+    np.testing.assert_array_equal(d.odo.speed_mps, np.arange(20.0))
+    np.testing.assert_array_equal(d.odo.t_ns, T0 + np.arange(20) * 10**8)  # stamp 0 -> log time
+    assert d.meta["mcap"]["zero_stamps"] == {"/odom": 1}
+    write_mcap(path, [("/tw", "twistcov", tw)])
+    np.testing.assert_array_equal(read_mcap(path).odo.speed_mps, -np.arange(20.0))  # reversing
+
+
+def test_fast_path_declines_and_generic_fallback_decodes(tmp_path):
+    """Nanoseconds >= 1e9 and big-endian encapsulation: fast path says no, generic decodes."""
+    good = ros2_fast.encode("imu", T0, "imu", wz=0.5)
+    odd_ns = bytearray(good)
+    odd_ns[8:12] = struct.pack("<I", 1_500_000_000)  # nanosec field
+    sec = T0 // 10**9
+    path = tmp_path / "f.mcap"
+    write_mcap(path, [("/imu", "imu", [(T0, T0, good), (T0 + 1, T0 + 1, bytes(odd_ns))])])
+    buf = np.frombuffer(bytes(odd_ns), np.uint8)
+    _, ok = ros2_fast.decode("imu", buf, np.array([0]), np.array([len(odd_ns)]))
+    assert not ok[0]
+    d = read_mcap(path)
+    np.testing.assert_array_equal(d.gyro.yaw_rate_radps, [0.5, 0.5])
+    assert d.gyro.t_ns[1] == sec * 10**9 + 1_500_000_000
+
+
+LOCFIX_JSON = ("foxglove.LocationFix", "jsonschema", b'{"type":"object"}')
+LOCFIX_PB = ("foxglove.LocationFix", "protobuf", b"")  # descriptor unused by the wire decoder
+NAVSAT_JSON = ("sensor_msgs/msg/NavSatFix", "jsonschema", b'{"type":"object"}')
+
+
+def _pb_varint(v: int) -> bytes:
+    out = bytearray()
+    v &= (1 << 64) - 1
+    while True:
+        b = v & 0x7F
+        v >>= 7
+        out.append(b | (0x80 if v else 0))
+        if not v:
+            return bytes(out)
+
+
+def _pb_location_fix(sec: int, nsec: int, lat: float, lon: float, cov: list[float], cov_type: int) -> bytes:
+    ts = b"\x08" + _pb_varint(sec) + b"\x10" + _pb_varint(nsec)
+    packed = struct.pack(f"<{len(cov)}d", *cov)
+    return (b"\x32" + _pb_varint(len(ts)) + ts + b"\x3a\x03gps"
+            + b"\x09" + struct.pack("<d", lat) + b"\x11" + struct.pack("<d", lon)
+            + b"\x19" + struct.pack("<d", 12.5)
+            + b"\x22" + _pb_varint(len(packed)) + packed + b"\x28" + _pb_varint(cov_type))
+
+
+@pytest.mark.parametrize("encoding", ["json", "protobuf", "ros-json"])
+def test_location_fix_json_protobuf_and_json_navsatfix(tmp_path, encoding):
+    msgs = []
+    for i in range(5):
+        t = T0 + i * 10**9
+        sec, nsec = divmod(t, 10**9)
+        lat, lon = 54.4 + i * 1e-4, 18.6 - i * 1e-4
+        cov = [4.0, 0, 0, 0, 1.0, 0, 0, 0, 9.0]
+        if encoding == "json":
+            data = json.dumps({"timestamp": {"sec": sec, "nsec": nsec + 7}, "frame_id": "gps",
+                               "latitude": lat, "longitude": lon, "altitude": 12.5,
+                               "position_covariance": cov, "position_covariance_type": 2}).encode()
+        elif encoding == "protobuf":
+            data = _pb_location_fix(sec, nsec + 7, lat, lon, cov, 2)
+        else:
+            data = json.dumps({"header": {"stamp": {"sec": sec, "nanosec": nsec + 7}, "frame_id": "g"},
+                               "status": {"status": 0, "service": 1}, "latitude": lat,
+                               "longitude": lon, "altitude": 12.5, "position_covariance": cov,
+                               "position_covariance_type": 2}).encode()
+        msgs.append((t, t, data))
+    key = {"json": "loc:json", "protobuf": "loc:protobuf", "ros-json": "nav:json"}[encoding]
+    schemas = {"loc:json": LOCFIX_JSON, "loc:protobuf": LOCFIX_PB, "nav:json": NAVSAT_JSON}
+    path = tmp_path / "l.mcap"
+    write_mcap(path, [("/loc", key, msgs)], schemas=schemas)
+    g = read_mcap(path).gnss
+    np.testing.assert_array_equal(g.t_ns, T0 + np.arange(5) * 10**9 + 7)
+    np.testing.assert_allclose(g.lat_deg, 54.4 + np.arange(5) * 1e-4, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(g.lon_deg, 18.6 - np.arange(5) * 1e-4, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(g.sigma_e_m, 2.0)
+    np.testing.assert_array_equal(g.alt_m, 12.5)
+
+
+def test_nmea_sentences_in_mcap(tmp_path):
+    from gpsdr_cli.io.nmea import parse_nmea
+
+    def ck(body: str) -> str:
+        c = 0
+        for ch in body.encode():
+            c ^= ch
+        return f"${body}*{c:02X}"
+
+    # 2023-11-14 22:13:20 UTC = T0; GGA has no date: it must come from the stamps.
+    lines = [ck(f"GPGGA,2213{20 + i:02d}.00,5424.0000,N,01836.0000,E,1,08,0.9,30.0,M,32.0,M,,")
+             for i in range(10)]
+    msgs = [(T0 + i * 10**9, T0 + i * 10**9,
+             ros2_fast.encode("sentence", T0 + i * 10**9, "gps", text=s)) for i, s in enumerate(lines)]
+    path = tmp_path / "n.mcap"
+    write_mcap(path, [("/nmea", "sentence", msgs)])
+    d = read_mcap(path)
+    np.testing.assert_array_equal(d.gnss.t_ns, T0 + np.arange(10) * 10**9)
+    np.testing.assert_allclose(d.gnss.lat_deg, 54.4, atol=1e-12)
+    np.testing.assert_allclose(d.gnss.lon_deg, 18.6, atol=1e-12)
+    ref, _, _ = parse_nmea("\r\n".join(lines).encode(), date=__import__("datetime").date(2023, 11, 14))
+    np.testing.assert_array_equal(ref.t_ns, d.gnss.t_ns)
+
+
+# --------------------------------------------------------------------------- damage
+
+def test_truncated_file_reads_up_to_the_damage(generated, tmp_path):
+    path, truth = generated
+    raw = path.read_bytes()
+    full = read_mcap(path)
+    for cut in (len(raw) // 3, len(raw) // 2, len(raw) - 100):
+        p = tmp_path / f"cut{cut}.mcap"
+        p.write_bytes(raw[:cut])
+        d = read_mcap(p)
+        assert d.meta["warnings"], cut
+        assert cut == len(raw) - 100 or any("MCAP" in r for r in d.skipped.counts)
+        n = len(d.gyro)
+        assert 0 < n <= len(full.gyro)
+        # What was read is exactly the prefix of the full file.
+        np.testing.assert_array_equal(d.gyro.yaw_rate_radps, truth["wz"][:n])
+    assert len(read_mcap(tmp_path / f"cut{len(raw) - 100}.mcap").gyro) == len(truth["wz"])
+
+
+def test_corrupt_chunk_is_skipped_not_fatal(generated, tmp_path):
+    path, truth = generated
+    raw = bytearray(path.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF
+    p = tmp_path / "flip.mcap"
+    p.write_bytes(bytes(raw))
+    d = read_mcap(p)
+    assert d.meta["warnings"]
+    assert len(d.gyro) < len(truth["wz"])
+    assert set(d.gyro.yaw_rate_radps) <= set(truth["wz"])
+
+
+@pytest.mark.parametrize("content, match", [
+    (b"", "empty file"),
+    (b"hello world, not an mcap", "not an MCAP file"),
+    (b"\x89MCAP0\r\n", "no readable GNSS"),
+])
+def test_garbage_is_an_input_error_naming_the_file(tmp_path, content, match):
+    p = tmp_path / "bad.mcap"
+    p.write_bytes(content)
+    with pytest.raises(InputError, match=match) as err:
+        read_mcap(p)
+    assert str(p) in str(err.value)
+
+
+def test_no_known_channels_is_no_data_error(tmp_path):
+    schemas = {"x:json": ("my/Thing", "jsonschema", b"{}")}
+    p = tmp_path / "other.mcap"
+    write_mcap(p, [("/thing", "x:json", [(T0, T0, b"{}")])], schemas=schemas)
+    with pytest.raises(NoDataError, match=r"/thing \(my/Thing\)"):
+        read_mcap(p)
+
+
+def test_committed_sample_files_read():
+    """tests/data/mcap: a small drive (zstd, indexed) and its truncated copy."""
+    d = read_mcap(DATA / "small_drive.mcap")
+    assert (len(d.gnss), len(d.gyro), len(d.odo)) == (20, 100, 100)
+    assert np.all(d.gnss.valid) and 54.3 < d.gnss.lat_deg.mean() < 54.5
+    t = read_mcap(DATA / "small_drive_truncated.mcap")
+    assert t.meta["warnings"] and len(t.gyro) < 100
