@@ -66,8 +66,9 @@ sign = "ccw"             # ccw: positive counter-clockwise seen from above (REP-
 time = "posix"           # posix: UTC POSIX seconds | relative: seconds + start_posix_s
 start_posix_s = 0.0
 noise_sd_radps = 0.0017453  # 0.1 deg/s per sample (seed 000)
-bias_tau_s = 300.0       # Gauss-Markov correlation time of the gyro drift
-bias_sd_radps = 0.005    # steady-state sigma of the drift
+bias_tau_s = 36000.0     # Gauss-Markov correlation time of the gyro drift (10 h: a shorter tau drags a
+                         #   large turn-on bias toward zero during outages: 300 s gave 20-40 m after 60 s)
+bias_sd_radps = 0.002    # steady-state sigma of the drift (q = 2 sd^2 / tau: ~0.005 deg/s per minute)
 bias_init_sd_radps = 0.1 # initial sigma of the drift (covers a 4 deg/s bias)
 
 [odo]
@@ -95,27 +96,42 @@ sigma_a_mps2 = 0.5       # fixed acceleration sigma (ekf), and sigma when a_hat 
 init_pos_sd_m = 10.0
 init_vel_sd_mps = 5.0
 init_acc_sd_mps2 = 1.0
+check_spd = false        # Cholesky of P at every epoch, failures counted in info["spd_failures"] (tests)
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)
 innovation_c = 0.9
 fading = false           # fading memory P(k|k-1) = lambda Phi P Phi^T + Q
-fading_lambda = 1.01
+fading_lambda = 1.01     # per second: each step multiplies Phi P Phi^T by lambda**T
 sage_husa = false        # Sage-Husa estimation of the GNSS R
 sage_husa_b = 0.98       # forgetting factor of Sage-Husa
+sage_husa_r_min = 0.25   # divergence guard: the estimated R scale (x the nominal R) stays within
+sage_husa_r_max = 100.0  #   [r_min, r_max]; each innovation sample is clamped to the same range
 
 [fkf]
-mode = "nr"              # nr: no reset (seed 002) | fr: fusion-reset (Carlson 1990)
+mode = "fr"              # fr: fusion-reset (Carlson 1990; default: NR lets the DR position drift) | nr: no reset (seed 002)
+beta_gnss = 0.5          # fkf, FR mode: information share of the GNSS local filter (the DR filter gets 1 - this)
+jerk_psd_m2ps5 = 1.0     # white-jerk spectral density per axis of the shared model's Q (m^2/s^5)
 gnss_err_tau_s = 60.0    # correlation time of the GNSS position error states eps_e, eps_n
 gnss_err_sd_m = 1.0      # steady-state sigma of eps_e, eps_n
 heading_sd_rad = 0.01    # sigma of the gyro-integrated heading measurement
-heading_err_rw_sd = 0.001  # random walk of q_w, rad per sqrt(s)
+heading_err_rw_sd = 0.002  # random walk of q_w, rad per sqrt(s)
 dist_err_rw_sd = 0.01    # random walk of q_s, m per sqrt(s)
+heading_interval_s = 0.1 # heading measurements from the integrated gyro at most this often
+v_lin_mps = 0.1          # below this speed the distance row is linearised along the heading
+init_pos_sd_m = 10.0     # initial sigmas of the shared state
+init_vel_sd_mps = 5.0
+init_acc_sd_mps2 = 1.0
+init_heading_err_sd_rad = 0.1  # initial sigma of q_w (alignment of the gyro heading)
+init_dist_err_sd_m = 0.05      # initial sigma of q_s
+check_spd = false        # fkf and fafkf: Cholesky of every P at every epoch, failures in info["spd_failures"] (tests)
 
 [fafkf]
 window = 20              # M residuals in the covariance-matching window
 r_min_factor = 0.1       # R_jj clamped to [r_min_factor, r_max_factor] x its initial value
 r_max_factor = 100.0
+delta_max = 0.2          # largest |Delta| of one fuzzy R step (R_jj *= 1 + Delta)
+residual_clip = 9.0      # a squared residual enters the window clipped to this x Te_jj (outlier guard)
 weights = "block"        # scalar (seed 002) | block (per-state-block weights)
 normalisation = "share"  # share: value / sum over both filters | log
 """

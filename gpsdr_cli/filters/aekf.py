@@ -1,0 +1,283 @@
+"""AEKF: seed 000's adaptive EKF on the current statistical model (ALGORITHMS.md 1, 3, 4, 5).
+
+``run(epochs, params)`` prepares arrays and calls the compiled kernel
+:func:`gpsdr_cli.filters.kernels_aekf.cs_filter_kernel`; the same preparation
+serves the non-adaptive baseline :mod:`gpsdr_cli.filters.ekf` (``adaptive=False``).
+
+What is adaptive here (``[gnss]``, ``[aekf]``, ``[adaptive]`` in config.py):
+
+- Q: per axis ``sigma_a^2`` from the current acceleration estimate
+  (seed 000 eqs. (14)-(15)) scaled by the regime's K_a;
+- R and K_a from PDOP: three regimes (``pdop_mode = "regimes"``: good <
+  pdop_good <= medium < pdop_poor <= poor) or ``"continuous"``: log k and log K_a
+  interpolated linearly over PDOP through (pdop_good, good),
+  ((pdop_good + pdop_poor)/2, medium), (pdop_poor, poor), clamped outside.  The
+  base sigma per fix (GST > HDOP x UERE > covariance > default) comes in
+  ``epochs.gnss_sd_e/n``; R = (k sigma)^2.  A fix without PDOP uses k_good (its
+  base sigma already carries the quality).  Between fixes K_a keeps the last
+  GNSS record's regime; inside a GNSS outage (``epochs.gnss_outage``) it is the
+  poor regime's ("no fix: DR dominates");
+- options for every filter: seed 001 adaptive factor, fading memory,
+  Sage-Husa R, chi-square gate, standstill (ZUPT + held position).
+
+Initialisation (our choice, documented in :func:`initial_state`): first usable
+GNSS fix; velocity from the receiver's speed/course, else from the next fix,
+else unknown (zero with a large variance, odometer row deferred until the
+velocity is known); DR-only drives start at e = n = 0 with
+``frame.initial_heading_deg`` (NaN: heading 0 with a 180 deg sigma).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..align import Epochs
+from ..config import Params
+from ..errors import ConfigError
+from ..models.cs_model import N_STATES
+from ..smoothing import rts_smooth
+from . import kernels_aekf as kn
+from . import register
+from .adaptive import gate_threshold
+from .base import FilterResult
+
+#: Speed sigma (m/s) assigned to a velocity taken from the receiver's speed and course.
+GNSS_VEL_SD_MPS = 1.0
+#: Largest gap (s) between the first two fixes for a velocity by differencing.
+INIT_DIFF_MAX_S = 5.0
+#: Heading sigma (rad) for a DR-only start with a given heading / without one.
+DR_HEADING_SD_RAD = math.radians(5.0)
+DR_UNKNOWN_HEADING_SD_RAD = math.pi
+#: Upper bound (m/s) on the speed before the first fix when no odometer tells it.
+MAX_SPEED_MPS = 60.0
+
+
+def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarray, np.ndarray,
+                                                                      np.ndarray, float]:
+    """Per-epoch GNSS variances r_e, r_n (m^2) and K_a, and the constant sigma of the ekf.
+
+    ``adaptive=False`` (ekf): one sigma for the whole drive, the median over the
+    fixes of the base sigma ``sqrt((sd_e^2 + sd_n^2)/2)``; K_a = 1 everywhere.
+    ``adaptive=True`` (aekf): seed 000's PDOP regimes or their continuous form.
+    """
+    g = params["gnss"]
+    n = len(epochs)
+    fix = epochs.has_gnss
+    sd_e = np.where(fix, epochs.gnss_sd_e, np.nan)
+    sd_n = np.where(fix, epochs.gnss_sd_n, np.nan)
+    if fix.any():
+        sigma_const = float(np.median(np.sqrt(0.5 * (sd_e[fix] ** 2 + sd_n[fix] ** 2))))
+    else:
+        sigma_const = float(g["sigma_default_m"])
+    if not adaptive:
+        r = np.where(fix, sigma_const ** 2, np.nan)
+        return r, r.copy(), np.ones(n), sigma_const
+    k_fix, ka_rec = pdop_factors(epochs.pdop, g)
+    r_e = np.where(fix, (k_fix * sd_e) ** 2, np.nan)
+    r_n = np.where(fix, (k_fix * sd_n) ** 2, np.nan)
+    # K_a: the last GNSS record's regime held forward; poor inside outages
+    rec = np.isfinite(epochs.pdop) | fix
+    idx = np.where(rec, np.arange(n), -1)
+    np.maximum.accumulate(idx, out=idx)
+    ka = np.where(idx >= 0, ka_rec[np.maximum(idx, 0)], float(g["ka_good"]))
+    ka = np.where(epochs.gnss_outage, float(g["ka_poor"]), ka)
+    return r_e, r_n, ka, sigma_const
+
+
+def pdop_factors(pdop: np.ndarray, g: dict) -> tuple[np.ndarray, np.ndarray]:
+    """R factor k and Q factor K_a for each PDOP (seed 000's table; NaN PDOP -> good)."""
+    good, poor = float(g["pdop_good"]), float(g["pdop_poor"])
+    ks = np.array([g["k_good"], g["k_medium"], g["k_poor"]], float)
+    kas = np.array([g["ka_good"], g["ka_medium"], g["ka_poor"]], float)
+    p = np.where(np.isfinite(pdop), pdop, -np.inf)
+    mode = g["pdop_mode"]
+    if mode == "regimes":
+        reg = np.where(p < good, 0, np.where(p < poor, 1, 2))
+        return ks[reg], kas[reg]
+    if mode == "continuous":
+        xp = np.array([good, 0.5 * (good + poor), poor])
+        pc = np.clip(p, good, poor)
+        return np.exp(np.interp(pc, xp, np.log(ks))), np.exp(np.interp(pc, xp, np.log(kas)))
+    raise ConfigError(f"gnss.pdop_mode = {mode!r}: expected \"regimes\" or \"continuous\"")
+
+
+def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray, float, bool]:
+    """x0, P0 at epoch 0, the remembered heading psi0 (rad) and whether it is known.
+
+    With GNSS: position of the first usable fix (k0), variance
+    ``init_pos_sd^2 + base sigma^2 + d^2`` where d bounds the distance travelled
+    before k0 (odometer integral, else MAX_SPEED_MPS x time).  Velocity: receiver
+    speed/course at k0 (sigma GNSS_VEL_SD_MPS); else difference to the next fix
+    within INIT_DIFF_MAX_S; else zero with variance ``init_vel_sd^2 + u^2``
+    (u the first odometer speed) and the heading unknown.
+    DR-only: e = n = 0 (the frame origin, sigma 1 m), heading
+    ``frame.initial_heading_deg`` with a 5 deg sigma, or 0 with a 180 deg sigma
+    when NaN; velocity = first odometer speed along it.
+    """
+    a = params["aekf"]
+    n_ep = len(epochs)
+    x0 = np.zeros(N_STATES)
+    x0[7] = 1.0
+    P0 = np.zeros((N_STATES, N_STATES))
+    P0[2, 2] = P0[5, 5] = a["init_acc_sd_mps2"] ** 2
+    P0[6, 6] = params["gyro"]["bias_init_sd_radps"] ** 2
+    P0[7, 7] = params["odo"]["scale_init_sd"] ** 2
+    odo_idx = np.flatnonzero(epochs.has_odo)
+    u0 = float(epochs.odo_speed_mps[odo_idx[0]]) if len(odo_idx) else 0.0
+    fixes = np.flatnonzero(epochs.has_gnss)
+    if len(fixes):
+        k0 = int(fixes[0])
+        t_before = (epochs.t_ns[k0] - epochs.t_ns[0]) / 1e9 if n_ep else 0.0
+        if len(odo_idx) and k0 > 0:
+            before = slice(1, k0 + 1)
+            d = float(np.nansum(np.abs(np.where(epochs.has_odo[:k0 + 1], epochs.odo_speed_mps[:k0 + 1],
+                                                0.0))[before] * epochs.dt_s[before])) * 1.2
+        else:
+            d = MAX_SPEED_MPS * t_before
+        sd = max(float(epochs.gnss_sd_e[k0]), float(epochs.gnss_sd_n[k0]))
+        x0[0], x0[3] = epochs.gnss_e[k0], epochs.gnss_n[k0]
+        P0[0, 0] = P0[3, 3] = a["init_pos_sd_m"] ** 2 + sd ** 2 + d ** 2
+        spd, crs = float(epochs.gnss_speed_mps[k0]), float(epochs.gnss_course_rad[k0])
+        omega_min = params["standstill"]["omega_min_speed_mps"]
+        if math.isfinite(spd) and math.isfinite(crs):
+            x0[1], x0[4] = spd * math.sin(crs), spd * math.cos(crs)
+            P0[1, 1] = P0[4, 4] = GNSS_VEL_SD_MPS ** 2
+            return x0, P0, crs, spd >= omega_min
+        if len(fixes) > 1:
+            k1 = int(fixes[1])
+            dt1 = (epochs.t_ns[k1] - epochs.t_ns[k0]) / 1e9
+            if 0 < dt1 <= INIT_DIFF_MAX_S:
+                ve = (epochs.gnss_e[k1] - epochs.gnss_e[k0]) / dt1
+                vn = (epochs.gnss_n[k1] - epochs.gnss_n[k0]) / dt1
+                sd1 = max(float(epochs.gnss_sd_e[k1]), float(epochs.gnss_sd_n[k1]))
+                spd = math.hypot(ve, vn)
+                x0[1], x0[4] = ve, vn
+                P0[1, 1] = P0[4, 4] = (sd ** 2 + sd1 ** 2) / dt1 ** 2 + GNSS_VEL_SD_MPS ** 2
+                return x0, P0, math.atan2(ve, vn), spd >= omega_min and spd > 3 * math.sqrt(
+                    sd ** 2 + sd1 ** 2) / dt1
+        P0[1, 1] = P0[4, 4] = a["init_vel_sd_mps"] ** 2 + u0 ** 2
+        return x0, P0, 0.0, False
+    # DR-only: start at the frame origin with the configured heading
+    psi = math.radians(params["frame"]["initial_heading_deg"])
+    psi_sd = DR_HEADING_SD_RAD
+    if not math.isfinite(psi):
+        psi, psi_sd = 0.0, DR_UNKNOWN_HEADING_SD_RAD
+    P0[0, 0] = P0[3, 3] = 1.0
+    s, c = math.sin(psi), math.cos(psi)
+    x0[1], x0[4] = u0 * s, u0 * c
+    var_along = params["odo"]["noise_sd_mps"] ** 2 + (params["odo"]["scale_init_sd"] * u0) ** 2
+    var_cross = (u0 * psi_sd) ** 2 + params["odo"]["noise_sd_mps"] ** 2
+    # rotate diag(along, cross) into (e, n): along = (s, c), cross = (c, -s)
+    P0[1, 1] = var_along * s * s + var_cross * c * c
+    P0[4, 4] = var_along * c * c + var_cross * s * s
+    P0[1, 4] = P0[4, 1] = (var_along - var_cross) * s * c
+    return x0, P0, psi, True
+
+
+def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's float parameter vector and integer flags (see kernels_aekf P_*/F_*)."""
+    a, ad, st, g = params["aekf"], params["adaptive"], params["standstill"], params["gnss"]
+    gy, od = params["gyro"], params["odo"]
+    prm = np.zeros(kn.N_PRM)
+    prm[kn.P_ALPHA] = 1.0 / a["tau_a_s"]
+    prm[kn.P_AMAX] = a["a_max_mps2"]
+    prm[kn.P_AMIN] = a["a_min_mps2"]
+    prm[kn.P_SIGMA_A] = a["sigma_a_mps2"]
+    prm[kn.P_TAU_EPS] = gy["bias_tau_s"]
+    prm[kn.P_Q_EPS] = 2.0 * gy["bias_sd_radps"] ** 2 / gy["bias_tau_s"]  # ALGORITHMS.md 1
+    prm[kn.P_Q_KS] = od["scale_rw_sd"] ** 2
+    prm[kn.P_R_OMEGA] = gy["noise_sd_radps"] ** 2
+    prm[kn.P_R_ODO] = od["noise_sd_mps"] ** 2
+    prm[kn.P_STATIC_SPEED] = st["speed_mps"]
+    prm[kn.P_R_ZUPT] = st["zupt_sd_mps"] ** 2
+    prm[kn.P_OMEGA_MIN] = st["omega_min_speed_mps"]
+    prm[kn.P_GATE_THR] = gate_threshold(g["gate_prob"])
+    prm[kn.P_GATE_RESET] = g["gate_reset_s"]
+    prm[kn.P_INNOV_C] = ad["innovation_c"]
+    prm[kn.P_FADING] = ad["fading_lambda"]
+    prm[kn.P_SH_B] = ad["sage_husa_b"]
+    prm[kn.P_SH_RMIN] = ad["sage_husa_r_min"]
+    prm[kn.P_SH_RMAX] = ad["sage_husa_r_max"]
+    flg = np.zeros(kn.N_FLG, np.int64)
+    flg[kn.F_ADAPT_Q] = int(adaptive)
+    flg[kn.F_STANDSTILL] = int(st["enabled"])
+    flg[kn.F_GATE] = int(g["gate"])
+    flg[kn.F_INNOV] = int(ad["innovation_factor"])
+    flg[kn.F_FADING] = int(ad["fading"])
+    flg[kn.F_SAGE_HUSA] = int(ad["sage_husa"])
+    flg[kn.F_CHECK_SPD] = int(a["check_spd"])
+    flg[kn.F_STORE] = int(store)
+    return prm, flg
+
+
+def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> FilterResult:
+    """Forward pass (and RTS when ``params["filter"]["smooth"]``) of the CS-model filter."""
+    n = len(epochs)
+    smooth = bool(params["filter"]["smooth"])
+    r_e, r_n, ka, sigma_const = gnss_noise(epochs, params, adaptive)
+    x0, P0, psi0, heading_known = initial_state(epochs, params)
+    prm, flg = kernel_params(params, adaptive, smooth)
+    flg[kn.F_HEADING_KNOWN] = int(heading_known)
+    f64 = np.float64
+    x_out = np.empty((n, N_STATES))
+    pcov = np.empty((n, 3))
+    sd = np.empty((n, 2))
+    gnss_used = np.zeros(n, bool)
+    gnss_rej = np.zeros(n, bool)
+    nis = np.empty(n)
+    static = np.zeros(n, bool)
+    hold = np.zeros(n, bool)
+    P_store = np.empty((n if smooth else 0, kn.N_PACKED))
+    prior_store = np.empty((n if smooth else 0, kn.N_PRIOR))
+    info_v = np.zeros(kn.N_INFO)
+    gnss_e = np.where(epochs.has_gnss, epochs.gnss_e, 0.0).astype(f64)
+    gnss_n = np.where(epochs.has_gnss, epochs.gnss_n, 0.0).astype(f64)
+    omega = np.where(epochs.has_gyro, -epochs.yaw_rate_radps, 0.0)  # d(psi)/dt = -yaw_rate
+    odo = np.where(epochs.has_odo, epochs.odo_speed_mps, 0.0)
+    if n:
+        kn.cs_filter_kernel(
+            np.ascontiguousarray(epochs.dt_s, f64), np.ascontiguousarray(epochs.has_gnss, bool),
+            gnss_e, gnss_n, np.nan_to_num(r_e, nan=1.0), np.nan_to_num(r_n, nan=1.0),
+            np.ascontiguousarray(ka, f64), np.ascontiguousarray(epochs.has_gyro, bool), omega,
+            np.ascontiguousarray(epochs.has_odo, bool), odo, x0, P0, float(psi0), prm, flg,
+            x_out, pcov, gnss_used, gnss_rej, nis, static, hold, sd, P_store, prior_store, info_v)
+    info = {
+        "filter": name,
+        "gnss_rejected": int(gnss_rej.sum()),
+        "gnss_used": int(gnss_used.sum()),
+        "gate_resets": int(info_v[kn.I_GATE_RESETS]),
+        "updates_skipped": int(info_v[kn.I_SKIPPED]),
+        "nonfinite_states": int(info_v[kn.I_NONFINITE]),
+        "min_p_diag": float(info_v[kn.I_MIN_DIAG]) if n else math.nan,
+        "spd_checked": bool(params["aekf"]["check_spd"]),
+        "spd_failures": int(info_v[kn.I_SPD_FAIL]),
+        "smoothed": smooth,
+        "ekf_gnss_sigma_m": sigma_const,
+    }
+    if smooth and n:
+        rts_smooth(epochs.dt_s, hold, prm, x_out, P_store, prior_store, pcov, sd)
+    del P_store, prior_store
+    return _result(epochs, x_out, pcov, sd, gnss_used, gnss_rej, nis, static, info)
+
+
+def _result(epochs: Epochs, x: np.ndarray, pcov: np.ndarray, sd: np.ndarray,
+            gnss_used: np.ndarray, gnss_rej: np.ndarray, nis: np.ndarray, static: np.ndarray,
+            info: dict) -> FilterResult:
+    extras = {
+        "a_e": x[:, 2].copy(), "a_n": x[:, 5].copy(),
+        # the drift state eps is in d(psi)/dt = -yaw_rate; report the bias of the gyro reading
+        "gyro_bias_radps": -x[:, 6], "odo_scale": x[:, 7].copy(),
+        "gyro_bias_sd_radps": sd[:, 0].copy(), "odo_scale_sd": sd[:, 1].copy(),
+    }
+    return FilterResult(t_ns=epochs.t_ns, e=x[:, 0].copy(), n=x[:, 3].copy(), v_e=x[:, 1].copy(),
+                        v_n=x[:, 4].copy(), var_e=pcov[:, 0].copy(), var_n=pcov[:, 1].copy(),
+                        cov_en=pcov[:, 2].copy(), gnss_used=gnss_used, gnss_rejected=gnss_rej,
+                        nis=nis, static=static, extras=extras, info=info)
+
+
+@register("aekf")
+def run(epochs: Epochs, params: Params) -> FilterResult:
+    """seed 000 AEKF (adaptive Q from the acceleration, PDOP-driven R and K_a) with options."""
+    return run_cs(epochs, params, adaptive=True, name="aekf")

@@ -1,0 +1,416 @@
+"""Compiled per-epoch loop of the ekf/aekf filters (numba, nopython, ``cache=True``).
+
+One kernel, :func:`cs_filter_kernel`, runs the whole forward pass over the epoch
+arrays (no per-epoch Python objects).  Model: :mod:`gpsdr_cli.models.cs_model`
+(seed 000, ALGORITHMS.md section 1); conventions: :mod:`gpsdr_cli.conventions`
+(ENU metres, heading clockwise from north, ``omega = d(psi)/dt = -yaw_rate``).
+
+Per epoch k (asynchronous cycle, ALGORITHMS.md 0):
+
+1. predict with the actual step ``T = dt[k]``: mean by the Newton matrix
+   (current statistical model), covariance by the Singer blocks, exploiting
+   the block structure (two 3x3 axis blocks + two scalars) instead of 8x8
+   products; fading memory multiplies ``Phi P Phi^T``; in static mode
+   (seed 004) the axes are held (no propagation, no position noise);
+2. GNSS fix (if any): chi-square gate on the 2-D NIS (with a no-lock-out
+   reset), seed 001 adaptive factor on P(k|k-1), Sage-Husa scale on R, then two
+   sequential scalar updates (e, n);
+3. odometer (if any): below ``standstill.speed_mps`` a zero-velocity update of
+   v_e, v_n, a_e, a_n; else the speed ``u = k_s |v|``;
+4. gyro (if any): at standstill the rate measures the drift alone; above
+   ``omega_min_speed_mps`` the seed 000 heading-rate row; in between skipped.
+
+Every scalar update uses the Joseph form and re-symmetrises P.  A remembered
+heading (from the velocity above the direction threshold, gyro-integrated
+below it) keeps the odometer row defined when the vehicle starts from rest.
+
+For the RTS smoother the kernel optionally stores the packed upper triangle of
+P(k|k) and the six scalars that rebuild P(k|k-1) from it exactly
+(:func:`rebuild_prior`), instead of a second packed matrix: 42 instead of 72
+floats per epoch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..models.cs_model import N_STATES, cs_sigma_a2, odo_row, omega_row, singer_phi, singer_q
+from .adaptive import adaptive_factor, fading_factor, nis_2d, sage_husa_r
+from .linalg import cholesky, symmetrize
+
+# indices into the float parameter vector ``prm``
+P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_ODO = range(9)
+P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = range(9, 15)
+P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX = range(15, 19)
+N_PRM = 19
+# indices into the integer flag vector ``flg``
+F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
+F_HEADING_KNOWN = 8
+N_FLG = 9
+# stored prior scalars per epoch (columns of ``prior_prm``)
+Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N = range(6)
+N_PRIOR = 6
+# counters (``info`` vector)
+I_SPD_FAIL, I_MIN_DIAG, I_SKIPPED, I_GATE_RESETS, I_NONFINITE = range(5)
+N_INFO = 5
+N_PACKED = N_STATES * (N_STATES + 1) // 2
+
+
+@njit(cache=True)
+def pack(P: np.ndarray, out: np.ndarray) -> None:
+    """Upper triangle of symmetric P, row by row, into ``out`` (length n(n+1)/2)."""
+    m = 0
+    for i in range(N_STATES):
+        for j in range(i, N_STATES):
+            out[m] = P[i, j]
+            m += 1
+
+
+@njit(cache=True)
+def unpack(v: np.ndarray, P: np.ndarray) -> None:
+    """Inverse of :func:`pack`."""
+    m = 0
+    for i in range(N_STATES):
+        for j in range(i, N_STATES):
+            P[i, j] = v[m]
+            P[j, i] = v[m]
+            m += 1
+
+
+@njit(cache=True)
+def predict_mean(x: np.ndarray, T: float, f_eps: float, hold: bool) -> None:
+    """Current statistical mean propagation (abar = a_hat): Newton per axis (seed 000)."""
+    if not hold:
+        for o in (0, 3):
+            x[o] += T * x[o + 1] + 0.5 * T * T * x[o + 2]
+            x[o + 1] += T * x[o + 2]
+    x[6] *= f_eps
+
+
+@njit(cache=True)
+def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float, qa_n: float,
+                q_eps: float, q_ks: float, lam: float, hold: bool, qbuf: np.ndarray) -> None:
+    """P <- lam * Phi P Phi^T + Q in place, Phi = blockdiag(Phi_a, Phi_a, f_eps, 1) (Singer).
+
+    Row then column operations on the two 3x3 axis blocks: ~200 flops instead
+    of two dense 8x8 products.  ``hold``: static mode, axis blocks not propagated
+    and no position noise (seed 004).
+    """
+    n = N_STATES
+    if not hold:
+        p13, p23, p33 = singer_phi(T, alpha)
+        for j in range(n):  # rows: Phi P
+            for o in (0, 3):
+                r0 = P[o, j]
+                r1 = P[o + 1, j]
+                r2 = P[o + 2, j]
+                P[o, j] = r0 + T * r1 + p13 * r2
+                P[o + 1, j] = r1 + p23 * r2
+                P[o + 2, j] = p33 * r2
+        for i in range(n):  # columns: (Phi P) Phi^T
+            for o in (0, 3):
+                c0 = P[i, o]
+                c1 = P[i, o + 1]
+                c2 = P[i, o + 2]
+                P[i, o] = c0 + T * c1 + p13 * c2
+                P[i, o + 1] = c1 + p23 * c2
+                P[i, o + 2] = p33 * c2
+    for j in range(n):
+        P[6, j] *= f_eps
+    for i in range(n):
+        P[i, 6] *= f_eps
+    if lam != 1.0:
+        for i in range(n):
+            for j in range(n):
+                P[i, j] *= lam
+    singer_q(T, alpha, qbuf)
+    first = 1 if hold else 0
+    for o, qa in ((0, qa_e), (3, qa_n)):
+        for a in range(first, 3):
+            for b in range(first, 3):
+                ia = min(a, b)
+                ib = max(b, a)
+                # q index of (ia, ib) in [q11, q12, q13, q22, q23, q33]
+                qi = ia * 3 - (ia * (ia - 1)) // 2 + (ib - ia)
+                P[o + a, o + b] += qa * qbuf[qi]
+    P[6, 6] += q_eps * T
+    P[7, 7] += q_ks * T
+    symmetrize(P)
+
+
+@njit(cache=True)
+def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
+                K: np.ndarray, Bh: np.ndarray) -> bool:
+    """Scalar update with H = unit row ``idx`` (Joseph form).  False if S is not positive."""
+    n = N_STATES
+    S = P[idx, idx] + R
+    if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
+        return False
+    for i in range(n):
+        K[i] = P[i, idx] / S
+    for i in range(n):
+        x[i] += K[i] * y
+    # Joseph: B = (I - K h) P ; P = B (I - K h)^T + R K K^T
+    for i in range(n):
+        Bh[i] = P[idx, i]  # row idx of P (= column, symmetric) before the update
+    for i in range(n):
+        ki = K[i]
+        for j in range(n):
+            P[i, j] -= ki * Bh[j]
+    for i in range(n):
+        Bh[i] = P[i, idx]  # B h
+    for i in range(n):
+        for j in range(n):
+            P[i, j] += -Bh[i] * K[j] + R * K[i] * K[j]
+    symmetrize(P)
+    return True
+
+
+@njit(cache=True)
+def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
+               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray) -> bool:
+    """Scalar update with a dense Jacobian row H (Joseph form).  False if S is not positive."""
+    n = N_STATES
+    S = R
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += P[i, j] * H[j]
+        PHt[i] = s
+        S += H[i] * s
+    if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
+        return False
+    for i in range(n):
+        K[i] = PHt[i] / S
+    for i in range(n):
+        x[i] += K[i] * y
+    for i in range(n):  # B = P - K (H P)
+        ki = K[i]
+        for j in range(n):
+            P[i, j] -= ki * PHt[j]
+    for i in range(n):  # B H^T
+        s = 0.0
+        for j in range(n):
+            s += P[i, j] * H[j]
+        Bh[i] = s
+    for i in range(n):
+        for j in range(n):
+            P[i, j] += -Bh[i] * K[j] + R * K[i] * K[j]
+    symmetrize(P)
+    return True
+
+
+@njit(cache=True)
+def rebuild_prior(P: np.ndarray, T: float, alpha: float, tau_eps: float, q_eps: float,
+                  q_ks: float, pr: np.ndarray, hold: bool, qbuf: np.ndarray) -> None:
+    """P(k-1|k-1) -> the P(k|k-1) the forward pass used (predict, adaptive factor, gate reset)."""
+    f_eps = math.exp(-T / tau_eps)
+    predict_cov(P, T, alpha, f_eps, pr[Q_QA_E], pr[Q_QA_N], q_eps, q_ks, pr[Q_LAM], hold, qbuf)
+    g = pr[Q_GAIN]
+    if g != 1.0:
+        for i in range(N_STATES):
+            for j in range(N_STATES):
+                P[i, j] *= g
+    P[0, 0] += pr[Q_ADD_E]
+    P[3, 3] += pr[Q_ADD_N]
+
+
+@njit(cache=True)
+def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n: np.ndarray,
+                     r_e: np.ndarray, r_n: np.ndarray, ka: np.ndarray, has_gyro: np.ndarray,
+                     omega: np.ndarray, has_odo: np.ndarray, odo: np.ndarray,
+                     x0: np.ndarray, P0: np.ndarray, psi0: float, prm: np.ndarray,
+                     flg: np.ndarray, x_out: np.ndarray, pcov_out: np.ndarray,
+                     gnss_used: np.ndarray, gnss_rej: np.ndarray, nis_out: np.ndarray,
+                     static_out: np.ndarray, hold_out: np.ndarray, sd_out: np.ndarray,
+                     P_store: np.ndarray, prior_store: np.ndarray, info: np.ndarray) -> None:
+    """Forward pass of the ekf/aekf over n epochs; writes the ``*_out`` arrays in place.
+
+    Inputs per epoch: ``dt`` s; GNSS ``z_e, z_n`` m with variances ``r_e, r_n`` m^2
+    (already regime-scaled); ``ka`` K_a factor; ``omega`` = -yaw_rate rad/s;
+    ``odo`` speed m/s.  ``x0, P0``: state at epoch 0; ``psi0`` initial remembered
+    heading (rad, clockwise from north).  ``prm``/``flg``: see the P_*/F_* indices.
+    Outputs: ``x_out`` (n, 8) posterior states; ``pcov_out`` (n, 3) var_e, var_n,
+    cov_en; ``sd_out`` (n, 2) sigma of eps and k_s; ``P_store`` (n, 36) and
+    ``prior_store`` (n, 6) when ``flg[F_STORE]``; ``info`` counters (I_*).
+    """
+    n_ep = dt.shape[0]
+    n = N_STATES
+    x = x0.copy()
+    P = P0.copy()
+    H = np.zeros(n)
+    K = np.zeros(n)
+    PHt = np.zeros(n)
+    Bh = np.zeros(n)
+    L = np.zeros((n, n))
+    qbuf = np.zeros(6)
+    alpha = prm[P_ALPHA]
+    tau_eps = prm[P_TAU_EPS]
+    adapt_q = flg[F_ADAPT_Q] != 0
+    standstill = flg[F_STANDSTILL] != 0
+    gate = flg[F_GATE] != 0
+    innov = flg[F_INNOV] != 0
+    fading = flg[F_FADING] != 0
+    sage = flg[F_SAGE_HUSA] != 0
+    check = flg[F_CHECK_SPD] != 0
+    store = flg[F_STORE] != 0
+    heading_known = flg[F_HEADING_KNOWN] != 0
+    omega_min = prm[P_OMEGA_MIN]
+    sigma_a = prm[P_SIGMA_A]
+    psi_mem = psi0
+    is_static = False
+    t = 0.0
+    rej_since = -1.0
+    sh_r = 1.0
+    sh_m = 0
+    info[I_SPD_FAIL] = 0.0
+    info[I_MIN_DIAG] = math.inf
+    info[I_SKIPPED] = 0.0
+    info[I_GATE_RESETS] = 0.0
+    info[I_NONFINITE] = 0.0
+    for k in range(n_ep):
+        T = dt[k]
+        qa_e = 0.0
+        qa_n = 0.0
+        lam = 1.0
+        g = 1.0
+        add_e = 0.0
+        add_n = 0.0
+        hold = standstill and is_static
+        # ---- 1. predict (seed 000 CS model; seed 004 static hold; fading memory)
+        if k > 0 and T > 0.0:
+            if adapt_q:  # seed 000 eqs. (14)-(15)
+                s2e = cs_sigma_a2(x[2], prm[P_AMAX], prm[P_AMIN], ka[k], sigma_a)
+                s2n = cs_sigma_a2(x[5], prm[P_AMAX], prm[P_AMIN], ka[k], sigma_a)
+            else:
+                s2e = sigma_a * sigma_a
+                s2n = s2e
+            qa_e = 2.0 * alpha * s2e
+            qa_n = 2.0 * alpha * s2n
+            if fading:
+                lam = fading_factor(prm[P_FADING], T)
+            f_eps = math.exp(-T / tau_eps)
+            predict_mean(x, T, f_eps, hold)
+            predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[P_Q_EPS], prm[P_Q_KS], lam, hold, qbuf)
+            t += T
+        # ---- 2. GNSS position fix
+        nis_out[k] = math.nan
+        gnss_used[k] = False
+        gnss_rej[k] = False
+        if has_gnss[k]:
+            ye = z_e[k] - x[0]
+            yn = z_n[k] - x[3]
+            re = r_e[k] * sh_r
+            rn = r_n[k] * sh_r
+            s00 = P[0, 0] + re
+            s11 = P[3, 3] + rn
+            s01 = P[0, 3]
+            nis = nis_2d(ye, yn, s00, s01, s11)
+            nis_out[k] = nis
+            accept = True
+            reset = False
+            if gate:
+                if nis > prm[P_GATE_THR]:
+                    if rej_since < 0.0:
+                        rej_since = t
+                    if t - rej_since >= prm[P_GATE_RESET]:
+                        reset = True  # no lock-out: accept and inflate P by the innovation
+                        rej_since = -1.0
+                        info[I_GATE_RESETS] += 1.0
+                    else:
+                        accept = False
+                        gnss_rej[k] = True
+                else:
+                    rej_since = -1.0
+            if accept:
+                if innov:  # seed 001: P(k|k-1) /= alpha
+                    af = adaptive_factor(ye, yn, s00 + s11, prm[P_INNOV_C])
+                    if af < 1.0:
+                        g = 1.0 / af
+                        for i in range(n):
+                            for j in range(n):
+                                P[i, j] *= g
+                if reset:
+                    add_e = ye * ye
+                    add_n = yn * yn
+                    P[0, 0] += add_e
+                    P[3, 3] += add_n
+                if sage:  # seed 004 Sage-Husa on a scale of R, with the divergence guard
+                    sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e[k] + r_n[k])
+                    sh_r = sage_husa_r(sh_r, sh_m, prm[P_SH_B], sample, prm[P_SH_RMIN],
+                                       prm[P_SH_RMAX])
+                    sh_m += 1
+                    re = r_e[k] * sh_r
+                    rn = r_n[k] * sh_r
+                ok1 = unit_update(x, P, 0, ye, re, K, Bh)
+                ok2 = unit_update(x, P, 3, z_n[k] - x[3], rn, K, Bh)
+                if ok1 and ok2:
+                    gnss_used[k] = True
+                else:
+                    info[I_SKIPPED] += 1.0
+        # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
+        if has_odo[k]:
+            u = odo[k]
+            is_static = standstill and u < prm[P_STATIC_SPEED]
+            if is_static:
+                for idx in (1, 4, 2, 5):
+                    if not unit_update(x, P, idx, -x[idx], prm[P_R_ZUPT], K, Bh):
+                        info[I_SKIPPED] += 1.0
+            else:
+                sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+                use = True
+                if sp >= omega_min:
+                    ue = x[1] / sp
+                    un = x[4] / sp
+                else:
+                    ue = math.sin(psi_mem)
+                    un = math.cos(psi_mem)
+                    use = heading_known
+                if use:
+                    h = odo_row(x, ue, un, H)
+                    if not row_update(x, P, H, u - h, prm[P_R_ODO], K, PHt, Bh):
+                        info[I_SKIPPED] += 1.0
+        static_out[k] = is_static
+        hold_out[k] = hold
+        # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
+        if has_gyro[k]:
+            if is_static:
+                if not unit_update(x, P, 6, omega[k] - x[6], prm[P_R_OMEGA], K, Bh):
+                    info[I_SKIPPED] += 1.0
+            elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
+                h = omega_row(x, H)
+                if not row_update(x, P, H, omega[k] - h, prm[P_R_OMEGA], K, PHt, Bh):
+                    info[I_SKIPPED] += 1.0
+        # ---- remembered heading for the odometer row near standstill
+        sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+        if sp >= omega_min:
+            psi_mem = math.atan2(x[1], x[4])
+            heading_known = True
+        elif has_gyro[k] and k > 0:
+            psi_mem += (omega[k] - x[6]) * T
+        # ---- outputs and health
+        for i in range(n):
+            x_out[k, i] = x[i]
+            if not math.isfinite(x[i]):
+                info[I_NONFINITE] += 1.0
+        pcov_out[k, 0] = P[0, 0]
+        pcov_out[k, 1] = P[3, 3]
+        pcov_out[k, 2] = P[0, 3]
+        sd_out[k, 0] = math.sqrt(max(P[6, 6], 0.0))
+        sd_out[k, 1] = math.sqrt(max(P[7, 7], 0.0))
+        for i in range(n):
+            if P[i, i] < info[I_MIN_DIAG] or not math.isfinite(P[i, i]):
+                info[I_MIN_DIAG] = P[i, i] if math.isfinite(P[i, i]) else -math.inf
+        if check and not cholesky(P, L):
+            info[I_SPD_FAIL] += 1.0
+        if store:
+            pack(P, P_store[k])
+            prior_store[k, Q_QA_E] = qa_e
+            prior_store[k, Q_QA_N] = qa_n
+            prior_store[k, Q_LAM] = lam
+            prior_store[k, Q_GAIN] = g
+            prior_store[k, Q_ADD_E] = add_e
+            prior_store[k, Q_ADD_N] = add_n
