@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import datetime as dt
 import json
 import math
 from collections.abc import Callable
@@ -440,7 +441,8 @@ def describe_drive(drive: Drive, params: Params) -> dict[str, Any]:
         desc["odo"] = {"speed_mps": _distribution(drive.odo.speed_mps)}
     desc["skipped"] = {r: {"count": int(c), "first": drive.skipped.first.get(r, "")}
                        for r, c in sorted(drive.skipped.counts.items())}
-    desc["meta"] = _jsonable(drive.meta)
+    desc["notes"] = list(drive.meta.get("notes", [])) + list(drive.meta.get("warnings", []))
+    desc["meta"] = _jsonable({k: v for k, v in drive.meta.items() if k not in ("notes", "warnings")})
     return desc
 
 
@@ -467,7 +469,21 @@ def describe_log(path: str, params: Params, *, topics: dict[str, str] | None = N
     elif kind == "nmea":
         from .io.nmea import read_nmea
 
-        drive = read_nmea(path, date=date)
+        try:
+            drive = read_nmea(path, date=date)
+        except NoDataError as err:
+            if date is not None or "no date" not in err.reason:
+                return {"path": str(path), "kind": kind, "streams": [], "skipped": {},
+                        "notes": [f"nothing usable: {err.reason}"]}
+            # a log without any date still tells its times of day: show them on 1970-01-01
+            try:
+                drive = read_nmea(path, date=dt.date(1970, 1, 1))
+            except NoDataError as err2:
+                return {"path": str(path), "kind": kind, "streams": [], "skipped": {},
+                        "notes": [f"nothing usable: {err2.reason}"]}
+            drive.meta.setdefault("notes", []).append(
+                "no date in the log (no RMC/ZDA date): times are times of day shown on "
+                "1970-01-01; give --date YYYY-MM-DD")
     else:
         drive, ref = _read_csv_any(path, params)
         if ref is not None:

@@ -37,14 +37,26 @@ def info(logs: tuple[str, ...], as_json: bool, config_path: str | None, date: An
 
     params = make_params(config_path, gyro_units=gyro_units, gyro_sign=gyro_sign,
                          odo_kind=odo_kind, ticks_per_m=ticks_per_m)
+    from ..errors import GpsdrError
+
+    failed = 0
     for i, path in enumerate(logs):
-        desc = describe_log(path, params, topics=topics, date=date, use_log_time=log_time)
+        try:
+            desc = describe_log(path, params, topics=topics, date=date, use_log_time=log_time)
+        except GpsdrError as err:
+            if len(logs) == 1:
+                raise
+            click.echo(f"gpsdr: error: {err}", err=True)  # the other files still get described
+            failed += 1
+            continue
         if as_json:
             click.echo(json.dumps(desc, default=str))
             continue
         if i:
             click.echo("")
         _print(desc)
+    if failed:
+        raise click.exceptions.Exit(1)
 
 
 def _f(x: Any, fmt: str = ".2f") -> str:
@@ -87,6 +99,8 @@ def _print(desc: dict[str, Any]) -> None:
     if track:
         for k, v in track.items():
             echo(f"  {k}: {v}")
+    for note in desc.get("notes", []):
+        echo(f"  note: {note}")
     skipped = desc.get("skipped", {})
     total = sum(v["count"] for v in skipped.values())
     echo(f"  skipped records: {total}")
