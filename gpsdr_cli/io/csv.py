@@ -99,7 +99,7 @@ def _parse_header(path: str | Path, data: bytes) -> tuple[list[str], str, int]:
     if not header.strip():
         raise InputError(path, "first line is empty; expected a header row of column names", line=1)
     delim = _detect_delimiter(header)
-    names = [n.strip() for n in next(_stdcsv.reader([header], delimiter=delim))]
+    names = [n.strip().strip("\"'").strip() for n in next(_stdcsv.reader([header], delimiter=delim))]
     if all(_is_number(n) for n in names if n):
         raise InputError(path, f"no header row: first line is {header[:60]!r}; "
                          "expected column names such as t,yaw_rate", line=1)
