@@ -16,6 +16,7 @@ import dataclasses
 import datetime as dt
 import json
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -64,18 +65,32 @@ class FuseResult:
     gnss_offset_s: float = 0.0
     #: the parameters actually used (with an estimated offset filled in)
     params: Params = field(default_factory=dict)
+    #: readers' warnings about the inputs (e.g. a truncated MCAP summary)
+    drive_warnings: list[str] = field(default_factory=list)
 
     def summary(self) -> dict[str, float]:
         """Figures of the ``all`` segment: rmse_m, cep95_m, max_m, epochs (NaN when unknown)."""
         return summary_of(self.stats)
 
 
+    def gnss_only_summary(self) -> dict[str, float]:
+        """The same figures for the GNSS fixes alone (empty without a reference)."""
+        if self.reference_en is None:
+            return {}
+        from .evaluation import gnss_only_errors, summarise
+
+        return summarise(gnss_only_errors(self.epochs, self.reference_en))
+
+
 def summary_of(stats: pd.DataFrame) -> dict[str, float]:
+    """rmse_m, cep95_m, max_m, mean_m, epochs, ... of the ``all`` row (NaN for nulls)."""
     rows = stats[stats["segment"] == "all"] if "segment" in stats else stats.iloc[:0]
     out: dict[str, float] = {}
     for col in ("rmse_m", "cep95_m", "max_m", "mean_m", "epochs", "nis_in_95_share",
                 "gnss_separation_rmse_m"):
-        out[col] = float(rows[col].iloc[0]) if len(rows) and col in rows else math.nan
+        out[col] = math.nan
+        if len(rows) and col in rows:
+            out[col] = float(rows[col].to_numpy(dtype=float, na_value=np.nan)[0])
     return out
 
 
@@ -182,7 +197,9 @@ def check_finite(track: pd.DataFrame, stats: pd.DataFrame | None = None) -> None
                 raise NonFiniteOutputError(f"filter output: column {col} holds infinity")
     if stats is not None:
         for col in stats.columns:
-            if pd.api.types.is_float_dtype(stats[col]) and np.isinf(stats[col].to_numpy()).any():
+            if not pd.api.types.is_float_dtype(stats[col]):
+                continue
+            if np.isinf(stats[col].to_numpy(dtype=float, na_value=np.nan)).any():
                 raise NonFiniteOutputError(f"statistics: column {col} holds infinity")
 
 
@@ -217,7 +234,10 @@ def build_metadata(drive: Drive, params: Params, frame: LocalFrame, epochs: Epoc
         "params_toml": config.to_toml(params),
     }
     meta.update({f"param.{k}": v for k, v in config.flat(params).items()})
-    meta.update({f"frame.{k}": v for k, v in frame.describe().items()})
+    with warnings.catch_warnings():
+        # pyproj warns that a PROJ string loses information; the WKT beside it is exact
+        warnings.simplefilter("ignore", UserWarning)
+        meta.update({f"frame.{k}": v for k, v in frame.describe().items()})
     meta["inputs"] = json.dumps([{"path": s.path, "sha256": s.sha256, "streams": list(s.streams)}
                                  for s in drive.sources])
     for i, s in enumerate(drive.sources):
@@ -303,7 +323,8 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     meta = build_metadata(drive, params, frame, epochs, result, skipped, reference, offset_auto)
     return FuseResult(track=track, stats=stats, frame=frame, epochs=epochs, result=result,
                       metadata=meta, reference_en=ref_en,
-                      gnss_offset_s=float(params["time"]["gnss_offset_s"]), params=params)
+                      gnss_offset_s=float(params["time"]["gnss_offset_s"]), params=params,
+                      drive_warnings=[str(w) for w in drive.meta.get("warnings", [])])
 
 
 def order_stats(stats: pd.DataFrame) -> pd.DataFrame:

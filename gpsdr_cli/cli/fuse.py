@@ -213,8 +213,13 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
                + (f", {stats_out}" if stats_out else ""), file=err)
     if auto:
         click.echo(f"GNSS time offset (auto): {res.gnss_offset_s:+.3f} s", file=err)
+    for note in res.drive_warnings:
+        click.echo(f"warning: {note}", file=err)
     if reference:
         s = res.summary()
         click.echo(f"error vs {reference}: RMSE {s['rmse_m']:.2f} m, CEP95 {s['cep95_m']:.2f} m, "
-                   f"max {s['max_m']:.2f} m over {int(s['epochs']) if s['epochs'] == s['epochs'] else 0} epochs",
-                   file=err)
+                   f"max {s['max_m']:.2f} m over {s['epochs']:.0f} epochs", file=err)
+        g = res.gnss_only_summary()
+        if g.get("count"):
+            click.echo(f"GNSS fixes alone: RMSE {g['rmse_m']:.2f} m, CEP95 {g['cep95_m']:.2f} m, "
+                       f"max {g['max_m']:.2f} m over {g['count']} fixes", file=err)

@@ -50,6 +50,8 @@ def stats(track: str, reference: str | None, output: str | None, fmt: str, quiet
 
 
 def _cell(v: Any) -> str:
+    if str(v) in ("<NA>", "nan", "NaT", "None"):
+        return "-"
     if isinstance(v, float):
         return "-" if not math.isfinite(v) else f"{v:.3f}"
     return str(v)
