@@ -1,0 +1,112 @@
+"""Format sniffing, read_drive dispatch and merging, sha256_file."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from gpsdr_cli import config
+from gpsdr_cli.errors import InputError, NoDataError, UsageError
+from gpsdr_cli.io.readers import read_drive, sha256_file, sniff
+
+DRIVE = Path(__file__).resolve().parents[3] / "shared" / "data" / "comma2k19"
+REAL_MCAP = DRIVE.parent / "mcap_samples" / "ublox_gps_ros2.mcap"
+SMALL_MCAP = Path(__file__).resolve().parents[1] / "data" / "mcap" / "small_drive.mcap"
+P = config.defaults()
+
+
+@pytest.mark.parametrize("path, kind", [
+    (DRIVE / "gps.nmea", "nmea"), (DRIVE / "gyro.csv", "csv"), (DRIVE / "truth.csv", "csv"),
+    (REAL_MCAP, "mcap"), (SMALL_MCAP, "mcap"),
+])
+def test_sniff_real_files(path, kind):
+    assert sniff(path) == kind
+
+
+def test_sniff_by_content_not_name(tmp_path):
+    p = tmp_path / "track.csv"
+    pq.write_table(pa.table({"time": [1]}), p)
+    assert sniff(p) == "parquet"
+    q = tmp_path / "log.txt"
+    q.write_bytes(b"12:00:01 " + (DRIVE / "gps.nmea").read_bytes()[:2000])  # logger prefix
+    assert sniff(q) == "nmea"
+
+
+@pytest.mark.parametrize("content, match", [
+    (b"", "empty file"),
+    ("$GPGGA,1\n".encode("utf-16"), "UTF-16"),
+    (bytes(range(256)) * 4, "binary"),
+    (b"just some words\nand more\n", "unrecognised format"),
+])
+def test_sniff_rejects(tmp_path, content, match):
+    p = tmp_path / "f.log"
+    p.write_bytes(content)
+    with pytest.raises(InputError, match=match) as err:
+        sniff(p)
+    assert str(p) in str(err.value)
+    with pytest.raises(InputError):
+        read_drive(p, params=P)
+
+
+def test_sniff_missing_file(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        sniff(tmp_path / "nope.mcap")
+
+
+def test_read_drive_separate_files():
+    d = read_drive(gps=DRIVE / "gps.nmea", gyro=DRIVE / "gyro.csv", odo=DRIVE / "odo.csv", params=P)
+    assert (len(d.gnss), len(d.gyro), len(d.odo)) == (579, 6256, 4974)
+    assert [s.streams for s in d.sources] == [("gnss",), ("gyro",), ("odo",)]
+    assert d.sources[1].sha256 == sha256_file(DRIVE / "gyro.csv")
+
+
+def test_read_drive_mcap_log_and_override_precedence():
+    d = read_drive(SMALL_MCAP, params=P)
+    assert (len(d.gnss), len(d.gyro), len(d.odo)) == (20, 100, 100)
+    # an explicit --gyro replaces the LOG's gyro; the LOG's GNSS and odometer stay
+    d = read_drive(SMALL_MCAP, gyro=DRIVE / "gyro.csv", params=P)
+    assert len(d.gyro) == 6256 and len(d.gnss) == 20 and len(d.odo) == 100
+    assert [Path(s.path).name for s in d.sources] == ["gyro.csv", "small_drive.mcap"]
+
+
+def test_read_drive_real_mcap_keeps_warnings():
+    d = read_drive(REAL_MCAP, params=P)
+    assert len(d.gnss) == 3364 and d.gyro is None
+    assert any("navheading" in w for w in d.meta["warnings"])
+
+
+def test_read_drive_mcap_for_one_stream():
+    d = read_drive(gps=DRIVE / "gps.nmea", odo=SMALL_MCAP, params=P)
+    assert len(d.gnss) == 579 and len(d.odo) == 100 and d.gyro is None
+    with pytest.raises(NoDataError, match="no gyro messages"):
+        read_drive(gyro=REAL_MCAP, params=P)
+
+
+def test_gps_from_stdin(monkeypatch):
+    data = (DRIVE / "gps.nmea").read_bytes()
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data)))
+    d = read_drive(gps="-", params=P)
+    assert len(d.gnss) == 579 and d.sources[0].sha256 == hashlib.sha256(data).hexdigest()
+
+
+def test_read_drive_usage_errors(tmp_path):
+    with pytest.raises(UsageError, match="no input"):
+        read_drive(params=P)
+    with pytest.raises(UsageError, match="cannot be the LOG"):
+        read_drive(DRIVE / "gyro.csv", params=P)
+
+
+def test_sha256_file(tmp_path):
+    p = tmp_path / "b.bin"
+    data = np.random.default_rng(1).bytes(3 << 20)
+    p.write_bytes(data)
+    assert sha256_file(p) == hashlib.sha256(data).hexdigest()
+    with pytest.raises(InputError):
+        sha256_file(tmp_path / "missing")
