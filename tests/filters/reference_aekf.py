@@ -1,0 +1,181 @@
+"""Plain numpy reference of the ekf/aekf (one Python iteration per epoch, dense matrices).
+
+Readable on purpose: textbook letters x, P, F, Q, H, R, K, S, y, dense 8x8
+products, ``np.linalg.solve`` for the smoother.  It shares only the input
+preparation with the package (``aekf.gnss_noise``, ``aekf.initial_state``,
+``aekf.kernel_params``: R/K_a per epoch, x0/P0 and the parameter vector) and
+the model's dense matrices (``cs_model.phi_matrix``, ``newton_matrix``,
+``q_matrix``, ``cs_sigma_a2``); the per-epoch cycle, measurement rows,
+Joseph updates, gating, adaptive options and RTS are written out again here, so
+that the tests comparing it with the compiled kernel check the kernel's block
+arithmetic, packing and bookkeeping.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gpsdr_cli.filters import kernels_aekf as kn
+from gpsdr_cli.filters.aekf import gnss_noise, initial_state, kernel_params
+from gpsdr_cli.models.cs_model import cs_sigma_a2, newton_matrix, phi_matrix, q_matrix
+
+
+def joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Scalar Kalman update x, P with row H, innovation y, variance R (Joseph form)."""
+    S = float(H @ P @ H) + R
+    K = P @ H / S
+    x = x + K * y
+    A = np.eye(len(x)) - np.outer(K, H)
+    P = A @ P @ A.T + R * np.outer(K, K)
+    return x, 0.5 * (P + P.T)
+
+
+def unit(i: int) -> np.ndarray:
+    H = np.zeros(8)
+    H[i] = 1.0
+    return H
+
+
+def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
+    """Forward pass (and RTS when params["filter"]["smooth"]); returns per-epoch arrays."""
+    n = len(epochs)
+    smooth = bool(params["filter"]["smooth"])
+    r_e, r_n, ka, _ = gnss_noise(epochs, params, adaptive)
+    x, P, psi_mem, heading_known = initial_state(epochs, params)
+    prm, _ = kernel_params(params, adaptive, smooth)
+    alpha, tau_eps = prm[kn.P_ALPHA], prm[kn.P_TAU_EPS]
+    sigma_a = prm[kn.P_SIGMA_A]
+    st = params["standstill"]
+    standstill = bool(st["enabled"])
+    omega_min = st["omega_min_speed_mps"]
+    ad = params["adaptive"]
+    gate = bool(params["gnss"]["gate"])
+    sa_py = cs_sigma_a2.py_func
+    is_static = False
+    t = 0.0
+    rej_since = -1.0
+    sh_r, sh_m = 1.0, 0
+    xs = np.zeros((n, 8))
+    Ps = np.zeros((n, 8, 8))
+    Ps_prior = np.zeros((n, 8, 8))
+    xs_prior = np.zeros((n, 8))
+    Fs = np.zeros((n, 8, 8))
+    nis = np.full(n, np.nan)
+    used = np.zeros(n, bool)
+    rejected = np.zeros(n, bool)
+    static = np.zeros(n, bool)
+    for k in range(n):
+        T = epochs.dt_s[k]
+        hold = standstill and is_static
+        F = np.eye(8)
+        if k > 0 and T > 0:
+            if adaptive:  # seed 000 eqs. (14)-(15)
+                s2e = sa_py(x[2], prm[kn.P_AMAX], prm[kn.P_AMIN], ka[k], sigma_a)
+                s2n = sa_py(x[5], prm[kn.P_AMAX], prm[kn.P_AMIN], ka[k], sigma_a)
+            else:
+                s2e = s2n = sigma_a ** 2
+            lam = prm[kn.P_FADING] ** T if ad["fading"] and prm[kn.P_FADING] > 1 else 1.0
+            F = phi_matrix(T, alpha, tau_eps, hold)
+            Q = q_matrix(T, alpha, 2 * alpha * s2e, 2 * alpha * s2n, prm[kn.P_Q_EPS],
+                         prm[kn.P_Q_KS], hold)
+            x = newton_matrix(T, tau_eps, hold) @ x
+            P = lam * F @ P @ F.T + Q
+            P = 0.5 * (P + P.T)
+            t += T
+        xs_prior[k], Ps_prior[k], Fs[k] = x, P, F  # the smoother's prior (P updated below)
+        if epochs.has_gnss[k]:
+            z = np.array([epochs.gnss_e[k], epochs.gnss_n[k]])
+            Hg = np.zeros((2, 8))
+            Hg[0, 0] = Hg[1, 3] = 1.0
+            y = z - Hg @ x
+            R = np.diag([r_e[k], r_n[k]]) * sh_r
+            S = Hg @ P @ Hg.T + R
+            nis[k] = float(y @ np.linalg.solve(S, y))
+            accept, reset = True, False
+            if gate:
+                if nis[k] > prm[kn.P_GATE_THR]:
+                    if rej_since < 0:
+                        rej_since = t
+                    if t - rej_since >= prm[kn.P_GATE_RESET]:
+                        reset, rej_since = True, -1.0
+                    else:
+                        accept = False
+                        rejected[k] = True
+                else:
+                    rej_since = -1.0
+            if accept:
+                if ad["innovation_factor"]:  # seed 001
+                    beta = math.sqrt(float(y @ y) / np.trace(S))
+                    a_f = 1.0 if beta <= ad["innovation_c"] else ad["innovation_c"] / beta
+                    if a_f < 1.0:
+                        P = P * (1.0 / a_f)
+                if reset:  # no lock-out: accept and inflate the position variance
+                    P = P + np.diag([y[0] ** 2, 0, 0, y[1] ** 2, 0, 0, 0, 0])
+                Ps_prior[k] = P  # seed 001 factor and reset inflation are part of P(k|k-1)
+                if ad["sage_husa"]:
+                    b = ad["sage_husa_b"]
+                    d = (1 - b) / (1 - b ** (sh_m + 1))
+                    lo, hi = ad["sage_husa_r_min"], ad["sage_husa_r_max"]
+                    sample = (y @ y - P[0, 0] - P[3, 3]) / (r_e[k] + r_n[k])
+                    sh_r = min(max((1 - d) * sh_r + d * min(max(sample, lo), hi), lo), hi)
+                    sh_m += 1
+                x, P = joseph(x, P, unit(0), z[0] - x[0], r_e[k] * sh_r)
+                x, P = joseph(x, P, unit(3), z[1] - x[3], r_n[k] * sh_r)
+                used[k] = True
+        if epochs.has_odo[k]:
+            u = epochs.odo_speed_mps[k]
+            is_static = standstill and u < st["speed_mps"]
+            if is_static:  # zero-velocity update (seed 004)
+                for i in (1, 4, 2, 5):
+                    x, P = joseph(x, P, unit(i), -x[i], st["zupt_sd_mps"] ** 2)
+            else:
+                v = math.hypot(x[1], x[4])
+                if v >= omega_min:
+                    d_e, d_n, use = x[1] / v, x[4] / v, True
+                else:
+                    d_e, d_n, use = math.sin(psi_mem), math.cos(psi_mem), heading_known
+                if use:  # u = k_s * |v| (seed 000's s = k_s T v divided by T)
+                    H = np.zeros(8)
+                    H[1], H[4], H[7] = x[7] * d_e, x[7] * d_n, x[1] * d_e + x[4] * d_n
+                    h = x[7] * (x[1] * d_e + x[4] * d_n)
+                    x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2)
+        static[k] = is_static
+        if epochs.has_gyro[k]:
+            w = -epochs.yaw_rate_radps[k]  # d(psi)/dt = -yaw_rate
+            r_w = params["gyro"]["noise_sd_radps"] ** 2
+            if is_static:
+                x, P = joseph(x, P, unit(6), w - x[6], r_w)
+            elif math.hypot(x[1], x[4]) >= omega_min:
+                ve, ae, vn, an = x[1], x[2], x[4], x[5]
+                v2 = ve ** 2 + vn ** 2
+                c = vn * ae - ve * an
+                H = np.zeros(8)  # seed 000 Jacobian of omega
+                H[1] = (-an * v2 - 2 * ve * c) / v2 ** 2
+                H[4] = (ae * v2 - 2 * vn * c) / v2 ** 2
+                H[2], H[5], H[6] = vn / v2, -ve / v2, 1.0
+                x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w)
+        v = math.hypot(x[1], x[4])
+        if v >= omega_min:
+            psi_mem, heading_known = math.atan2(x[1], x[4]), True
+        elif epochs.has_gyro[k] and k > 0:
+            psi_mem += (-epochs.yaw_rate_radps[k] - x[6]) * T
+        xs[k], Ps[k] = x, P
+    if smooth and n > 1:
+        xs, Ps = _rts(xs, Ps, xs_prior, Ps_prior, Fs)
+    return {"x": xs, "P": Ps, "nis": nis, "gnss_used": used, "gnss_rejected": rejected,
+            "static": static}
+
+
+def _rts(xs: np.ndarray, Ps: np.ndarray, xs_prior: np.ndarray, Ps_prior: np.ndarray,
+         Fs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Textbook RTS: C = P(k|k) F^T P(k+1|k)^-1 (a solve), x_s = x + C (x_s' - x_prior')."""
+    x_s, P_s = xs.copy(), Ps.copy()
+    for k in range(len(xs) - 2, -1, -1):
+        C = np.linalg.solve(Ps_prior[k + 1], Fs[k + 1] @ Ps[k]).T
+        x_s[k] = xs[k] + C @ (x_s[k + 1] - xs_prior[k + 1])
+        P = Ps[k] + C @ (P_s[k + 1] - Ps_prior[k + 1]) @ C.T
+        P_s[k] = 0.5 * (P + P.T)
+    return x_s, P_s

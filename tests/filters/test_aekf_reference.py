@@ -1,0 +1,68 @@
+"""The compiled ekf/aekf kernels reproduce the plain numpy reference to 1e-9 relative."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gpsdr_cli.config import defaults
+from gpsdr_cli.filters import get
+
+from . import tiny_drive
+from .reference_aekf import reference_filter
+
+#: relative tolerance between kernel and reference (dimensionless)
+RTOL = 1e-9
+
+OPTIONS = {
+    "plain": {},
+    "no_gate": {"gnss": {"gate": False}},
+    "innovation_factor": {"adaptive": {"innovation_factor": True}},
+    "fading": {"adaptive": {"fading": True, "fading_lambda": 1.05}},
+    "sage_husa": {"adaptive": {"sage_husa": True}},
+    "no_standstill": {"standstill": {"enabled": False}},  # also exercises a gate reset
+    "continuous_pdop": {"gnss": {"pdop_mode": "continuous"}},
+}
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return tiny_drive(70.0, seed=3, dr_hz=20.0, gyro_bias_radps=0.02, odo_scale=1.03,
+                      outages=((20.0, 32.0),), stops=((45.0, 52.0),),
+                      bad_pdop=((5.0, 12.0, 4.0), (55.0, 62.0, 8.0)),
+                      outliers=((14.0, 15.0, 40.0),))
+
+
+def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:
+    scale = max(float(np.max(np.abs(b))), 1e-300)
+    np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * scale, err_msg=what)
+
+
+@pytest.mark.parametrize("name", ["ekf", "aekf"])
+@pytest.mark.parametrize("option", list(OPTIONS))
+@pytest.mark.parametrize("smooth", [False, True])
+def test_kernel_matches_reference(drive, name, option, smooth):
+    epochs, _ = drive
+    params = defaults()
+    for sec, vals in OPTIONS[option].items():
+        params[sec].update(vals)
+    params["filter"]["smooth"] = smooth
+    res = get(name)(epochs, params)
+    ref = reference_filter(epochs, params, adaptive=(name == "aekf"))
+    x, P = ref["x"], ref["P"]
+    _close(res.e, x[:, 0], "e")
+    _close(res.n, x[:, 3], "n")
+    _close(res.v_e, x[:, 1], "v_e")
+    _close(res.v_n, x[:, 4], "v_n")
+    _close(res.extras["a_e"], x[:, 2], "a_e")
+    _close(-res.extras["gyro_bias_radps"], x[:, 6], "eps")
+    _close(res.extras["odo_scale"], x[:, 7], "k_s")
+    _close(res.var_e, P[:, 0, 0], "var_e")
+    _close(res.var_n, P[:, 3, 3], "var_n")
+    _close(res.cov_en, P[:, 0, 3], "cov_en")
+    np.testing.assert_array_equal(res.gnss_used, ref["gnss_used"])
+    np.testing.assert_array_equal(res.gnss_rejected, ref["gnss_rejected"])
+    np.testing.assert_array_equal(res.static, ref["static"])
+    m = np.isfinite(ref["nis"])
+    np.testing.assert_array_equal(np.isfinite(res.nis), m)
+    _close(res.nis[m], ref["nis"][m], "nis")
