@@ -24,7 +24,8 @@ file at once with numpy (a few microseconds per sentence, see
    row per epoch that has a GGA or an RMC; within an epoch the last non-empty
    value of each field wins (so one GSA per constellation merges into one row).
 
-Conventions (see :mod:`gpsdr_cli.conventions`): ``t_ns`` int64 ns UTC;
+Conventions (see :mod:`gpsdr_cli.conventions`): ``t_ns`` int64 ns UTC (time
+of day rounded to the microsecond);
 lat/lon degrees WGS84 (``ddmm.mmmm`` + hemisphere converted); speeds m/s.
 
 Field choices, documented here once:
@@ -47,7 +48,8 @@ Field choices, documented here once:
   knots * 1852/3600.
 - Date: RMC (``ddmmyy``; years 80-99 read as 19xx) or ZDA, per epoch; epochs
   between dated ones take the previous date plus midnight rollovers (time of
-  day decreasing by more than 12 h is the next day).  The ``date`` argument is
+  day decreasing by more than 12 h is the next day; an increase, however
+  large, is a gap within the day).  The ``date`` argument is
   only used when the log has no RMC/ZDA date at all: a date in the log always
   wins.  Dates before 2000 or in the future (GPS week-rollover bugs) are kept
   as given and counted in ``meta['warnings']``.
@@ -688,8 +690,9 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
             fill = np.isfinite(day_of_epoch_k)
             day_of_epoch[fill] = day_of_epoch_k[fill]
     d_sod = np.diff(epoch_sod)
-    roll = np.r_[0, np.cumsum((d_sod < -_HALF_DAY_US).astype(np.int64)
-                              - (d_sod > _HALF_DAY_US).astype(np.int64))]
+    # midnight rollover: time of day decreasing by more than 12 h is the next day; an
+    # increase (however large) is a gap within the same day
+    roll = np.r_[0, np.cumsum(d_sod < -_HALF_DAY_US)].astype(np.int64)
     dated = np.isfinite(day_of_epoch)
     row = has_gga | has_rmc
     if dated.any():

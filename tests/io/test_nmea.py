@@ -181,6 +181,14 @@ def test_midnight_rollover_without_dates_uses_argument() -> None:
     assert meta["dates"] == ["2024-05-17", "2024-05-18"]
 
 
+def test_forward_gap_stays_on_the_same_day() -> None:
+    data = log(gga("010000"), gga("140000"), gga("235959"), gga("000001"))
+    fixes, _, _ = parse_nmea(data, date=DAY)
+    next_day = DAY + datetime.timedelta(days=1)
+    assert fixes.t_ns.tolist() == [t_ns(DAY, 1, 0, 0), t_ns(DAY, 14, 0, 0),
+                                   t_ns(DAY, 23, 59, 59), t_ns(next_day, 0, 0, 1)]
+
+
 def test_rollover_after_last_dated_epoch_and_before_first() -> None:
     # GGA before the first RMC (date back-filled), then GGAs after the last RMC roll over
     data = log(gga("235957"), rmc("235958", date="170524"), gga("235959"), gga("000000"))
