@@ -386,3 +386,41 @@ def test_looks_like_nmea() -> None:
     assert not looks_like_nmea(b"t,yaw_rate\n1.0,0.01\n2.0,0.02\n")
     assert not looks_like_nmea(b"$GPGGA,no checksum here\n$GPRMC,nor here\n")
     assert not looks_like_nmea(bytes(range(256)) * 4)
+
+
+def test_round_trip_with_the_simulator_writer_across_midnight() -> None:
+    """gpsdr's own NMEA writer (simulate.nmea_lines) -> parse_nmea recovers every field."""
+    simulate = pytest.importorskip("gpsdr_cli.simulate")
+    from gpsdr_cli.io.drive import GnssFixes
+
+    n = 60
+    rng = np.random.default_rng(7)
+    g = GnssFixes.empty(n)
+    g.t_ns = t_ns(DAY, 23, 59, 57) + np.arange(n, dtype=np.int64) * 100_000_000  # 10 Hz
+    g.lat_deg = -33.9 + rng.normal(0, 0.01, n)
+    g.lon_deg = 151.2 + rng.normal(0, 0.01, n)
+    g.alt_m = 40 + rng.normal(0, 1, n)
+    g.fix_quality[:] = 1
+    g.fix_quality[20:25] = 0  # an outage
+    g.lat_deg[20:25] = np.nan
+    g.lon_deg[20:25] = np.nan
+    g.n_sats[:] = 9
+    g.hdop[:], g.pdop[:], g.vdop[:] = 0.9, 1.7, 1.4
+    g.sigma_e_m[:], g.sigma_n_m[:] = 1.5, 2.5
+    g.speed_mps = rng.uniform(0, 30, n)
+    g.course_deg = rng.uniform(0, 359, n)
+    data = "".join(simulate.nmea_lines(g)).encode()
+    fixes, report, meta = parse_nmea(data)
+    assert report.total == 0
+    assert fixes.t_ns.tolist() == g.t_ns.tolist()  # midnight crossed via the RMC dates
+    assert meta["dates"] == ["2024-05-17", "2024-05-18"]
+    assert fixes.fix_quality.tolist() == g.fix_quality.tolist()
+    ok = g.fix_quality > 0
+    assert np.allclose(fixes.lat_deg[ok], g.lat_deg[ok], atol=2e-8)  # deg: 1e-6 min printed
+    assert np.allclose(fixes.lon_deg[ok], g.lon_deg[ok], atol=2e-8)
+    assert np.isnan(fixes.lat_deg[~ok]).all()
+    assert np.allclose(fixes.alt_m[ok], g.alt_m[ok], atol=1e-3)  # m: 3 decimals printed
+    assert np.allclose(fixes.speed_mps[ok], g.speed_mps[ok], atol=1e-3)  # m/s
+    assert np.allclose(fixes.pdop[ok], 1.7) and np.allclose(fixes.vdop[ok], 1.4)
+    assert np.allclose(fixes.sigma_e_m[ok], 1.5) and np.allclose(fixes.sigma_n_m[ok], 2.5)
+    assert (fixes.n_sats[ok] == 9).all()
