@@ -1,0 +1,204 @@
+"""`gpsdr fuse`, `info`, `stats`, `plot`, `simulate` end to end on the bundled sample."""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from gpsdr_cli.conventions import TRACK_COLUMNS
+from tests.conftest import SHARED_DATA, one_line_error
+
+pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
+
+
+@pytest.fixture
+def drive_dir(sample_dir: Path, tmp_path: Path) -> Path:
+    d = tmp_path / "drive"
+    d.mkdir()
+    for name in ("gps.nmea", "gyro.csv", "odo.csv", "truth.csv"):
+        shutil.copy(sample_dir / name, d / name)
+    return d
+
+
+def streams(d: Path) -> list[str]:
+    return ["--gps", str(d / "gps.nmea"), "--gyro", str(d / "gyro.csv"), "--odo", str(d / "odo.csv")]
+
+
+def test_fuse_writes_track_and_stats_next_to_the_gps_log(gpsdr, drive_dir: Path) -> None:
+    result = gpsdr(["fuse", *streams(drive_dir), "--reference", drive_dir / "truth.csv",
+                    "--smooth", "--gnss-offset", "0.1"])
+    assert result.exit_code == 0, result.output
+    assert result.stdout == ""  # summaries go to stderr
+    assert "RMSE" in result.stderr and "CEP95" in result.stderr and "max" in result.stderr
+    track = pq.read_table(drive_dir / "gps.fused.parquet")
+    assert track.column_names[:len(TRACK_COLUMNS)] == list(TRACK_COLUMNS)
+    assert str(track.schema.field("time").type) == "timestamp[ns, tz=UTC]"
+    meta = track.schema.metadata
+    assert meta[b"filter"] == b"aekf" and meta[b"param.time.gnss_offset_s"] == b"0.1"
+    assert track.schema.field("sigma_e").metadata[b"unit"] == b"m"
+    stats = pd.read_parquet(drive_dir / "gps.stats.parquet")
+    all_row = stats[stats["segment"] == "all"].iloc[0]
+    assert all_row["rmse_m"] < 1.0  # m, with the 0.1 s latency applied
+    rmse_printed = float(result.stderr.split("RMSE ")[1].split(" m")[0])
+    assert rmse_printed == pytest.approx(all_row["rmse_m"], abs=0.006)
+
+
+def test_fuse_explicit_outputs_csv_and_config(gpsdr, drive_dir: Path, tmp_path: Path) -> None:
+    cfg = tmp_path / "p.toml"
+    cfg.write_text('[filter]\nname = "ekf"\n')
+    out = tmp_path / "out" / "run.csv"
+    out.parent.mkdir()
+    result = gpsdr(["fuse", *streams(drive_dir), "--config", cfg, "-o", out, "--format", "csv",
+                    "-q"])
+    assert result.exit_code == 0, result.output
+    assert result.stderr == ""  # -q
+    track = pd.read_csv(out)
+    assert list(track.columns[:len(TRACK_COLUMNS)]) == list(TRACK_COLUMNS)
+    stats = pd.read_csv(tmp_path / "out" / "run.stats.csv")
+    assert set(stats["filter"]) == {"ekf"}
+
+
+def test_fuse_to_stdout_and_stats_from_stdin(gpsdr, drive_dir: Path, tmp_path: Path) -> None:
+    result = gpsdr(["fuse", *streams(drive_dir), "-o", "-", "-q"])
+    assert result.exit_code == 0, result.stderr
+    data = result.stdout_bytes
+    assert data[:4] == b"PAR1"
+    stats = gpsdr(["stats", "-", "--reference", drive_dir / "truth.csv", "-o",
+                   tmp_path / "s.parquet"], input=data)
+    assert stats.exit_code == 0, stats.output
+    assert "rmse_m" in stats.stdout and "outage" in stats.stdout
+    table = pd.read_parquet(tmp_path / "s.parquet")
+    assert 1.0 < table.loc[table["segment"] == "all", "rmse_m"].iloc[0] < 4.0  # m, no latency fix
+
+
+def test_fuse_reads_nmea_from_stdin(gpsdr, drive_dir: Path) -> None:
+    nmea = (drive_dir / "gps.nmea").read_bytes()
+    result = gpsdr(["fuse", "-", "--gyro", drive_dir / "gyro.csv", "--odo", drive_dir / "odo.csv",
+                    "--format", "csv", "-q"], input=nmea)
+    assert result.exit_code == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith('"time","lat","lon"')
+    assert len(lines) > 5000
+
+
+def test_fuse_mcap_default_outputs(gpsdr, tmp_path: Path) -> None:
+    src = SHARED_DATA / "mcap_samples" / "ublox_gps_ros2.mcap"
+    if not src.exists():
+        pytest.skip("shared MCAP sample not present")
+    log = tmp_path / "LOG.mcap"
+    shutil.copy(src, log)
+    result = gpsdr(["fuse", log, "--filter", "ekf"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "LOG.fused.parquet").exists() and (tmp_path / "LOG.stats.parquet").exists()
+
+
+def test_fuse_refuses_to_overwrite_an_input(gpsdr, drive_dir: Path) -> None:
+    result = gpsdr(["fuse", *streams(drive_dir), "-o", drive_dir / "gyro.csv"])
+    assert result.exit_code == 2
+    assert "overwrite" in one_line_error(result)
+
+
+@pytest.mark.parametrize(("content", "expect"), [
+    (None, "no such file"),
+    (b"", "empty"),
+    (bytes(range(256)) * 40, "binary"),
+    ("$GPGGA,161448.30,3743.259862,N,12228.338318,W,1,16,1.00,33.370,M,0.0,M,,*57\n"
+     .encode("utf-16"), "UTF-16"),
+])
+def test_bad_input_files_are_one_line_errors(gpsdr, drive_dir: Path, tmp_path: Path,
+                                             content: bytes | None, expect: str) -> None:
+    bad = tmp_path / "bad.nmea"
+    if content is not None:
+        bad.write_bytes(content)
+    for args in (["fuse", "--gps", bad, "--gyro", drive_dir / "gyro.csv"], ["fuse", bad],
+                 ["info", bad]):
+        result = gpsdr(args)
+        assert result.exit_code == 1, (args, result.output)
+        line = one_line_error(result)
+        assert str(bad) in line and expect.lower() in line.lower(), line
+
+
+def test_bad_csv_names_the_line(gpsdr, drive_dir: Path) -> None:
+    gyro = drive_dir / "gyro.csv"
+    gyro.write_text("t,yaw_rate\n")  # header only
+    result = gpsdr(["fuse", *streams(drive_dir)])
+    assert result.exit_code == 1
+    assert str(gyro) in one_line_error(result)
+
+
+def test_info_on_the_sample_and_every_shared_log(gpsdr, sample_dir: Path) -> None:
+    result = gpsdr(["info", sample_dir / "gps.nmea", sample_dir / "gyro.csv",
+                    sample_dir / "odo.csv", sample_dir / "truth.csv"])
+    assert result.exit_code == 0, result.output
+    out = result.stdout
+    assert "579 records" in out and "6256 records" in out and "4974 records" in out
+    assert "PDOP       min 1.80" in out and "GNSS outages (gap > 1.50 s): 0" in out
+    logs = [p for p in SHARED_DATA.rglob("*") if p.is_file()
+            and p.suffix in (".nmea", ".log", ".txt", ".mcap", ".csv")]
+    for log in logs:
+        result = gpsdr(["info", log])
+        assert result.exit_code == 0, (log, result.output)
+
+
+def test_info_json(gpsdr, sample_dir: Path) -> None:
+    import json
+
+    result = gpsdr(["info", "--json", sample_dir / "gps.nmea"])
+    desc = json.loads(result.stdout)
+    assert desc["gnss"]["valid"] == 579 and desc["gnss"]["outages"] == []
+    assert desc["streams"][0]["rate_hz"] == pytest.approx(9.7, abs=0.1)  # 10 Hz with holes
+
+
+def test_info_lists_outages(gpsdr, drive_dir: Path) -> None:
+    lines = (drive_dir / "gps.nmea").read_text().splitlines(keepends=True)
+    # drop 10 s of fixes (epochs 161500.0 .. 161509.9)
+    kept = [ln for ln in lines if not ln.split(",")[1].startswith("16150")]
+    (drive_dir / "gps.nmea").write_text("".join(kept))
+    result = gpsdr(["info", drive_dir / "gps.nmea"])
+    assert "GNSS outages (gap > 1.50 s): 1" in result.stdout
+    assert "2018-08-02T16:14:59.900000+00:00  10.1 s" in result.stdout
+
+
+def test_plot(gpsdr, drive_dir: Path, tmp_path: Path) -> None:
+    if importlib.util.find_spec("gpsdr_cli.plot") is None:
+        pytest.skip("gpsdr_cli.plot not in this tree yet")
+    assert gpsdr(["fuse", *streams(drive_dir), "-q"]).exit_code == 0
+    out = tmp_path / "report.png"
+    result = gpsdr(["plot", drive_dir / "gps.fused.parquet", "--reference",
+                    drive_dir / "truth.csv", "-o", out])
+    assert result.exit_code == 0, result.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_simulate_then_fuse(gpsdr, tmp_path: Path) -> None:
+    if importlib.util.find_spec("gpsdr_cli.simulate") is None:
+        pytest.skip("gpsdr_cli.simulate not in this tree yet")
+    out = tmp_path / "sim"
+    result = gpsdr(["simulate", "-o", out, "--scenario", "open_sky", "--seed", "1",
+                    "--duration", "60"])
+    assert result.exit_code == 0, result.output
+    for name in ("gps.nmea", "gyro.csv", "odo.csv", "truth.csv"):
+        assert (out / name).exists()
+    fused = gpsdr(["fuse", *streams(out), "--reference", out / "truth.csv"])
+    assert fused.exit_code == 0, fused.output
+    bad = gpsdr(["simulate", "-o", out, "--scenario", "moon"])
+    assert bad.exit_code == 2 and "moon" in one_line_error(bad)
+
+
+def test_installed_entry_point_exit_codes(drive_dir: Path) -> None:
+    exe = Path(sys.executable).with_name("gpsdr")
+    if not exe.exists():
+        pytest.skip("gpsdr console script not installed in this environment")
+    ok = subprocess.run([exe, "--help"], capture_output=True, text=True, check=False)
+    assert ok.returncode == 0
+    missing = subprocess.run([exe, "fuse", "--gps", drive_dir / "nope.nmea"], capture_output=True,
+                             text=True, check=False)
+    assert missing.returncode == 1
+    assert missing.stderr.count("\n") == 1 and "nope.nmea" in missing.stderr
