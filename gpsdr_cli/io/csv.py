@@ -23,6 +23,7 @@ from __future__ import annotations
 import csv as _stdcsv
 import hashlib
 import math
+import re
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any
@@ -35,6 +36,8 @@ from .drive import Drive, Odometry, SkipReport, Source, YawRates
 
 #: Header detection and the text checks shared with :func:`gpsdr_cli.io.readers.sniff`.
 UTF8_BOM = b"\xef\xbb\xbf"
+_NEWLINE_B = re.compile(rb"\r\n|\r|\n")
+_NEWLINE = re.compile(r"\r\n|\r|\n")
 _POSIX_PLAUSIBLE_S = 1.0e8  # 1973-03-03: earlier "POSIX" times are almost surely relative seconds
 
 
@@ -93,17 +96,21 @@ def _parse_header(path: str | Path, data: bytes) -> tuple[list[str], str, int]:
     if problem:
         raise InputError(path, problem)
     start = len(UTF8_BOM) if data.startswith(UTF8_BOM) else 0
-    end = data.find(b"\n", start)
-    end = len(data) if end < 0 else end
-    header = data[start:end].decode("utf-8", errors="replace").rstrip("\r")
+    m = _NEWLINE_B.search(data, start)
+    end, body = (m.start(), m.end()) if m else (len(data), len(data))
+    header = data[start:end].decode("utf-8", errors="replace")
     if not header.strip():
         raise InputError(path, "first line is empty; expected a header row of column names", line=1)
     delim = _detect_delimiter(header)
-    names = [n.strip().strip("\"'").strip() for n in next(_stdcsv.reader([header], delimiter=delim))]
+    try:
+        fields = next(_stdcsv.reader([header], delimiter=delim, strict=False), [])
+    except _stdcsv.Error as err:
+        raise InputError(path, f"unreadable header row: {err}", line=1) from err
+    names = [n.strip().strip("\"'").strip() for n in fields]
     if all(_is_number(n) for n in names if n):
         raise InputError(path, f"no header row: first line is {header[:60]!r}; "
                          "expected column names such as t,yaw_rate", line=1)
-    return names, delim, min(end + 1, len(data))
+    return names, delim, body
 
 
 def _is_number(text: str) -> bool:
@@ -240,12 +247,18 @@ def _slow_path(data: bytes, body: int, names: list[str], delim: str, t_column: s
     line_out: list[int] = []
     v_out: list[list[float]] = [[] for _ in columns]
     n_rows = 0
-    lines = text.split("\n")
+    lines = _NEWLINE.split(text)  # the newlines pyarrow knows: \n, \r\n and a lone \r
     if lines and lines[-1] == "":
         lines.pop()  # the newline that ends the last row
-    for lineno, row in enumerate(_stdcsv.reader(lines, delimiter=delim, strict=False), start=2):
+    reader = _stdcsv.reader
+    for lineno, line in enumerate(lines, start=2):
         n_rows += 1
         where = f"{path}:{lineno}"
+        if "\x00" in line:
+            skipped.add("NUL byte in a line", where)
+            continue
+        # One reader per line: an unbalanced quote cannot swallow the following lines.
+        row = next(reader([line], delimiter=delim, strict=False), [])
         if not row or (len(row) == 1 and not row[0].strip()):
             skipped.add("empty line", where)
             continue

@@ -192,3 +192,12 @@ def test_unreadable_paths(tmp_path):
         read_gyro_csv(tmp_path / "missing.csv", P["gyro"])
     with pytest.raises(InputError, match="is a directory"):
         read_gyro_csv(tmp_path, P["gyro"])
+
+
+def test_lone_cr_newlines_both_paths(tmp_path):
+    p = _csv(tmp_path, "t,yaw_rate\r1700000000,1\r1700000001,2\r")
+    np.testing.assert_array_equal(read_gyro_csv(p, P["gyro"]).gyro.yaw_rate_radps, [1, 2])
+    p = _csv(tmp_path, "t,yaw_rate\r1700000000,1\rbad\r1700000001,2\r")
+    d = read_gyro_csv(p, P["gyro"])
+    np.testing.assert_array_equal(d.gyro.yaw_rate_radps, [1, 2])
+    assert d.skipped.first == {"wrong field count (expected 2)": f"{p}:3"}
