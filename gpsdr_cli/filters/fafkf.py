@@ -1,0 +1,43 @@
+"""``fafkf``: fuzzy adaptive federated Kalman filter (seed 002, Tang et al.).
+
+The local filters, model, inputs, modes and smoothing of :mod:`.fkf`, plus
+the paper's two fuzzy controllers (:mod:`.fuzzy`, interpolated inside the
+kernel :func:`~gpsdr_cli.filters.kernels_fkf.fafkf_kernel`):
+
+1. adaptive R by covariance matching, per measurement component
+   (GNSS e, GNSS n, heading, distance): the window of the last ``[fafkf]
+   window`` squared prior residuals gives ``Ra``; ``u = (Te - Ra)/Te`` drives
+   the 5-rule controller; ``R_jj *= 1 + Delta`` within ``[r_min_factor,
+   r_max_factor]`` x the nominal R (which for GNSS is the receiver's base sigma
+   of each epoch squared);
+2. fusion weights: reliabilities ``W_i`` from ``PE_i = tr(P_i P_i^T)`` and
+   ``DE_i = tr(D_i D_i^T)`` (``D_i`` the diagonal of ``Dis_i`` divided by
+   ``Te_i``: dimensionless, so the two filters' values compare), normalised by
+   ``[fafkf] normalisation``; ``beta_1 = W_1/(W_1 + W_2)``.
+   ``[fafkf] weights = "scalar"``: one beta for all shared states (the
+   paper); ``"block"``: one for the position block [e, n] and one for the
+   velocity/acceleration block, each from that block of P.  In FR mode PE is
+   taken from ``c_i P_i`` (the filter's covariance before the reset's
+   ``1/c_i`` inflation): otherwise the share given at the last reset would
+   decide the next weight, a feedback loop.
+
+Extras: ``beta_gnss`` (position) and ``beta_gnss_vel`` (velocity) fusion
+weights of the GNSS filter; ``r_factor_gnss_e``, ``r_factor_gnss_n``,
+``r_factor_heading``, ``r_factor_distance`` (R adaptation factors).
+
+Conventions: :mod:`gpsdr_cli.conventions`.
+"""
+
+from __future__ import annotations
+
+from ..align import Epochs
+from ..config import Params
+from . import register
+from .base import FilterResult
+from .fkf import run_federated
+
+
+@register("fafkf")
+def run(epochs: Epochs, params: Params) -> FilterResult:
+    """Fuzzy adaptive federated Kalman filter (seed 002)."""
+    return run_federated("fafkf", epochs, params)

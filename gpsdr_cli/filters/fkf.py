@@ -1,0 +1,287 @@
+"""``fkf``: federated Kalman filter of GNSS and dead reckoning (seed 002, Tang et al.).
+
+Two local filters share the 10-state model of
+:mod:`gpsdr_cli.filters.kernels_fkf` (which documents Phi, Q, H and the
+fusion): a GNSS filter (position fixes) and a DR filter (gyro-integrated
+heading ``Theta`` and odometer distance ``S``).  A master filter fuses them
+every epoch by covariance weighting ``P_g = (sum P_i^-1)^-1``,
+``x_g = P_g sum P_i^-1 x_i``.  ``[fkf] mode``: ``"nr"`` (no reset, the
+paper's) or ``"fr"`` (fusion-reset with information-sharing factors
+``beta_gnss``, ``1 - beta_gnss``, Carlson 1990; the default because in NR the
+DR filter's position is pure dead reckoning from the start of the drive).
+
+Conventions (:mod:`gpsdr_cli.conventions`): metres ENU, seconds; heading
+clockwise from north; the gyro's yaw rate is CCW-positive, so the integrated
+heading is ``psi(t) = psi(t_a) - int_{t_a}^t yaw_rate dt``.
+
+This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
+
+* ``Theta``: the trapezoid integral of ``-yaw_rate`` over the gyro records,
+  aligned at ``t_a`` to the first GNSS course over ground given with speed
+  >= ``[standstill] omega_min_speed_mps``; without one, to the course between
+  two fixes 2 s apart that are at least max(5 m, 4 sigma) apart; without any,
+  to ``[frame] initial_heading_deg`` (else 0).  Used at gyro epochs at most
+  every ``[fkf] heading_interval_s`` (the integrated heading's errors are
+  correlated; updating at the gyro's full rate would treat them as white).
+* ``S = |odo speed| x T_m`` at odometer epochs, ``T_m`` the time since the
+  previous odometer record; sigma ``[odo] noise_sd_mps x T_m``.
+* standstill: the latest odometer speed (at most 1 s old) below
+  ``[standstill] speed_mps``.
+* initial state: the first usable fix (else e = n = 0), speed from the first
+  odometer (else GNSS) record along the aligned heading.
+
+Smoothing (``params["filter"]["smooth"]``): the *fused* sequence is smoothed
+by a fixed-interval RTS pass (:func:`~gpsdr_cli.filters.linalg.rts_step`)
+with the master's own prediction ``Phi x_g``, ``Phi P_g Phi^T + Q``, Phi and Q
+recomputed from ``dt``; only the fused x and the packed upper triangle of
+P_g (65 floats per epoch) are stored.  In FR mode the fused sequence is the
+centralised filter's (up to the EKF linearisation), so this is the usual
+RTS smoother; in NR mode it is an approximation (the local filters' own
+correlations are not modelled by the master).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..align import Epochs
+from ..config import Params
+from ..conventions import NS_PER_S
+from ..errors import ConfigError, NoDataError
+from . import fuzzy, register
+from . import kernels_fkf as kf
+from .base import FilterResult
+
+#: seconds: an odometer reading older than this does not decide standstill
+STALE_ODO_S = 1.0
+#: seconds: fixes this far apart give the fallback course for the heading alignment
+COURSE_BASE_S = 2.0
+
+
+@dataclass
+class Prepared:
+    """Everything the kernels take, built from the epochs and the parameters."""
+
+    dt: np.ndarray
+    has_gnss: np.ndarray
+    gnss_e: np.ndarray
+    gnss_n: np.ndarray
+    gnss_var_e: np.ndarray
+    gnss_var_n: np.ndarray
+    theta: np.ndarray
+    dist: np.ndarray
+    t_m: np.ndarray
+    static: np.ndarray
+    x0: np.ndarray
+    P0: np.ndarray
+    psi0: float
+    par: np.ndarray
+    flags: np.ndarray
+    info: dict
+
+
+def gate_threshold(prob: float) -> float:
+    """chi-square(2) quantile: the 2-dof distribution is exponential, ``-2 ln(1 - p)``."""
+    return -2.0 * math.log1p(-prob)
+
+
+def heading_alignment(epochs: Epochs, t_s: np.ndarray, params: Params) -> tuple[float, float, str]:
+    """(t_a s, heading at t_a rad, source) for aligning the integrated gyro heading."""
+    v_min = params["standstill"]["omega_min_speed_mps"]
+    ok = (epochs.has_gnss & np.isfinite(epochs.gnss_course_rad)
+          & (epochs.gnss_speed_mps >= v_min))
+    k = np.flatnonzero(ok)
+    if len(k):
+        return float(t_s[k[0]]), float(epochs.gnss_course_rad[k[0]]), "gnss_course"
+    f = np.flatnonzero(epochs.has_gnss)
+    if len(f) > 1:
+        tf = t_s[f]
+        j = np.searchsorted(tf, tf + COURSE_BASE_S)
+        valid = j < len(f)
+        i = np.flatnonzero(valid)
+        jj = j[valid]
+        de = epochs.gnss_e[f[jj]] - epochs.gnss_e[f[i]]
+        dn = epochs.gnss_n[f[jj]] - epochs.gnss_n[f[i]]
+        sd = np.maximum(epochs.gnss_sd_e[f[i]], epochs.gnss_sd_n[f[i]])
+        moved = (np.hypot(de, dn) >= np.maximum(5.0, 4.0 * sd)) & (tf[jj] - tf[i] <= 2.5 * COURSE_BASE_S)
+        m = np.flatnonzero(moved)
+        if len(m):
+            a = m[0]
+            return (float(0.5 * (tf[i[a]] + tf[jj[a]])), float(math.atan2(de[a], dn[a])),
+                    "gnss_fixes")
+    h0 = params["frame"]["initial_heading_deg"]
+    if math.isfinite(h0):
+        return float(t_s[0]), math.radians(h0), "initial_heading_deg"
+    return float(t_s[0]), 0.0, "none"
+
+
+def prepare(epochs: Epochs, params: Params) -> Prepared:
+    """Kernel inputs from epochs and parameters (see the module docstring)."""
+    fp = params["fkf"]
+    ap = params["fafkf"]
+    sp = params["standstill"]
+    n = len(epochs)
+    t_s = (epochs.t_ns - epochs.t_ns[0]) / NS_PER_S
+    gnss_on = bool(epochs.has_gnss.any())
+    dr_on = bool(epochs.has_gyro.any() or epochs.has_odo.any())
+    if not (gnss_on or dr_on):
+        raise NoDataError(None, "fkf/fafkf: no usable GNSS fix and no gyro or odometer record; "
+                                "expected at least one stream with data")
+    if fp["mode"] not in ("nr", "fr"):
+        raise ConfigError(f"fkf.mode = {fp['mode']!r}: expected \"nr\" or \"fr\"")
+    if ap["weights"] not in ("scalar", "block"):
+        raise ConfigError(f"fafkf.weights = {ap['weights']!r}: expected \"scalar\" or \"block\"")
+    if ap["normalisation"] not in ("share", "log"):
+        raise ConfigError(f"fafkf.normalisation = {ap['normalisation']!r}: "
+                          "expected \"share\" or \"log\"")
+    if ap["window"] < 1:
+        raise ConfigError(f"fafkf.window = {ap['window']}: expected an integer >= 1")
+
+    # ---- heading measurement Theta from the gyro ------------------------------------
+    t_a, psi_a, source = heading_alignment(epochs, t_s, params)
+    theta = np.full(n, np.nan)
+    g = np.flatnonzero(epochs.has_gyro)
+    if len(g):
+        tg = t_s[g]
+        rate = -epochs.yaw_rate_radps[g]            # d(psi)/dt, clockwise-positive
+        integral = np.zeros(len(g))
+        integral[1:] = np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(tg))
+        psi_g = psi_a + integral - np.interp(t_a, tg, integral)
+        _, first = np.unique(np.floor(tg / max(fp["heading_interval_s"], 1e-9)), return_index=True)
+        use = g[first]
+        theta[use] = np.angle(np.exp(1j * psi_g[first]))     # wrapped to (-pi, pi]
+        psi0 = float(psi_a - np.interp(t_a, tg, integral) + np.interp(0.0, tg, integral))
+    else:
+        psi0 = psi_a
+
+    # ---- odometer distance S and standstill -----------------------------------------
+    dist = np.full(n, np.nan)
+    t_m = np.zeros(n)
+    o = np.flatnonzero(epochs.has_odo)
+    speed0 = math.nan
+    static = np.zeros(n, bool)
+    if len(o):
+        speed = np.abs(epochs.odo_speed_mps[o])
+        t_m[o[1:]] = np.diff(t_s[o])
+        dist[o[1:]] = speed[1:] * t_m[o[1:]]
+        speed0 = float(speed[0])
+        if sp["enabled"]:
+            last = np.maximum.accumulate(np.where(epochs.has_odo, np.arange(n), -1))
+            have = last >= 0
+            lastc = np.maximum(last, 0)
+            fresh = have & (t_s - t_s[lastc] <= STALE_ODO_S)
+            static = fresh & (np.abs(epochs.odo_speed_mps[lastc]) < sp["speed_mps"])
+
+    # ---- initial state ---------------------------------------------------------------
+    x0 = np.zeros(kf.NX)
+    f = np.flatnonzero(epochs.has_gnss)
+    if len(f):
+        x0[kf.IE] = epochs.gnss_e[f[0]]
+        x0[kf.IN] = epochs.gnss_n[f[0]]
+        if not math.isfinite(speed0) and math.isfinite(epochs.gnss_speed_mps[f[0]]):
+            speed0 = float(epochs.gnss_speed_mps[f[0]])
+    if not math.isfinite(speed0):
+        speed0 = 0.0
+    x0[kf.IVE] = speed0 * math.sin(psi0)
+    x0[kf.IVN] = speed0 * math.cos(psi0)
+    P0 = np.diag(np.array([
+        fp["init_pos_sd_m"], fp["init_vel_sd_mps"], fp["init_acc_sd_mps2"],
+        fp["init_pos_sd_m"], fp["init_vel_sd_mps"], fp["init_acc_sd_mps2"],
+        fp["gnss_err_sd_m"], fp["gnss_err_sd_m"],
+        fp["init_heading_err_sd_rad"], fp["init_dist_err_sd_m"]]) ** 2)
+
+    g_p = params["gnss"]
+    par = np.zeros(kf.N_PAR)
+    par[kf.K_TAU_EPS] = fp["gnss_err_tau_s"]
+    par[kf.K_EPS_SD] = fp["gnss_err_sd_m"]
+    par[kf.K_JERK_PSD] = fp["jerk_psd_m2ps5"]
+    par[kf.K_QW_RW] = fp["heading_err_rw_sd"]
+    par[kf.K_QS_RW] = fp["dist_err_rw_sd"]
+    par[kf.K_HEAD_SD] = fp["heading_sd_rad"]
+    par[kf.K_ODO_SD] = params["odo"]["noise_sd_mps"]
+    par[kf.K_ZUPT_SD] = sp["zupt_sd_mps"]
+    par[kf.K_OMEGA_MIN] = max(sp["omega_min_speed_mps"], 1e-3)
+    par[kf.K_GATE_CHI2] = gate_threshold(g_p["gate_prob"]) if g_p["gate"] else 0.0
+    par[kf.K_GATE_RESET_S] = g_p["gate_reset_s"]
+    par[kf.K_R_MIN] = ap["r_min_factor"]
+    par[kf.K_R_MAX] = ap["r_max_factor"]
+    par[kf.K_DELTA_MAX] = ap["delta_max"]
+    par[kf.K_RES_CLIP] = ap["residual_clip"]
+    par[kf.K_BETA_GNSS] = fp["beta_gnss"]
+    par[kf.K_V_LIN] = max(fp["v_lin_mps"], 1e-3)
+    if not (par[kf.K_TAU_EPS] > 0 and 0 < par[kf.K_R_MIN] <= 1.0 <= par[kf.K_R_MAX]):
+        raise ConfigError("fkf.gnss_err_tau_s must be > 0 and fafkf.r_min_factor <= 1 <= "
+                          f"fafkf.r_max_factor (got {par[kf.K_TAU_EPS]}, {par[kf.K_R_MIN]}, "
+                          f"{par[kf.K_R_MAX]})")
+
+    flags = np.zeros(kf.N_FLAGS, np.int64)
+    flags[kf.F_MODE_FR] = fp["mode"] == "fr"
+    flags[kf.F_FUSION] = kf.FUSE_BLOCK if ap["weights"] == "block" else kf.FUSE_SCALAR
+    flags[kf.F_NORM] = ap["normalisation"] == "log"
+    flags[kf.F_WINDOW] = ap["window"]
+    flags[kf.F_GNSS_ON] = gnss_on
+    flags[kf.F_DR_ON] = dr_on
+    flags[kf.F_STORE] = bool(params["filter"]["smooth"])
+    flags[kf.F_CHECK_SPD] = bool(fp["check_spd"])
+
+    var_e = np.where(epochs.has_gnss, epochs.gnss_sd_e, 1.0) ** 2
+    var_n = np.where(epochs.has_gnss, epochs.gnss_sd_n, 1.0) ** 2
+    info = {"heading_alignment": source, "heading_alignment_t_s": t_a,
+            "local_filters": ",".join(name for name, on in (("gnss", gnss_on), ("dr", dr_on)) if on)}
+    return Prepared(dt=np.ascontiguousarray(epochs.dt_s, dtype=float),
+                    has_gnss=np.ascontiguousarray(epochs.has_gnss, dtype=bool),
+                    gnss_e=np.nan_to_num(epochs.gnss_e), gnss_n=np.nan_to_num(epochs.gnss_n),
+                    gnss_var_e=var_e, gnss_var_n=var_n, theta=theta, dist=dist, t_m=t_m,
+                    static=static, x0=x0, P0=P0, psi0=psi0, par=par, flags=flags, info=info)
+
+
+def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
+    """Run ``fkf`` or ``fafkf`` over the epochs (forward pass, then RTS when asked)."""
+    n = len(epochs)
+    if n == 0:
+        raise NoDataError(None, f"{kind}: no epochs to filter; expected at least one record")
+    prep = prepare(epochs, params)
+    kernel = kf.fkf_kernel if kind == "fkf" else kf.fafkf_kernel
+    out, used, rej, nis, beta, rfac, counters, xs, Ps = kernel(
+        prep.dt, prep.has_gnss, prep.gnss_e, prep.gnss_n, prep.gnss_var_e, prep.gnss_var_n,
+        prep.theta, prep.dist, prep.t_m, prep.static, prep.x0, prep.P0, prep.psi0, prep.par,
+        prep.flags, fuzzy.R_TABLE, fuzzy.W_TABLE)
+    smoothed = bool(params["filter"]["smooth"])
+    smooth_not_spd = 0
+    if smoothed:
+        out, smooth_not_spd = kf.smooth_fused(xs, Ps, prep.dt, prep.static, prep.par)
+    info = dict(prep.info)
+    info.update({
+        "filter": kind, "mode": params["fkf"]["mode"], "smoothed": smoothed,
+        "gnss_used": int(counters[kf.C_GNSS_USED]),
+        "gnss_rejected": int(counters[kf.C_GNSS_REJECTED]),
+        "gate_resets": int(counters[kf.C_GATE_RESETS]),
+        "heading_updates": int(counters[kf.C_HEADING]),
+        "heading_skipped_slow": int(counters[kf.C_HEADING_SLOW]),
+        "distance_updates": int(counters[kf.C_DIST]),
+        "zupt_epochs": int(counters[kf.C_ZUPT]),
+        "r_adaptations": int(counters[kf.C_R_ADAPT]),
+        "spd_failures": int(counters[kf.C_NOT_SPD]) + int(smooth_not_spd),
+    })
+    if kind == "fafkf":
+        info["weights"] = params["fafkf"]["weights"]
+        info["normalisation"] = params["fafkf"]["normalisation"]
+    extras = {"beta_gnss": beta[:, 0], "beta_gnss_vel": beta[:, 1]}
+    if kind == "fafkf":
+        extras.update({"r_factor_gnss_e": rfac[:, 0], "r_factor_gnss_n": rfac[:, 1],
+                       "r_factor_heading": rfac[:, 2], "r_factor_distance": rfac[:, 3]})
+    return FilterResult(
+        t_ns=epochs.t_ns, e=out[:, kf.O_E].copy(), n=out[:, kf.O_N].copy(),
+        v_e=out[:, kf.O_VE].copy(), v_n=out[:, kf.O_VN].copy(),
+        var_e=out[:, kf.O_VAR_E].copy(), var_n=out[:, kf.O_VAR_N].copy(),
+        cov_en=out[:, kf.O_COV_EN].copy(), gnss_used=used, gnss_rejected=rej, nis=nis,
+        static=prep.static.copy(), extras=extras, info=info)
+
+
+@register("fkf")
+def run(epochs: Epochs, params: Params) -> FilterResult:
+    """Federated Kalman filter (seed 002's FKF baseline): covariance-weighted fusion, fixed R."""
+    return run_federated("fkf", epochs, params)

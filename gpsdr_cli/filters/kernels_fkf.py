@@ -1,0 +1,844 @@
+"""Compiled kernels of the federated filters ``fkf`` and ``fafkf`` (seed 002, Tang et al.).
+
+One forward kernel per filter (:func:`fkf_kernel`, :func:`fafkf_kernel`, thin
+wrappers over one shared loop) and one backward RTS kernel
+(:func:`smooth_fused`), all over plain arrays: no Python object per epoch.
+
+Conventions (:mod:`gpsdr_cli.conventions`): metres in the local ENU frame,
+seconds, radians; heading ``psi = atan2(v_e, v_n)`` clockwise from north.
+
+Model (ALGORITHMS.md section 2), shared by both local filters::
+
+    x = [e, v_e, a_e, n, v_n, a_n, eps_e, eps_n, q_w, q_s]          (indices 0..9)
+    Phi = diag(Phi_e(T), Phi_n(T), exp(-T/tau_eps), exp(-T/tau_eps), I2)   # seed 002 eq. (2)
+    Phi_e = Phi_n = [[1, T, T^2/2], [0, 1, T], [0, 0, 1]]    # eq. (3), erratum: T^2/2
+
+``eps_e, eps_n`` GNSS position error (Gauss-Markov, ``tau_eps``), ``q_w`` the
+heading-sensor error and ``q_s`` the odometer distance error (random walks).
+Q (our choice, the paper gives none): per axis the white-jerk discretisation
+``q_j * [[T^5/20, T^4/8, T^3/6], [T^4/8, T^3/3, T^2/2], [T^3/6, T^2/2, T]]``
+(exact for the Newton Phi above, ``q_j = jerk_psd``, m^2/s^5); for eps
+``sd^2 (1 - exp(-2T/tau))`` (keeps its variance stationary at ``sd^2``); for
+q_w, q_s ``rw_sd^2 T``.  Phi is applied in place using its block structure
+(row and column operations), never as a dense 10x10 product.
+
+Standstill (seed 004 static mode): at epochs flagged static the kinematic
+blocks are held (Phi = I, no kinematic Q: "x(k|k-1) = x(k-1)") and both local
+filters apply a zero-velocity update ``v_e = v_n = a_e = a_n = 0``.
+
+GNSS local filter (seed 002 eqs. (4)-(6), erratum: row 2 selects n)::
+
+    z1 = [e + eps_e, n + eps_n],  R1 = diag(f_e sd_e^2, f_n sd_n^2)
+
+with a chi-square gate on the 2-dof NIS (accept anyway after ``gate_reset_s``
+of rejections).  DR local filter (eqs. (7)-(14), erratum: h3, h4 divide by
+``v``)::
+
+    Theta = atan2(v_e, v_n) + q_w     H: d/dv_e = v_n/v2, d/dv_n = -v_e/v2, d/dq_w = 1
+    S     = T_m sqrt(v2) + q_s        H: d/dv_e = T_m v_e/v, d/dv_n = T_m v_n/v, d/dq_s = 1
+
+The heading row is skipped below ``omega_min_speed`` (of the predicted state:
+the Jacobian divides by v2); below ``v_lin`` the distance row is linearised
+along the latest heading instead of ``v/|v|``: no division by a speed that
+can be zero.  Heading residuals are wrapped to (-pi, pi].
+
+Updates are sequential scalar rows with the Joseph form
+``P = (I - K h) P (I - K h)^T + K r K^T`` (computed in O(n^2) for a row) and
+P symmetrised after each.
+
+Master fusion (each epoch):
+
+* covariance weighting (fkf): ``P_g = (sum_i P_i^-1)^-1``,
+  ``x_g = P_g sum_i P_i^-1 x_i`` (seed 002 section 4 / Carlson 1990), every
+  inverse through a Cholesky factor and solves.  In NR mode a filter's
+  information is taken only over the states it can observe (the marginal of
+  its P over them): the GNSS filter never contributes q_w, q_s, the DR filter
+  never eps_e, eps_n -- their copies there are the never-updated prior, and
+  fusing them would count that prior twice and pull the other filter's
+  estimate towards zero.  In FR mode every state is fused (the reset gives
+  each filter a consistent share of all of them).
+* fuzzy weights (fafkf, seed 002 eq. (19)-(20)): ``x_g = W1 x1 + W2 x2`` with
+  diagonal weight matrices ``W1 + W2 = I``; ``P_g = W1 P1 W1 + W2 P2 W2``
+  (the covariance of that combination when the local errors are bounded by
+  blockdiag(P1, P2), Carlson's invariant).  Shared states (position, velocity,
+  acceleration) get the controller's beta (one scalar, or one per block:
+  position block [e, n] and velocity block [v, a]); each sensor-error state
+  comes from the filter that observes it.
+
+Modes: NR (no reset, seed 002's choice) keeps the local filters apart; FR
+(fusion-reset, Carlson 1990) sets ``x_i = x_g``, ``P_i = P_g / c_i`` after
+each fusion and predicts with ``Q_i = Q / c_i`` (shares ``c_1 + c_2 = 1``),
+which keeps the fused covariance consistent.  fkf uses ``c_1 = beta_gnss``;
+fafkf the position-block (or scalar) beta of the epoch.
+
+Adaptive R (fafkf, seed 002 section 3): see :mod:`gpsdr_cli.filters.fuzzy`;
+the controller's table is interpolated here, once per measurement row.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .linalg import chol_solve, cholesky, is_spd, rts_step, symmetrize
+
+NX = 10
+IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS = range(NX)
+
+# ---- float parameter vector (built by fkf.kernel_parameters) ---------------------------
+K_TAU_EPS = 0      # s, correlation time of eps_e, eps_n
+K_EPS_SD = 1       # m, steady-state sigma of eps_e, eps_n
+K_JERK_PSD = 2     # m^2/s^5, white-jerk spectral density of each axis
+K_QW_RW = 3        # rad/sqrt(s), random walk of q_w
+K_QS_RW = 4        # m/sqrt(s), random walk of q_s
+K_HEAD_SD = 5      # rad, sigma of the heading measurement Theta
+K_ODO_SD = 6       # m/s, odometer speed sigma (distance sigma = this x T_m)
+K_ZUPT_SD = 7      # m/s (and m/s^2), sigma of the zero-velocity pseudo-measurements
+K_OMEGA_MIN = 8    # m/s, heading row skipped below this predicted speed
+K_GATE_CHI2 = 9    # chi-square(2) gate threshold; <= 0 disables the gate
+K_GATE_RESET_S = 10  # s, accept again after this long with every fix rejected
+K_R_MIN = 11       # lower clamp of the R adaptation factor
+K_R_MAX = 12       # upper clamp
+K_DELTA_MAX = 13   # largest |Delta| of one R adaptation step
+K_RES_CLIP = 14    # r^2 clipped to this x Te before entering the window
+K_BETA_GNSS = 15   # fkf FR: information share of the GNSS filter
+K_V_LIN = 16       # m/s, below this the distance row is linearised along the heading
+N_PAR = 17
+
+# ---- integer flags --------------------------------------------------------------------
+F_MODE_FR = 0      # 1: fusion-reset, 0: no reset
+F_ADAPT_R = 1      # 1: fuzzy adaptive R
+F_FUSION = 2       # 0: covariance weighting, 1: fuzzy scalar weight, 2: fuzzy block weights
+F_NORM = 3         # 0: share, 1: log
+F_WINDOW = 4       # M, residual window length
+F_GNSS_ON = 5      # the GNSS local filter exists (the drive has fixes)
+F_DR_ON = 6        # the DR local filter exists (the drive has gyro or odometer)
+F_STORE = 7        # store the fused x, P per epoch for the smoother
+F_CHECK_SPD = 8    # count epochs where a P fails the SPD test (tests)
+N_FLAGS = 9
+
+FUSE_COV = 0
+FUSE_SCALAR = 1
+FUSE_BLOCK = 2
+
+# ---- counters -------------------------------------------------------------------------
+C_GNSS_USED = 0
+C_GNSS_REJECTED = 1
+C_GATE_RESETS = 2
+C_HEADING = 3
+C_HEADING_SLOW = 4
+C_DIST = 5
+C_ZUPT = 6
+C_NOT_SPD = 7
+C_R_ADAPT = 8
+N_COUNTERS = 9
+
+# Output columns of the fused track.
+O_E, O_N, O_VE, O_VN, O_VAR_E, O_VAR_N, O_COV_EN = range(7)
+N_OUT = 7
+
+NPACK = NX * (NX + 1) // 2
+
+
+@njit(cache=True)
+def pack(P: np.ndarray, out: np.ndarray) -> None:
+    """Upper triangle of P, row by row, into ``out`` (length n(n+1)/2)."""
+    m = 0
+    for i in range(P.shape[0]):
+        for j in range(i, P.shape[0]):
+            out[m] = P[i, j]
+            m += 1
+
+
+@njit(cache=True)
+def unpack(p: np.ndarray, P: np.ndarray) -> None:
+    """Inverse of :func:`pack`."""
+    m = 0
+    for i in range(P.shape[0]):
+        for j in range(i, P.shape[0]):
+            P[i, j] = p[m]
+            P[j, i] = p[m]
+            m += 1
+
+
+@njit(cache=True)
+def wrap_pi(a: float) -> float:
+    """Angle wrapped to (-pi, pi]."""
+    return a - 2.0 * math.pi * math.ceil((a - math.pi) / (2.0 * math.pi))
+
+
+@njit(cache=True)
+def interp1_uniform(table: np.ndarray, lo: float, hi: float, x: float) -> float:
+    """Linear interpolation of ``table`` sampled evenly over [lo, hi]; clamped outside."""
+    n = table.shape[0]
+    if not x > lo:
+        return table[0]
+    if x >= hi:
+        return table[n - 1]
+    f = (x - lo) / (hi - lo) * (n - 1)
+    i = min(int(f), n - 2)
+    w = f - i
+    return table[i] + w * (table[i + 1] - table[i])
+
+
+@njit(cache=True)
+def interp2_unit(table: np.ndarray, a: float, b: float) -> float:
+    """Bilinear interpolation of ``table`` sampled evenly over [0, 1]^2 (rows a, columns b)."""
+    n = table.shape[0]
+    a = min(max(a, 0.0), 1.0)
+    b = min(max(b, 0.0), 1.0)
+    fa = a * (n - 1)
+    fb = b * (n - 1)
+    ia = min(int(fa), n - 2)
+    ib = min(int(fb), n - 2)
+    wa = fa - ia
+    wb = fb - ib
+    t0 = table[ia, ib] + wb * (table[ia, ib + 1] - table[ia, ib])
+    t1 = table[ia + 1, ib] + wb * (table[ia + 1, ib + 1] - table[ia + 1, ib])
+    return t0 + wa * (t1 - t0)
+
+
+@njit(cache=True)
+def predict(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: np.ndarray,
+            d: np.ndarray) -> None:
+    """x <- Phi x, P <- Phi P Phi^T + D Q D over a step of T s (seed 002 eqs. (1)-(3)).
+
+    ``d`` (length 10) scales Q per state: ``(D Q D)_ij = d_i Q_ij d_j``; all ones
+    for the master, ``1/sqrt(c_i)`` for a local filter after a fusion-reset.
+    """
+    if not T > 0.0:
+        return
+    if not static:
+        h2 = 0.5 * T * T
+        for b in range(0, 6, 3):                    # axes e (0..2) and n (3..5)
+            x[b] += T * x[b + 1] + h2 * x[b + 2]
+            x[b + 1] += T * x[b + 2]
+            for j in range(NX):                     # rows: Phi P
+                P[b, j] += T * P[b + 1, j] + h2 * P[b + 2, j]
+                P[b + 1, j] += T * P[b + 2, j]
+            for i in range(NX):                     # columns: (Phi P) Phi^T
+                P[i, b] += T * P[i, b + 1] + h2 * P[i, b + 2]
+                P[i, b + 1] += T * P[i, b + 2]
+        q = par[K_JERK_PSD]
+        T2 = T * T
+        T3 = T2 * T
+        for b in range(0, 6, 3):                    # white-jerk Q per axis
+            d0 = d[b]
+            d1 = d[b + 1]
+            d2 = d[b + 2]
+            P[b, b] += q * T3 * T2 / 20.0 * d0 * d0
+            P[b, b + 1] += q * T2 * T2 / 8.0 * d0 * d1
+            P[b + 1, b] += q * T2 * T2 / 8.0 * d0 * d1
+            P[b, b + 2] += q * T3 / 6.0 * d0 * d2
+            P[b + 2, b] += q * T3 / 6.0 * d0 * d2
+            P[b + 1, b + 1] += q * T3 / 3.0 * d1 * d1
+            P[b + 1, b + 2] += q * T2 / 2.0 * d1 * d2
+            P[b + 2, b + 1] += q * T2 / 2.0 * d1 * d2
+            P[b + 2, b + 2] += q * T * d2 * d2
+    f = math.exp(-T / par[K_TAU_EPS])               # Gauss-Markov eps_e, eps_n
+    for s in range(IEPS_E, IEPS_N + 1):
+        x[s] *= f
+        for j in range(NX):
+            P[s, j] *= f
+        for i in range(NX):
+            P[i, s] *= f
+    qe = par[K_EPS_SD] ** 2 * (1.0 - f * f)
+    P[IEPS_E, IEPS_E] += qe * d[IEPS_E] ** 2
+    P[IEPS_N, IEPS_N] += qe * d[IEPS_N] ** 2
+    P[IQW, IQW] += par[K_QW_RW] ** 2 * T * d[IQW] ** 2   # random walks q_w, q_s
+    P[IQS, IQS] += par[K_QS_RW] ** 2 * T * d[IQS] ** 2
+
+
+@njit(cache=True)
+def phi_matrix(T: float, static: bool, par: np.ndarray, Phi: np.ndarray) -> None:
+    """The dense Phi of a step (for the smoother; the filters apply it in place)."""
+    for i in range(NX):
+        for j in range(NX):
+            Phi[i, j] = 1.0 if i == j else 0.0
+    if not static:
+        for b in range(0, 6, 3):
+            Phi[b, b + 1] = T
+            Phi[b, b + 2] = 0.5 * T * T
+            Phi[b + 1, b + 2] = T
+    f = math.exp(-T / par[K_TAU_EPS])
+    Phi[IEPS_E, IEPS_E] = f
+    Phi[IEPS_N, IEPS_N] = f
+
+
+@njit(cache=True)
+def update_row(x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, r: float,
+               s: np.ndarray, k: np.ndarray, a: np.ndarray) -> float:
+    """Scalar measurement update, Joseph form; returns the innovation variance h P h^T + r.
+
+    ``y`` is the innovation z - h(x); ``s``, ``k``, ``a`` are length-10 scratch.
+    Joseph form ``(I - K h) P (I - K h)^T + K r K^T``, computed as
+    ``A = P - K s^T`` (s = P h^T), ``a = A h^T``, ``P = A - a K^T + r K K^T``:
+    O(n^2) for one row, and it stays PSD under rounding.
+    """
+    for i in range(NX):
+        acc = 0.0
+        for j in range(NX):
+            if h[j] != 0.0:
+                acc += P[i, j] * h[j]
+        s[i] = acc
+    sig = r
+    for j in range(NX):
+        sig += h[j] * s[j]
+    for i in range(NX):
+        k[i] = s[i] / sig
+    for i in range(NX):
+        for j in range(NX):
+            P[i, j] -= k[i] * s[j]                  # A = (I - K h) P
+    for i in range(NX):
+        acc = 0.0
+        for j in range(NX):
+            if h[j] != 0.0:
+                acc += P[i, j] * h[j]
+        a[i] = acc
+    for i in range(NX):
+        x[i] += k[i] * y
+        for j in range(NX):
+            P[i, j] += -a[i] * k[j] + r * k[i] * k[j]
+    symmetrize(P)
+    return sig
+
+
+@njit(cache=True)
+def hph(P: np.ndarray, h: np.ndarray) -> float:
+    """h P h^T for a row h."""
+    acc = 0.0
+    for i in range(NX):
+        if h[i] != 0.0:
+            for j in range(NX):
+                if h[j] != 0.0:
+                    acc += h[i] * P[i, j] * h[j]
+    return acc
+
+
+@njit(cache=True)
+def zupt(x: np.ndarray, P: np.ndarray, sd: float, h: np.ndarray, s: np.ndarray,
+         k: np.ndarray, a: np.ndarray) -> None:
+    """Zero-velocity update: v_e = v_n = a_e = a_n = 0 with sigma ``sd`` (seed 004 static mode)."""
+    for idx in (IVE, IVN, IAE, IAN):
+        h[:] = 0.0
+        h[idx] = 1.0
+        update_row(x, P, h, -x[idx], sd * sd, s, k, a)
+
+
+@njit(cache=True)
+def heading_row(x: np.ndarray, h: np.ndarray) -> float:
+    """Fill h with the heading row at x; return the prediction atan2(v_e, v_n) + q_w (rad).
+
+    Caller guarantees v_e^2 + v_n^2 >= omega_min_speed^2 > 0.  seed 002 eqs. (11)-(12).
+    """
+    ve = x[IVE]
+    vn = x[IVN]
+    v2 = ve * ve + vn * vn
+    h[:] = 0.0
+    h[IVE] = vn / v2
+    h[IVN] = -ve / v2
+    h[IQW] = 1.0
+    return math.atan2(ve, vn) + x[IQW]
+
+
+@njit(cache=True)
+def distance_row(x: np.ndarray, h: np.ndarray, t_m: float, v_lin: float, psi_hint: float) -> float:
+    """Fill h with the odometer-distance row; return the prediction T_m |v| + q_s (m).
+
+    seed 002 eqs. (13)-(14) with the erratum (divide by v, not v2).  Below
+    ``v_lin`` the speed is linearised along the heading ``psi_hint`` instead.
+    """
+    ve = x[IVE]
+    vn = x[IVN]
+    v = math.sqrt(ve * ve + vn * vn)
+    h[:] = 0.0
+    h[IQS] = 1.0
+    if v >= v_lin:
+        h[IVE] = t_m * ve / v
+        h[IVN] = t_m * vn / v
+        return t_m * v + x[IQS]
+    ue = math.sin(psi_hint)
+    un = math.cos(psi_hint)
+    h[IVE] = t_m * ue
+    h[IVN] = t_m * un
+    return t_m * (ue * ve + un * vn) + x[IQS]
+
+
+@njit(cache=True)
+def adapt_r(j: int, r2: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt: np.ndarray,
+            par: np.ndarray, r_table: np.ndarray, rfac: np.ndarray, u_last: np.ndarray) -> bool:
+    """Covariance matching for component j (seed 002 eqs. (15)-(18)) + the fuzzy R controller.
+
+    Pushes the squared prior residual (clipped to ``res_clip x Te``) into the
+    window; once it holds M values: ``Ra = mean``, ``u = (Te - Ra)/Te``,
+    ``Delta = delta_max * table(u)``, ``f_j *= 1 + Delta`` clamped.  Returns
+    True when R was adapted.
+    """
+    m = ring.shape[1]
+    v = min(r2, par[K_RES_CLIP] * te)
+    ring[j, pos[j]] = v
+    pos[j] = (pos[j] + 1) % m
+    cnt[j] += 1
+    if cnt[j] < m:
+        return False
+    ra = 0.0
+    for i in range(m):
+        ra += ring[j, i]
+    ra /= m                                         # seed 002 eq. (16)
+    u = (te - ra) / te                              # Dis_jj / Te_jj, eqs. (17)-(18)
+    u = min(max(u, -1.0), 1.0)
+    u_last[j] = u
+    f = rfac[j] * (1.0 + par[K_DELTA_MAX] * interp1_uniform(r_table, -1.0, 1.0, u))
+    rfac[j] = min(max(f, par[K_R_MIN]), par[K_R_MAX])
+    return True
+
+
+@njit(cache=True)
+def fuse_information(x1: np.ndarray, P1: np.ndarray, idx1: np.ndarray,
+                     x2: np.ndarray, P2: np.ndarray, idx2: np.ndarray,
+                     xg: np.ndarray, Pg: np.ndarray, Y: np.ndarray, yv: np.ndarray,
+                     A1: np.ndarray, L1: np.ndarray, B1: np.ndarray, b1: np.ndarray,
+                     A2: np.ndarray, L2: np.ndarray, B2: np.ndarray, b2: np.ndarray,
+                     L: np.ndarray) -> None:
+    """Covariance-weighted fusion over the states ``idx_i`` each filter contributes.
+
+    ``Y = sum_i E_i (P_i[idx_i, idx_i])^-1 E_i^T``, ``P_g = Y^-1``,
+    ``x_g = P_g sum_i E_i P_i[idx_i, idx_i]^-1 x_i[idx_i]`` -- every inverse by a
+    Cholesky factor and triangular solves.  ``yv`` is (10, 1) scratch; the
+    A/L/B/b arrays are scratch of the sub-block sizes.
+    """
+    for i in range(NX):
+        yv[i, 0] = 0.0
+        for j in range(NX):
+            Y[i, j] = 0.0
+    for f in range(2):
+        if f == 0:
+            x, P, idx, A, Lk, B, b = x1, P1, idx1, A1, L1, B1, b1
+        else:
+            x, P, idx, A, Lk, B, b = x2, P2, idx2, A2, L2, B2, b2
+        k = idx.shape[0]
+        for a in range(k):
+            b[a, 0] = x[idx[a]]
+            for c in range(k):
+                A[a, c] = P[idx[a], idx[c]]
+                B[a, c] = 1.0 if a == c else 0.0
+        cholesky(A, Lk)
+        chol_solve(Lk, B)                           # B = P_i^-1 (marginal)
+        chol_solve(Lk, b)                           # b = P_i^-1 x_i
+        for a in range(k):
+            yv[idx[a], 0] += b[a, 0]
+            for c in range(k):
+                Y[idx[a], idx[c]] += B[a, c]
+    symmetrize(Y)
+    cholesky(Y, L)
+    for i in range(NX):
+        for j in range(NX):
+            Pg[i, j] = 1.0 if i == j else 0.0
+    chol_solve(L, Pg)                               # P_g = Y^-1
+    symmetrize(Pg)
+    chol_solve(L, yv)                               # x_g = Y^-1 sum P_i^-1 x_i
+    for i in range(NX):
+        xg[i] = yv[i, 0]
+
+
+@njit(cache=True)
+def normalise_pair(a: float, b: float, log_scale: bool) -> tuple[float, float]:
+    """Normalise two non-negative evaluation factors to [0, 1] (ALGORITHMS.md 2, our choice).
+
+    share: ``a/(a+b)`` (both 0 when both are 0: equally perfect);
+    log: ``0.5 + 0.25 log10(a/b)`` clipped to [0, 1] (two decades either side saturate).
+    """
+    if log_scale:
+        tiny = 1e-300
+        la = 0.5 + 0.25 * math.log10((a + tiny) / (b + tiny))
+        la = min(max(la, 0.0), 1.0)
+        return la, 1.0 - la
+    tot = a + b
+    if not tot > 0.0:
+        return 0.0, 0.0
+    return a / tot, b / tot
+
+
+@njit(cache=True)
+def in_block(i: int, block: int) -> bool:
+    """State i belongs to block 0 (all), 1 (position e, n) or 2 (velocity and acceleration)."""
+    if block == 1:
+        return i == IE or i == IN
+    if block == 2:
+        return i == IVE or i == IAE or i == IVN or i == IAN
+    return True
+
+
+@njit(cache=True)
+def block_pe(P: np.ndarray, d: np.ndarray, block: int) -> float:
+    """PE = tr(M M^T), M = D^-1 P D^-1, over a state block (seed 002 section 4).
+
+    ``d`` is the filter's reset scaling (ones in NR mode), so M is its
+    covariance before the reset's inflation; blocks: see :func:`in_block`.
+    """
+    acc = 0.0
+    for i in range(NX):
+        if not in_block(i, block):
+            continue
+        for j in range(NX):
+            if in_block(j, block):
+                v = P[i, j] / (d[i] * d[j])
+                acc += v * v
+    return acc
+
+
+@njit(cache=True)
+def fuzzy_beta(pe1: float, pe2: float, de1n: float, de2n: float, log_scale: bool,
+               w_table: np.ndarray) -> float:
+    """beta_1 = W_1/(W_1 + W_2) from the fusion controller (seed 002 eq. (20))."""
+    p1, p2 = normalise_pair(pe1, pe2, log_scale)
+    w1 = interp2_unit(w_table, p1, de1n)
+    w2 = interp2_unit(w_table, p2, de2n)
+    return w1 / (w1 + w2)
+
+
+@njit(cache=True)
+def fuse_convex(x1: np.ndarray, P1: np.ndarray, x2: np.ndarray, P2: np.ndarray,
+                w: np.ndarray, xg: np.ndarray, Pg: np.ndarray) -> None:
+    """x_g = W x1 + (I - W) x2, P_g = W P1 W + (I - W) P2 (I - W), W = diag(w) (seed 002 eq. (19))."""
+    for i in range(NX):
+        xg[i] = w[i] * x1[i] + (1.0 - w[i]) * x2[i]
+        for j in range(NX):
+            Pg[i, j] = w[i] * w[j] * P1[i, j] + (1.0 - w[i]) * (1.0 - w[j]) * P2[i, j]
+
+
+@njit(cache=True)
+def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n: np.ndarray,
+               gnss_var_e: np.ndarray, gnss_var_n: np.ndarray, theta: np.ndarray,
+               dist: np.ndarray, t_m: np.ndarray, static: np.ndarray, x0: np.ndarray,
+               P0: np.ndarray, psi0: float, par: np.ndarray, flags: np.ndarray,
+               r_table: np.ndarray, w_table: np.ndarray):
+    n = dt.shape[0]
+    mode_fr = flags[F_MODE_FR] != 0
+    adaptive = flags[F_ADAPT_R] != 0
+    fusion = flags[F_FUSION]
+    log_scale = flags[F_NORM] != 0
+    m_window = max(flags[F_WINDOW], 1)
+    gnss_on = flags[F_GNSS_ON] != 0
+    dr_on = flags[F_DR_ON] != 0
+    store = flags[F_STORE] != 0
+    check = flags[F_CHECK_SPD] != 0
+    both = gnss_on and dr_on
+
+    out = np.zeros((n, N_OUT))
+    gnss_used = np.zeros(n, np.bool_)
+    gnss_rej = np.zeros(n, np.bool_)
+    nis_out = np.full(n, np.nan)
+    beta_out = np.full((n, 2), np.nan)              # GNSS weight: position, velocity
+    rfac_out = np.ones((n, 4))                      # R factors: gnss e, gnss n, heading, distance
+    counters = np.zeros(N_COUNTERS, np.int64)
+    ns = n if store else 1
+    xs = np.zeros((ns, NX))
+    Ps = np.zeros((ns, NPACK))
+
+    # local filters; per-state shares c_i, d_i = 1/sqrt(c_i): FR keeps
+    # P_i = D_i P_g D_i and predicts with Q_i = D_i Q D_i (c_1 + c_2 = 1 per state)
+    d1 = np.ones(NX)
+    d2 = np.ones(NX)
+    if mode_fr and both:
+        c0 = min(max(par[K_BETA_GNSS], 0.05), 0.95) if fusion == FUSE_COV else 0.5
+        d1[:] = 1.0 / math.sqrt(c0)
+        d2[:] = 1.0 / math.sqrt(1.0 - c0)
+    x1 = x0.copy()
+    x2 = x0.copy()
+    P1 = P0 * np.outer(d1, d1)
+    P2 = P0 * np.outer(d2, d2)
+    xg = x0.copy()
+    Pg = P0.copy()
+
+    # states each filter contributes to the NR fusion (see the module docstring)
+    if mode_fr:
+        idx1 = np.arange(NX)
+        idx2 = np.arange(NX)
+    else:
+        idx1 = np.array([IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N])
+        idx2 = np.array([IE, IVE, IAE, IN, IVN, IAN, IQW, IQS])
+    k1 = idx1.shape[0]
+    k2 = idx2.shape[0]
+    A1 = np.empty((k1, k1))
+    L1 = np.empty((k1, k1))
+    B1 = np.empty((k1, k1))
+    b1 = np.empty((k1, 1))
+    A2 = np.empty((k2, k2))
+    L2 = np.empty((k2, k2))
+    B2 = np.empty((k2, k2))
+    b2 = np.empty((k2, 1))
+    Y = np.empty((NX, NX))
+    yv = np.empty((NX, 1))
+    L = np.empty((NX, NX))
+
+    h = np.zeros(NX)
+    s = np.zeros(NX)
+    kk = np.zeros(NX)
+    aa = np.zeros(NX)
+    w = np.zeros(NX)
+
+    ring = np.zeros((4, m_window))
+    pos = np.zeros(4, np.int64)
+    cnt = np.zeros(4, np.int64)
+    rfac = np.ones(4)
+    u_last = np.zeros(4)
+
+    t_now = 0.0
+    t_last_acc = 0.0
+    psi_hint = psi0
+    zupt_sd = par[K_ZUPT_SD]
+    omin2 = par[K_OMEGA_MIN] ** 2
+    chi2 = par[K_GATE_CHI2]
+
+    for kx in range(n):
+        T = dt[kx] if kx > 0 else 0.0
+        t_now += T
+        st = static[kx]
+        if gnss_on:
+            predict(x1, P1, T, st, par, d1)
+        if dr_on:
+            predict(x2, P2, T, st, par, d2)
+        if st:
+            counters[C_ZUPT] += 1
+
+        # ---- GNSS local filter -------------------------------------------------------
+        if gnss_on:
+            if st:
+                zupt(x1, P1, zupt_sd, h, s, kk, aa)
+            if has_gnss[kx]:
+                ye = gnss_e[kx] - (x1[IE] + x1[IEPS_E])
+                yn = gnss_n[kx] - (x1[IN] + x1[IEPS_N])
+                s00 = P1[IE, IE] + 2.0 * P1[IE, IEPS_E] + P1[IEPS_E, IEPS_E]
+                s11 = P1[IN, IN] + 2.0 * P1[IN, IEPS_N] + P1[IEPS_N, IEPS_N]
+                s01 = P1[IE, IN] + P1[IE, IEPS_N] + P1[IEPS_E, IN] + P1[IEPS_E, IEPS_N]
+                if adaptive:
+                    if adapt_r(0, ye * ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
+                               par, r_table, rfac, u_last):
+                        counters[C_R_ADAPT] += 1
+                    if adapt_r(1, yn * yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
+                               par, r_table, rfac, u_last):
+                        counters[C_R_ADAPT] += 1
+                re = rfac[0] * gnss_var_e[kx]
+                rn = rfac[1] * gnss_var_n[kx]
+                s00 += re
+                s11 += rn
+                det = s00 * s11 - s01 * s01
+                nis = (s11 * ye * ye - 2.0 * s01 * ye * yn + s00 * yn * yn) / det
+                nis_out[kx] = nis
+                accept = True
+                if chi2 > 0.0 and nis > chi2:
+                    if t_now - t_last_acc > par[K_GATE_RESET_S]:
+                        counters[C_GATE_RESETS] += 1
+                    else:
+                        accept = False
+                if accept:
+                    h[:] = 0.0
+                    h[IE] = 1.0
+                    h[IEPS_E] = 1.0
+                    update_row(x1, P1, h, gnss_e[kx] - (x1[IE] + x1[IEPS_E]), re, s, kk, aa)
+                    h[:] = 0.0
+                    h[IN] = 1.0
+                    h[IEPS_N] = 1.0
+                    update_row(x1, P1, h, gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk, aa)
+                    gnss_used[kx] = True
+                    counters[C_GNSS_USED] += 1
+                    t_last_acc = t_now
+                else:
+                    gnss_rej[kx] = True
+                    counters[C_GNSS_REJECTED] += 1
+        else:
+            t_last_acc = t_now
+
+        # ---- DR local filter ---------------------------------------------------------
+        if dr_on:
+            if st:
+                zupt(x2, P2, zupt_sd, h, s, kk, aa)
+            else:
+                do_head = False
+                do_dist = False
+                if not math.isnan(theta[kx]):
+                    psi_hint = theta[kx] - x2[IQW]
+                    if x2[IVE] ** 2 + x2[IVN] ** 2 >= omin2:
+                        do_head = True
+                    else:
+                        counters[C_HEADING_SLOW] += 1
+                if not math.isnan(dist[kx]) and t_m[kx] > 0.0:
+                    do_dist = True
+                r_head = par[K_HEAD_SD] ** 2
+                r_dist = (par[K_ODO_SD] * t_m[kx]) ** 2
+                if adaptive:                        # prior residuals, seed 002 eq. (15)
+                    if do_head:
+                        pred = heading_row(x2, h)
+                        y = wrap_pi(theta[kx] - pred)
+                        if adapt_r(2, y * y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
+                                   par, r_table, rfac, u_last):
+                            counters[C_R_ADAPT] += 1
+                    if do_dist:
+                        pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
+                        y = dist[kx] - pred
+                        if adapt_r(3, y * y, hph(P2, h) + rfac[3] * r_dist, ring, pos, cnt,
+                                   par, r_table, rfac, u_last):
+                            counters[C_R_ADAPT] += 1
+                if do_head:
+                    pred = heading_row(x2, h)
+                    update_row(x2, P2, h, wrap_pi(theta[kx] - pred), rfac[2] * r_head, s, kk, aa)
+                    counters[C_HEADING] += 1
+                if do_dist:
+                    pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
+                    update_row(x2, P2, h, dist[kx] - pred, rfac[3] * r_dist, s, kk, aa)
+                    counters[C_DIST] += 1
+
+        # ---- master fusion -----------------------------------------------------------
+        if both:
+            if fusion == FUSE_COV:
+                fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
+                                 A1, L1, B1, b1, A2, L2, B2, b2, L)
+                beta_out[kx, 0] = 0.5 * (Pg[IE, IE] / P1[IE, IE] + Pg[IN, IN] / P1[IN, IN])
+                beta_out[kx, 1] = 0.5 * (Pg[IVE, IVE] / P1[IVE, IVE] + Pg[IVN, IVN] / P1[IVN, IVN])
+                for i in range(NX):
+                    w[i] = par[K_BETA_GNSS]
+            else:
+                de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
+                                            u_last[2] ** 2 + u_last[3] ** 2, log_scale)
+                if fusion == FUSE_BLOCK:
+                    bp = fuzzy_beta(block_pe(P1, d1, 1), block_pe(P2, d2, 1),
+                                    de1n, de2n, log_scale, w_table)
+                    bv = fuzzy_beta(block_pe(P1, d1, 2), block_pe(P2, d2, 2),
+                                    de1n, de2n, log_scale, w_table)
+                else:
+                    bp = fuzzy_beta(block_pe(P1, d1, 0), block_pe(P2, d2, 0),
+                                    de1n, de2n, log_scale, w_table)
+                    bv = bp
+                w[IE] = bp
+                w[IN] = bp
+                w[IVE] = bv
+                w[IAE] = bv
+                w[IVN] = bv
+                w[IAN] = bv
+                if mode_fr:                         # sensor-error states: the block's weight
+                    w[IEPS_E] = bp
+                    w[IEPS_N] = bp
+                    w[IQW] = bv
+                    w[IQS] = bv
+                else:                               # NR: from the filter that observes them
+                    w[IEPS_E] = 1.0
+                    w[IEPS_N] = 1.0
+                    w[IQW] = 0.0
+                    w[IQS] = 0.0
+                fuse_convex(x1, P1, x2, P2, w, xg, Pg)
+                beta_out[kx, 0] = bp
+                beta_out[kx, 1] = bv
+            if mode_fr:                             # Carlson 1990 fusion-reset
+                for i in range(NX):
+                    ci = min(max(w[i], 0.05), 0.95)
+                    d1[i] = 1.0 / math.sqrt(ci)
+                    d2[i] = 1.0 / math.sqrt(1.0 - ci)
+                for i in range(NX):
+                    x1[i] = xg[i]
+                    x2[i] = xg[i]
+                    for j in range(NX):
+                        P1[i, j] = Pg[i, j] * d1[i] * d1[j]
+                        P2[i, j] = Pg[i, j] * d2[i] * d2[j]
+        elif gnss_on:
+            xg[:] = x1
+            Pg[:, :] = P1
+            beta_out[kx, 0] = 1.0
+            beta_out[kx, 1] = 1.0
+        elif dr_on:
+            xg[:] = x2
+            Pg[:, :] = P2
+            beta_out[kx, 0] = 0.0
+            beta_out[kx, 1] = 0.0
+
+        if check and ((gnss_on and not is_spd(P1)) or (dr_on and not is_spd(P2))
+                      or not is_spd(Pg)):
+            counters[C_NOT_SPD] += 1
+        out[kx, O_E] = xg[IE]
+        out[kx, O_N] = xg[IN]
+        out[kx, O_VE] = xg[IVE]
+        out[kx, O_VN] = xg[IVN]
+        out[kx, O_VAR_E] = Pg[IE, IE]
+        out[kx, O_VAR_N] = Pg[IN, IN]
+        out[kx, O_COV_EN] = Pg[IE, IN]
+        rfac_out[kx, :] = rfac
+        if store:
+            xs[kx, :] = xg
+            pack(Pg, Ps[kx])
+    return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps
+
+
+@njit(cache=True)
+def fkf_kernel(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, theta, dist, t_m,
+               static, x0, P0, psi0, par, flags, r_table, w_table):
+    """Federated Kalman filter, covariance-weighted master fusion (flags[F_FUSION] = 0)."""
+    flags = flags.copy()
+    flags[F_FUSION] = FUSE_COV
+    flags[F_ADAPT_R] = 0
+    return _federated(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, theta, dist, t_m,
+                      static, x0, P0, psi0, par, flags, r_table, w_table)
+
+
+@njit(cache=True)
+def fafkf_kernel(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, theta, dist, t_m,
+                 static, x0, P0, psi0, par, flags, r_table, w_table):
+    """Fuzzy adaptive federated Kalman filter (fuzzy R, fuzzy fusion weights)."""
+    flags = flags.copy()
+    if flags[F_FUSION] == FUSE_COV:
+        flags[F_FUSION] = FUSE_BLOCK
+    flags[F_ADAPT_R] = 1
+    return _federated(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, theta, dist, t_m,
+                      static, x0, P0, psi0, par, flags, r_table, w_table)
+
+
+@njit(cache=True)
+def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndarray,
+                 par: np.ndarray) -> tuple[np.ndarray, int]:
+    """Fixed-interval RTS smoother over the fused sequence with the master's prediction.
+
+    The prior of epoch k+1 is recomputed from the fused posterior of k
+    (``Phi(dt[k+1]) x_g``, ``Phi P_g Phi^T + Q``, Q unscaled): nothing but the
+    fused x and packed P are stored per epoch.  Returns the smoothed outputs
+    (columns as the forward ``out``) and the count of epochs whose smoothed P
+    failed the SPD test.
+    """
+    n = xs.shape[0]
+    out = np.zeros((n, N_OUT))
+    x_post = np.zeros(NX)
+    P_post = np.zeros((NX, NX))
+    x_prior = np.zeros(NX)
+    P_prior = np.zeros((NX, NX))
+    Phi = np.zeros((NX, NX))
+    ones = np.ones(NX)
+    x_sn = xs[n - 1].copy()
+    P_sn = np.zeros((NX, NX))
+    unpack(Ps[n - 1], P_sn)
+    x_s = np.zeros(NX)
+    P_s = np.zeros((NX, NX))
+    wL = np.zeros((NX, NX))
+    wB = np.zeros((NX, NX))
+    not_spd = 0
+    for k in range(n - 1, -1, -1):
+        if k < n - 1:
+            x_post[:] = xs[k]
+            unpack(Ps[k], P_post)
+            x_prior[:] = x_post
+            P_prior[:, :] = P_post
+            predict(x_prior, P_prior, dt[k + 1], static[k + 1], par, ones)
+            phi_matrix(dt[k + 1], static[k + 1], par, Phi)
+            rts_step(x_post, P_post, x_prior, P_prior, Phi, x_sn, P_sn, x_s, P_s, wL, wB)
+            x_sn[:] = x_s
+            P_sn[:, :] = P_s
+        out[k, O_E] = x_sn[IE]
+        out[k, O_N] = x_sn[IN]
+        out[k, O_VE] = x_sn[IVE]
+        out[k, O_VN] = x_sn[IVN]
+        out[k, O_VAR_E] = P_sn[IE, IE]
+        out[k, O_VAR_N] = P_sn[IN, IN]
+        out[k, O_COV_EN] = P_sn[IE, IN]
+        if not (P_sn[IE, IE] > 0.0 and P_sn[IN, IN] > 0.0
+                and P_sn[IE, IN] ** 2 < P_sn[IE, IE] * P_sn[IN, IN]):
+            not_spd += 1
+    return out, not_spd
