@@ -14,8 +14,10 @@ odo        ``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``),
 
 Encodings: ROS 2 CDR (a vectorised fixed-layout fast path,
 :mod:`gpsdr_cli.io.ros2_fast`, with ``mcap_ros2``'s generic decoder as the fallback
-for any message the fast path declines) and JSON; ``foxglove.LocationFix`` also
-in protobuf (a tiny hand-written wire decoder: its seven scalar fields only).
+for any message the fast path declines), ROS 1 (the same fast path; no generic
+fallback is installed, so a message it declines is counted as undecodable) and
+JSON; ``foxglove.LocationFix`` also in protobuf (a tiny hand-written wire
+decoder: its scalar fields only).
 Times are the message header stamps, int64 ns UTC; ``use_log_time`` takes the
 MCAP log times instead (and a zero stamp always falls back to the log time).
 When several channels of one kind exist, the one with the most usable messages
@@ -308,8 +310,8 @@ class _Walker:
         assert layout is not None
         enc = chan.encoding.lower()
         rest = np.arange(len(off))
-        if enc == "cdr" and layout != "locationfix":
-            fields, ok = ros2_fast.decode(layout, npbuf, off, sz)
+        if enc in ("cdr", "ros1") and layout != "locationfix":
+            fields, ok = ros2_fast.decode(layout, npbuf, off, sz, ros1=enc == "ros1")
             if ok.any():
                 chan.add("log_ns", lt[ok])
                 if layout == "sentence":

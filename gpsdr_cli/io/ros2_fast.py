@@ -62,22 +62,29 @@ def _align(q: np.ndarray, n: int) -> np.ndarray:
 class _Batch:
     """Bounds-checked gathers for one batch of messages in one buffer."""
 
-    def __init__(self, buf: np.ndarray, off: np.ndarray, size: np.ndarray) -> None:
+    def __init__(self, buf: np.ndarray, off: np.ndarray, size: np.ndarray, ros1: bool) -> None:
         self.buf = buf
-        self.p0 = off.astype(np.int64) + 4
+        self.ros1 = ros1
+        self.base = 0 if ros1 else 4  # bytes before q = 0
+        self.p0 = off.astype(np.int64) + self.base
         self.size = size.astype(np.int64)
         self.ok = self.size >= 16
-        # Encapsulation: 00 01 is CDR little endian; anything else goes to the generic decoder.
-        head = _gather(buf, np.where(self.ok, off, 0).astype(np.int64), _AR2, "<u2")
-        self.ok &= head == 0x0100
+        if not ros1:
+            # Encapsulation: 00 01 is CDR little endian; anything else goes to the generic decoder.
+            head = _gather(buf, np.where(self.ok, off, 0).astype(np.int64), _AR2, "<u2")
+            self.ok &= head == 0x0100
+
+    def al(self, q: np.ndarray, n: int) -> np.ndarray:
+        """Align q to n bytes (CDR); ROS 1 serialisation has no padding."""
+        return q if self.ros1 else _align(q, n)
 
     def need(self, q_end: np.ndarray | int) -> None:
-        """Mark messages shorter than 4 + q_end bytes as not decodable here."""
-        self.ok &= 4 + np.asarray(q_end, np.int64) <= self.size
+        """Mark messages shorter than base + q_end bytes as not decodable here."""
+        self.ok &= self.base + np.asarray(q_end, np.int64) <= self.size
 
     def _pos(self, q: np.ndarray | int, width: int) -> np.ndarray:
         q = np.asarray(q, np.int64)
-        good = self.ok & (4 + q + width <= self.size)
+        good = self.ok & (self.base + q + width <= self.size)
         return np.where(good, self.p0 + q, 0)
 
     def u8(self, q: np.ndarray | int) -> np.ndarray:
@@ -97,22 +104,26 @@ class _Batch:
 
     def string_end(self, q: np.ndarray) -> np.ndarray:
         """q after a string whose uint32 length is at align4(q)."""
-        q = _align(q, 4)
+        q = self.al(q, 4)
         self.need(q + 4)
         n = self.u32(q)
         self.need(q + 4 + n)
         return q + 4 + n
 
     def header(self) -> tuple[np.ndarray, np.ndarray]:
-        """(stamp in int64 ns, q after the header)."""
-        sec = self.i32(0)
-        nsec = self.u32(4)
+        """(stamp in int64 ns, q after the header).
+
+        ROS 2: int32 sec, uint32 nanosec, frame_id.  ROS 1: uint32 seq, uint32 sec,
+        uint32 nsec, frame_id (length without a NUL)."""
+        k = 4 if self.ros1 else 0
+        sec = self.u32(k) if self.ros1 else self.i32(0)
+        nsec = self.u32(k + 4)
         self.ok &= nsec < 1_000_000_000
-        q = self.string_end(np.full(len(self.p0), 8, np.int64))
+        q = self.string_end(np.full(len(self.p0), k + 8, np.int64))
         return sec * 1_000_000_000 + nsec, q
 
 
-def decode(layout: str, buf: np.ndarray, off: np.ndarray, size: np.ndarray
+def decode(layout: str, buf: np.ndarray, off: np.ndarray, size: np.ndarray, *, ros1: bool = False
            ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Decode messages ``buf[off[i]:off[i]+size[i]]`` of one layout.
 
@@ -123,13 +134,15 @@ def decode(layout: str, buf: np.ndarray, off: np.ndarray, size: np.ndarray
     (angular_velocity.z, rad/s), ``wz_cov0`` (angular_velocity_covariance[0]);
     twist/twistcov/odometry: ``vx``, ``vy`` (twist.linear, m/s); sentence:
     ``text_off``, ``text_len`` (the sentence bytes in ``buf``, NUL excluded).
+    ``ros1``: the ROS 1 serialisation (same field order, no encapsulation
+    header, no alignment, a ``seq`` before the stamp, strings without a NUL).
     """
-    b = _Batch(buf, np.asarray(off, np.int64), np.asarray(size, np.int64))
+    b = _Batch(buf, np.asarray(off, np.int64), np.asarray(size, np.int64), ros1)
     stamp_ns, q = b.header()
     out: dict[str, np.ndarray] = {"stamp_ns": stamp_ns}
     if layout == "navsatfix":
-        q_service = _align(q + 1, 2)
-        q_lat = _align(q_service + 2, 8)
+        q_service = b.al(q + 1, 2)
+        q_lat = b.al(q_service + 2, 8)
         b.need(q_lat + 97)
         out["status"] = b.i8(q)
         out["lat"] = b.f64(q_lat)
@@ -139,28 +152,28 @@ def decode(layout: str, buf: np.ndarray, off: np.ndarray, size: np.ndarray
         out["cov_n"] = b.f64(q_lat + 24 + 32)     # position_covariance[4]
         out["cov_type"] = b.u8(q_lat + 96)
     elif layout == "imu":
-        q_av = _align(q, 8) + 104                 # after orientation (4 f64) and its f64[9]
+        q_av = b.al(q, 8) + 104                 # after orientation (4 f64) and its f64[9]
         b.need(q_av + 24 + 72 + 24 + 72)
         out["wz"] = b.f64(q_av + 16)
         out["wz_cov0"] = b.f64(q_av + 24)
     elif layout in ("twist", "twistcov", "odometry"):
         if layout == "odometry":
             q = b.string_end(q)                   # child_frame_id
-            q_lin = _align(q, 8) + 344            # after PoseWithCovariance (7 + 36 f64)
+            q_lin = b.al(q, 8) + 344            # after PoseWithCovariance (7 + 36 f64)
             extra = 288
         else:
-            q_lin = _align(q, 8)
+            q_lin = b.al(q, 8)
             extra = 288 if layout == "twistcov" else 0
         b.need(q_lin + 48 + extra)
         out["vx"] = b.f64(q_lin)
         out["vy"] = b.f64(q_lin + 8)
     elif layout == "sentence":
-        q_s = _align(q, 4)
+        q_s = b.al(q, 4)
         b.need(q_s + 4)
         n = b.u32(q_s)
         b.need(q_s + 4 + n)
         out["text_off"] = b.p0 + q_s + 4
-        out["text_len"] = np.maximum(n - 1, 0)
+        out["text_len"] = n if ros1 else np.maximum(n - 1, 0)
     else:
         raise ValueError(f"unknown layout {layout!r}")
     return out, b.ok
@@ -212,13 +225,15 @@ SCHEMAS: dict[str, tuple[str, str]] = {
 
 
 class _CdrWriter:
-    """Little-endian CDR v1 with alignment counted after the 4-byte header."""
+    """Little-endian CDR v1 with alignment counted after the 4-byte header (or ROS 1)."""
 
-    def __init__(self) -> None:
-        self.out = bytearray(b"\x00\x01\x00\x00")
+    def __init__(self, ros1: bool) -> None:
+        self.ros1 = ros1
+        self.out = bytearray() if ros1 else bytearray(b"\x00\x01\x00\x00")
 
     def _pad(self, n: int) -> None:
-        self.out.extend(b"\x00" * (-(len(self.out) - 4) % n))
+        if not self.ros1:
+            self.out.extend(b"\x00" * (-(len(self.out) - 4) % n))
 
     def put(self, fmt: str, *values: float) -> None:
         self._pad(struct.calcsize("<" + fmt.lstrip("0123456789")[0]))
@@ -226,18 +241,25 @@ class _CdrWriter:
 
     def string(self, text: str | bytes) -> None:
         raw = text.encode("utf-8") if isinstance(text, str) else text
-        self.put("I", len(raw) + 1)
-        self.out.extend(raw + b"\x00")
+        if self.ros1:
+            self.put("I", len(raw))
+            self.out.extend(raw)
+        else:
+            self.put("I", len(raw) + 1)
+            self.out.extend(raw + b"\x00")
 
 
-def encode(layout: str, stamp_ns: int, frame_id: str = "", **f: float | str | bytes
-           ) -> bytes:
+def encode(layout: str, stamp_ns: int, frame_id: str = "", *, ros1: bool = False,
+           **f: float | str | bytes) -> bytes:
     """Serialise one message of ``layout`` (the inverse of :func:`decode`), for tests,
     benchmarks and simulated logs.  Keywords: navsatfix ``status, service, lat, lon,
     alt, cov (9 floats), cov_type``; imu ``wz, wz_cov0``; twist/twistcov/odometry
-    ``vx, vy``, odometry ``child_frame_id``; sentence ``text``."""
-    w = _CdrWriter()
-    w.put("iI", *divmod(int(stamp_ns), 1_000_000_000))
+    ``vx, vy``, odometry ``child_frame_id``; sentence ``text``.  ``ros1``: ROS 1
+    serialisation (``seq`` = 0)."""
+    w = _CdrWriter(ros1)
+    if ros1:
+        w.put("I", 0)
+    w.put("II" if ros1 else "iI", *divmod(int(stamp_ns), 1_000_000_000))
     w.string(frame_id)
     if layout == "navsatfix":
         w.put("b", int(f.get("status", 0)))

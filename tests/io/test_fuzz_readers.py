@@ -115,15 +115,15 @@ def test_truncated_and_bit_flipped_mcap(cut, flips):
 
 @SETTINGS
 @given(layout=st.sampled_from(sorted(ros2_fast.SCHEMAS)), junk=st.binary(max_size=200),
-       cut=st.integers(0, 400))
-def test_fast_path_never_reads_out_of_bounds(layout, junk, cut):
-    good = ros2_fast.encode(layout, 1_700_000_000_000_000_000, "gps", lat=1.0, lon=2.0, wz=0.1,
-                            vx=1.0, text="$GPGGA")
+       cut=st.integers(0, 400), ros1=st.booleans())
+def test_fast_path_never_reads_out_of_bounds(layout, junk, cut, ros1):
+    good = ros2_fast.encode(layout, 1_700_000_000_000_000_000, "gps", ros1=ros1, lat=1.0, lon=2.0,
+                            wz=0.1, vx=1.0, text="$GPGGA")
     msgs = [junk, good[:cut], junk + good]
     blob = b"".join(msgs)
     sizes = np.array([len(m) for m in msgs])
     offs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    fields, ok = ros2_fast.decode(layout, np.frombuffer(blob, np.uint8), offs, sizes)
+    fields, ok = ros2_fast.decode(layout, np.frombuffer(blob, np.uint8), offs, sizes, ros1=ros1)
     assert ok[1] == (cut >= len(good))
     if ok[1]:
         assert fields["stamp_ns"][1] == 1_700_000_000_000_000_000

@@ -448,3 +448,30 @@ def test_committed_sample_files_read():
     assert np.all(d.gnss.valid) and 54.3 < d.gnss.lat_deg.mean() < 54.5
     t = read_mcap(DATA / "small_drive_truncated.mcap")
     assert t.meta["warnings"] and len(t.gyro) < 100
+
+
+def test_ros1_encoding(tmp_path):
+    """ROS 1 serialisation (converted bags): no CDR header, no padding, seq before the stamp."""
+    cov = (4.0, 0, 0, 0, 9.0, 0, 0, 0, 1.0)
+    msgs, imus = [], []
+    for i in range(6):
+        t = T0 + i * 10**8
+        sec, nsec = divmod(t, 10**9)
+        # sensor_msgs/NavSatFix by the ROS 1 rules, packed by hand
+        hand = (struct.pack("<III", i, sec, nsec) + struct.pack("<I", 3) + b"gps"
+                + struct.pack("<bH", 0, 1) + struct.pack("<3d", 54.0 + i * 1e-5, 18.0, 5.0)
+                + struct.pack("<9d", *cov) + struct.pack("<B", 2))
+        enc = ros2_fast.encode("navsatfix", t, "gps", ros1=True, lat=54.0 + i * 1e-5, lon=18.0, alt=5.0,
+                               cov=cov, cov_type=2)
+        assert enc[4:] == hand[4:]  # identical but for seq
+        msgs.append((t, t, hand))
+        imus.append((t, t, ros2_fast.encode("imu", t, "imu" * i, ros1=True, wz=0.1 * i)))
+    schemas = {"nav:ros1": ("sensor_msgs/NavSatFix", "ros1msg", b"Header header\n..."),
+               "imu:ros1": ("sensor_msgs/Imu", "ros1msg", b"Header header\n...")}
+    p = tmp_path / "r1.mcap"
+    write_mcap(p, [("/fix", "nav:ros1", msgs), ("/imu", "imu:ros1", imus)], schemas=schemas)
+    d = read_mcap(p)
+    np.testing.assert_array_equal(d.gnss.t_ns, T0 + np.arange(6) * 10**8)
+    np.testing.assert_array_equal(d.gnss.lat_deg, 54.0 + np.arange(6) * 1e-5)
+    np.testing.assert_array_equal(d.gnss.sigma_n_m, 3.0)
+    np.testing.assert_array_equal(d.gyro.yaw_rate_radps, 0.1 * np.arange(6))
