@@ -268,6 +268,7 @@ def process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
 
             ref = read_reference(spec.reference)
         res = fuse(drive, opts.params, ref)
+        stats_p.parent.mkdir(parents=True, exist_ok=True)  # a worker on another machine
         meta = {**res.metadata, **opts.extra_meta, "drive": spec.name}
         write_table(res.stats, stats_p, metadata=meta, units=stats_units(res.stats), fmt=opts.fmt)
         write_table(res.track, track_p, metadata=meta, units=TRACK_UNITS, fmt=opts.fmt)
@@ -300,6 +301,21 @@ def _existing_summary(stats_p: Path, fmt: str) -> dict[str, float]:
 OnDone = Callable[[dict[str, Any]], None]
 
 
+def plan(specs: Iterable[DriveSpec], opts: BatchOptions,
+         done: OnDone) -> list[DriveSpec]:
+    """Report the drives that are up to date (cheap, here) and return the ones to process."""
+    Path(opts.out_dir).mkdir(parents=True, exist_ok=True)
+    todo: list[DriveSpec] = []
+    for spec in specs:
+        track_p, stats_p = output_paths(spec, opts.out_dir, opts.fmt)
+        if not opts.force and _up_to_date(spec, track_p, stats_p, opts.params, opts.fmt):
+            done(_row(spec, "up to date", "", 0.0, _existing_summary(stats_p, opts.fmt),
+                      str(track_p), str(stats_p)))
+        else:
+            todo.append(spec)
+    return todo
+
+
 def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
               on_done: OnDone | None = None) -> list[dict[str, Any]]:
     """Process drives in a process pool (``jobs`` workers; 1 = in this process)."""
@@ -311,6 +327,7 @@ def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
         if on_done:
             on_done(row)
 
+    specs = plan(specs, opts, done)
     if jobs <= 1 or len(specs) <= 1:
         for spec in specs:
             done(process_drive(spec, opts))
@@ -334,19 +351,27 @@ def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
 
 
 def run_dask(specs: Iterable[DriveSpec], opts: BatchOptions, scheduler: Any,
-             on_done: OnDone | None = None) -> list[dict[str, Any]]:
+             on_done: OnDone | None = None, connect_timeout_s: float = 10.0) -> list[dict[str, Any]]:
     """Process drives on a dask.distributed cluster (address ``tcp://host:port`` or a Client)."""
     from dask.distributed import Client, as_completed
 
     from .errors import UsageError
 
-    specs = list(specs)
+    rows: list[dict[str, Any]] = []
+
+    def done(row: dict[str, Any]) -> None:
+        rows.append(row)
+        if on_done:
+            on_done(row)
+
+    specs = plan(specs, opts, done)
+    if not specs:
+        return rows
     own = not isinstance(scheduler, Client)
     try:
-        client = Client(scheduler, timeout="10s") if own else scheduler
+        client = Client(scheduler, timeout=f"{connect_timeout_s}s") if own else scheduler
     except (OSError, TimeoutError, ValueError) as err:
         raise UsageError(f"cannot connect to the dask scheduler {scheduler}: {err}") from err
-    rows: list[dict[str, Any]] = []
     try:
         futures = client.map(process_drive, specs, opts=opts, pure=False)
         by_key = {f.key: s for f, s in zip(futures, specs, strict=True)}
@@ -356,9 +381,7 @@ def run_dask(specs: Iterable[DriveSpec], opts: BatchOptions, scheduler: Any,
                 row = fut.result()
             except Exception as err:  # noqa: BLE001 - worker died / task lost: that drive failed
                 row = _row(spec, "failed", f"dask task failed: {type(err).__name__}: {err}")
-            rows.append(row)
-            if on_done:
-                on_done(row)
+            done(row)
     finally:
         if own:
             client.close()
