@@ -66,9 +66,9 @@ sign = "ccw"             # ccw: positive counter-clockwise seen from above (REP-
 time = "posix"           # posix: UTC POSIX seconds | relative: seconds + start_posix_s
 start_posix_s = 0.0
 noise_sd_radps = 0.0017453  # 0.1 deg/s per sample (seed 000)
-bias_tau_s = 36000.0     # Gauss-Markov correlation time of the gyro drift (10 h: a shorter tau drags a
-                         #   large turn-on bias toward zero during outages: 300 s gave 20-40 m after 60 s)
-bias_sd_radps = 0.002    # steady-state sigma of the drift (q = 2 sd^2 / tau: ~0.005 deg/s per minute)
+bias_tau_s = 300.0       # Gauss-Markov correlation time of the gyro drift (MEMS; a gyro with a large,
+                         #   steady turn-on bias is better served by a long tau, e.g. 36000 s)
+bias_sd_radps = 0.005    # steady-state sigma of the drift
 bias_init_sd_radps = 0.1 # initial sigma of the drift (covers a 4 deg/s bias)
 
 [odo]
@@ -97,6 +97,10 @@ init_pos_sd_m = 10.0
 init_vel_sd_mps = 5.0
 init_acc_sd_mps2 = 1.0
 check_spd = false        # Cholesky of P at every epoch, failures counted in info["spd_failures"] (tests)
+drift_mean_decay = false # true: the gyro drift's mean decays as exp(-T/tau) (seed 000 literally); false: the
+                         #   mean is held (a turn-on bias does not fade in an outage), covariance stays Gauss-Markov
+drift_consider = "outage"  # never | outage | always: the yaw-rate and odometer updates do not correct the drift
+                         #   (Schmidt consider state; Joseph keeps P exact) so sustained turns cannot leak into it
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)

@@ -24,6 +24,7 @@ from numba import njit
 
 from .filters.kernels_aekf import (
     P_ALPHA,
+    P_EPS_MEAN_DECAY,
     P_Q_EPS,
     P_Q_KS,
     P_TAU_EPS,
@@ -88,7 +89,8 @@ def rts_kernel(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndarr
                 x_prior[i] = x_post[i]
                 for j in range(n):
                     P_prior[i, j] = P_post[i, j]
-            predict_mean(x_prior, T, math.exp(-T / tau_eps), hold[k + 1])
+            f_mean = math.exp(-T / tau_eps) if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0
+            predict_mean(x_prior, T, f_mean, hold[k + 1])
             rebuild_prior(P_prior, T, alpha, tau_eps, prm[P_Q_EPS], prm[P_Q_KS],
                           prior_store[k + 1], hold[k + 1], qbuf)
             _phi_dense(T, alpha, tau_eps, hold[k + 1], F)

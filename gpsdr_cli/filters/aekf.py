@@ -200,6 +200,7 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.P_SH_B] = ad["sage_husa_b"]
     prm[kn.P_SH_RMIN] = ad["sage_husa_r_min"]
     prm[kn.P_SH_RMAX] = ad["sage_husa_r_max"]
+    prm[kn.P_EPS_MEAN_DECAY] = float(a["drift_mean_decay"])
     flg = np.zeros(kn.N_FLG, np.int64)
     flg[kn.F_ADAPT_Q] = int(adaptive)
     flg[kn.F_STANDSTILL] = int(st["enabled"])
@@ -209,6 +210,11 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     flg[kn.F_SAGE_HUSA] = int(ad["sage_husa"])
     flg[kn.F_CHECK_SPD] = int(a["check_spd"])
     flg[kn.F_STORE] = int(store)
+    modes = {"never": 0, "outage": 1, "always": 2}
+    if a["drift_consider"] not in modes:
+        raise ConfigError(f"aekf.drift_consider = {a['drift_consider']!r}: expected one of "
+                          f"{', '.join(modes)}")
+    flg[kn.F_DRIFT_CONSIDER] = modes[a["drift_consider"]]
     return prm, flg
 
 
@@ -241,7 +247,8 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
             np.ascontiguousarray(epochs.dt_s, f64), np.ascontiguousarray(epochs.has_gnss, bool),
             gnss_e, gnss_n, np.nan_to_num(r_e, nan=1.0), np.nan_to_num(r_n, nan=1.0),
             np.ascontiguousarray(ka, f64), np.ascontiguousarray(epochs.has_gyro, bool), omega,
-            np.ascontiguousarray(epochs.has_odo, bool), odo, x0, P0, float(psi0), prm, flg,
+            np.ascontiguousarray(epochs.has_odo, bool), odo,
+            np.ascontiguousarray(epochs.gnss_outage, bool), x0, P0, float(psi0), prm, flg,
             x_out, pcov, gnss_used, gnss_rej, nis, static, hold, sd, P_store, prior_store, info_v)
     info = {
         "filter": name,

@@ -44,12 +44,12 @@ from .linalg import cholesky, symmetrize
 # indices into the float parameter vector ``prm``
 P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_ODO = range(9)
 P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = range(9, 15)
-P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX = range(15, 19)
-N_PRM = 19
+P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
+N_PRM = 20
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
-F_HEADING_KNOWN = 8
-N_FLG = 9
+F_HEADING_KNOWN, F_DRIFT_CONSIDER = 8, 9
+N_FLG = 10
 # stored prior scalars per epoch (columns of ``prior_prm``)
 Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N = range(6)
 N_PRIOR = 6
@@ -82,7 +82,13 @@ def unpack(v: np.ndarray, P: np.ndarray) -> None:
 
 @njit(cache=True)
 def predict_mean(x: np.ndarray, T: float, f_eps: float, hold: bool) -> None:
-    """Current statistical mean propagation (abar = a_hat): Newton per axis (seed 000)."""
+    """Current statistical mean propagation (abar = a_hat): Newton per axis (seed 000).
+
+    ``f_eps`` multiplies the drift: exp(-T/tau_eps) for seed 000's literal
+    Gauss-Markov mean, 1 for our default (``aekf.drift_mean_decay = false``): the
+    drift's mean is held like a random constant (a turn-on bias does not decay
+    toward zero in an outage) while its covariance stays the Gauss-Markov one.
+    """
     if not hold:
         for o in (0, 3):
             x[o] += T * x[o + 1] + 0.5 * T * T * x[o + 2]
@@ -171,8 +177,14 @@ def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
 
 @njit(cache=True)
 def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
-               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray) -> bool:
-    """Scalar update with a dense Jacobian row H (Joseph form).  False if S is not positive."""
+               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int = -1) -> bool:
+    """Scalar update with a dense Jacobian row H (Joseph form).  False if S is not positive.
+
+    ``consider >= 0``: Schmidt-Kalman "consider" state: its gain is set to zero
+    (the state is not corrected by this measurement) while its uncertainty
+    still enters S and the cross-covariances; the Joseph form keeps P exact for
+    such a suboptimal gain.
+    """
     n = N_STATES
     S = R
     for i in range(n):
@@ -185,6 +197,8 @@ def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
         return False
     for i in range(n):
         K[i] = PHt[i] / S
+    if consider >= 0:
+        K[consider] = 0.0
     for i in range(n):
         x[i] += K[i] * y
     for i in range(n):  # B = P - K (H P)
@@ -221,7 +235,7 @@ def rebuild_prior(P: np.ndarray, T: float, alpha: float, tau_eps: float, q_eps: 
 @njit(cache=True)
 def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n: np.ndarray,
                      r_e: np.ndarray, r_n: np.ndarray, ka: np.ndarray, has_gyro: np.ndarray,
-                     omega: np.ndarray, has_odo: np.ndarray, odo: np.ndarray,
+                     omega: np.ndarray, has_odo: np.ndarray, odo: np.ndarray, outage: np.ndarray,
                      x0: np.ndarray, P0: np.ndarray, psi0: float, prm: np.ndarray,
                      flg: np.ndarray, x_out: np.ndarray, pcov_out: np.ndarray,
                      gnss_used: np.ndarray, gnss_rej: np.ndarray, nis_out: np.ndarray,
@@ -231,7 +245,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
 
     Inputs per epoch: ``dt`` s; GNSS ``z_e, z_n`` m with variances ``r_e, r_n`` m^2
     (already regime-scaled); ``ka`` K_a factor; ``omega`` = -yaw_rate rad/s;
-    ``odo`` speed m/s.  ``x0, P0``: state at epoch 0; ``psi0`` initial remembered
+    ``odo`` speed m/s; ``outage`` epoch inside a GNSS outage.  ``x0, P0``: state at epoch 0; ``psi0`` initial remembered
     heading (rad, clockwise from north).  ``prm``/``flg``: see the P_*/F_* indices.
     Outputs: ``x_out`` (n, 8) posterior states; ``pcov_out`` (n, 3) var_e, var_n,
     cov_en; ``sd_out`` (n, 2) sigma of eps and k_s; ``P_store`` (n, 36) and
@@ -258,6 +272,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     check = flg[F_CHECK_SPD] != 0
     store = flg[F_STORE] != 0
     heading_known = flg[F_HEADING_KNOWN] != 0
+    drift_consider = flg[F_DRIFT_CONSIDER]
     omega_min = prm[P_OMEGA_MIN]
     sigma_a = prm[P_SIGMA_A]
     psi_mem = psi0
@@ -293,7 +308,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             if fading:
                 lam = fading_factor(prm[P_FADING], T)
             f_eps = math.exp(-T / tau_eps)
-            predict_mean(x, T, f_eps, hold)
+            predict_mean(x, T, f_eps if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
             predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[P_Q_EPS], prm[P_Q_KS], lam, hold, qbuf)
             t += T
         # ---- 2. GNSS position fix
@@ -371,7 +386,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     use = heading_known
                 if use:
                     h = odo_row(x, ue, un, H)
-                    if not row_update(x, P, H, u - h, prm[P_R_ODO], K, PHt, Bh):
+                    cons = 6 if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else -1
+                    if not row_update(x, P, H, u - h, prm[P_R_ODO], K, PHt, Bh, cons):
                         info[I_SKIPPED] += 1.0
         static_out[k] = is_static
         hold_out[k] = hold
@@ -382,7 +398,11 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     info[I_SKIPPED] += 1.0
             elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
                 h = omega_row(x, H)
-                if not row_update(x, P, H, omega[k] - h, prm[P_R_OMEGA], K, PHt, Bh):
+                # drift as a consider state while moving (aekf.drift_consider): without an
+                # absolute reference a sustained turn (the Singer covariance lets a decay while
+                # the mean holds it) or a speed update (through P[eps, v]) must not move eps
+                cons = 6 if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else -1
+                if not row_update(x, P, H, omega[k] - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
                     info[I_SKIPPED] += 1.0
         # ---- remembered heading for the odometer row near standstill
         sp = math.sqrt(x[1] * x[1] + x[4] * x[4])

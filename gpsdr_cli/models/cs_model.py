@@ -158,15 +158,19 @@ def phi_matrix(T: float, alpha: float, tau_eps_s: float, hold: bool = False) -> 
     return F
 
 
-def newton_matrix(T: float, tau_eps_s: float, hold: bool = False) -> np.ndarray:
-    """Dense 8x8 mean transition of the current statistical model (abar = a_hat): Newton per axis."""
+def newton_matrix(T: float, tau_eps_s: float, hold: bool = False,
+                  drift_decay: bool = True) -> np.ndarray:
+    """Dense 8x8 mean transition of the current statistical model (abar = a_hat): Newton per axis.
+
+    ``drift_decay=False``: the drift's mean is held (see ``aekf.drift_mean_decay``).
+    """
     F = np.eye(N_STATES)
     if not hold:
         for o in (0, 3):
             F[o, o + 1] = T
             F[o, o + 2] = 0.5 * T * T
             F[o + 1, o + 2] = T
-    F[IEPS, IEPS] = math.exp(-T / tau_eps_s)
+    F[IEPS, IEPS] = math.exp(-T / tau_eps_s) if drift_decay else 1.0
     return F
 
 

@@ -22,11 +22,16 @@ from gpsdr_cli.filters.aekf import gnss_noise, initial_state, kernel_params
 from gpsdr_cli.models.cs_model import cs_sigma_a2, newton_matrix, phi_matrix, q_matrix
 
 
-def joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float
-           ) -> tuple[np.ndarray, np.ndarray]:
-    """Scalar Kalman update x, P with row H, innovation y, variance R (Joseph form)."""
+def joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
+           consider: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Scalar Kalman update x, P with row H, innovation y, variance R (Joseph form).
+
+    ``consider``: index of a state whose gain is forced to zero (Schmidt consider state).
+    """
     S = float(H @ P @ H) + R
     K = P @ H / S
+    if consider is not None:
+        K[consider] = 0.0
     x = x + K * y
     A = np.eye(len(x)) - np.outer(K, H)
     P = A @ P @ A.T + R * np.outer(K, K)
@@ -54,6 +59,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     ad = params["adaptive"]
     gate = bool(params["gnss"]["gate"])
     sa_py = cs_sigma_a2.py_func
+    mode = params["aekf"]["drift_consider"]
     is_static = False
     t = 0.0
     rej_since = -1.0
@@ -81,7 +87,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             F = phi_matrix(T, alpha, tau_eps, hold)
             Q = q_matrix(T, alpha, 2 * alpha * s2e, 2 * alpha * s2n, prm[kn.P_Q_EPS],
                          prm[kn.P_Q_KS], hold)
-            x = newton_matrix(T, tau_eps, hold) @ x
+            x = newton_matrix(T, tau_eps, hold, params["aekf"]["drift_mean_decay"]) @ x
             P = lam * F @ P @ F.T + Q
             P = 0.5 * (P + P.T)
             t += T
@@ -125,6 +131,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 x, P = joseph(x, P, unit(0), z[0] - x[0], r_e[k] * sh_r)
                 x, P = joseph(x, P, unit(3), z[1] - x[3], r_n[k] * sh_r)
                 used[k] = True
+        cons = 6 if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else None
         if epochs.has_odo[k]:
             u = epochs.odo_speed_mps[k]
             is_static = standstill and u < st["speed_mps"]
@@ -141,7 +148,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     H = np.zeros(8)
                     H[1], H[4], H[7] = x[7] * d_e, x[7] * d_n, x[1] * d_e + x[4] * d_n
                     h = x[7] * (x[1] * d_e + x[4] * d_n)
-                    x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2)
+                    x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons)
         static[k] = is_static
         if epochs.has_gyro[k]:
             w = -epochs.yaw_rate_radps[k]  # d(psi)/dt = -yaw_rate
@@ -156,7 +163,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 H[1] = (-an * v2 - 2 * ve * c) / v2 ** 2
                 H[4] = (ae * v2 - 2 * vn * c) / v2 ** 2
                 H[2], H[5], H[6] = vn / v2, -ve / v2, 1.0
-                x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w)
+                x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w, cons)
         v = math.hypot(x[1], x[4])
         if v >= omega_min:
             psi_mem, heading_known = math.atan2(x[1], x[4]), True

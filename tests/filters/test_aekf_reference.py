@@ -22,6 +22,8 @@ OPTIONS = {
     "sage_husa": {"adaptive": {"sage_husa": True}},
     "no_standstill": {"standstill": {"enabled": False}},  # also exercises a gate reset
     "continuous_pdop": {"gnss": {"pdop_mode": "continuous"}},
+    "drift_always_consider": {"aekf": {"drift_consider": "always"}},
+    "drift_never_consider_decay": {"aekf": {"drift_consider": "never", "drift_mean_decay": True}},
 }
 
 
