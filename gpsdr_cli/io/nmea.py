@@ -99,6 +99,7 @@ for _c in b"ABCDEF":
 _MODE_QUALITY = {b"": 1, b"A": 1, b"D": 2, b"P": 3, b"R": 4, b"F": 5, b"E": 6,
                  b"N": 0, b"M": 0, b"S": 0}
 
+_CHUNK_BYTES = 1 << 22  # 4 MiB of whole lines scanned at a time
 _MAX_FIELD = 40  # bytes; longer fields are never valid numbers or letters here
 _UTF16_HINT = "UTF-16 encoded; convert to ASCII/UTF-8 with iconv -f UTF-16 -t UTF-8"
 
@@ -125,16 +126,21 @@ class _Problems:
             item[1] = min(item[1], first)
 
 
+def _line_breaks(arr: np.ndarray) -> np.ndarray:
+    """Offsets of the line ends in ``arr``: LF, and CR not followed by LF."""
+    lf = arr == 10
+    ends = arr == 13
+    ends[:-1] &= ~lf[1:]
+    ends |= lf
+    return np.flatnonzero(ends)
+
+
 class _Lines:
     """Byte offset -> 1-based line number (LF, CRLF or lone CR line ends)."""
 
-    def __init__(self, arr: np.ndarray) -> None:
-        cr = arr == 13
-        lf = arr == 10
-        lone_cr = cr.copy()
-        lone_cr[:-1] &= ~lf[1:]
-        self.breaks = np.flatnonzero(lf | lone_cr)
-        self.count = len(self.breaks) + int(len(arr) > 0 and arr[-1] not in (10, 13))
+    def __init__(self, breaks: np.ndarray, arr: np.ndarray) -> None:
+        self.breaks = breaks
+        self.count = len(breaks) + int(len(arr) > 0 and arr[-1] not in (10, 13))
 
     def __call__(self, pos: np.ndarray | int) -> np.ndarray:
         return np.searchsorted(self.breaks, pos, side="right") + 1
@@ -200,7 +206,10 @@ def _is_binary(data: bytes) -> bool:
 
 # ------------------------------------------------------------------ field conversion
 def _num(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Bytes field array -> (float64 values, NaN where empty or bad; mask of bad non-empty)."""
+    """Bytes field array -> (float64 values, NaN where empty or bad; mask of bad non-empty).
+
+    Bad: not a number, or beyond +-1e9 (inf, nan, 1e300 ...).
+    """
     empty = a == b""
     try:
         v = np.where(empty, b"nan", a).astype(np.float64)
@@ -212,7 +221,9 @@ def _num(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                     v[i] = float(s)
                 except ValueError:
                     v[i] = np.inf  # marks bad below
-    bad = ~empty & ~np.isfinite(v)
+    # no field read here exceeds 1e9 in magnitude; the bound keeps arithmetic finite
+    with np.errstate(invalid="ignore"):
+        bad = ~empty & ~(np.abs(v) <= 1e9)
     v[bad] = np.nan
     return v, bad
 
@@ -255,15 +266,16 @@ def _valid_ymd(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
     leap = (y % 4 == 0) & ((y % 100 != 0) | (y % 400 == 0))
     dim = np.array([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31])[np.clip(m, 0, 12)]
     dim = dim + ((m == 2) & leap)
-    return (m >= 1) & (m <= 12) & (d >= 1) & (d <= dim) & (y >= 1900) & (y <= 2200)
+    # GNSS dates start with GPS time (1980-01-06); RMC's two-digit years map into 1980-2079
+    return (m >= 1) & (m <= 12) & (d >= 1) & (d <= dim) & (y >= 1980) & (y <= 2099)
 
 
 def _ymd_days(y: np.ndarray, m: np.ndarray, d: np.ndarray, ok: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray]:
     """(days since epoch as float, NaN where invalid; mask of invalid among ``ok``)."""
-    yi = np.where(ok, y, 2000).astype(np.int64)
-    mi = np.where(ok, m, 1).astype(np.int64)
-    di = np.where(ok, d, 1).astype(np.int64)
+    yi = np.where(ok, np.clip(y, 0, 9999), 2000).astype(np.int64)
+    mi = np.where(ok, np.clip(m, 0, 99), 1).astype(np.int64)
+    di = np.where(ok, np.clip(d, 0, 99), 1).astype(np.int64)
     valid = ok & _valid_ymd(yi, mi, di)
     days = np.where(valid, _days_from_civil(yi, mi, di), 0).astype(np.float64)
     days[~valid] = np.nan
@@ -375,32 +387,15 @@ def _last_per_epoch(out: np.ndarray, epoch: np.ndarray, values: np.ndarray,
     out[e[last]] = v[last]
 
 
-def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None = None,
-               strict: bool = False) -> tuple[GnssFixes, SkipReport, dict]:
-    """Parse NMEA text (whole file content as bytes).
+def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems,
+                acc: dict[int, list[dict[str, np.ndarray]]], stats: dict) -> int:
+    """Steps 1-4 on one chunk of whole lines (``arr``, starting at byte ``base`` of the file).
 
-    Returns fixes (one row per receiver epoch, in file order), the skipped-line
-    report (reasons counted, first ``name:line`` of each) and a meta dict
-    (``sentences``, ``talkers``, ``lines``, ``epochs``, ``dates``, ``date_source``,
-    ``warnings``, ...).  ``date`` is used only when the log holds no RMC/ZDA date.
-    ``strict`` raises :class:`ParseError` at the first bad line instead of skipping it.
-    Raises :class:`InputError` for empty, UTF-16 or binary input and
-    :class:`NoDataError` when no epoch with a time (and a date) can be built.
+    Appends the parsed fields of each kind to ``acc``, problems (with file offsets) to
+    ``probs`` and counts to ``stats``; returns the number of checksum-valid sentences.
+    ``breaks``: offsets of the line ends inside the chunk.
     """
-    if len(data) == 0:
-        raise InputError(name, "empty file (expected NMEA 0183 text lines like $GPGGA,...*hh)")
-    if _utf16_kind(data[:4096]) is not None:
-        raise InputError(name, _UTF16_HINT)
-    # NUL padding: drop it (line numbers count line ends only, so they do not move)
-    buf = data.replace(b"\x00", b"") if b"\x00" in data else data
-    if not buf.strip():
-        raise InputError(name, "file holds only NUL bytes or whitespace (expected NMEA 0183 text)")
-    arr = np.frombuffer(buf, np.uint8)
     n = len(arr)
-    lines = _Lines(arr)
-    probs = _Problems()
-    meta: dict = {"lines": lines.count}
-
     # ---- 1. sentence candidates: from a start to the next start or line end
     is_start = arr == 36  # '$'
     bang = arr == 33  # '!' followed by an upper-case letter (AIS and other encapsulation)
@@ -424,9 +419,9 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     has_ck &= (h1 >= 0) & (h2 >= 0) & (star > starts + 1)
 
     doubled = (next_start == starts + 1) & (next_start < n)  # "$$": ignore the first
-    meta["doubled_starts"] = int(doubled.sum())
+    stats["doubled_starts"] += int(doubled.sum())
     no_ck = ~has_ck & ~doubled
-    probs.add("no checksum (truncated sentence)", starts[no_ck])
+    probs.add("no checksum (truncated sentence)", starts[no_ck] + base)
 
     # ---- 2. checksums, all at once
     s1 = starts[has_ck] + 1
@@ -440,11 +435,11 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         good = xor == given
     else:
         good = np.zeros(0, bool)
-    probs.add("bad checksum", starts[has_ck][~good], exc=ChecksumError)
+    probs.add("bad checksum", starts[has_ck][~good] + base, exc=ChecksumError)
     ok_start = starts[has_ck][good]
 
     # lines that hold no sentence start at all but are not blank: free text, JSON, comments
-    line_first = np.r_[0, lines.breaks + 1]
+    line_first = np.r_[0, breaks + 1]
     line_first = line_first[line_first < n]
     if len(line_first):
         nonblank = np.logical_or.reduceat(
@@ -452,11 +447,8 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         with_start = np.zeros(len(line_first), bool)
         with_start[np.searchsorted(line_first, starts, side="right") - 1] = True
         text_lines = line_first[nonblank & ~with_start]
-        probs.add("not a sentence (no $ on the line)", text_lines)
+        probs.add("not a sentence (no $ on the line)", text_lines + base)
 
-    if len(ok_start) == 0 and _is_binary(buf):
-        raise InputError(name, "binary file with no NMEA sentence (expected text lines like "
-                               "$GPGGA,...*hh; is this a UBX/RTCM/SBF log?)")
 
     # ---- 3. classify by the first 7 bytes ('$'/'!' + address + ','), once per distinct head
     ok_s1_a = s1[good]
@@ -469,32 +461,26 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     uniq, first_i, inverse, counts = np.unique(heads, return_index=True, return_inverse=True,
                                                return_counts=True)
     kind_of_uniq = np.empty(len(uniq), np.int64)
-    talker_counts: Counter = Counter()
     for u, head in enumerate(uniq.tolist()):
         k = _classify(head[1:], head[:1] == b"!")
         if isinstance(k, int):
             kind_of_uniq[u] = k
-            talker_counts[head[1:3].decode("ascii", "replace")] += int(counts[u])
+            stats["talkers"][head[1:3].decode("ascii", "replace")] += int(counts[u])
         else:
             kind_of_uniq[u] = -1
-            probs.add(k, int(ok_start[first_i[u]]), fatal=False, n=int(counts[u]))
+            probs.add(k, int(ok_start[first_i[u]]) + base, fatal=False, n=int(counts[u]))
     kind_arr = kind_of_uniq[inverse.ravel()] if len(uniq) else np.zeros(0, np.int64)
 
     sent: dict[int, _Sentences] = {}
     commas = np.flatnonzero(arr == 44)
-    sentences: Counter = Counter()
     for kind in range(6):
         sel = np.flatnonzero(kind_arr == kind)
         if len(sel) == 0:
             continue
-        sent[kind] = _Sentences(arr, commas, ok_start[sel], ok_s1_a[sel], ok_st_a[sel])
-        sentences[_TYPE_NAME[kind]] = len(sel)
-    meta["sentences"] = dict(sentences)
-    meta["talkers"] = dict(talker_counts)
+        sent[kind] = _Sentences(arr, commas, ok_start[sel] + base, ok_s1_a[sel], ok_st_a[sel])
+        stats["sentences"][_TYPE_NAME[kind]] += len(sel)
 
     # ---- 4. fields per kind; each returns (keep mask, sod_us) and its arrays
-    parsed: dict[int, dict[str, np.ndarray]] = {}
-    alt_without_sep = 0
     for kind, s in sent.items():
         tname = _TYPE_NAME[kind]
         p: dict[str, np.ndarray] = {}
@@ -515,7 +501,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
             probs.add("malformed position in GGA", s.pos[badpos & keep])
             probs.add("malformed fix quality in GGA", s.pos[bq & keep & ~badpos])
             keep &= ~badpos & ~bq
-            qi = np.where(np.isfinite(q), q, 0).astype(np.int64)
+            qi = np.where(np.isfinite(q) & ~bq, q, 0).astype(np.int64)
             fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
             nsat, bs = _num(s.f(7))
             hdop, bh = _num(s.f(8))
@@ -524,7 +510,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
             for bad, fld in ((bs, "satellites"), (bh, "HDOP"), (ba, "altitude"),
                              (bsep, "geoid separation")):
                 probs.add(f"malformed {fld} in GGA (field ignored)", s.pos[bad & keep])
-            alt_without_sep += int((fix & keep & np.isfinite(alt) & np.isnan(sep)).sum())
+            stats["alt_without_geoid_sep"] += int((fix & keep & np.isfinite(alt) & np.isnan(sep)).sum())
             p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan),
                      alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
                      q=np.where(fix, qi, 0).astype(np.float64),
@@ -597,8 +583,60 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
             probs.add("malformed date in ZDA (field ignored)", s.pos[bad_date & keep])
             p["days"] = days
         p["pos"] = s.pos
-        parsed[kind] = {k: v[keep] for k, v in p.items()}
-    meta["alt_without_geoid_sep"] = alt_without_sep
+        acc.setdefault(kind, []).append({k: v[keep] for k, v in p.items()})
+    return len(ok_start)
+
+
+
+def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None = None,
+               strict: bool = False) -> tuple[GnssFixes, SkipReport, dict]:
+    """Parse NMEA text (whole file content as bytes).
+
+    Returns fixes (one row per receiver epoch, in file order), the skipped-line
+    report (reasons counted, first ``name:line`` of each) and a meta dict
+    (``sentences``, ``talkers``, ``lines``, ``epochs``, ``dates``, ``date_source``,
+    ``warnings``, ...).  ``date`` is used only when the log holds no RMC/ZDA date.
+    ``strict`` raises :class:`ParseError` at the first bad line instead of skipping it.
+    Raises :class:`InputError` for empty, UTF-16 or binary input and
+    :class:`NoDataError` when no epoch with a time (and a date) can be built.
+    """
+    if len(data) == 0:
+        raise InputError(name, "empty file (expected NMEA 0183 text lines like $GPGGA,...*hh)")
+    if _utf16_kind(data[:4096]) is not None:
+        raise InputError(name, _UTF16_HINT)
+    # NUL padding: drop it (line numbers count line ends only, so they do not move)
+    buf = data.replace(b"\x00", b"") if b"\x00" in data else data
+    if not buf.strip():
+        raise InputError(name, "file holds only NUL bytes or whitespace (expected NMEA 0183 text)")
+    arr = np.frombuffer(buf, np.uint8)
+    n = len(arr)
+    probs = _Problems()
+    acc: dict[int, list[dict[str, np.ndarray]]] = {}
+    stats: dict = {"doubled_starts": 0, "sentences": Counter(), "talkers": Counter(),
+                   "alt_without_geoid_sep": 0}
+    # whole lines per chunk bound the temporaries' memory (about 10 bytes per input byte)
+    all_breaks = []
+    n_valid = 0
+    cs = 0
+    while cs < n:
+        nl = buf.find(b"\n", min(cs + _CHUNK_BYTES, n) - 1)
+        ce = n if nl < 0 else nl + 1
+        chunk = arr[cs:ce]
+        breaks = _line_breaks(chunk)
+        all_breaks.append(breaks + cs)
+        n_valid += _scan_chunk(chunk, cs, breaks, probs, acc, stats)
+        cs = ce
+    lines = _Lines(np.concatenate(all_breaks), arr)
+    if n_valid == 0 and _is_binary(buf):
+        raise InputError(name, "binary file with no NMEA sentence (expected text lines like "
+                               "$GPGGA,...*hh; is this a UBX/RTCM/SBF log?)")
+    meta: dict = {"lines": lines.count, "doubled_starts": stats["doubled_starts"],
+                  "sentences": dict(stats["sentences"]), "talkers": dict(stats["talkers"]),
+                  "alt_without_geoid_sep": stats["alt_without_geoid_sep"]}
+    sentences = stats["sentences"]
+    parsed = {k: {f: np.concatenate([d[f] for d in parts]) for f in parts[0]}
+              for k, parts in sorted(acc.items())}
+
 
     # ---- 5. epochs
     report = _report(probs, name, lines, strict)

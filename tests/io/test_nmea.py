@@ -16,6 +16,7 @@ from gpsdr_cli.errors import ChecksumError, InputError, NoDataError, ParseError
 from gpsdr_cli.io.nmea import KNOT_MPS, looks_like_nmea, parse_nmea, read_nmea
 
 DAY = datetime.date(2024, 5, 17)
+pytestmark = pytest.mark.filterwarnings("error")  # no numpy RuntimeWarning may escape
 
 
 def ck(body: str, lower: bool = False) -> str:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import datetime
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -17,6 +18,7 @@ from gpsdr_cli.errors import InputError
 from gpsdr_cli.io.nmea import looks_like_nmea, parse_nmea
 
 DAY = datetime.date(2024, 5, 17)
+pytestmark = pytest.mark.filterwarnings("error")  # no numpy RuntimeWarning may escape
 SETTINGS = settings(max_examples=150, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
 

@@ -23,6 +23,7 @@ SAMPLE_FILES = sorted(p for p in SAMPLES.rglob("*") if p.is_file()
                       and p.suffix in (".log", ".nmea", ".txt")) if SAMPLES.is_dir() else []
 LOCAL_FILES = sorted(p for p in DATA.glob("*") if p.suffix in (".log", ".nmea"))
 
+pytestmark = pytest.mark.filterwarnings("error")  # no numpy RuntimeWarning may escape
 DEG = 1e-9  # deg, tolerance on decoded positions
 
 
