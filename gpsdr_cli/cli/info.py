@@ -46,7 +46,9 @@ def info(logs: tuple[str, ...], as_json: bool, config_path: str | None, date: An
         except GpsdrError as err:
             if len(logs) == 1:
                 raise
-            click.echo(f"gpsdr: error: {err}", err=True)  # the other files still get described
+            from .main import to_click_exception
+
+            to_click_exception(err).show()  # the other files still get described
             failed += 1
             continue
         if as_json:

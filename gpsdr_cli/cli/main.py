@@ -54,6 +54,12 @@ def to_click_exception(err: BaseException) -> click.ClickException:
 class GpsdrGroup(click.Group):
     """Group whose ``invoke`` maps exceptions (also under CliRunner) in one place."""
 
+    def make_context(self, info_name: str | None, args: list[str],
+                     parent: click.Context | None = None, **extra: Any) -> click.Context:
+        STATE["debug"] = False  # a fresh run (CliRunner reuses the process)
+        STATE["quiet"] = False
+        return super().make_context(info_name, args, parent, **extra)
+
     def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
@@ -73,6 +79,9 @@ class GpsdrGroup(click.Group):
 
 @click.group(cls=GpsdrGroup, epilog=EPILOG, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="gpsdr", prog_name="gpsdr")
+@click.option("--debug", is_flag=True, expose_value=False, is_eager=True,
+              callback=lambda ctx, param, value: STATE.update(debug=True) if value else None,
+              help="Show the full traceback of an error.")
 def cli() -> None:
     """Post-process vehicle GNSS + gyro + odometer logs with adaptive Kalman filters.
 
@@ -80,8 +89,6 @@ def cli() -> None:
     (optionally RTS-smoothed) and writes a track Parquet and a statistics
     Parquet.  Every command has --help with an example.
     """
-    STATE["debug"] = False
-    STATE["quiet"] = False
 
 
 def _register() -> None:
@@ -101,8 +108,6 @@ _register()
 
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point (``gpsdr``)."""
-    if "--debug" in (sys.argv[1:] if argv is None else argv):
-        STATE["debug"] = True
     cli.main(args=argv, prog_name="gpsdr")
 
 
