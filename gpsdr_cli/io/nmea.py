@@ -2,9 +2,9 @@
 
 Why hand-written instead of pynmea2 / pynmeagps: those parse one sentence at a
 time into Python objects (tens of microseconds per sentence), and they raise or
-silently drop on the oddities real logs carry.  This reader works on the whole
-file at once with numpy (a few microseconds per sentence, see
-``benchmarks/read_nmea.py``):
+silently drop on the oddities real logs carry.  This reader works on whole
+4 MiB chunks of lines at once with numpy (about a microsecond or two per
+sentence, see ``benchmarks/read_nmea.py``):
 
 1. Find every sentence start (``$``, or ``!`` before a letter) anywhere in a
    line, so logger prefixes, binary bytes before the ``$``, ``$$`` doubled

@@ -425,3 +425,33 @@ def test_round_trip_with_the_simulator_writer_across_midnight() -> None:
     assert np.allclose(fixes.pdop[ok], 1.7) and np.allclose(fixes.vdop[ok], 1.4)
     assert np.allclose(fixes.sigma_e_m[ok], 1.5) and np.allclose(fixes.sigma_n_m[ok], 2.5)
     assert (fixes.n_sats[ok] == 9).all()
+
+
+@pytest.mark.parametrize("chunk", [1, 37, 200, 1 << 22])
+def test_chunked_scan_gives_identical_results(monkeypatch, chunk: int) -> None:
+    """Chunk boundaries (whole lines) change nothing: rows, counts, first lines."""
+    from gpsdr_cli.io import nmea
+
+    lines = [b"# header", b"\xb5b\x01\x07" * 40 + rmc("235958").encode()]
+    for k in range(30):
+        sec = (23 * 3600 + 59 * 60 + 58 + k) % 86400
+        tod = f"{sec // 3600:02d}{sec // 60 % 60:02d}{sec % 60:02d}"
+        date = "170524" if sec >= 12 * 3600 else "180524"
+        lines += [rmc(tod, date=date).encode(), gga(tod).encode(),
+                  ck("GNGSA,A,3,01,02,03,,,,,,,,,,1.9,0.95,1.6,1").encode()]
+        if k % 7 == 0:
+            lines.append(gga(tod).encode()[:25])  # truncated
+        if k % 11 == 0:
+            lines.append(ck("GPGSV,1,1,00").encode() + b"\r")  # CR CR LF
+    data = b"\r\n".join(lines) + b"\n"
+    ref = parse_nmea(data, name="c.nmea")
+    monkeypatch.setattr(nmea, "_CHUNK_BYTES", chunk)
+    fixes, report, meta = parse_nmea(data, name="c.nmea")
+    assert len(fixes) == 30
+    assert fixes.t_ns.tolist() == ref[0].t_ns.tolist()
+    assert np.array_equal(fixes.lat_deg, ref[0].lat_deg, equal_nan=True)
+    assert np.array_equal(fixes.pdop, ref[0].pdop, equal_nan=True)
+    assert dict(report.counts) == dict(ref[1].counts)
+    assert report.first == ref[1].first
+    assert meta == ref[2]
+    assert report.counts["no checksum (truncated sentence)"] == 5
