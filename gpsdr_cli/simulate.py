@@ -590,7 +590,7 @@ def _gyro(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tupl
     dt = step * DT_S
     noise_sd = math.radians(0.1)       # white noise per sample, rad/s
     bias_sd = math.radians(0.3)        # stationary sigma of the Gauss-Markov bias
-    bias_tau = 300.0
+    bias_tau = 3600.0  # in-run wander ~ 20 deg/h/sqrt(h) rate random walk; the spread is turn-on bias
     scale_sd = 0.005
     scale = float(rng.normal(0.0, scale_sd))
     bias = _gauss_markov(rng, m, dt, bias_tau, bias_sd)

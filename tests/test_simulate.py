@@ -218,7 +218,7 @@ def test_oracle_params_only_known_keys(urban):
     for section, values in p.items():
         assert set(values) == set(DEFAULTS[section])
     assert p["gyro"]["noise_sd_radps"] == pytest.approx(urban.noise["gyro_noise_sd_radps"])
-    assert p["gyro"]["bias_tau_s"] == pytest.approx(300.0)
+    assert p["gyro"]["bias_tau_s"] == pytest.approx(urban.noise["gyro_bias_tau_s"])
     assert p["fkf"]["gnss_err_sd_m"] == pytest.approx(urban.noise["multipath_sd_m"])
     od = oracle_drive(urban)
     ok = od.gnss.valid
