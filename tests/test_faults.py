@@ -130,6 +130,11 @@ def test_track_problems_finds_nan_and_gaps() -> None:
 
 FILTERS = ("ekf", "aekf", "fkf", "fafkf")
 
+#: RMSE bound against the truth (m) where the fault itself forbids the default 5 m:
+#: GNSS stamps 2 s late for good (~15 m/s x 2 s along track), no GNSS at all (120 s of DR),
+#: half the drive in a 60 s outage (its own test bounds the error inside it).
+RMSE_BOUND_M = {"gnss_clock_back": 40.0, "no_gnss_origin": 250.0, "outage_60s": 40.0}
+
 
 @pytest.fixture(scope="module")
 def sim() -> object:
@@ -149,8 +154,17 @@ def test_fault_gives_a_track_or_one_clear_error(case: str, filter_name: str, sim
     assert F.outcome_problems(out, fc.expect) == []
     if out.status == 0 and fc.expect == "track":
         # the damaged drive still follows the truth: open sky, 120 s, GNSS almost throughout
-        rmse_bound_m = 250.0 if case == "no_gnss_origin" else 10.0
-        assert F.case_metrics(inputs, out)["rmse_m"] < rmse_bound_m
+        assert F.case_metrics(inputs, out)["rmse_m"] < RMSE_BOUND_M.get(case, 5.0)
+
+
+def _dr_bound_m(inputs: F.CaseInputs) -> float:
+    """5 m + 10 % of the distance driven in the fault window (a common dead-reckoning spec)."""
+    tr = inputs.sim.truth
+    t = tr["t_ns"].to_numpy()
+    lo, hi = inputs.focus_ns
+    w = (t >= lo) & (t < hi)
+    dist_m = float(np.sum(tr["speed"].to_numpy()[w]) * np.median(np.diff(t)) / NS_PER_S)
+    return 5.0 + 0.1 * dist_m
 
 
 @pytest.mark.parametrize("filter_name", FILTERS)
@@ -164,9 +178,13 @@ def test_outage_sigma_grows_and_error_stays_bounded(filter_name: str, sim: objec
     w = (t >= lo) & (t < hi)
     sig = np.hypot(tr["sigma_e"], tr["sigma_n"]).to_numpy()[w]
     assert sig[-1] > 2.0 * sig[0]  # 60 s of dead reckoning at ~15 m/s
-    assert np.all(np.diff(sig) >= -1e-6 * sig[1:])  # no update in an outage: P only grows
+    # no position update in an outage; odometer updates may trim it slightly via P_pv
+    assert np.all(sig >= 0.95 * np.maximum.accumulate(sig))
     assert not tr["gnss_used"].to_numpy()[w].any()
-    assert F.case_metrics(inputs, out)["focus_max_m"] < 50.0  # m after 60 s of odometer + gyro
+    m = F.case_metrics(inputs, out)
+    assert m["focus_max_m"] < _dr_bound_m(inputs)
+    # the covariance tells the truth: 99.9 % chi-square(2) radius is 3.7 sigma
+    assert m["end_error_sigmas"] < 3.7
 
 
 @pytest.mark.parametrize("filter_name", FILTERS)
@@ -193,7 +211,8 @@ def test_long_faults_in_memory(case: str, filter_name: str, tmp_path: Path) -> N
         w = (t >= lo) & (t < hi)
         sig = np.hypot(tr["sigma_e"], tr["sigma_n"]).to_numpy()[w]
         assert sig[-1] > 5.0 * sig[0]
-        assert np.all(np.diff(sig) >= -1e-6 * sig[1:])
+        assert np.all(sig >= 0.95 * np.maximum.accumulate(sig))
+        assert m["focus_max_m"] < _dr_bound_m(inputs)
 
 
 def test_failed_run_keeps_an_existing_output(sim: object, tmp_path: Path) -> None:
