@@ -57,6 +57,9 @@ N_PRIOR = 6
 I_SPD_FAIL, I_MIN_DIAG, I_SKIPPED, I_GATE_RESETS, I_NONFINITE = range(5)
 N_INFO = 5
 N_PACKED = N_STATES * (N_STATES + 1) // 2
+#: nonzero columns of the odometer row (v_e, v_n, k_s) and the heading-rate row
+NZ_ODO = np.array([1, 4, 7], np.int64)
+NZ_OMEGA = np.array([1, 2, 4, 5, 6], np.int64)
 
 
 @njit(cache=True)
@@ -148,51 +151,65 @@ def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float
 
 
 @njit(cache=True)
+def joseph_apply(P: np.ndarray, K: np.ndarray, PHt: np.ndarray, HPHt: float, R: float,
+                 Bh: np.ndarray) -> None:
+    """Joseph form for a scalar measurement, P <- (I - K H) P (I - K H)^T + R K K^T, in place.
+
+    With ``B = (I - K H) P = P - K PHt^T`` and ``B H^T = PHt - K (H P H^T)`` (valid
+    for any gain, so also with consider states) the result is
+    ``B - (B H^T) K^T + R K K^T``; evaluated on the upper triangle and mirrored,
+    so P stays exactly symmetric (one O(n^2) pass instead of three).
+    """
+    n = N_STATES
+    for i in range(n):
+        Bh[i] = PHt[i] - K[i] * HPHt
+    for i in range(n):
+        ki = K[i]
+        bi = Bh[i]
+        for j in range(i, n):
+            v = P[i, j] - ki * PHt[j] - bi * K[j] + R * ki * K[j]
+            P[i, j] = v
+            P[j, i] = v
+
+
+@njit(cache=True)
 def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
-                K: np.ndarray, Bh: np.ndarray) -> bool:
+                K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray) -> bool:
     """Scalar update with H = unit row ``idx`` (Joseph form).  False if S is not positive."""
     n = N_STATES
-    S = P[idx, idx] + R
+    HPHt = P[idx, idx]
+    S = HPHt + R
     if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
         return False
     for i in range(n):
-        K[i] = P[i, idx] / S
+        PHt[i] = P[i, idx]
+        K[i] = PHt[i] / S
     for i in range(n):
         x[i] += K[i] * y
-    # Joseph: B = (I - K h) P ; P = B (I - K h)^T + R K K^T
-    for i in range(n):
-        Bh[i] = P[idx, i]  # row idx of P (= column, symmetric) before the update
-    for i in range(n):
-        ki = K[i]
-        for j in range(n):
-            P[i, j] -= ki * Bh[j]
-    for i in range(n):
-        Bh[i] = P[i, idx]  # B h
-    for i in range(n):
-        for j in range(n):
-            P[i, j] += -Bh[i] * K[j] + R * K[i] * K[j]
-    symmetrize(P)
+    joseph_apply(P, K, PHt, HPHt, R, Bh)
     return True
 
 
 @njit(cache=True)
-def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
+def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: float, R: float,
                K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int = -1) -> bool:
-    """Scalar update with a dense Jacobian row H (Joseph form).  False if S is not positive.
+    """Scalar update with a sparse Jacobian row H (nonzeros at indices ``nz``), Joseph form.
 
-    ``consider >= 0``: Schmidt-Kalman "consider" state: its gain is set to zero
-    (the state is not corrected by this measurement) while its uncertainty
-    still enters S and the cross-covariances; the Joseph form keeps P exact for
-    such a suboptimal gain.
+    False if S is not positive.  ``consider >= 0``: Schmidt-Kalman "consider"
+    state: its gain is set to zero (the state is not corrected by this
+    measurement) while its uncertainty still enters S and the
+    cross-covariances; the Joseph form keeps P exact for such a suboptimal gain.
     """
     n = N_STATES
-    S = R
+    HPHt = 0.0
     for i in range(n):
         s = 0.0
-        for j in range(n):
-            s += P[i, j] * H[j]
+        for m in nz:
+            s += P[i, m] * H[m]
         PHt[i] = s
-        S += H[i] * s
+    for m in nz:
+        HPHt += H[m] * PHt[m]
+    S = HPHt + R
     if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
         return False
     for i in range(n):
@@ -201,19 +218,7 @@ def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
         K[consider] = 0.0
     for i in range(n):
         x[i] += K[i] * y
-    for i in range(n):  # B = P - K (H P)
-        ki = K[i]
-        for j in range(n):
-            P[i, j] -= ki * PHt[j]
-    for i in range(n):  # B H^T
-        s = 0.0
-        for j in range(n):
-            s += P[i, j] * H[j]
-        Bh[i] = s
-    for i in range(n):
-        for j in range(n):
-            P[i, j] += -Bh[i] * K[j] + R * K[i] * K[j]
-    symmetrize(P)
+    joseph_apply(P, K, PHt, HPHt, R, Bh)
     return True
 
 
@@ -360,8 +365,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     sh_m += 1
                     re = r_e[k] * sh_r
                     rn = r_n[k] * sh_r
-                ok1 = unit_update(x, P, 0, ye, re, K, Bh)
-                ok2 = unit_update(x, P, 3, z_n[k] - x[3], rn, K, Bh)
+                ok1 = unit_update(x, P, 0, ye, re, K, PHt, Bh)
+                ok2 = unit_update(x, P, 3, z_n[k] - x[3], rn, K, PHt, Bh)
                 if ok1 and ok2:
                     gnss_used[k] = True
                 else:
@@ -372,7 +377,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             is_static = standstill and u < prm[P_STATIC_SPEED]
             if is_static:
                 for idx in (1, 4, 2, 5):
-                    if not unit_update(x, P, idx, -x[idx], prm[P_R_ZUPT], K, Bh):
+                    if not unit_update(x, P, idx, -x[idx], prm[P_R_ZUPT], K, PHt, Bh):
                         info[I_SKIPPED] += 1.0
             else:
                 sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
@@ -387,14 +392,14 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 if use:
                     h = odo_row(x, ue, un, H)
                     cons = 6 if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else -1
-                    if not row_update(x, P, H, u - h, prm[P_R_ODO], K, PHt, Bh, cons):
+                    if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons):
                         info[I_SKIPPED] += 1.0
         static_out[k] = is_static
         hold_out[k] = hold
         # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
         if has_gyro[k]:
             if is_static:
-                if not unit_update(x, P, 6, omega[k] - x[6], prm[P_R_OMEGA], K, Bh):
+                if not unit_update(x, P, 6, omega[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh):
                     info[I_SKIPPED] += 1.0
             elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
                 h = omega_row(x, H)
@@ -402,7 +407,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 # absolute reference a sustained turn (the Singer covariance lets a decay while
                 # the mean holds it) or a speed update (through P[eps, v]) must not move eps
                 cons = 6 if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else -1
-                if not row_update(x, P, H, omega[k] - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
+                if not row_update(x, P, H, NZ_OMEGA, omega[k] - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
                     info[I_SKIPPED] += 1.0
         # ---- remembered heading for the odometer row near standstill
         sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
