@@ -11,8 +11,13 @@ from gpsdr_cli.filters import get
 from . import tiny_drive
 from .reference_aekf import reference_filter
 
-#: relative tolerance between kernel and reference (dimensionless)
+#: relative tolerance between kernel and reference on the track (position, velocity, their
+#: variances, NIS), dimensionless, relative to each array's largest magnitude
 RTOL = 1e-9
+#: the same for the hidden states (acceleration, drift, scale): round-off differences of the
+#: block/upper-triangle arithmetic are amplified by the 1/v^2 of the heading-rate row when the
+#: vehicle restarts from a stop (measured up to 3e-8 on a_e for a few epochs)
+RTOL_HIDDEN = 1e-7
 
 OPTIONS = {
     "plain": {},
@@ -35,9 +40,9 @@ def drive():
                       outliers=((14.0, 15.0, 40.0),))
 
 
-def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:
+def _close(a: np.ndarray, b: np.ndarray, what: str, rtol: float = RTOL) -> None:
     scale = max(float(np.max(np.abs(b))), 1e-300)
-    np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * scale, err_msg=what)
+    np.testing.assert_allclose(a, b, rtol=rtol, atol=rtol * scale, err_msg=what)
 
 
 @pytest.mark.parametrize("name", ["ekf", "aekf"])
@@ -56,9 +61,10 @@ def test_kernel_matches_reference(drive, name, option, smooth):
     _close(res.n, x[:, 3], "n")
     _close(res.v_e, x[:, 1], "v_e")
     _close(res.v_n, x[:, 4], "v_n")
-    _close(res.extras["a_e"], x[:, 2], "a_e")
-    _close(-res.extras["gyro_bias_radps"], x[:, 6], "eps")
-    _close(res.extras["odo_scale"], x[:, 7], "k_s")
+    _close(res.extras["a_e"], x[:, 2], "a_e", RTOL_HIDDEN)
+    _close(res.extras["a_n"], x[:, 5], "a_n", RTOL_HIDDEN)
+    _close(-res.extras["gyro_bias_radps"], x[:, 6], "eps", RTOL_HIDDEN)
+    _close(res.extras["odo_scale"], x[:, 7], "k_s", RTOL_HIDDEN)
     _close(res.var_e, P[:, 0, 0], "var_e")
     _close(res.var_n, P[:, 3, 3], "var_n")
     _close(res.cov_en, P[:, 0, 3], "cov_en")
