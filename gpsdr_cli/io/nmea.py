@@ -342,9 +342,9 @@ class _Sentences:
     become ``b"?"`` (never a valid value).
     """
 
-    def __init__(self, arr: np.ndarray, commas: np.ndarray, pos: np.ndarray, s1: np.ndarray,
+    def __init__(self, win: np.ndarray, commas: np.ndarray, pos: np.ndarray, s1: np.ndarray,
                  st: np.ndarray) -> None:
-        self.arr, self.commas, self.pos, self.s1, self.st = arr, commas, pos, s1, st
+        self.win, self.commas, self.pos, self.s1, self.st = win, commas, pos, s1, st
         self.n = len(pos)
         self.c0 = np.searchsorted(commas, s1)
         self.nf = np.searchsorted(commas, st) - self.c0 + 1  # fields including the address
@@ -364,11 +364,10 @@ class _Sentences:
         w = int(min(length.max(initial=0), _MAX_FIELD))
         if w == 0:
             return np.zeros(self.n, dtype="S1")
-        j = np.arange(w)
-        idx = a[:, None] + j[None, :]
-        g = self.arr[np.minimum(idx, len(self.arr) - 1)]
-        g[j[None, :] >= length[:, None]] = 0
-        out = np.ascontiguousarray(g).view(f"S{w}").ravel()
+        # rows of a sliding window over the bytes: one contiguous copy per field
+        g = self.win[:, :w][np.where(has, a, 0)]
+        g *= np.arange(w)[None, :] < length[:, None]
+        out = g.view(f"S{w}").ravel()
         long = length > _MAX_FIELD
         if long.any():
             out = out.astype(f"S{max(w, 1)}")
@@ -453,11 +452,12 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     # ---- 3. classify by the first 7 bytes ('$'/'!' + address + ','), once per distinct head
     ok_s1_a = s1[good]
     ok_st_a = st[good]
-    j = np.arange(7)
-    gidx = ok_start[:, None] + j[None, :]
-    heads = arr[np.minimum(gidx, n - 1)].copy()
-    heads[gidx >= ok_st_a[:, None]] = 0  # bytes past the body: NUL (dropped by the S view)
-    heads = np.ascontiguousarray(heads).view("S7").ravel()
+    # window view over the chunk padded with NULs: row i = the _MAX_FIELD bytes from i
+    win = np.lib.stride_tricks.sliding_window_view(
+        np.concatenate([arr, np.zeros(_MAX_FIELD, np.uint8)]), _MAX_FIELD)
+    heads = win[:, :7][ok_start]
+    heads *= np.arange(7)[None, :] < (ok_st_a - ok_start)[:, None]  # past the body: NUL
+    heads = heads.view("S7").ravel()
     uniq, first_i, inverse, counts = np.unique(heads, return_index=True, return_inverse=True,
                                                return_counts=True)
     kind_of_uniq = np.empty(len(uniq), np.int64)
@@ -477,7 +477,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         sel = np.flatnonzero(kind_arr == kind)
         if len(sel) == 0:
             continue
-        sent[kind] = _Sentences(arr, commas, ok_start[sel] + base, ok_s1_a[sel], ok_st_a[sel])
+        sent[kind] = _Sentences(win, commas, ok_start[sel] + base, ok_s1_a[sel], ok_st_a[sel])
         stats["sentences"][_TYPE_NAME[kind]] += len(sel)
 
     # ---- 4. fields per kind; each returns (keep mask, sod_us) and its arrays
