@@ -675,7 +675,7 @@ def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log
     if not data.startswith(MAGIC):
         raise InputError(path_s, f"not an MCAP file (starts with {data[:8]!r}, expected the "
                          "MCAP magic \\x89MCAP0\\r\\n)")
-    topics = dict(topics or {})
+    topics = {k: v for k, v in (topics or {}).items() if v}
     for kind in topics:
         if kind not in ("gnss", "gyro", "odo"):
             raise UsageError(f"topic override for {kind!r}: expected gnss, gyro or odo")

@@ -115,6 +115,11 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
     warnings: list[str] = []
 
     def add(part: Drive) -> None:
+        """Merge ``part``; its sources list only the streams actually taken from it."""
+        taken = tuple(s for s in ("gnss", "gyro", "odo")
+                      if getattr(drive, s) is None and getattr(part, s) is not None)
+        for src in part.sources:
+            src.streams = tuple(s for s in src.streams if s in taken) if src.streams else taken
         warnings.extend(part.meta.get("warnings", []))
         drive.merge(part)
 

@@ -74,6 +74,7 @@ def test_read_drive_mcap_log_and_override_precedence():
     d = read_drive(SMALL_MCAP, gyro=DRIVE / "gyro.csv", params=P)
     assert len(d.gyro) == 6256 and len(d.gnss) == 20 and len(d.odo) == 100
     assert [Path(s.path).name for s in d.sources] == ["gyro.csv", "small_drive.mcap"]
+    assert [s.streams for s in d.sources] == [("gyro",), ("gnss", "odo")]
 
 
 def test_read_drive_real_mcap_keeps_warnings():
