@@ -111,19 +111,26 @@ class _Problems:
         self.items: dict[str, list] = {}
 
     def add(self, reason: str, pos: np.ndarray | int, *, fatal: bool = True,
-            exc: type[ParseError] = ParseError, n: int | None = None) -> None:
-        """Count ``n`` (default: one per offset in ``pos``) skips of ``reason``."""
+            exc: type[ParseError] = ParseError, n: int | None = None,
+            detail: np.ndarray | None = None) -> None:
+        """Count ``n`` (default: one per offset in ``pos``) skips of ``reason``.
+
+        ``detail`` (aligned with ``pos``): text for the strict-mode message of the first.
+        """
         pos = np.atleast_1d(np.asarray(pos, dtype=np.int64))
         if len(pos) == 0:
             return
         count = len(pos) if n is None else n
-        first = int(pos.min())
+        i = int(pos.argmin())
+        first = int(pos[i])
+        note = "" if detail is None else str(detail[i])
         item = self.items.get(reason)
         if item is None:
-            self.items[reason] = [count, first, fatal, exc]
+            self.items[reason] = [count, first, fatal, exc, note]
         else:
             item[0] += count
-            item[1] = min(item[1], first)
+            if first < item[1]:
+                item[1], item[4] = first, note
 
 
 def _line_breaks(arr: np.ndarray) -> np.ndarray:
@@ -434,7 +441,10 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         good = xor == given
     else:
         good = np.zeros(0, bool)
-    probs.add("bad checksum", starts[has_ck][~good] + base, exc=ChecksumError)
+    if not good.all():
+        computed = np.char.mod("computed *%02X", xor[~good])
+        probs.add("bad checksum", starts[has_ck][~good] + base, exc=ChecksumError,
+                  detail=computed)
     ok_start = starts[has_ck][good]
 
     # lines that hold no sentence start at all but are not blank: free text, JSON, comments
@@ -639,7 +649,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
 
 
     # ---- 5. epochs
-    report = _report(probs, name, lines, strict)
+    report = _report(probs, name, lines, strict, buf)
     pos_all = np.concatenate([parsed[k]["pos"] for k in parsed] or [np.zeros(0, np.int64)])
     sod_all = np.concatenate([parsed[k]["sod"] if k in _TIMED else
                               np.full(len(parsed[k]["pos"]), -1, np.int64) for k in parsed]
@@ -774,15 +784,37 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     return fixes, report, meta
 
 
-def _report(probs: _Problems, name: str, lines: _Lines, strict: bool) -> SkipReport:
+#: What strict mode says was expected, by the start of a skip reason.
+_EXPECTED = (
+    ("no checksum", "expected $ADDRESS,fields...*hh before the line end"),
+    ("bad checksum", "expected the XOR of the bytes between $ and * as *hh"),
+    ("not a sentence", "expected an NMEA sentence starting with $"),
+    ("malformed time", "expected hhmmss[.sss]"),
+    ("malformed date in RMC", "expected ddmmyy"),
+    ("malformed date in ZDA", "expected dd,mm,yyyy"),
+    ("malformed position", "expected ddmm.mmmm,N|S,dddmm.mmmm,E|W"),
+    ("malformed mode", "expected one of A D P R F E N M S"),
+    ("GSA with too few fields", "expected mode,fix type,satellites...,PDOP,HDOP,VDOP"),
+    ("malformed", "expected a number"),
+)
+
+
+def _report(probs: _Problems, name: str, lines: _Lines, strict: bool,
+            buf: bytes = b"") -> SkipReport:
     """Turn the problems into a SkipReport, or raise the first fatal one when strict."""
     if strict:
-        fatal = [(v[1], r, v[3]) for r, v in probs.items.items() if v[2]]
+        fatal = [(v[1], r, v[3], v[4]) for r, v in probs.items.items() if v[2]]
         if fatal:
-            pos, reason, exc = min(fatal, key=lambda t: t[0])
-            raise exc(name, f"{reason} (strict mode)", line=int(lines(pos)))
+            pos, reason, exc, note = min(fatal, key=lambda t: t[0])
+            text = re.split(rb"[\r\n]", buf[pos:pos + 82], maxsplit=1)[0]
+            text = text.decode("ascii", "backslashreplace")
+            expected = next(e for p, e in _EXPECTED + (("", "expected NMEA 0183"),)
+                            if reason.startswith(p))
+            note = f", {note}" if note else ""
+            raise exc(name, f"{reason}: {text!r}{note}; {expected} (strict mode)",
+                      line=int(lines(pos)))
     report = SkipReport()
-    for reason, (count, first, _fatal, _exc) in sorted(probs.items.items(), key=lambda kv: kv[1][1]):
+    for reason, (count, first, *_rest) in sorted(probs.items.items(), key=lambda kv: kv[1][1]):
         report.add(reason, f"{name}:{int(lines(first))}", count)
     return report
 

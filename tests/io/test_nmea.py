@@ -331,8 +331,12 @@ def test_strict_raises_at_first_bad_line() -> None:
         parse_nmea(data, name="s.nmea", strict=True)
     body = rmc("120001")
     data = log(rmc("120000"), body[:-2] + ("00" if body[-2:] != "00" else "11"))
-    with pytest.raises(ChecksumError, match=r"^s\.nmea:2: bad checksum"):
+    with pytest.raises(ChecksumError, match=r"^s\.nmea:2: bad checksum") as err:
         parse_nmea(data, name="s.nmea", strict=True)
+    assert f"computed *{body[-2:]}" in str(err.value)  # the right checksum is named
+    with pytest.raises(ParseError, match=r"^s\.nmea:1: malformed time in GGA: '\$GPGGA,1200,.*"
+                                         r"expected hhmmss\[\.sss\]"):
+        parse_nmea(log(gga("1200")), name="s.nmea", strict=True, date=DAY)
     fixes, _, _ = parse_nmea(log(rmc("120000"), ck("GPGSV,1,1,00")), strict=True)  # unknown: fine
     assert len(fixes) == 1
 
