@@ -98,8 +98,9 @@ class _Channel:
     schema_data: bytes
     layout: str | None
     n_msgs: int = 0
-    #: Decoded columns: lists of arrays (fast path) or scalars (slow path), by field.
+    #: Decoded columns by field: arrays from the fast path, scalars from the generic route.
     cols: dict[str, list] = field(default_factory=dict)
+    scalars: dict[str, list] = field(default_factory=dict)
     texts: list[bytes] = field(default_factory=list)
     n_undecodable: int = 0
     first_undecodable: str = ""
@@ -378,7 +379,7 @@ class _Walker:
             if layout == "sentence":
                 chan.texts.append(rec.pop("text"))
             for name, value in rec.items():
-                chan.add(name, np.array([value]))
+                chan.scalars.setdefault(name, []).append(value)
 
     def _decode_one(self, chan: _Channel, raw: bytes) -> dict[str, Any] | None:
         """One message by the generic route (CDR generic decoder, JSON, protobuf), or None."""
@@ -553,7 +554,11 @@ def _pb_location_fix(buf: bytes) -> dict[str, Any]:
 # --------------------------------------------------------------------------- streams
 
 def _cat(chan: _Channel, name: str, dtype: Any) -> np.ndarray:
-    parts = chan.cols.get(name, [])
+    """A field's values: fast-path arrays, then generic-route scalars (the same order for
+    every field of a channel, so rows stay aligned)."""
+    parts = list(chan.cols.get(name, []))
+    if chan.scalars.get(name):
+        parts.append(np.array(chan.scalars[name], dtype=dtype))
     if not parts:
         return np.zeros(0, dtype)
     return np.concatenate(parts).astype(dtype, copy=False)
@@ -657,7 +662,7 @@ def _usable(kind: str, chan: _Channel) -> int:
         return int((_cat(chan, "wz_cov0", np.float64) != -1.0).sum())
     if chan.layout == "sentence":
         return len(chan.texts)
-    return sum(len(p) for p in chan.cols.get("log_ns", []))
+    return len(_cat(chan, "log_ns", np.int64))
 
 
 def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log_time: bool = False,
