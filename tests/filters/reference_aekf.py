@@ -116,8 +116,9 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 if ad["innovation_factor"]:  # seed 001
                     beta = math.sqrt(float(y @ y) / np.trace(S))
                     a_f = 1.0 if beta <= ad["innovation_c"] else ad["innovation_c"] / beta
-                    if a_f < 1.0:
-                        P = P * (1.0 / a_f)
+                    if a_f < 1.0:  # on the kinematic block only (see kernels_aekf)
+                        D = np.diag([math.sqrt(1.0 / a_f)] * 6 + [1.0, 1.0])
+                        P = D @ P @ D
                 if reset:  # no lock-out: accept and inflate the position variance
                     P = P + np.diag([y[0] ** 2, 0, 0, y[1] ** 2, 0, 0, 0, 0])
                 Ps_prior[k] = P  # seed 001 factor and reset inflation are part of P(k|k-1)
