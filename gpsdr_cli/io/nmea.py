@@ -306,7 +306,7 @@ def _lat_lon(val: np.ndarray, hemi: np.ndarray, pos_letter: bytes, neg_letter: b
              max_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(d)ddmm.mmmm`` + hemisphere -> (degrees, NaN where empty/bad; empty mask; bad mask)."""
     v, bad = _num(val)
-    empty = (val == b"") & (hemi == b"")
+    empty = val == b""  # an empty value is no position, whatever the hemisphere says
     deg = np.floor(v / 100.0)
     minutes = v - deg * 100.0
     out = deg + minutes / 60.0
@@ -610,6 +610,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     Raises :class:`InputError` for empty, UTF-16 or binary input and
     :class:`NoDataError` when no epoch with a time (and a date) can be built.
     """
+    data = bytes(data)  # bytearray / memoryview welcome
     if len(data) == 0:
         raise InputError(name, "empty file (expected NMEA 0183 text lines like $GPGGA,...*hh)")
     if _utf16_kind(data[:4096]) is not None:

@@ -100,13 +100,15 @@ def test_no_fix_rows_are_nan_never_zero() -> None:
                rmc("100001"), gga("100001", q=1, lat=",", lon=","),  # quality 1 but empty position
                rmc("100002"), gga("100002", q=0),  # quality 0 with a (stale) position
                rmc("100003"), gga("100003", lat="0000.000,N", lon="00000.000,E"),
-               rmc("100004"), gga("100004"))
-    fixes, _, _ = parse_nmea(data)
-    assert len(fixes) == 5
-    assert fixes.fix_quality.tolist() == [0, 0, 0, 0, 1]
+               rmc("100004"), gga("100004"),
+               rmc("100005"), gga("100005", q=0, lat=",N", lon=",E"))  # letters, no numbers
+    fixes, report, _ = parse_nmea(bytearray(data))
+    assert len(fixes) == 6
+    assert fixes.fix_quality.tolist() == [0, 0, 0, 0, 1, 0]
     assert np.isnan(fixes.lat_deg[:4]).all() and np.isnan(fixes.lon_deg[:4]).all()
     assert not (fixes.lat_deg == 0).any()
-    assert fixes.valid.tolist() == [False] * 4 + [True]
+    assert fixes.valid.tolist() == [False] * 4 + [True, False]
+    assert report.total == 0
 
 
 @pytest.mark.parametrize("q", [2, 4, 5, 6])
