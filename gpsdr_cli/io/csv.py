@@ -92,6 +92,9 @@ def _detect_delimiter(header: str) -> str:
 
 def _parse_header(path: str | Path, data: bytes) -> tuple[list[str], str, int]:
     """Column names, delimiter and the byte offset where the data rows start."""
+    for magic, kind in ((b"\x89MCAP", "an MCAP log"), (b"PAR1", "a Parquet file")):
+        if data.startswith(magic):
+            raise InputError(path, f"is {kind}, expected a CSV with a header row")
     problem = text_problem(data[:65536])
     if problem:
         raise InputError(path, problem)
@@ -101,6 +104,8 @@ def _parse_header(path: str | Path, data: bytes) -> tuple[list[str], str, int]:
     header = data[start:end].decode("utf-8", errors="replace")
     if not header.strip():
         raise InputError(path, "first line is empty; expected a header row of column names", line=1)
+    if header.lstrip().startswith(("$", "!")) and "*" in header:
+        raise InputError(path, "looks like an NMEA log, expected a CSV with a header row", line=1)
     delim = _detect_delimiter(header)
     try:
         fields = next(_stdcsv.reader([header], delimiter=delim, strict=False), [])

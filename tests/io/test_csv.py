@@ -172,6 +172,9 @@ def test_missing_column_names_file_columns_and_option(tmp_path):
     (b"1700000000,0.1\n1700000001,0.2\n", "no header row"),
     (b"t,yaw_rate\n", "no usable gyro rows"),
     (b"t,yaw_rate\nx,y\n", "no usable gyro rows"),
+    (b"$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n", "looks like an NMEA log"),
+    (b"\x89MCAP0\r\n\x01", "is an MCAP log"),
+    (b"PAR1\x00\x00", "is a Parquet file"),
 ])
 def test_bad_files_are_one_clear_input_error(tmp_path, content, match):
     p = _csv(tmp_path, content)
