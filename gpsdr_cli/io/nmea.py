@@ -179,8 +179,8 @@ def _utf16_kind(head: bytes) -> str | None:
 def looks_like_nmea(head: bytes) -> bool:
     """True when ``head`` (the first bytes of a file) holds NMEA sentences with valid checksums.
 
-    Needs two checksum-valid sentences in the first KB (one if the head is a single
-    short line).  UTF-16 NMEA also answers True, so that :func:`read_nmea` can say
+    Needs two checksum-valid sentences in the first KB (one if the head holds at most
+    three sentence starts).  UTF-16 NMEA also answers True, so that :func:`read_nmea` can say
     how to convert it.
     """
     kind = _utf16_kind(head)
@@ -199,7 +199,7 @@ def looks_like_nmea(head: bytes) -> bool:
             found += 1
             if found >= 2:
                 return True
-    return found == 1 and head.count(b"$") + head.count(b"!") <= 1
+    return found == 1 and head.count(b"$") + head.count(b"!") <= 3
 
 
 def _is_binary(data: bytes) -> bool:

@@ -191,3 +191,4 @@ def test_sniffer_on_real_files() -> None:
     assert looks_like_nmea((DATA / "pygpsdata-um981.log").read_bytes()[:1024])
     assert looks_like_nmea((DATA / "pygpsdata-mixed.log").read_bytes()[:2048][-1024:])
     assert not looks_like_nmea((DATA / "ATTRIBUTION.tsv").read_bytes()[:1024])
+    assert looks_like_nmea((DATA / "pygpsdata-nmeabadck.log").read_bytes())  # 1 of 3 valid
