@@ -140,6 +140,9 @@ def plot_report(track: pd.DataFrame, out_path: str | Path, reference_en: pd.Data
     pdop_shown = np.where(outage, np.nan, pdop)  # the track carries the last PDOP through outages
     ax_pdop.plot(t_min, pdop_shown, "-", lw=0.8, color="tab:purple", label="PDOP")
     ax_pdop.axhline(pdop_good, color="tab:purple", lw=0.6, ls=":", label=f"pdop_good = {pdop_good:g}")
+    if not np.isfinite(pdop).any():
+        ax_pdop.text(0.5, 0.5, "no PDOP in the input", transform=ax_pdop.transAxes,
+                     ha="center", va="center", color="0.4")
     ax_pdop.set_ylabel("PDOP")
     ax_pdop.set_ylim(bottom=0.0)
     ax_pdop.grid(True, lw=0.3)
