@@ -1,0 +1,372 @@
+"""Plain numpy, per-epoch reference of fkf and fafkf (seed 002), in textbook letters.
+
+Written to be obviously right rather than fast: dense ``Phi``, ``Q``, ``H``;
+``K = P H^T S^-1``; the Joseph form as a matrix product; the fusion with
+``np.linalg.solve``; the RTS smoother as ``C = P Phi^T P_prior^-1``.  The
+compiled kernels (:mod:`gpsdr_cli.filters.kernels_fkf`) must reproduce its
+tracks to 1e-9 relative.  It takes the same prepared inputs
+(:func:`gpsdr_cli.filters.fkf.prepare`: the heading integration, odometer
+distances and standstill flags are vectorised numpy there already) and the
+same fuzzy control tables (:mod:`gpsdr_cli.filters.fuzzy`).
+
+Also here: :func:`tiny_drive`, a small drive generator with known truth for
+the closed-form tests (straight lines and circles), independent of
+:mod:`gpsdr_cli.simulate`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gpsdr_cli.filters import fuzzy
+from gpsdr_cli.filters import kernels_fkf as kf
+from gpsdr_cli.filters.fkf import Prepared
+
+NX = 10
+POS_BLOCK = [kf.IE, kf.IN]
+VEL_BLOCK = [kf.IVE, kf.IAE, kf.IVN, kf.IAN]
+
+
+def Phi_of(T: float, static: bool, tau: float) -> np.ndarray:
+    """seed 002 eqs. (2)-(3) with the T^2/2 erratum; kinematics held at standstill."""
+    Phi = np.eye(NX)
+    if not static:
+        axis = np.array([[1.0, T, 0.5 * T * T], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
+        Phi[0:3, 0:3] = axis
+        Phi[3:6, 3:6] = axis
+    Phi[6, 6] = Phi[7, 7] = math.exp(-T / tau)
+    return Phi
+
+
+def Q_of(T: float, static: bool, par: np.ndarray) -> np.ndarray:
+    """White-jerk kinematics, stationary Gauss-Markov eps, random-walk q_w, q_s."""
+    Q = np.zeros((NX, NX))
+    if not static:
+        q = par[kf.K_JERK_PSD]
+        axis = q * np.array([[T**5 / 20, T**4 / 8, T**3 / 6],
+                             [T**4 / 8, T**3 / 3, T**2 / 2],
+                             [T**3 / 6, T**2 / 2, T]])
+        Q[0:3, 0:3] = axis
+        Q[3:6, 3:6] = axis
+    f = math.exp(-T / par[kf.K_TAU_EPS])
+    Q[6, 6] = Q[7, 7] = par[kf.K_EPS_SD] ** 2 * (1 - f * f)
+    Q[8, 8] = par[kf.K_QW_RW] ** 2 * T
+    Q[9, 9] = par[kf.K_QS_RW] ** 2 * T
+    return Q
+
+
+def kf_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """One scalar row: K = P H^T / S, Joseph form."""
+    S = float(H @ P @ H) + R
+    K = P @ H / S
+    x = x + K * y
+    IKH = np.eye(NX) - np.outer(K, H)
+    P = IKH @ P @ IKH.T + R * np.outer(K, K)
+    return x, 0.5 * (P + P.T)
+
+
+def wrap(a: float) -> float:
+    return a - 2 * math.pi * math.ceil((a - math.pi) / (2 * math.pi))
+
+
+def row(name: str, x: np.ndarray, t_m: float = 0.0, v_lin: float = 0.0,
+        psi_hint: float = 0.0) -> tuple[np.ndarray, float]:
+    """Measurement row H and prediction h(x) (seed 002 eqs. (6), (8), (10)-(14) with errata)."""
+    H = np.zeros(NX)
+    ve, vn = x[1], x[4]
+    if name == "e":
+        H[0] = H[6] = 1
+        return H, x[0] + x[6]
+    if name == "n":
+        H[3] = H[7] = 1
+        return H, x[3] + x[7]
+    if name == "heading":
+        v2 = ve * ve + vn * vn
+        H[1], H[4], H[8] = vn / v2, -ve / v2, 1
+        return H, math.atan2(ve, vn) + x[8]
+    v = math.hypot(ve, vn)
+    H[9] = 1
+    if v >= v_lin:
+        H[1], H[4] = t_m * ve / v, t_m * vn / v
+        return H, t_m * v + x[9]
+    ue, un = math.sin(psi_hint), math.cos(psi_hint)
+    H[1], H[4] = t_m * ue, t_m * un
+    return H, t_m * (ue * ve + un * vn) + x[9]
+
+
+class Window:
+    """Covariance matching for one component (seed 002 eqs. (15)-(18)) + fuzzy R step."""
+
+    def __init__(self, M: int) -> None:
+        self.buf = [0.0] * M
+        self.pos = 0
+        self.count = 0
+        self.factor = 1.0
+        self.u = 0.0
+
+    def push(self, r2: float, Te: float, par: np.ndarray) -> None:
+        M = len(self.buf)
+        self.buf[self.pos] = min(r2, par[kf.K_RES_CLIP] * Te)
+        self.pos = (self.pos + 1) % M
+        self.count += 1
+        if self.count < M:
+            return
+        Ra = 0.0
+        for v in self.buf:
+            Ra += v
+        Ra /= M
+        u = min(max((Te - Ra) / Te, -1.0), 1.0)
+        self.u = u
+        delta = par[kf.K_DELTA_MAX] * np.interp(u, np.linspace(-1, 1, len(fuzzy.R_TABLE)),
+                                                fuzzy.R_TABLE)
+        self.factor = min(max(self.factor * (1 + delta), par[kf.K_R_MIN]), par[kf.K_R_MAX])
+
+
+def bilinear(table: np.ndarray, a: float, b: float) -> float:
+    n = table.shape[0]
+    a = min(max(a, 0.0), 1.0) * (n - 1)
+    b = min(max(b, 0.0), 1.0) * (n - 1)
+    i, j = min(int(a), n - 2), min(int(b), n - 2)
+    wa, wb = a - i, b - j
+    t0 = table[i, j] + wb * (table[i, j + 1] - table[i, j])
+    t1 = table[i + 1, j] + wb * (table[i + 1, j + 1] - table[i + 1, j])
+    return t0 + wa * (t1 - t0)
+
+
+def normalise(a: float, b: float, log: bool) -> tuple[float, float]:
+    if log:
+        la = min(max(0.5 + 0.25 * math.log10((a + 1e-300) / (b + 1e-300)), 0.0), 1.0)
+        return la, 1 - la
+    return (a / (a + b), b / (a + b)) if a + b > 0 else (0.0, 0.0)
+
+
+def beta(P1: np.ndarray, P2: np.ndarray, d1: np.ndarray, d2: np.ndarray, idx: list[int],
+         de: tuple[float, float], log: bool) -> float:
+    """seed 002 eq. (20) with PE = tr(M M^T), M = D^-1 P D^-1 over the block."""
+    M1 = (P1 / np.outer(d1, d1))[np.ix_(idx, idx)]
+    M2 = (P2 / np.outer(d2, d2))[np.ix_(idx, idx)]
+    p1, p2 = normalise(float(np.trace(M1 @ M1.T)), float(np.trace(M2 @ M2.T)), log)
+    W1 = bilinear(fuzzy.W_TABLE, p1, de[0])
+    W2 = bilinear(fuzzy.W_TABLE, p2, de[1])
+    return W1 / (W1 + W2)
+
+
+def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, np.ndarray]:
+    """Forward pass (and RTS when ``smooth``) of fkf or fafkf; returns the fused track."""
+    par, flags = prep.par, prep.flags
+    fr = bool(flags[kf.F_MODE_FR])
+    adaptive = kind == "fafkf"
+    fusion = kf.FUSE_COV if kind == "fkf" else (
+        kf.FUSE_SCALAR if flags[kf.F_FUSION] == kf.FUSE_SCALAR else kf.FUSE_BLOCK)
+    log = bool(flags[kf.F_NORM])
+    gnss_on, dr_on = bool(flags[kf.F_GNSS_ON]), bool(flags[kf.F_DR_ON])
+    both = gnss_on and dr_on
+    n = len(prep.dt)
+    d1, d2 = np.ones(NX), np.ones(NX)
+    if fr and both:
+        c0 = min(max(par[kf.K_BETA_GNSS], 0.05), 0.95) if fusion == kf.FUSE_COV else 0.5
+        d1[:], d2[:] = 1 / math.sqrt(c0), 1 / math.sqrt(1 - c0)
+    x1, x2 = prep.x0.copy(), prep.x0.copy()
+    P1, P2 = prep.P0 * np.outer(d1, d1), prep.P0 * np.outer(d2, d2)
+    xg, Pg = prep.x0.copy(), prep.P0.copy()
+    own1 = list(range(NX)) if fr else [0, 1, 2, 3, 4, 5, 6, 7]
+    own2 = list(range(NX)) if fr else [0, 1, 2, 3, 4, 5, 8, 9]
+    win = [Window(int(flags[kf.F_WINDOW])) for _ in range(4)]
+    zupt_R = par[kf.K_ZUPT_SD] ** 2
+    t, t_acc, psi_hint = 0.0, 0.0, prep.psi0
+    xs, Ps = np.zeros((n, NX)), np.zeros((n, NX, NX))
+    beta_out = np.full((n, 2), np.nan)
+    used = np.zeros(n, bool)
+
+    def zupt(x, P):
+        for i in (1, 4, 2, 5):
+            H = np.zeros(NX)
+            H[i] = 1
+            x, P = kf_update(x, P, H, -x[i], zupt_R)
+        return x, P
+
+    for k in range(n):
+        T = prep.dt[k] if k > 0 else 0.0
+        t += T
+        st = bool(prep.static[k])
+        if T > 0:
+            Phi, Q = Phi_of(T, st, par[kf.K_TAU_EPS]), Q_of(T, st, par)
+            x1, x2 = Phi @ x1, Phi @ x2
+            P1 = Phi @ P1 @ Phi.T + np.outer(d1, d1) * Q
+            P2 = Phi @ P2 @ Phi.T + np.outer(d2, d2) * Q
+        if gnss_on:
+            if st:
+                x1, P1 = zupt(x1, P1)
+            if prep.has_gnss[k]:
+                z = np.array([prep.gnss_e[k], prep.gnss_n[k]])
+                H1 = np.array([row("e", x1)[0], row("n", x1)[0]])
+                y = z - H1 @ x1                           # seed 002 eq. (15)
+                HPH = H1 @ P1 @ H1.T
+                R0 = np.array([prep.gnss_var_e[k], prep.gnss_var_n[k]])
+                if adaptive:
+                    for j in range(2):
+                        win[j].push(y[j] ** 2, HPH[j, j] + win[j].factor * R0[j], par)
+                R = np.diag([win[0].factor * R0[0], win[1].factor * R0[1]])
+                S = HPH + R
+                nis = float(y @ np.linalg.solve(S, y))
+                chi2 = par[kf.K_GATE_CHI2]
+                accept = not (chi2 > 0 and nis > chi2 and t - t_acc <= par[kf.K_GATE_RESET_S])
+                if accept:
+                    for j, name in enumerate(("e", "n")):
+                        H, h = row(name, x1)
+                        x1, P1 = kf_update(x1, P1, H, z[j] - h, R[j, j])
+                    used[k] = True
+                    t_acc = t
+        else:
+            t_acc = t
+        if dr_on:
+            if st:
+                x2, P2 = zupt(x2, P2)
+            else:
+                th, dist, t_m = prep.theta[k], prep.dist[k], prep.t_m[k]
+                do_head = do_dist = False
+                if not math.isnan(th):
+                    psi_hint = th - x2[8]
+                    do_head = x2[1] ** 2 + x2[4] ** 2 >= par[kf.K_OMEGA_MIN] ** 2
+                if not math.isnan(dist) and t_m > 0:
+                    do_dist = True
+                R_head = par[kf.K_HEAD_SD] ** 2
+                R_dist = (par[kf.K_ODO_SD] * t_m) ** 2
+                if adaptive:
+                    if do_head:
+                        H, h = row("heading", x2)
+                        win[2].push(wrap(th - h) ** 2, H @ P2 @ H + win[2].factor * R_head, par)
+                    if do_dist:
+                        H, h = row("dist", x2, t_m, par[kf.K_V_LIN], psi_hint)
+                        win[3].push((dist - h) ** 2, H @ P2 @ H + win[3].factor * R_dist, par)
+                if do_head:
+                    H, h = row("heading", x2)
+                    x2, P2 = kf_update(x2, P2, H, wrap(th - h), win[2].factor * R_head)
+                if do_dist:
+                    H, h = row("dist", x2, t_m, par[kf.K_V_LIN], psi_hint)
+                    x2, P2 = kf_update(x2, P2, H, dist - h, win[3].factor * R_dist)
+        if both:
+            if fusion == kf.FUSE_COV:
+                Y, yv = np.zeros((NX, NX)), np.zeros(NX)
+                for x, P, own in ((x1, P1, own1), (x2, P2, own2)):
+                    ix = np.ix_(own, own)
+                    Y[ix] += np.linalg.solve(P[ix], np.eye(len(own)))
+                    yv[own] += np.linalg.solve(P[ix], x[own])
+                Pg = np.linalg.solve(Y, np.eye(NX))
+                Pg = 0.5 * (Pg + Pg.T)
+                xg = np.linalg.solve(Y, yv)
+                w = np.full(NX, par[kf.K_BETA_GNSS])
+                beta_out[k] = [0.5 * (Pg[0, 0] / P1[0, 0] + Pg[3, 3] / P1[3, 3]),
+                               0.5 * (Pg[1, 1] / P1[1, 1] + Pg[4, 4] / P1[4, 4])]
+            else:
+                de = normalise(win[0].u ** 2 + win[1].u ** 2, win[2].u ** 2 + win[3].u ** 2, log)
+                if fusion == kf.FUSE_BLOCK:
+                    bp = beta(P1, P2, d1, d2, POS_BLOCK, de, log)
+                    bv = beta(P1, P2, d1, d2, VEL_BLOCK, de, log)
+                else:
+                    bp = bv = beta(P1, P2, d1, d2, list(range(NX)), de, log)
+                w = np.array([bp, bv, bv, bp, bv, bv, 1, 1, 0, 0], float)
+                if fr:
+                    w[6:8], w[8:10] = bp, bv
+                W1, W2 = np.diag(w), np.eye(NX) - np.diag(w)
+                xg = W1 @ x1 + W2 @ x2                    # seed 002 eq. (19)
+                Pg = W1 @ P1 @ W1 + W2 @ P2 @ W2
+                beta_out[k] = [bp, bv]
+            if fr:                                        # Carlson fusion-reset
+                c = np.clip(w, 0.05, 0.95)
+                d1, d2 = 1 / np.sqrt(c), 1 / np.sqrt(1 - c)
+                x1, x2 = xg.copy(), xg.copy()
+                P1, P2 = Pg * np.outer(d1, d1), Pg * np.outer(d2, d2)
+        elif gnss_on:
+            xg, Pg = x1.copy(), P1.copy()
+        else:
+            xg, Pg = x2.copy(), P2.copy()
+        xs[k], Ps[k] = xg, Pg
+
+    if smooth:
+        x_s, P_s = xs[-1].copy(), Ps[-1].copy()
+        out_x, out_P = xs.copy(), Ps.copy()
+        for k in range(n - 2, -1, -1):
+            T, st = prep.dt[k + 1], bool(prep.static[k + 1])
+            Phi = Phi_of(T, st, par[kf.K_TAU_EPS])
+            x_prior = Phi @ xs[k]
+            P_prior = Phi @ Ps[k] @ Phi.T + Q_of(T, st, par)
+            C = np.linalg.solve(P_prior, Phi @ Ps[k]).T   # P Phi^T P_prior^-1
+            x_s = xs[k] + C @ (x_s - x_prior)
+            P_s = Ps[k] + C @ (P_s - P_prior) @ C.T
+            out_x[k], out_P[k] = x_s, P_s
+        xs, Ps = out_x, out_P
+    return {"e": xs[:, 0], "n": xs[:, 3], "v_e": xs[:, 1], "v_n": xs[:, 4],
+            "var_e": Ps[:, 0, 0], "var_n": Ps[:, 3, 3], "cov_en": Ps[:, 0, 3],
+            "beta": beta_out, "gnss_used": used}
+
+
+# ----------------------------------------------------------------------------------------
+# A tiny drive generator with known truth (closed-form paths), for the tests.
+
+
+def tiny_drive(duration_s: float = 120.0, *, speed_mps: float = 10.0, turn_radps: float = 0.0,
+               gnss_sd_m: float = 1.0, gnss_hz: float = 5.0, dr_hz: float = 50.0,
+               gyro_bias_radps: float = 0.0, odo_scale: float = 1.0, stop: tuple[float, float] | None = None,
+               gnss_gap: tuple[float, float] | None = None, gnss_sd_jump: tuple[float, float] | None = None,
+               seed: int = 0, lat0: float = 48.0, lon0: float = 11.0):
+    """A drive at constant speed on a line (``turn_radps = 0``) or circle, with truth.
+
+    ``stop = (t0, t1)``: standing still in that interval (speed ramps 2 s each side);
+    ``gnss_gap``: no fixes in (t0, t1); ``gnss_sd_jump = (t0, factor)``: true GNSS
+    noise times ``factor`` from t0 on (the reported sigma stays ``gnss_sd_m``).
+    Returns (Drive, LocalFrame, truth dict of arrays t_ns, e, n, v_e, v_n).
+    """
+    from gpsdr_cli.geodesy import LocalFrame
+    from gpsdr_cli.io.drive import Drive, GnssFixes, Odometry, YawRates
+
+    rng = np.random.default_rng(seed)
+    t0_ns = 1_700_000_000 * 1_000_000_000
+    dt = 1.0 / dr_hz
+    t = np.arange(0.0, duration_s + 1e-9, dt)
+    speed = np.full(len(t), speed_mps)
+    if stop is not None:
+        a, b = stop
+        ramp_down = np.clip((a - t) / 2.0, 0.0, 1.0)
+        ramp_up = np.clip((t - b) / 2.0, 0.0, 1.0)
+        speed = speed_mps * np.where(t < a, ramp_down, np.where(t > b, ramp_up, 0.0))
+        speed[t < a - 2.0] = speed_mps
+    psi_rate = np.where(speed > 0.0, turn_radps, 0.0)
+    psi = np.concatenate(([0.7], 0.7 + np.cumsum(0.5 * (psi_rate[1:] + psi_rate[:-1]) * dt)))
+    v_e, v_n = speed * np.sin(psi), speed * np.cos(psi)
+    e = np.concatenate(([0.0], np.cumsum(0.5 * (v_e[1:] + v_e[:-1]) * dt)))
+    n = np.concatenate(([0.0], np.cumsum(0.5 * (v_n[1:] + v_n[:-1]) * dt)))
+    frame = LocalFrame.centred_on(lat0, lon0)
+    t_ns = t0_ns + np.round(t * 1e9).astype(np.int64)
+
+    step = int(round(dr_hz / gnss_hz))
+    gi = np.arange(0, len(t), step)
+    sd = np.full(len(gi), gnss_sd_m)
+    if gnss_sd_jump is not None:
+        sd = np.where(t[gi] >= gnss_sd_jump[0], gnss_sd_m * gnss_sd_jump[1], sd)
+    ge = e[gi] + rng.normal(0.0, 1.0, len(gi)) * sd
+    gn = n[gi] + rng.normal(0.0, 1.0, len(gi)) * sd
+    keep = np.ones(len(gi), bool)
+    if gnss_gap is not None:
+        keep = ~((t[gi] > gnss_gap[0]) & (t[gi] < gnss_gap[1]))
+    gi, ge, gn = gi[keep], ge[keep], gn[keep]
+    lat, lon = frame.inverse(ge, gn)
+    g = GnssFixes.empty(len(gi))
+    g.t_ns[:] = t_ns[gi]
+    g.lat_deg[:] = lat
+    g.lon_deg[:] = lon
+    g.alt_m[:] = 0.0
+    g.fix_quality[:] = 1
+    g.sigma_e_m[:] = gnss_sd_m
+    g.sigma_n_m[:] = gnss_sd_m
+    g.speed_mps[:] = speed[gi]
+    g.course_deg[:] = np.degrees(psi[gi]) % 360.0
+    yaw = -(psi_rate + gyro_bias_radps) + rng.normal(0.0, 0.002, len(t))   # CCW-positive
+    odo = odo_scale * speed + np.where(speed > 0, rng.normal(0.0, 0.05, len(t)), 0.0)
+    drive = Drive(gnss=g, gyro=YawRates(t_ns=t_ns.copy(), yaw_rate_radps=yaw),
+                  odo=Odometry(t_ns=t_ns.copy(), speed_mps=np.maximum(odo, 0.0)))
+    truth = {"t_ns": t_ns, "e": e, "n": n, "v_e": v_e, "v_n": v_n}
+    return drive, frame, truth
