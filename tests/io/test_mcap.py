@@ -475,3 +475,20 @@ def test_ros1_encoding(tmp_path):
     np.testing.assert_array_equal(d.gnss.lat_deg, 54.0 + np.arange(6) * 1e-5)
     np.testing.assert_array_equal(d.gnss.sigma_n_m, 3.0)
     np.testing.assert_array_equal(d.gyro.yaw_rate_radps, 0.1 * np.arange(6))
+
+
+def test_enu_twist_and_partial_imu(tmp_path):
+    """A navigation-frame twist (driving north: linear.y carries the speed) is read as
+    |linear.xy|; Imu messages with covariance[0] = -1 are skipped one by one."""
+    tw, imu = [], []
+    for i in range(30):
+        t = T0 + i * 10**8
+        tw.append((t, t, ros2_fast.encode("twistcov", t, "gps", vx=0.3, vy=10.0)))
+        imu.append((t, t, ros2_fast.encode("imu", t, "imu", wz=0.2, wz_cov0=-1.0 if i % 3 == 0 else 0.01)))
+    p = tmp_path / "enu.mcap"
+    write_mcap(p, [("/gps/fix_velocity", "twistcov", tw), ("/imu", "imu", imu)])
+    d = read_mcap(p)
+    np.testing.assert_allclose(d.odo.speed_mps, np.hypot(0.3, 10.0), rtol=1e-15)
+    assert any("navigation-frame" in w for w in d.meta["warnings"])
+    assert len(d.gyro) == 20
+    assert d.skipped.counts["Imu without angular velocity (angular_velocity_covariance[0] = -1)"] == 10
