@@ -41,7 +41,8 @@ Field choices, documented here once:
   MSL altitude is kept and ``meta['alt_without_geoid_sep']`` counts those rows.
 - ``pdop``/``vdop`` (and ``hdop`` when GGA has none): GSA, last non-empty of the
   epoch; the DOPs are the last three fields, before the NMEA 4.1 system id.
-  A GSA reporting fix type 1 (no fix) contributes no DOPs.
+  A GSA reporting fix type 1 (no fix) contributes no DOPs; a DOP of 99.99 (the
+  receivers' "no DOP" placeholder) is NaN.
 - ``sigma_n_m``/``sigma_e_m``: GST fields 6 and 7 (1-sigma latitude and
   longitude error, metres).
 - ``speed_mps``/``course_deg``: RMC (status ``A``), else VTG (mode not ``N``);
@@ -100,6 +101,7 @@ _MODE_QUALITY = {b"": 1, b"A": 1, b"D": 2, b"P": 3, b"R": 4, b"F": 5, b"E": 6,
                  b"N": 0, b"M": 0, b"S": 0}
 
 _CHUNK_BYTES = 1 << 22  # 4 MiB of whole lines scanned at a time
+_DOP_NONE = 99.99  # receivers' placeholder for "no DOP" (u-blox, Quectel, ...): read as NaN
 _MAX_FIELD = 40  # bytes; longer fields are never valid numbers or letters here
 _UTF16_HINT = "UTF-16 encoded; convert to ASCII/UTF-8 with iconv -f UTF-16 -t UTF-8"
 
@@ -525,7 +527,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                      alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
                      q=np.where(fix, qi, 0).astype(np.float64),
                      nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
-                     hdop=np.where(hdop > 0, hdop, np.nan))
+                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan))
         elif kind == _RMC:
             status = s.f(2)
             lat, _, b1 = _lat_lon(s.f(3), s.f(4), b"N", b"S", 90.0)
@@ -565,7 +567,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                 kk = k0 + j
                 v, b = _num(s.f(kk))
                 probs.add("malformed DOP in GSA (field ignored)", s.pos[b & keep])
-                dops.append(np.where(v > 0, v, np.nan))
+                dops.append(np.where((v > 0) & (v < _DOP_NONE), v, np.nan))
             nofix = s.f(2) == b"1"
             p.update(pdop=np.where(nofix, np.nan, dops[0]), hdop=np.where(nofix, np.nan, dops[1]),
                      vdop=np.where(nofix, np.nan, dops[2]))

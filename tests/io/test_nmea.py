@@ -108,6 +108,7 @@ def test_no_fix_rows_are_nan_never_zero() -> None:
     assert np.isnan(fixes.lat_deg[:4]).all() and np.isnan(fixes.lon_deg[:4]).all()
     assert not (fixes.lat_deg == 0).any()
     assert fixes.valid.tolist() == [False] * 4 + [True, False]
+    assert np.isnan(fixes.hdop[0])  # 99.99: the receivers' "no DOP" placeholder
     assert report.total == 0
 
 
