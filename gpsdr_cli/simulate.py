@@ -620,6 +620,7 @@ def _odo(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tuple
     noise = {"odo_rate_hz": float(rate_hz), "odo_scale_error": scale, "odo_scale_sd": scale_sd,
              "odo_noise_sd_mps": white_sd, "odo_ticks_per_m": ticks_per_m,
              "odo_window_s": window * DT_S,
+             "odo_lag_s": 0.5 * window * DT_S,  # a speed over the last window describes its middle
              "odo_effective_sd_mps": float(math.hypot(white_sd, q_sd))}
     return Odometry(t_ns=t, speed_mps=meas[::step]), noise
 
