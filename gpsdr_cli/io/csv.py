@@ -38,6 +38,7 @@ from .drive import Drive, Odometry, SkipReport, Source, YawRates
 UTF8_BOM = b"\xef\xbb\xbf"
 _NEWLINE_B = re.compile(rb"\r\n|\r|\n")
 _NEWLINE = re.compile(r"\r\n|\r|\n")
+_TIME_RANGE = "time beyond year 2262 (expected seconds, not ms/us/ns)"
 _POSIX_PLAUSIBLE_S = 1.0e8  # 1973-03-03: earlier "POSIX" times are almost surely relative seconds
 
 
@@ -132,7 +133,9 @@ def _seconds_to_ns(value: float) -> int:
 
 
 def _text_to_ns(text: str) -> int | None:
-    """Decimal seconds text to int ns, rounded half to even; None if not a finite number."""
+    """Decimal seconds text to int ns, rounded half to even; None if not a finite number.
+
+    Raises OverflowError beyond int64 ns (year 2262: ms/us/ns stamps read as seconds)."""
     try:
         d = Decimal(text.strip())
     except InvalidOperation:
@@ -141,7 +144,7 @@ def _text_to_ns(text: str) -> int | None:
         return None
     ns = d.scaleb(9).to_integral_value()
     if abs(ns) >= 2**63:
-        return None
+        raise OverflowError(text)
     return int(ns)
 
 
@@ -215,7 +218,10 @@ def _fast_path(data: bytes, body: int, names: list[str], delim: str, t_column: s
     t_ns = raw[0::2][tcol.offset:tcol.offset + n].copy()
     ok = tcol.is_valid().to_numpy(zero_copy_only=False)
     # Values beyond int64 ns (year 2262) have a high word that is not the low word's sign.
-    ok &= hi == (t_ns >> 63)
+    over = ok & (hi != (t_ns >> 63))
+    if over.any():
+        skipped.add(_TIME_RANGE, f"{path}:{int(np.flatnonzero(over)[0]) + 2}", int(over.sum()))
+    ok &= ~over
     values = {}
     all_null = ~tcol.is_valid().to_numpy(zero_copy_only=False)
     for c in columns:
@@ -232,6 +238,7 @@ def _fast_path(data: bytes, body: int, names: list[str], delim: str, t_column: s
         other = bad[~all_null[bad]]
         if len(empty):
             skipped.add("empty line", f"{path}:{int(empty[0]) + 2}", len(empty))
+        other = other[~over[other]]
         if len(other):
             skipped.add("missing, non-numeric or non-finite value", f"{path}:{int(other[0]) + 2}",
                         len(other))
@@ -270,7 +277,11 @@ def _slow_path(data: bytes, body: int, names: list[str], delim: str, t_column: s
         if len(row) != n_fields:
             skipped.add(f"wrong field count (expected {n_fields})", where)
             continue
-        t = _text_to_ns(row[ti])
+        try:
+            t = _text_to_ns(row[ti])
+        except OverflowError:
+            skipped.add(_TIME_RANGE, where)
+            continue
         if t is None:
             skipped.add("missing, non-numeric or non-finite value", where)
             continue

@@ -204,3 +204,10 @@ def test_lone_cr_newlines_both_paths(tmp_path):
     d = read_gyro_csv(p, P["gyro"])
     np.testing.assert_array_equal(d.gyro.yaw_rate_radps, [1, 2])
     assert d.skipped.first == {"wrong field count (expected 2)": f"{p}:3"}
+
+
+@pytest.mark.parametrize("t_text", ["1533226488429", "1533226488429536000", "1533226488429536000000"])
+def test_millisecond_or_nanosecond_stamps_are_named(tmp_path, t_text):
+    p = _csv(tmp_path, f"t,yaw_rate\n{t_text},0.1\n")
+    with pytest.raises(NoDataError, match=r"time beyond year 2262 \(expected seconds, not ms/us/ns\) at .*:2"):
+        read_gyro_csv(p, P["gyro"])
