@@ -8,8 +8,9 @@ For each fault (:data:`gpsdr_cli.testing.faults.CATALOGUE`: outages 10 s to
 100 m jumps, gyro saturation, odometer dropouts, no GNSS, no DR, midnight and
 date changes, truncated/corrupt MCAP, binary garbage in NMEA) and filter, one
 cell: ``ok`` (complete finite track, one row per epoch) with the fault's figure,
-``err1``/``err2`` (a clean one-line error), or ``BUG`` (an escape, a NaN, a
-missing row, a traceback, an error where a track was due).  Figures: RMSE
+``err1``/``err2`` (a clean one-line error), ``BUG`` (an escape, a NaN, a
+missing row, a traceback, an error where a track was due) or ``BAD`` (a track
+that breaks the accuracy bounds of ``faults.accuracy_problems``).  Figures: RMSE
 against the truth (m) for most faults; for outages the largest error inside
 the outage (m), the growth of the horizontal sigma across it and the end error
 in sigmas (consistency); for the jump
@@ -53,9 +54,12 @@ def cell(case: F.FaultCase, inputs: F.CaseInputs, out: F.Outcome) -> tuple[str, 
             text = f"max {_fmt(m['focus_max_m'])} rej {_fmt(m['rejected'], '.0f')}"
         else:
             text = f"rmse {_fmt(m['rmse_m'])}"
+    accuracy = F.accuracy_problems(case, inputs, out)
     if problems:
         text = "BUG " + text
-    return text, problems
+    elif accuracy:
+        text = "BAD " + text
+    return text, problems + [f"accuracy: {a}" for a in accuracy]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,8 +105,9 @@ def main(argv: list[str] | None = None) -> int:
         print("  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)))
         for r in rows:
             print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))
+    n_contract = sum(1 for b in bugs if ": accuracy: " not in b)
     print(f"\n{len(cases)} faults x {len(filters)} filters in {elapsed:.0f} s; "
-          f"{len(bugs)} contract violations")
+          f"{n_contract} contract violations, {len(bugs) - n_contract} accuracy violations")
     print("legend: rmse/max/drift in m against the truth; sx = sigma growth across the outage; "
           "e/s = end error / sigma; rej = fixes rejected; errN = clean one-line error, exit N")
     for b in bugs:

@@ -130,94 +130,64 @@ def test_track_problems_finds_nan_and_gaps() -> None:
 
 FILTERS = ("ekf", "aekf", "fkf", "fafkf")
 
-#: RMSE bound against the truth (m) where the fault itself forbids the default 5 m:
-#: GNSS stamps 2 s late for good (~15 m/s x 2 s along track), no GNSS at all (120 s of DR),
-#: half the drive in a 60 s outage (its own test bounds the error inside it).
-RMSE_BOUND_M = {"gnss_clock_back": 40.0, "no_gnss_origin": 250.0, "outage_60s": 40.0}
+#: (fault, filter) -> reason, for bugs in other modules still open at the deadline
+KNOWN_BUGS: dict[tuple[str, str], str] = {}
+
+
+def _params(kind: str) -> list:
+    out = []
+    for case in F.CATALOGUE:
+        if kind == "accuracy" and case.expect != "track":
+            continue
+        for f in FILTERS:
+            reason = KNOWN_BUGS.get((case.name, f)) if kind == "accuracy" else None
+            marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
+            out.append(pytest.param(case.name, f, marks=marks, id=f"{case.name}-{f}"))
+    return out
 
 
 @pytest.fixture(scope="module")
-def sim() -> object:
-    return F.base_sim()
+def runs(tmp_path_factory: pytest.TempPathFactory) -> object:
+    """Run each (fault, filter) once; the contract and the accuracy tests share the outcome."""
+    sim = F.base_sim()
+    root = tmp_path_factory.mktemp("faults")
+    cache: dict[tuple[str, str], tuple[F.CaseInputs, F.Outcome]] = {}
+
+    def get(case: str, filter_name: str) -> tuple[F.CaseInputs, F.Outcome]:
+        if (case, filter_name) not in cache:
+            cache[case, filter_name] = F.run_case(F.CASES[case], filter_name,
+                                                  root / case / filter_name, sim)
+        return cache[case, filter_name]
+
+    get.sim = sim  # type: ignore[attr-defined]
+    return get
 
 
-def _run(case: str, filter_name: str, sim: object, tmp_path: Path) -> tuple[F.CaseInputs, F.Outcome]:
-    return F.run_case(F.CASES[case], filter_name, tmp_path / case, sim)
+@pytest.mark.parametrize(("case", "filter_name"), _params("contract"))
+def test_fault_gives_a_track_or_one_clear_error(case: str, filter_name: str, runs) -> None:
+    """INTERFACE.md: a complete finite track, one row per epoch, or one error line, exit 1/2."""
+    inputs, out = runs(case, filter_name)
+    assert F.outcome_problems(out, F.CASES[case].expect) == []
+    if inputs.drive is None:  # file runs: outputs appear whole, no temporary left behind
+        names = sorted(p.name for p in Path(inputs.out_dir).iterdir())
+        assert ("track.parquet" in names) == (out.status == 0)
+        assert not [n for n in names if "tmp" in n.lower() or n.startswith(".")]
 
 
-@pytest.mark.parametrize("filter_name", FILTERS)
-@pytest.mark.parametrize("case", [c.name for c in F.CATALOGUE if c.base == "short"])
-def test_fault_gives_a_track_or_one_clear_error(case: str, filter_name: str, sim: object,
-                                                tmp_path: Path) -> None:
-    fc = F.CASES[case]
-    inputs, out = _run(case, filter_name, sim, tmp_path)
-    assert F.outcome_problems(out, fc.expect) == []
-    if out.status == 0 and fc.expect == "track":
-        # the damaged drive still follows the truth: open sky, 120 s, GNSS almost throughout
-        assert F.case_metrics(inputs, out)["rmse_m"] < RMSE_BOUND_M.get(case, 5.0)
+@pytest.mark.parametrize(("case", "filter_name"), _params("accuracy"))
+def test_fault_track_follows_the_truth(case: str, filter_name: str, runs) -> None:
+    """Against the simulator's truth: RMSE bound per fault; outages grow sigma, stay within
+    5 m + 10 % of the distance and within 3.7 sigma; 100 m jumps rejected with < 5 m error;
+    a 30 minute stop drifts < 1 m (see faults.accuracy_problems)."""
+    inputs, out = runs(case, filter_name)
+    if out.status != 0:
+        pytest.skip(f"no track: {out.stderr.strip()}")  # the contract test judges that
+    assert F.accuracy_problems(F.CASES[case], inputs, out) == []
 
 
-def _dr_bound_m(inputs: F.CaseInputs) -> float:
-    """5 m + 10 % of the distance driven in the fault window (a common dead-reckoning spec)."""
-    tr = inputs.sim.truth
-    t = tr["t_ns"].to_numpy()
-    lo, hi = inputs.focus_ns
-    w = (t >= lo) & (t < hi)
-    dist_m = float(np.sum(tr["speed"].to_numpy()[w]) * np.median(np.diff(t)) / NS_PER_S)
-    return 5.0 + 0.1 * dist_m
-
-
-@pytest.mark.parametrize("filter_name", FILTERS)
-def test_outage_sigma_grows_and_error_stays_bounded(filter_name: str, sim: object,
-                                                     tmp_path: Path) -> None:
-    inputs, out = _run("outage_60s", filter_name, sim, tmp_path)
-    assert F.outcome_problems(out, "track") == []
-    tr = out.track
-    t = F.track_t_ns(tr)
-    lo, hi = inputs.focus_ns
-    w = (t >= lo) & (t < hi)
-    sig = np.hypot(tr["sigma_e"], tr["sigma_n"]).to_numpy()[w]
-    assert sig[-1] > 2.0 * sig[0]  # 60 s of dead reckoning at ~15 m/s
-    # no position update in an outage; odometer updates may trim it slightly via P_pv
-    assert np.all(sig >= 0.95 * np.maximum.accumulate(sig))
-    assert not tr["gnss_used"].to_numpy()[w].any()
-    m = F.case_metrics(inputs, out)
-    assert m["focus_max_m"] < _dr_bound_m(inputs)
-    # the covariance tells the truth: 99.9 % chi-square(2) radius is 3.7 sigma
-    assert m["end_error_sigmas"] < 3.7
-
-
-@pytest.mark.parametrize("filter_name", FILTERS)
-def test_jump_of_100m_is_rejected(filter_name: str, sim: object, tmp_path: Path) -> None:
-    inputs, out = _run("jump_100m", filter_name, sim, tmp_path)
-    assert F.outcome_problems(out, "track") == []
-    m = F.case_metrics(inputs, out)
-    assert m["rejected"] >= 5  # all five 5 Hz fixes of the jump
-    assert m["focus_max_m"] < 5.0  # m from the truth while the fixes are 100 m off
-
-
-@pytest.mark.parametrize("filter_name", FILTERS)
-@pytest.mark.parametrize("case", [c.name for c in F.CATALOGUE if c.base == "long"])
-def test_long_faults_in_memory(case: str, filter_name: str, tmp_path: Path) -> None:
-    inputs, out = _run(case, filter_name, None, tmp_path)
-    assert F.outcome_problems(out, "track") == []
-    m = F.case_metrics(inputs, out)
-    if case.startswith("standstill"):
-        assert m["drift_m"] < 1.0  # m over 30 minutes at rest
-    else:  # 10 minutes without GNSS
-        tr = out.track
-        t = F.track_t_ns(tr)
-        lo, hi = inputs.focus_ns
-        w = (t >= lo) & (t < hi)
-        sig = np.hypot(tr["sigma_e"], tr["sigma_n"]).to_numpy()[w]
-        assert sig[-1] > 5.0 * sig[0]
-        assert np.all(sig >= 0.95 * np.maximum.accumulate(sig))
-        assert m["focus_max_m"] < _dr_bound_m(inputs)
-
-
-def test_failed_run_keeps_an_existing_output(sim: object, tmp_path: Path) -> None:
+def test_failed_run_keeps_an_existing_output(runs, tmp_path: Path) -> None:
     """A failing run must not clobber (or half-write) the file -o names, nor leave temp files."""
-    inputs = F.CASES["no_gnss"].make(sim, tmp_path)
+    inputs = F.CASES["no_gnss"].make(runs.sim, tmp_path)
     track = tmp_path / "track.parquet"
     stats = tmp_path / "track.parquet.stats.parquet"
     track.write_bytes(b"precious track")
@@ -230,7 +200,8 @@ def test_failed_run_keeps_an_existing_output(sim: object, tmp_path: Path) -> Non
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
-def test_real_process_gives_one_line_and_exit_status(sim: object, tmp_path: Path) -> None:
+def test_real_process_gives_one_line_and_exit_status(runs, tmp_path: Path) -> None:
+    sim = runs.sim
     exe = shutil.which("gpsdr") or str(Path(__file__).resolve().parents[1] / ".venv/bin/gpsdr")
     _, bad = F.run_case(F.CASES["nmea_all_garbage"], "aekf", tmp_path / "bad", sim,
                         subprocess_exe=exe)

@@ -873,6 +873,8 @@ class CaseInputs:
     drive: Drive | None = None
     focus_ns: tuple[int, int] | None = None
     config: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
+    #: where the inputs and outputs of the run are (set by :func:`run_case`)
+    out_dir: Any = None
 
 
 @dataclasses.dataclass
@@ -1028,9 +1030,9 @@ def _mcap_case(fault: Callable[[bytes], bytes]) -> Callable[[Any, Any], CaseInpu
 
 CATALOGUE: tuple[FaultCase, ...] = (
     FaultCase("clean", "no fault (baseline)", "track", _drive_case(lambda d: d)),
-    FaultCase("outage_10s", "GNSS outage 10 s (fix quality 0)", "track",
-              _drive_case(lambda d: gnss_outage(d, 40.0, 10.0), (40.0, 10.0))),
-    FaultCase("outage_60s", "GNSS outage 60 s (no records)", "track",
+    FaultCase("outage_10s", "GNSS outage 10 s at ~20 m/s (fix quality 0)", "track",
+              _drive_case(lambda d: gnss_outage(d, 15.0, 10.0), (15.0, 10.0))),
+    FaultCase("outage_60s", "GNSS outage 60 s with a 25 s stop in it (no records)", "track",
               _drive_case(lambda d: gnss_outage(d, 30.0, 60.0, mode="drop"), (30.0, 60.0))),
     FaultCase("outage_10min", "GNSS outage 600 s, in memory, 10 Hz DR", "track",
               _outage_long(600.0), base="long"),
@@ -1132,6 +1134,7 @@ def run_case(case: FaultCase, filter_name: str, out_dir: Any, sim: Any | None = 
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     inputs = case.make(sim, out)
+    inputs.out_dir = out
     if inputs.drive is not None:
         params = cfg.merge(cfg.defaults(), {"filter": {"name": filter_name}, **inputs.config})
         return inputs, run_inmemory(inputs.drive, params)
@@ -1299,3 +1302,73 @@ def fuzz_case(target: str, seeds: dict[str, bytes], rng: np.random.Generator, wo
 def is_bug(outcome_key: str) -> bool:
     """An escape or a NaN/invalid track: what the contract forbids."""
     return outcome_key.startswith(("escape:", "nan:"))
+
+
+#: RMSE bound against the truth (m) of a fault's whole track; the default holds for the
+#: open-sky base drive with GNSS almost throughout (clean: ~1 m).  Larger where the fault
+#: itself forbids it: GNSS stamps 2 s late for good (~15 m/s x 2 s along track), no GNSS
+#: at all (120 s of DR); long outages are bounded inside the outage by dr_bound_m instead.
+DEFAULT_RMSE_BOUND_M = 5.0
+RMSE_BOUND_M: dict[str, float] = {"gnss_clock_back": 40.0, "no_gnss_origin": 250.0,
+                                  "outage_60s": math.inf, "outage_10min": math.inf,
+                                  "standstill_30min_nognss": 10.0}
+#: 99.9 % radius of a chi-square(2) error, in sigmas: a consistent covariance stays inside it.
+CONSISTENT_SIGMAS = 3.7
+#: A standstill may drift this much (m) over the stop.
+STANDSTILL_DRIFT_M = 1.0
+#: Within a fault window, the largest error while 100 m GNSS jumps are present (m).
+JUMP_MAX_ERROR_M = 5.0
+
+
+def dr_bound_m(inputs: CaseInputs) -> float:
+    """5 m + 10 % of the distance driven in the fault window (a common dead-reckoning spec)."""
+    tr = inputs.sim.truth
+    t = tr["t_ns"].to_numpy(np.int64)
+    lo, hi = inputs.focus_ns
+    w = (t >= lo) & (t < hi)
+    dist_m = float(np.sum(tr["speed"].to_numpy(float)[w]) * _median_dt_ns(t) / NS_PER_S)
+    return 5.0 + 0.1 * dist_m
+
+
+def accuracy_problems(case: FaultCase, inputs: CaseInputs, outcome: Outcome) -> list[str]:
+    """What a successful run of ``case`` gets wrong against the truth (empty when fine).
+
+    Every track fault: RMSE under :data:`RMSE_BOUND_M`.  Outages: horizontal sigma
+    larger at the end than at the start (a stop inside the outage may trim it
+    through the zero-velocity update; the consistency check judges that); largest error under :func:`dr_bound_m`; end error within
+    :data:`CONSISTENT_SIGMAS`.  Jumps: every displaced fix rejected, error under
+    :data:`JUMP_MAX_ERROR_M`.  Standstills: drift under :data:`STANDSTILL_DRIFT_M`.
+    """
+    if outcome.status != 0 or outcome.track is None or track_problems(outcome.track):
+        return []
+    m = case_metrics(inputs, outcome)
+    out: list[str] = []
+    bound = RMSE_BOUND_M.get(case.name, DEFAULT_RMSE_BOUND_M)
+    if case.expect == "track" and not m["rmse_m"] < bound:
+        out.append(f"rmse {m['rmse_m']:.1f} m > {bound} m")
+    if inputs.focus_ns is None:
+        return out
+    tr = outcome.track
+    t = track_t_ns(tr)
+    lo, hi = inputs.focus_ns
+    w = (t >= lo) & (t < hi)
+    if case.name.startswith("outage"):
+        sig = np.hypot(tr["sigma_e"].to_numpy(float), tr["sigma_n"].to_numpy(float))[w]
+        if not sig[-1] > sig[0]:
+            out.append(f"sigma {sig[0]:.2f} -> {sig[-1]:.2f} m: no growth in the outage")
+        b = dr_bound_m(inputs)
+        if not m["focus_max_m"] < b:
+            out.append(f"max error {m['focus_max_m']:.1f} m > {b:.1f} m in the outage")
+        if not m["end_error_sigmas"] < CONSISTENT_SIGMAS:
+            out.append(f"end error {m['end_error_sigmas']:.1f} sigma (> {CONSISTENT_SIGMAS}):"
+                       " covariance overconfident")
+    elif case.name.startswith("jump"):
+        g = inputs.sim.drive.gnss
+        n_jump = int(((g.t_ns >= lo) & (g.t_ns < hi)).sum())
+        if not m["rejected"] >= n_jump:
+            out.append(f"{m['rejected']:.0f} of {n_jump} jumped fixes rejected")
+        if not m["focus_max_m"] < JUMP_MAX_ERROR_M:
+            out.append(f"max error {m['focus_max_m']:.1f} m > {JUMP_MAX_ERROR_M} m at the jump")
+    elif case.name.startswith("standstill") and not m["drift_m"] < STANDSTILL_DRIFT_M:
+        out.append(f"drift {m['drift_m']:.2f} m > {STANDSTILL_DRIFT_M} m over the stop")
+    return out
