@@ -661,12 +661,19 @@ def oracle_params(noise: dict, params: Params) -> Params:
     return out
 
 
-def oracle_drive(sim: SimDrive) -> Drive:
-    """The drive with every fix's sigma replaced by its true sigma (white and multipath)."""
+def oracle_drive(sim: SimDrive, *, multipath_in_sigma: bool = True) -> Drive:
+    """The drive with every fix's sigma replaced by its true sigma.
+
+    ``multipath_in_sigma``: white noise and the multipath's stationary sigma (for
+    filters whose GNSS errors are white: ekf, aekf); False: white noise only, for
+    filters that carry the multipath as Gauss-Markov states (fkf, fafkf, told its
+    sigma and correlation time by :func:`oracle_params`).
+    """
     g = sim.drive.gnss
     if g is None:
         raise UsageError(f"simulated drive {sim.scenario!r} has no GNSS stream")
-    true_sd = sim.gnss_errors["true_sd_m"].to_numpy() * np.where(g.valid, 1.0, np.nan)
+    col = "true_sd_m" if multipath_in_sigma else "white_sd_m"
+    true_sd = sim.gnss_errors[col].to_numpy() * np.where(g.valid, 1.0, np.nan)
     fixes = GnssFixes(**{**g.__dict__, "sigma_e_m": true_sd.copy(), "sigma_n_m": true_sd.copy()})
     return Drive(gnss=fixes, gyro=sim.drive.gyro, odo=sim.drive.odo,
                  sources=list(sim.drive.sources), meta=dict(sim.drive.meta))

@@ -224,3 +224,10 @@ def test_oracle_params_only_known_keys(urban):
     ok = od.gnss.valid
     np.testing.assert_allclose(od.gnss.sigma_e_m[ok], urban.gnss_errors["true_sd_m"][ok])
     assert np.all(od.gnss.sigma_e_m[ok] >= urban.drive.gnss.sigma_e_m[ok] - 1e-12)
+
+
+def test_oracle_drive_white_only_for_multipath_states(urban):
+    od = oracle_drive(urban, multipath_in_sigma=False)
+    ok = od.gnss.valid
+    np.testing.assert_allclose(od.gnss.sigma_e_m[ok], urban.gnss_errors["white_sd_m"][ok])
+    assert np.all(np.isnan(od.gnss.sigma_e_m[~ok]))
