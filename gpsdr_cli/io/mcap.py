@@ -16,8 +16,9 @@ Encodings: ROS 2 CDR (a vectorised fixed-layout fast path,
 :mod:`gpsdr_cli.io.ros2_fast`, with ``mcap_ros2``'s generic decoder as the fallback
 for any message the fast path declines), ROS 1 (the same fast path; no generic
 fallback is installed, so a message it declines is counted as undecodable) and
-JSON; ``foxglove.LocationFix`` also in protobuf (a tiny hand-written wire
-decoder: its scalar fields only).
+JSON; ``foxglove.LocationFix`` also in protobuf (a small hand-written wire
+decoder, since ``protobuf`` is not a dependency: field numbers are read from the
+channel's FileDescriptorSet, else the published foxglove schema's).
 Times are the message header stamps, int64 ns UTC; ``use_log_time`` takes the
 MCAP log times instead (and a zero stamp always falls back to the log time).
 When several channels of one kind exist, the one with the most usable messages
@@ -106,6 +107,7 @@ class _Channel:
     n_undecodable: int = 0
     first_undecodable: str = ""
     generic: Any = None  # cached generic decoder, False when unavailable
+    pb_numbers: dict[str, int] | None = None  # protobuf field numbers by name
 
     def add(self, name: str, values: Any) -> None:
         self.cols.setdefault(name, []).append(values)
@@ -416,7 +418,9 @@ class _Walker:
             if enc == "json":
                 return _extract(chan.layout, json.loads(raw))
             if enc == "protobuf" and chan.layout == "locationfix":
-                return _extract("locationfix", _pb_location_fix(raw))
+                if chan.pb_numbers is None:
+                    chan.pb_numbers = _pb_numbers(chan.schema_data)
+                return _extract("locationfix", _pb_location_fix(raw, chan.pb_numbers))
         except (struct.error, IndexError, KeyError, TypeError, ValueError, AttributeError,
                 OverflowError, UnicodeDecodeError, RecursionError) as err:
             chan.first_undecodable = chan.first_undecodable or (
@@ -518,57 +522,92 @@ def _varint(buf: bytes, pos: int) -> tuple[int, int]:
             raise ValueError("varint longer than 10 bytes")
 
 
-def _pb_location_fix(buf: bytes) -> dict[str, Any]:
-    """foxglove.LocationFix in protobuf wire format (foxglove schemas: latitude = 1,
-    longitude = 2, altitude = 3, position_covariance = 4 (packed double),
-    position_covariance_type = 5, timestamp = 6 (google.protobuf.Timestamp:
-    seconds = 1, nanos = 2)); other fields are skipped by wire type."""
-    out: dict[str, Any] = {"latitude": None, "longitude": None, "altitude": 0.0,
-                           "position_covariance": [], "position_covariance_type": 0,
-                           "timestamp": {"sec": 0, "nsec": 0}}
+def _pb_fields(buf: bytes) -> list[tuple[int, int, Any]]:
+    """Protobuf wire format: (field number, wire type, value) with value an int
+    (varint), bytes (length-delimited, fixed64, fixed32)."""
+    out: list[tuple[int, int, Any]] = []
     pos, end = 0, len(buf)
     while pos < end:
         key, pos = _varint(buf, pos)
         num, wt = key >> 3, key & 7
         if wt == 0:
             value, pos = _varint(buf, pos)
-            if num == 5:
-                out["position_covariance_type"] = value
-        elif wt == 1:
-            if pos + 8 > end:
-                raise ValueError("truncated fixed64")
-            (value,) = struct.unpack_from("<d", buf, pos)
-            pos += 8
-            if num in (1, 2, 3):
-                out[("latitude", "longitude", "altitude")[num - 1]] = value
-            elif num == 4:
-                out["position_covariance"].append(value)
+        elif wt in (1, 5):
+            n = 8 if wt == 1 else 4
+            if pos + n > end:
+                raise ValueError("truncated fixed-width field")
+            value, pos = buf[pos:pos + n], pos + n
         elif wt == 2:
             n, pos = _varint(buf, pos)
             if pos + n > end:
                 raise ValueError("truncated length-delimited field")
-            sub = buf[pos:pos + n]
-            pos += n
-            if num == 4:
-                out["position_covariance"] = list(struct.unpack(f"<{n // 8}d", sub[:n - n % 8]))
-            elif num == 6:
-                sp, ts = 0, {"sec": 0, "nsec": 0}
-                while sp < len(sub):
-                    k, sp = _varint(sub, sp)
-                    if k & 7 != 0:
-                        raise ValueError("unexpected wire type in Timestamp")
-                    v, sp = _varint(sub, sp)
-                    if k >> 3 == 1:
-                        ts["sec"] = v - (1 << 64) if v >= 1 << 63 else v
-                    elif k >> 3 == 2:
-                        ts["nsec"] = v if v < 1 << 31 else v - (1 << 64)
-                out["timestamp"] = ts
-        elif wt == 5:
-            pos += 4
+            value, pos = buf[pos:pos + n], pos + n
         else:
             raise ValueError(f"unsupported wire type {wt}")
-    if pos > end:
-        raise ValueError("truncated field")
+        out.append((num, wt, value))
+    return out
+
+
+#: foxglove.LocationFix field numbers (foxglove schemas), used when the channel's
+#: schema carries no readable FileDescriptorSet.
+_LOCFIX_NUMBERS = {"latitude": 1, "longitude": 2, "altitude": 3, "position_covariance": 4,
+                   "position_covariance_type": 5, "timestamp": 6}
+
+
+def _pb_numbers(descriptor_set: bytes, message: str = "LocationFix") -> dict[str, int]:
+    """Field numbers by name of ``message`` in a FileDescriptorSet (schema data of a
+    protobuf MCAP channel): FileDescriptorSet.file = 1, FileDescriptorProto.message_type
+    = 4, DescriptorProto.name = 1 / field = 2, FieldDescriptorProto.name = 1 / number = 3.
+    Falls back to the published foxglove numbers when the descriptor is unreadable."""
+    try:
+        for num, wt, file in _pb_fields(descriptor_set):
+            if num != 1 or wt != 2:
+                continue
+            for n2, w2, msg in _pb_fields(file):
+                if n2 != 4 or w2 != 2:
+                    continue
+                fields = _pb_fields(msg)
+                if not any(n == 1 and v == message.encode() for n, _, v in fields):
+                    continue
+                numbers = {}
+                for n3, w3, fdesc in fields:
+                    if n3 == 2 and w3 == 2:
+                        f = {n: v for n, _, v in _pb_fields(fdesc)}
+                        if 1 in f and 3 in f:
+                            numbers[bytes(f[1]).decode("utf-8", "replace")] = int(f[3])
+                if {"latitude", "longitude"} <= numbers.keys():
+                    return numbers
+    except (ValueError, IndexError, TypeError):
+        pass
+    return dict(_LOCFIX_NUMBERS)
+
+
+def _pb_location_fix(buf: bytes, numbers: dict[str, int] | None = None) -> dict[str, Any]:
+    """foxglove.LocationFix in protobuf wire format; ``numbers`` maps field names to
+    numbers (from the channel's descriptor, default the published schema).
+    Timestamp is google.protobuf.Timestamp (seconds = 1, nanos = 2)."""
+    by_num = {v: k for k, v in (numbers or _LOCFIX_NUMBERS).items()}
+    out: dict[str, Any] = {"latitude": None, "longitude": None, "altitude": 0.0,
+                           "position_covariance": [], "position_covariance_type": 0,
+                           "timestamp": {"sec": 0, "nsec": 0}}
+    for num, wt, value in _pb_fields(buf):
+        name = by_num.get(num)
+        if name in ("latitude", "longitude", "altitude") and wt == 1:
+            out[name] = struct.unpack("<d", value)[0]
+        elif name == "position_covariance" and wt == 1:
+            out[name].append(struct.unpack("<d", value)[0])
+        elif name == "position_covariance" and wt == 2:
+            n = len(value) // 8
+            out[name] = list(struct.unpack(f"<{n}d", value[:8 * n]))
+        elif name == "position_covariance_type" and wt == 0:
+            out[name] = value
+        elif name == "timestamp" and wt == 2:
+            ts = {"sec": 0, "nsec": 0}
+            for k, w, v in _pb_fields(value):
+                if w == 0 and k in (1, 2):
+                    v = v - (1 << 64) if v >= 1 << 63 else v  # int64/int32 two's complement
+                    ts["sec" if k == 1 else "nsec"] = v
+            out["timestamp"] = ts
     return out
 
 

@@ -309,7 +309,7 @@ def test_fast_path_declines_and_generic_fallback_decodes(tmp_path):
 
 
 LOCFIX_JSON = ("foxglove.LocationFix", "jsonschema", b'{"type":"object"}')
-LOCFIX_PB = ("foxglove.LocationFix", "protobuf", b"")  # descriptor unused by the wire decoder
+LOCFIX_PB = ("foxglove.LocationFix", "protobuf", b"")  # no descriptor: the published numbers
 NAVSAT_JSON = ("sensor_msgs/msg/NavSatFix", "jsonschema", b'{"type":"object"}')
 
 
@@ -324,13 +324,50 @@ def _pb_varint(v: int) -> bytes:
             return bytes(out)
 
 
-def _pb_location_fix(sec: int, nsec: int, lat: float, lon: float, cov: list[float], cov_type: int) -> bytes:
-    ts = b"\x08" + _pb_varint(sec) + b"\x10" + _pb_varint(nsec)
+def _ld(num: int, payload: bytes) -> bytes:
+    return _pb_varint(num << 3 | 2) + _pb_varint(len(payload)) + payload
+
+
+def _vi(num: int, value: int) -> bytes:
+    return _pb_varint(num << 3) + _pb_varint(value)
+
+
+def _d(num: int, value: float) -> bytes:
+    return _pb_varint(num << 3 | 1) + struct.pack("<d", value)
+
+
+LOCFIX_NUMS = {"latitude": 1, "longitude": 2, "altitude": 3, "position_covariance": 4,
+               "position_covariance_type": 5, "timestamp": 6, "frame_id": 7}
+
+
+def _pb_location_fix(sec: int, nsec: int, lat: float, lon: float, cov: list[float], cov_type: int,
+                     nums: dict[str, int] = LOCFIX_NUMS) -> bytes:
+    ts = _vi(1, sec) + _vi(2, nsec)
     packed = struct.pack(f"<{len(cov)}d", *cov)
-    return (b"\x32" + _pb_varint(len(ts)) + ts + b"\x3a\x03gps"
-            + b"\x09" + struct.pack("<d", lat) + b"\x11" + struct.pack("<d", lon)
-            + b"\x19" + struct.pack("<d", 12.5)
-            + b"\x22" + _pb_varint(len(packed)) + packed + b"\x28" + _pb_varint(cov_type))
+    return (_ld(nums["timestamp"], ts) + _ld(nums["frame_id"], b"gps") + _d(nums["latitude"], lat)
+            + _d(nums["longitude"], lon) + _d(nums["altitude"], 12.5)
+            + _ld(nums["position_covariance"], packed) + _vi(nums["position_covariance_type"], cov_type))
+
+
+def _descriptor_set(nums: dict[str, int]) -> bytes:
+    """A FileDescriptorSet for foxglove.LocationFix with the given field numbers."""
+    fields = b"".join(_ld(2, _ld(1, name.encode()) + _vi(3, num)) for name, num in nums.items())
+    message = _ld(1, b"LocationFix") + fields
+    file = _ld(1, b"foxglove/LocationFix.proto") + _ld(2, b"foxglove") + _ld(4, message)
+    return _ld(1, file)
+
+
+def test_protobuf_field_numbers_come_from_the_descriptor(tmp_path):
+    nums = {k: v + 20 for k, v in LOCFIX_NUMS.items()}  # renumbered: only the descriptor says so
+    msgs = [(T0 + i, T0 + i, _pb_location_fix(T0 // 10**9, i, 54.0 + i, 18.0, [1.0] * 9, 1, nums))
+            for i in range(3)]
+    schemas = {"loc:protobuf": ("foxglove.LocationFix", "protobuf", _descriptor_set(nums))}
+    p = tmp_path / "pb.mcap"
+    write_mcap(p, [("/loc", "loc:protobuf", msgs)], schemas=schemas)
+    g = read_mcap(p).gnss
+    np.testing.assert_array_equal(g.lat_deg, [54.0, 55.0, 56.0])
+    np.testing.assert_array_equal(g.t_ns, T0 + np.arange(3))
+    np.testing.assert_array_equal(g.sigma_n_m, 1.0)
 
 
 @pytest.mark.parametrize("encoding", ["json", "protobuf", "ros-json"])
