@@ -257,6 +257,53 @@ def build_metadata(drive: Drive, params: Params, frame: LocalFrame, epochs: Epoc
     return meta
 
 
+# --------------------------------------------------------------------------- stray records
+
+#: A stretch without records longer than this splits a stream into separate clusters (s).
+STRAY_GAP_S = 3600.0
+#: A cluster holding less than this share of a stream's records is stray (a corrupt stamp).
+STRAY_SHARE = 0.01
+
+
+def stray_mask(t_ns: np.ndarray) -> np.ndarray:
+    """True for records to keep: drops small clusters of records more than STRAY_GAP_S away
+    from the rest of the stream (a corrupt digit in one stamp would otherwise make the
+    filter predict across days)."""
+    t = np.asarray(t_ns, np.int64)
+    keep = np.ones(len(t), bool)
+    if len(t) < 3:
+        return keep
+    order = np.argsort(t, kind="stable")
+    gaps = np.diff(t[order]) > STRAY_GAP_S * NS_PER_S
+    if not gaps.any():
+        return keep
+    cluster = np.concatenate(([0], np.cumsum(gaps)))
+    counts = np.bincount(cluster)
+    small = (counts < STRAY_SHARE * len(t)) & (np.arange(len(counts)) != np.argmax(counts))
+    keep[order] = ~small[cluster]
+    return keep
+
+
+def drop_stray_records(drive: Drive) -> Drive:
+    """A copy of ``drive`` without stray-stamped records, counted in its SkipReport."""
+    out = dataclasses.replace(drive)
+    for name in ("gnss", "gyro", "odo"):
+        stream = getattr(drive, name)
+        if stream is None or not len(stream):
+            continue
+        keep = stray_mask(stream.t_ns)
+        if keep.all():
+            continue
+        k = int(np.flatnonzero(~keep)[0])
+        out.skipped.add(f"{name}: time stamp more than {STRAY_GAP_S:.0f} s away from the rest "
+                        "of the stream", f"{name} record {k + 1} ({_iso(stream.t_ns[k])})",
+                        int((~keep).sum()))
+        setattr(out, name, dataclasses.replace(
+            stream, **{f.name: getattr(stream, f.name)[keep]
+                       for f in dataclasses.fields(stream)}))
+    return out
+
+
 # --------------------------------------------------------------------------- fuse
 
 def _run_once(drive: Drive, params: Params, frame: LocalFrame,
@@ -266,7 +313,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame,
 
     # build_epochs counts what it drops into the drive's SkipReport: work on a copy so
     # a second run (auto offset, batch retry) does not count twice.
-    work = dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped))
+    work = drop_stray_records(dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped)))
     if progress:
         progress("aligning streams")
     epochs = build_epochs(work, frame, params)

@@ -223,3 +223,24 @@ def test_track_is_written_with_units(result, tmp_path: Path) -> None:
     pd.testing.assert_frame_equal(back, result.track)
     assert meta == result.metadata
     assert field_units(path)["speed"] == "m/s" and field_units(path)["heading_deg"] == "deg"
+
+
+def test_a_stray_time_stamp_is_dropped_and_counted(drive: Drive, reference) -> None:
+    """One gyro stamp 23 days late (a corrupt digit): dropped and reported, not integrated."""
+    from gpsdr_cli.pipeline import stray_mask
+
+    bad = copy.deepcopy(drive)
+    bad.gyro.t_ns[-1] += 2_000_000 * 1_000_000_000
+    res = fuse(bad, config.defaults(), reference)
+    span_s = (res.track["time"].iloc[-1] - res.track["time"].iloc[0]).total_seconds()
+    assert span_s < 61.0  # s: the drive, not 23 days
+    import json
+
+    skipped = json.loads(res.metadata["skipped"])
+    (reason,) = skipped
+    assert reason.startswith("gyro: time stamp more than 3600 s away")
+    assert skipped[reason]["count"] == 1 and "record 6256" in skipped[reason]["first"]
+    assert res.summary()["rmse_m"] < 4.0
+    # two long sessions an hour and a half apart are both kept
+    t = np.concatenate([np.arange(1000), 5400 + np.arange(800)]) * 1_000_000_000
+    assert stray_mask(t).all()
