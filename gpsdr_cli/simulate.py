@@ -819,6 +819,22 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
     return path
 
 
+def _posix(t_ns: int) -> str:
+    """UTC POSIX seconds with 6 decimals, exact from integer nanoseconds (no float rounding,
+    so streams sampled at the same instant keep identical stamps)."""
+    sec, ns = divmod(int(t_ns), NS_PER_S)
+    return f"{sec}.{ns // 1000:06d}"
+
+
+def _write_csv(path: Path, header: str, t_ns: np.ndarray, cols: list[np.ndarray],
+               fmts: list[str]) -> None:
+    with path.open("w", encoding="ascii", newline="\n") as fh:
+        fh.write(header + "\n")
+        for k in range(len(t_ns)):
+            fh.write(",".join([_posix(t_ns[k]), *(f.format(c[k]) for f, c in zip(fmts, cols, strict=True))])
+                     + "\n")
+
+
 def write_drive(sim: SimDrive, out_dir: str | Path, *, truth_rate_hz: float = 20.0,
                 mcap: bool = True) -> dict[str, Path]:
     """Write the drive's logs and truth into ``out_dir`` (created if missing).
@@ -833,17 +849,13 @@ def write_drive(sim: SimDrive, out_dir: str | Path, *, truth_rate_hz: float = 20
     paths = {name: out / name for name in
              ("gps.nmea", "gyro.csv", "odo.csv", "drive.mcap", "truth.csv", "noise.json")}
     paths["gps.nmea"].write_text("".join(nmea_lines(d.gnss)), encoding="ascii", newline="")
-    pd.DataFrame({"t": d.gyro.t_ns / NS_PER_S, "yaw_rate": d.gyro.yaw_rate_radps}).to_csv(
-        paths["gyro.csv"], index=False, float_format="%.7f")
-    pd.DataFrame({"t": d.odo.t_ns / NS_PER_S, "speed": d.odo.speed_mps}).to_csv(
-        paths["odo.csv"], index=False, float_format="%.6f")
+    _write_csv(paths["gyro.csv"], "t,yaw_rate", d.gyro.t_ns, [d.gyro.yaw_rate_radps], ["{:.7f}"])
+    _write_csv(paths["odo.csv"], "t,speed", d.odo.t_ns, [d.odo.speed_mps], ["{:.6f}"])
     step = max(1, round(TRUTH_RATE_HZ / truth_rate_hz))
     tr = sim.truth.iloc[::step]
-    with paths["truth.csv"].open("w", encoding="ascii") as fh:
-        fh.write("t,lat,lon,alt,heading\n")
-        for t, la, lo, al, hd in zip(tr["t_ns"].to_numpy() / NS_PER_S, tr["lat"], tr["lon"],
-                                     tr["alt"], tr["heading_deg"], strict=True):
-            fh.write(f"{t:.3f},{la:.9f},{lo:.9f},{al:.3f},{hd:.3f}\n")
+    _write_csv(paths["truth.csv"], "t,lat,lon,alt,heading", tr["t_ns"].to_numpy(),
+               [tr["lat"].to_numpy(), tr["lon"].to_numpy(), tr["alt"].to_numpy(),
+                tr["heading_deg"].to_numpy()], ["{:.9f}", "{:.9f}", "{:.3f}", "{:.3f}"])
     paths["noise.json"].write_text(json.dumps(sim.noise, indent=2, sort_keys=True) + "\n",
                                    encoding="utf-8")
     if mcap:
