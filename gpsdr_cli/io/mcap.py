@@ -462,14 +462,28 @@ def _get(obj: Any, *names: str, default: Any = None) -> Any:
     return default
 
 
+def _int(x: Any, lo: int, hi: int, what: str) -> int:
+    """An integer field within [lo, hi]; TypeError/ValueError otherwise (undecodable message)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{what} = {x!r} is not a number")
+    if not (math.isfinite(x) and lo <= x <= hi):
+        raise ValueError(f"{what} = {x!r} outside [{lo}, {hi}]")
+    return int(x)
+
+
+_I64 = 2**63 - 1
+
+
 def _stamp_ns(stamp: Any) -> int:
     if stamp is None:
         return 0
-    if isinstance(stamp, (int, float)):  # JSON: seconds as a number
-        return round(float(stamp) * NS_PER_S)
-    sec = _get(stamp, "sec", "secs", "seconds", default=0)
-    nsec = _get(stamp, "nanosec", "nsec", "nsecs", "nanos", default=0)
-    return int(sec) * NS_PER_S + int(nsec)
+    if isinstance(stamp, (int, float)) and not isinstance(stamp, bool):  # JSON: seconds
+        return _int(round(float(stamp) * NS_PER_S) if math.isfinite(stamp) else stamp,
+                    -_I64, _I64, "stamp")
+    sec = _int(_get(stamp, "sec", "secs", "seconds", default=0), -2**40, 2**40, "stamp seconds")
+    nsec = _int(_get(stamp, "nanosec", "nsec", "nsecs", "nanos", default=0), -2**40, 2**40,
+                "stamp nanoseconds")
+    return _int(sec * NS_PER_S + nsec, -_I64, _I64, "stamp")
 
 
 def _f(x: Any) -> float:
@@ -486,13 +500,15 @@ def _extract(layout: str | None, msg: Any) -> dict[str, Any]:
     if layout in ("navsatfix", "locationfix"):
         cov = _get(msg, "position_covariance", default=[]) or []
         cov = list(cov)
-        out["status"] = int(_get(msg, "status.status", default=0)) if layout == "navsatfix" else 0
+        out["status"] = (_int(_get(msg, "status.status", default=0), -128, 127, "status")
+                         if layout == "navsatfix" else 0)
         out["lat"] = _f(_get(msg, "latitude"))
         out["lon"] = _f(_get(msg, "longitude"))
         out["alt"] = _f(_get(msg, "altitude"))
         out["cov_e"] = _f(cov[0]) if len(cov) >= 9 else math.nan
         out["cov_n"] = _f(cov[4]) if len(cov) >= 9 else math.nan
-        out["cov_type"] = int(_get(msg, "position_covariance_type", default=0))
+        out["cov_type"] = _int(_get(msg, "position_covariance_type", default=0), 0, 255,
+                               "position_covariance_type")
     elif layout == "imu":
         out["wz"] = _f(_get(msg, "angular_velocity.z"))
         cov = list(_get(msg, "angular_velocity_covariance", default=[]) or [])
