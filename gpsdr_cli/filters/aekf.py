@@ -215,6 +215,7 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
         raise ConfigError(f"aekf.drift_consider = {a['drift_consider']!r}: expected one of "
                           f"{', '.join(modes)}")
     flg[kn.F_DRIFT_CONSIDER] = modes[a["drift_consider"]]
+    flg[kn.F_HEADING_CONSIDER] = int(a["heading_consider"])
     return prm, flg
 
 

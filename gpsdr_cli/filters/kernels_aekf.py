@@ -48,8 +48,8 @@ P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 N_PRM = 20
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
-F_HEADING_KNOWN, F_DRIFT_CONSIDER = 8, 9
-N_FLG = 10
+F_HEADING_KNOWN, F_DRIFT_CONSIDER, F_HEADING_CONSIDER = 8, 9, 10
+N_FLG = 11
 # stored prior scalars per epoch (columns of ``prior_prm``)
 Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N = range(6)
 N_PRIOR = 6
@@ -60,6 +60,9 @@ N_PACKED = N_STATES * (N_STATES + 1) // 2
 #: nonzero columns of the odometer row (v_e, v_n, k_s) and the heading-rate row
 NZ_ODO = np.array([1, 4, 7], np.int64)
 NZ_OMEGA = np.array([1, 2, 4, 5, 6], np.int64)
+#: consider-state bit masks: the gyro drift; the velocity (for aekf.heading_consider)
+CONS_EPS = 1 << 6
+CONS_VEL = (1 << 1) | (1 << 4)
 
 
 @njit(cache=True)
@@ -192,11 +195,11 @@ def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
 
 @njit(cache=True)
 def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: float, R: float,
-               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int = -1) -> bool:
+               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int = 0) -> bool:
     """Scalar update with a sparse Jacobian row H (nonzeros at indices ``nz``), Joseph form.
 
     False if S is not positive.  ``consider >= 0``: Schmidt-Kalman "consider"
-    state: its gain is set to zero (the state is not corrected by this
+    their gain is set to zero (they are not corrected by this
     measurement) while its uncertainty still enters S and the
     cross-covariances; the Joseph form keeps P exact for such a suboptimal gain.
     """
@@ -214,8 +217,10 @@ def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: f
         return False
     for i in range(n):
         K[i] = PHt[i] / S
-    if consider >= 0:
-        K[consider] = 0.0
+    if consider > 0:
+        for i in range(n):
+            if (consider >> i) & 1:
+                K[i] = 0.0
     for i in range(n):
         x[i] += K[i] * y
     joseph_apply(P, K, PHt, HPHt, R, Bh)
@@ -294,6 +299,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     store = flg[F_STORE] != 0
     heading_known = flg[F_HEADING_KNOWN] != 0
     drift_consider = flg[F_DRIFT_CONSIDER]
+    heading_consider = flg[F_HEADING_CONSIDER] != 0
     omega_min = prm[P_OMEGA_MIN]
     sigma_a = prm[P_SIGMA_A]
     psi_mem = psi0
@@ -405,7 +411,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     use = heading_known
                 if use:
                     h = odo_row(x, ue, un, H)
-                    cons = 6 if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else -1
+                    cons = CONS_EPS if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else 0
                     if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons):
                         info[I_SKIPPED] += 1.0
         static_out[k] = is_static
@@ -420,7 +426,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 # drift as a consider state while moving (aekf.drift_consider): without an
                 # absolute reference a sustained turn (the Singer covariance lets a decay while
                 # the mean holds it) or a speed update (through P[eps, v]) must not move eps
-                cons = 6 if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else -1
+                cons = CONS_EPS if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else 0
+                if heading_consider and outage[k]:
+                    cons |= CONS_VEL
                 if not row_update(x, P, H, NZ_OMEGA, omega[k] - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
                     info[I_SKIPPED] += 1.0
         # ---- remembered heading for the odometer row near standstill

@@ -23,15 +23,15 @@ from gpsdr_cli.models.cs_model import cs_sigma_a2, newton_matrix, phi_matrix, q_
 
 
 def joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
-           consider: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+           consider: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
     """Scalar Kalman update x, P with row H, innovation y, variance R (Joseph form).
 
-    ``consider``: index of a state whose gain is forced to zero (Schmidt consider state).
+    ``consider``: indices of states whose gain is forced to zero (Schmidt consider states).
     """
     S = float(H @ P @ H) + R
     K = P @ H / S
-    if consider is not None:
-        K[consider] = 0.0
+    if consider:
+        K[list(consider)] = 0.0
     x = x + K * y
     A = np.eye(len(x)) - np.outer(K, H)
     P = A @ P @ A.T + R * np.outer(K, K)
@@ -132,7 +132,9 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 x, P = joseph(x, P, unit(0), z[0] - x[0], r_e[k] * sh_r)
                 x, P = joseph(x, P, unit(3), z[1] - x[3], r_n[k] * sh_r)
                 used[k] = True
-        cons = 6 if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else None
+        cons = (6,) if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else ()
+        cons_w = cons + ((1, 4) if params["aekf"]["heading_consider"] and epochs.gnss_outage[k]
+                         else ())
         if epochs.has_odo[k]:
             u = epochs.odo_speed_mps[k]
             is_static = standstill and u < st["speed_mps"]
@@ -164,7 +166,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 H[1] = (-an * v2 - 2 * ve * c) / v2 ** 2
                 H[4] = (ae * v2 - 2 * vn * c) / v2 ** 2
                 H[2], H[5], H[6] = vn / v2, -ve / v2, 1.0
-                x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w, cons)
+                x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w, cons_w)
         v = math.hypot(x[1], x[4])
         if v >= omega_min:
             psi_mem, heading_known = math.atan2(x[1], x[4]), True

@@ -28,6 +28,7 @@ OPTIONS = {
     "no_standstill": {"standstill": {"enabled": False}},  # also exercises a gate reset
     "continuous_pdop": {"gnss": {"pdop_mode": "continuous"}},
     "drift_always_consider": {"aekf": {"drift_consider": "always"}},
+    "heading_consider": {"aekf": {"heading_consider": True}},
     "drift_never_consider_decay": {"aekf": {"drift_consider": "never", "drift_mean_decay": True}},
 }
 
