@@ -210,3 +210,19 @@ def test_real_process_gives_one_line_and_exit_status(runs, tmp_path: Path) -> No
     assert "gps.nmea" in bad.stderr
     _, good = F.run_case(F.CASES["jump_100m"], "aekf", tmp_path / "good", sim, subprocess_exe=exe)
     assert good.status == 0 and F.track_problems(good.track, n_epochs=good.epochs) == []
+
+
+def test_failed_track_write_keeps_the_existing_statistics(runs, tmp_path: Path) -> None:
+    """cli: a run that fails writing the track (its directory is missing) must not have
+    replaced the statistics file already there: nothing already written is lost."""
+    inputs = F.CASES["clean"].make(runs.sim, tmp_path)
+    stats = tmp_path / "stats.parquet"
+    stats.write_bytes(b"precious stats")
+    from click.testing import CliRunner
+
+    from gpsdr_cli.cli.main import cli
+
+    res = CliRunner().invoke(cli, ["fuse", *inputs.args, "-o", str(tmp_path / "no" / "t.parquet"),
+                                   "--stats", str(stats), "-q"])
+    assert res.exit_code == 1 and F.error_line_problems(res.stderr) == []
+    assert stats.read_bytes() == b"precious stats"
