@@ -34,10 +34,14 @@ The GNSS receiver (per epoch, per axis e/n)
     its stamp (the comma2k19 situation); the correction is
     ``[time] gnss_offset_s = stamp_offset``.
 
-The gyro: ``(1 + scale_error) * yaw_rate + bias(t) + white``, bias a stationary
-Gauss-Markov process (the filters' own drift model).  The odometer: wheel ticks
-``floor(ticks_per_m * (1 + scale_error) * distance)`` turned into speed over a
-moving window, plus white noise.
+The gyro (consumer MEMS): ``(1 + scale_error) * yaw_rate + bias(t) + white`` with
+white noise 0.1 deg/s per 100 Hz sample, scale error ~N(0, 0.5 %), and a bias
+that is a stationary first-order Gauss-Markov process (the filters' own drift
+model) of sigma 0.3 deg/s and correlation time 1 h: a turn-on bias that differs
+per drive and wanders slowly (rate random walk ~20 deg/h/sqrt(h)).
+The odometer: wheel ticks ``floor(40/m * (1 + scale_error) * distance)``
+(scale error ~N(0, 2 %)) turned into speed over a 0.1 s moving window (so it
+lags by 0.05 s and is quantised to 0.25 m/s steps), plus 0.02 m/s white noise.
 """
 
 from __future__ import annotations
