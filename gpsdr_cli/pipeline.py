@@ -286,7 +286,7 @@ def stray_mask(t_ns: np.ndarray) -> np.ndarray:
 
 def drop_stray_records(drive: Drive) -> Drive:
     """A copy of ``drive`` without stray-stamped records, counted in its SkipReport."""
-    out = dataclasses.replace(drive)
+    out = dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped))
     for name in ("gnss", "gyro", "odo"):
         stream = getattr(drive, name)
         if stream is None or not len(stream):
@@ -313,7 +313,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame,
 
     # build_epochs counts what it drops into the drive's SkipReport: work on a copy so
     # a second run (auto offset, batch retry) does not count twice.
-    work = drop_stray_records(dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped)))
+    work = drop_stray_records(drive)
     if progress:
         progress("aligning streams")
     epochs = build_epochs(work, frame, params)
