@@ -23,7 +23,7 @@ T0 = 1_700_000_000_000_000_000
 
 def write_mcap(path: Path | io.BytesIO, channels: list[tuple[str, str, list[tuple[int, int, bytes]]]],
                *, compression: str = "zstd", chunk_size: int = 1024 * 1024, index: bool = True,
-               schemas: dict[str, tuple[str, str, bytes]] | None = None) -> bytes:
+               schemas: dict[str, tuple[str, str, bytes]] | None = None, chunked: bool = True) -> bytes:
     """Write channels ``(topic, layout_or_schema_key, [(log_time_ns, publish_ns, data)])``.
 
     ``layout`` keys are ros2_fast layouts (ROS 2 CDR); other keys are looked up in
@@ -38,7 +38,7 @@ def write_mcap(path: Path | io.BytesIO, channels: list[tuple[str, str, list[tupl
     w = Writer(buf, compression=comp, chunk_size=chunk_size,
                index_types=IndexType.ALL if index else IndexType.NONE,
                use_summary_offsets=index, use_statistics=index, repeat_channels=index,
-               repeat_schemas=index)
+               repeat_schemas=index, use_chunking=chunked)
     w.start(profile="ros2", library="gpsdr tests")
     events = []
     for topic, key, msgs in channels:
@@ -237,6 +237,21 @@ def test_compressions_and_unindexed(tmp_path, compression):
     d = read_mcap(path)
     np.testing.assert_array_equal(d.gyro.yaw_rate_radps, truth["wz"])
     assert len(d.gnss) == 20 and "warnings" not in d.meta
+
+
+def test_unchunked_file_and_its_truncation(tmp_path):
+    channels, truth = _drive_channels(20, 100)
+    path = tmp_path / "flat.mcap"
+    raw = write_mcap(path, channels, chunked=False)
+    d = read_mcap(path)
+    assert d.meta["mcap"]["chunks"] == 0 and "warnings" not in d.meta
+    np.testing.assert_array_equal(d.gyro.yaw_rate_radps, truth["wz"])
+    np.testing.assert_array_equal(d.odo.speed_mps, truth["v"])
+    path.write_bytes(raw[:len(raw) // 2])  # cut mid-record: everything before the cut is kept
+    d = read_mcap(path)
+    n = len(d.gyro)
+    assert 40 < n < 100 and d.meta["warnings"]
+    np.testing.assert_array_equal(d.gyro.yaw_rate_radps, truth["wz"][:n])
 
 
 def test_no_fix_status_nan_and_covariance_type(tmp_path):
