@@ -68,6 +68,11 @@ class FuseResult:
     #: readers' warnings about the inputs (e.g. a truncated MCAP summary)
     drive_warnings: list[str] = field(default_factory=list)
 
+    @property
+    def gnss_offset_note(self) -> str:
+        """How ``--gnss-offset auto`` came to its value (empty when it was not asked for)."""
+        return self.metadata.get("gnss_offset_auto_note", "")
+
     def summary(self) -> dict[str, float]:
         """Figures of the ``all`` segment: rmse_m, cep95_m, max_m, epochs (NaN when unknown)."""
         return summary_of(self.stats)
@@ -346,19 +351,24 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     frame = choose_frame(drive, params)
     epochs, result, track, skipped = _run_once(drive, params, frame, progress)
     offset_auto: float | None = None
+    offset_note = ""
     if auto_gnss_offset:
-        from .latency import estimate_gnss_offset_s
+        from .latency import estimate_gnss_offset
 
         if progress:
             progress("estimating the GNSS time offset")
-        est = float(estimate_gnss_offset_s(track))
-        if not math.isfinite(est):
-            raise InputError(drive.sources[0].path if drive.sources else None,
-                             "cannot estimate the GNSS time offset (too few moving GNSS "
-                             "epochs); give --gnss-offset SECONDS")
-        params["time"]["gnss_offset_s"] = float(params["time"]["gnss_offset_s"]) + est
-        offset_auto = params["time"]["gnss_offset_s"]
-        epochs, result, track, skipped = _run_once(drive, params, frame, progress)
+        # from the track's own kinematics, never from the reference: the error statistics
+        # against the reference must stay an independent check
+        est = estimate_gnss_offset(track)
+        offset_auto = float(params["time"]["gnss_offset_s"])
+        if est.identified and math.isfinite(est.offset_s):
+            params["time"]["gnss_offset_s"] = offset_auto + float(est.offset_s)
+            offset_auto = params["time"]["gnss_offset_s"]
+            offset_note = (f"{est.method}, +-{est.stderr_s:.3f} s from {est.n_used} fixes"
+                           if math.isfinite(est.stderr_s) else est.method)
+            epochs, result, track, skipped = _run_once(drive, params, frame, progress)
+        else:
+            offset_note = f"not estimated ({est.reason}); kept {offset_auto:+.3f} s"
 
     if progress:
         progress("statistics")
@@ -368,6 +378,8 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     stats = order_stats(stats)
     check_finite(track, stats)
     meta = build_metadata(drive, params, frame, epochs, result, skipped, reference, offset_auto)
+    if offset_note:
+        meta["gnss_offset_auto_note"] = offset_note
     return FuseResult(track=track, stats=stats, frame=frame, epochs=epochs, result=result,
                       metadata=meta, reference_en=ref_en,
                       gnss_offset_s=float(params["time"]["gnss_offset_s"]), params=params,

@@ -50,6 +50,13 @@ def test_fuse_writes_track_and_stats_next_to_the_gps_log(gpsdr, drive_dir: Path)
     assert rmse_printed == pytest.approx(all_row["rmse_m"], abs=0.006)
 
 
+def test_fuse_gnss_offset_auto_is_reported(gpsdr, drive_dir: Path) -> None:
+    result = gpsdr(["fuse", *streams(drive_dir), "--gnss-offset", "auto", "--filter", "ekf"])
+    assert result.exit_code == 0, result.output
+    line = next(ln for ln in result.stderr.splitlines() if ln.startswith("GNSS time offset"))
+    assert 0.06 < float(line.split(": ")[1].split(" s")[0]) < 0.16  # s; the log's ~0.1 s latency
+
+
 def test_fuse_explicit_outputs_csv_and_config(gpsdr, drive_dir: Path, tmp_path: Path) -> None:
     cfg = tmp_path / "p.toml"
     cfg.write_text('[filter]\nname = "ekf"\n')

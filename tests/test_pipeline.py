@@ -210,6 +210,8 @@ def test_auto_gnss_offset(drive: Drive, reference) -> None:
     res = fuse(drive, params, reference, auto_gnss_offset=True)
     assert res.gnss_offset_s == pytest.approx(LATENCY_S, abs=0.04)  # s
     assert float(res.metadata["gnss_offset_auto_s"]) == res.gnss_offset_s
+    assert float(res.metadata["param.time.gnss_offset_s"]) == res.gnss_offset_s
+    assert res.gnss_offset_note.startswith("differenced")  # not from the reference
     assert res.summary()["rmse_m"] < 1.0
 
 

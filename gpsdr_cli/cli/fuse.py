@@ -212,7 +212,8 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
                f"{info['skipped_total']} input records skipped -> {where}"
                + (f", {stats_out}" if stats_out else ""), file=err)
     if auto:
-        click.echo(f"GNSS time offset (auto): {res.gnss_offset_s:+.3f} s", file=err)
+        click.echo(f"GNSS time offset (auto): {res.gnss_offset_s:+.3f} s ({res.gnss_offset_note})",
+                   file=err)
     for note in res.drive_warnings:
         click.echo(f"warning: {note}", file=err)
     if reference:
