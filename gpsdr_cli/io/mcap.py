@@ -47,6 +47,8 @@ import functools
 import hashlib
 import json
 import math
+import mmap
+import os
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -59,7 +61,6 @@ import numpy as np
 from ..conventions import FIX_DGPS, FIX_GPS, FIX_NONE, NS_PER_S
 from ..errors import InputError, NoDataError, UsageError
 from . import ros2_fast
-from .csv import read_bytes
 from .drive import Drive, GnssFixes, Odometry, SkipReport, Source, YawRates
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -333,7 +334,7 @@ class _Walker:
             self.damage.append(f"{self.path}: ends without a data-end record (truncated?); "
                                "read up to the end")
             self.skipped.add("MCAP truncated or damaged (rest of file unread)", self.path)
-        elif len(data) >= 8 + 29 + 8 and data.endswith(MAGIC) and data[-37] == _OP_FOOTER:
+        elif len(data) >= 8 + 29 + 8 and data[-8:] == MAGIC and data[-37] == _OP_FOOTER:
             # Footer: opcode, length, summary_start u64, summary_offset_start u64, crc u32; magic.
             self.has_summary = _U64.unpack_from(data, len(data) - 28)[0] != 0
         else:
@@ -752,6 +753,22 @@ def _usable(kind: str, chan: _Channel) -> int:
     return len(_cat(chan, "log_ns", np.int64))
 
 
+def _map_file(path: str | Path) -> mmap.mmap | bytes:
+    """The file's bytes, memory-mapped: logs with camera topics run to gigabytes and
+    only the few messages gpsdr reads (plus one chunk at a time) need to be in memory."""
+    try:
+        with open(path, "rb") as f:
+            if os.fstat(f.fileno()).st_size == 0:
+                return b""
+            return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+    except IsADirectoryError as err:
+        raise InputError(path, "is a directory, expected a file") from err
+    except FileNotFoundError as err:
+        raise InputError(path, "no such file") from err
+    except (OSError, ValueError) as err:
+        raise InputError(path, f"cannot read: {getattr(err, 'strerror', None) or err}") from err
+
+
 def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log_time: bool = False,
               date: dt.date | None = None) -> Drive:
     """Read GNSS, gyro and odometer streams from an MCAP file (see the module docstring).
@@ -761,10 +778,10 @@ def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log
     sentences without one (default: the date of the first message stamp).
     """
     path_s = str(path)
-    data = read_bytes(path)
-    if not data:
+    data = _map_file(path)
+    if not len(data):
         raise InputError(path_s, "empty file, expected an MCAP log")
-    if not data.startswith(MAGIC):
+    if data[:8] != MAGIC:
         raise InputError(path_s, f"not an MCAP file (starts with {data[:8]!r}, expected the "
                          "MCAP magic \\x89MCAP0\\r\\n)")
     topics = {k: v for k, v in (topics or {}).items() if v}
