@@ -227,7 +227,7 @@ def duplicate_records(drive: Drive, stream: str, every: int = 10, *,
 
 def nan_values(drive: Drive, stream: str, fraction: float, *, seed: int = 0,
                value: float = np.nan) -> Drive:
-    """A random ``fraction`` of a stream's values replaced by ``value`` (NaN, or inf)."""
+    """A random ``fraction`` of a stream's values replaced by ``value`` (NaN, inf, a spike)."""
     out = copy_drive(drive)
     s = getattr(out, stream)
     if s is None:
@@ -1074,6 +1074,12 @@ CATALOGUE: tuple[FaultCase, ...] = (
               _drive_case(lambda d: odo_dropout(d, 40.0, 30.0), (40.0, 30.0))),
     FaultCase("odo_zero", "odometer reads 0 m/s for 10 s while moving", "track",
               _drive_case(lambda d: odo_dropout(d, 40.0, 10.0, mode="zero"), (40.0, 10.0))),
+    FaultCase("odo_spikes", "1 % of odometer readings 1000 m/s (glitches)", "track",
+              _drive_case(lambda d: nan_values(d, "odo", 0.01, seed=4, value=1000.0))),
+    FaultCase("gyro_spikes", "1 % of gyro readings 100 rad/s (glitches)", "track",
+              _drive_case(lambda d: nan_values(d, "gyro", 0.01, seed=4, value=100.0))),
+    FaultCase("no_odo", "GNSS and gyro, no odometer", "track", _subset_case(("gnss", "gyro"))),
+    FaultCase("no_gyro", "GNSS and odometer, no gyro", "track", _subset_case(("gnss", "odo"))),
     FaultCase("no_gnss", "no GNSS and no origin configured", "error", _subset_case(("gyro", "odo"))),
     FaultCase("no_gnss_origin", "no GNSS, origin and heading configured (pure DR)", "track",
               _subset_case(("gyro", "odo"), _origin_config)),
