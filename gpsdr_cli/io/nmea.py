@@ -599,6 +599,115 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     return len(ok_start)
 
 
+def _assign_epochs(parsed: dict[int, dict[str, np.ndarray]]) -> np.ndarray | None:
+    """Give every sentence its epoch (``parsed[kind]['ep']``); return each epoch's time of day.
+
+    A timed sentence (GGA, RMC, GST, ZDA) opens a new epoch when its time of day differs
+    from the previous timed sentence's, or when its date differs from the last date seen
+    (a multi-day log sampled at the same time of day).  Untimed sentences (GSA, VTG) join
+    the epoch of the timed sentence before them; before the first one, the first epoch.
+    Returns the epochs' times of day (us), or None when no sentence has a time.
+    """
+    kinds = list(parsed)
+    if not kinds:
+        return None
+    pos_all = np.concatenate([parsed[k]["pos"] for k in kinds])
+    sod_all = np.concatenate([parsed[k]["sod"] if k in _TIMED else
+                              np.full(len(parsed[k]["pos"]), -1, np.int64) for k in kinds])
+    days_all = np.concatenate([parsed[k]["days"] if "days" in parsed[k] else
+                               np.full(len(parsed[k]["pos"]), np.nan) for k in kinds])
+    order = np.argsort(pos_all, kind="stable")
+    s_sorted = sod_all[order]
+    t_mask = s_sorted >= 0
+    if not t_mask.any():
+        return None
+    ts = s_sorted[t_mask]
+    td = days_all[order][t_mask]
+    last_d = np.maximum.accumulate(np.where(np.isfinite(td), np.arange(len(td)), -1))
+    d_ff = np.where(last_d >= 0, td[np.maximum(last_d, 0)], np.nan)
+    date_change = np.isfinite(td[1:]) & np.isfinite(d_ff[:-1]) & (td[1:] != d_ff[:-1])
+    new = np.r_[True, (ts[1:] != ts[:-1]) | date_change]
+    ep_timed = np.cumsum(new) - 1
+    last_timed = np.maximum.accumulate(np.where(t_mask, np.arange(len(s_sorted)), -1))
+    rank = np.cumsum(t_mask) - 1
+    ep_sorted = np.where(last_timed >= 0, ep_timed[rank[np.maximum(last_timed, 0)]], 0)
+    ep_all = np.empty_like(ep_sorted)
+    ep_all[order] = ep_sorted
+    off = 0
+    for k in kinds:
+        m = len(parsed[k]["pos"])
+        parsed[k]["ep"] = ep_all[off:off + m]
+        off += m
+    return ts[new]
+
+
+def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int) -> dict[str, np.ndarray]:
+    """One value per epoch and field: the last non-empty in file order, by the module's rules.
+
+    ``row``: the epoch has a GGA or an RMC (the epochs that become fixes).
+    """
+    def field(kinds_fields: list[tuple[int, str]]) -> np.ndarray:
+        out = np.full(n_ep, np.nan)
+        for kind, fld in kinds_fields:  # later kinds win
+            if kind in parsed:
+                _last_per_epoch(out, parsed[kind]["ep"], parsed[kind][fld])
+        return out
+
+    has = {k: np.zeros(n_ep, bool) for k in (_GGA, _RMC)}
+    for k, mask in has.items():
+        if k in parsed:
+            mask[parsed[k]["ep"]] = True
+    e = {f: np.full(n_ep, np.nan) for f in ("lat", "lon", "alt")}
+    e["q"] = np.zeros(n_ep)
+    # position and quality: GGA where the epoch has one (even without a fix), else RMC
+    for kind, src_mask in ((_RMC, ~has[_GGA]), (_GGA, has[_GGA])):
+        if kind not in parsed:
+            continue
+        g = parsed[kind]
+        use = np.isfinite(g["lat"]) & src_mask[g["ep"]]
+        for f in ("lat", "lon", "q") + (("alt",) if kind == _GGA else ()):
+            _last_per_epoch(e[f], g["ep"], g[f], use)
+    e["nsat"] = field([(_GGA, "nsat")])
+    e["hdop"] = field([(_GSA, "hdop"), (_GGA, "hdop")])  # GGA's HDOP wins
+    e["pdop"] = field([(_GSA, "pdop")])
+    e["vdop"] = field([(_GSA, "vdop")])
+    e["sig_n"] = field([(_GST, "sig_n")])
+    e["sig_e"] = field([(_GST, "sig_e")])
+    e["speed"] = field([(_VTG, "speed"), (_RMC, "speed")])  # RMC wins
+    e["course"] = field([(_VTG, "course"), (_RMC, "course")])
+    e["row"] = has[_GGA] | has[_RMC]
+    return e
+
+
+def _epoch_days(parsed: dict[int, dict[str, np.ndarray]], epoch_sod: np.ndarray,
+                date: datetime.date | None) -> tuple[np.ndarray | None, str]:
+    """Day (since 1970-01-01) of every epoch and where it came from; None if no date source.
+
+    RMC/ZDA dates (ZDA wins within an epoch) are carried to the epochs around them
+    with midnight rollovers counted in between: time of day decreasing by more than
+    12 h is the next day; an increase, however large, is a gap within the same day.
+    Only without any RMC/ZDA date is ``date`` (the first epoch's day) used.
+    """
+    n_ep = len(epoch_sod)
+    day_of_epoch = np.full(n_ep, np.nan)
+    for kind in (_RMC, _ZDA):
+        if kind in parsed:
+            g = parsed[kind]
+            k_days = np.full(n_ep, np.nan)
+            _last_per_epoch(k_days, g["ep"], g["days"])
+            fill = np.isfinite(k_days)
+            day_of_epoch[fill] = k_days[fill]
+    roll = np.r_[0, np.cumsum(np.diff(epoch_sod) < -_HALF_DAY_US)].astype(np.int64)
+    dated = np.isfinite(day_of_epoch)
+    if dated.any():
+        offset = np.where(dated, day_of_epoch - roll, 0).astype(np.int64)
+        src = np.maximum.accumulate(np.where(dated, np.arange(n_ep), -1))
+        src[src < 0] = int(np.flatnonzero(dated)[0])  # before the first date: back-fill
+        return offset[src] + roll, "log (RMC/ZDA)"
+    if date is not None:
+        return (date - datetime.date(1970, 1, 1)).days + roll, "argument"
+    return None, "none"
+
 
 def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None = None,
                strict: bool = False) -> tuple[GnssFixes, SkipReport, dict]:
@@ -646,132 +755,35 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     meta: dict = {"lines": lines.count, "doubled_starts": stats["doubled_starts"],
                   "sentences": dict(stats["sentences"]), "talkers": dict(stats["talkers"]),
                   "alt_without_geoid_sep": stats["alt_without_geoid_sep"]}
-    sentences = stats["sentences"]
     parsed = {k: {f: np.concatenate([d[f] for d in parts]) for f in parts[0]}
               for k, parts in sorted(acc.items())}
 
-
-    # ---- 5. epochs
+    # ---- 5.-7. epochs, merged fields, dates
     report = _report(probs, name, lines, strict, buf)
-    pos_all = np.concatenate([parsed[k]["pos"] for k in parsed] or [np.zeros(0, np.int64)])
-    sod_all = np.concatenate([parsed[k]["sod"] if k in _TIMED else
-                              np.full(len(parsed[k]["pos"]), -1, np.int64) for k in parsed]
-                             or [np.zeros(0, np.int64)])
-    days_all = np.concatenate([parsed[k]["days"] if "days" in parsed[k] else
-                               np.full(len(parsed[k]["pos"]), np.nan) for k in parsed]
-                              or [np.zeros(0)])
-    timed = sod_all >= 0
-    if not timed.any():
-        if not sentences:
-            raise NoDataError(name, "no GGA/RMC/GSA/VTG/GST/ZDA sentence with a valid checksum "
-                                    f"({_summary(report)})")
-        raise NoDataError(name, "no GGA or RMC sentence with a time of day "
-                                f"({_summary(report)})")
-    order = np.argsort(pos_all, kind="stable")
-    s_sorted = sod_all[order]
-    t_mask = s_sorted >= 0
-    ts = s_sorted[t_mask]
-    # a new epoch: the time of day changes, or a date differs from the last date seen
-    # (a multi-day log sampled at the same time of day)
-    td = days_all[order][t_mask]
-    last_d = np.maximum.accumulate(np.where(np.isfinite(td), np.arange(len(td)), -1))
-    d_ff = np.where(last_d >= 0, td[np.maximum(last_d, 0)], np.nan)
-    date_change = np.isfinite(td[1:]) & np.isfinite(d_ff[:-1]) & (td[1:] != d_ff[:-1])
-    new = np.r_[True, (ts[1:] != ts[:-1]) | date_change]
-    ep_timed = np.cumsum(new) - 1
-    epoch_sod = ts[new]
-    n_ep = len(epoch_sod)
-    last_timed = np.maximum.accumulate(np.where(t_mask, np.arange(len(s_sorted)), -1))
-    rank = np.cumsum(t_mask) - 1
-    ep_sorted = np.where(last_timed >= 0, ep_timed[rank[np.maximum(last_timed, 0)]], 0)
-    ep_all = np.empty_like(ep_sorted)
-    ep_all[order] = ep_sorted
-    off = 0
-    for g in parsed.values():
-        m = len(g["pos"])
-        g["ep"] = ep_all[off:off + m]
-        off += m
-
-    # ---- 6. merge fields per epoch
-    def field(kinds_fields: list[tuple[int, str]]) -> np.ndarray:
-        out = np.full(n_ep, np.nan)
-        for kind, fld in kinds_fields:
-            if kind in parsed:
-                _last_per_epoch(out, parsed[kind]["ep"], parsed[kind][fld])
-        return out
-
-    has_gga = np.zeros(n_ep, bool)
-    has_rmc = np.zeros(n_ep, bool)
-    if _GGA in parsed:
-        has_gga[parsed[_GGA]["ep"]] = True
-    if _RMC in parsed:
-        has_rmc[parsed[_RMC]["ep"]] = True
-    lat = np.full(n_ep, np.nan)
-    lon = np.full(n_ep, np.nan)
-    alt = np.full(n_ep, np.nan)
-    qual = np.zeros(n_ep)
-    for kind, src_mask in ((_RMC, ~has_gga), (_GGA, has_gga)):
-        if kind not in parsed:
-            continue
-        g = parsed[kind]
-        use = np.isfinite(g["lat"]) & src_mask[g["ep"]]
-        _last_per_epoch(lat, g["ep"], g["lat"], use)
-        _last_per_epoch(lon, g["ep"], g["lon"], use)
-        _last_per_epoch(qual, g["ep"], g["q"], use)
-        if kind == _GGA:
-            _last_per_epoch(alt, g["ep"], g["alt"], use)
-    nsat = field([(_GGA, "nsat")])
-    hdop = field([(_GSA, "hdop"), (_GGA, "hdop")])  # GGA's HDOP wins: written last
-    pdop = field([(_GSA, "pdop")])
-    vdop = field([(_GSA, "vdop")])
-    sig_n = field([(_GST, "sig_n")])
-    sig_e = field([(_GST, "sig_e")])
-    speed = field([(_VTG, "speed"), (_RMC, "speed")])  # RMC wins
-    course = field([(_VTG, "course"), (_RMC, "course")])
-
-    # ---- 7. dates: from RMC/ZDA per epoch, carried over rollovers; else the argument
-    day_of_epoch = np.full(n_ep, np.nan)
-    for kind in (_RMC, _ZDA):
-        if kind in parsed:
-            g = parsed[kind]
-            use = np.isfinite(g["days"])
-            # ZDA (4-digit year) overrides RMC within an epoch
-            day_of_epoch_k = np.full(n_ep, np.nan)
-            _last_per_epoch(day_of_epoch_k, g["ep"], g["days"], use)
-            fill = np.isfinite(day_of_epoch_k)
-            day_of_epoch[fill] = day_of_epoch_k[fill]
-    d_sod = np.diff(epoch_sod)
-    # midnight rollover: time of day decreasing by more than 12 h is the next day; an
-    # increase (however large) is a gap within the same day
-    roll = np.r_[0, np.cumsum(d_sod < -_HALF_DAY_US)].astype(np.int64)
-    dated = np.isfinite(day_of_epoch)
-    row = has_gga | has_rmc
-    if dated.any():
-        meta["date_source"] = "log (RMC/ZDA)"
-        offset = np.where(dated, day_of_epoch - roll, 0).astype(np.int64)
-        src = np.maximum.accumulate(np.where(dated, np.arange(n_ep), -1))
-        src[src < 0] = int(np.flatnonzero(dated)[0])
-        day = offset[src] + roll
-    elif date is not None:
-        meta["date_source"] = "argument"
-        day = (date - datetime.date(1970, 1, 1)).days + roll
-    else:
-        if (qual[row] > 0).any():
+    epoch_sod = _assign_epochs(parsed)
+    if epoch_sod is None:
+        what = ("GGA/RMC/GSA/VTG/GST/ZDA sentence with a valid checksum" if not parsed
+                else "GGA or RMC sentence with a time of day")
+        raise NoDataError(name, f"no {what} ({_summary(report)})")
+    e = _merge_epochs(parsed, len(epoch_sod))
+    row = e.pop("row")
+    day, meta["date_source"] = _epoch_days(parsed, epoch_sod, date)
+    if day is None:
+        if (e["q"][row] > 0).any():
             raise NoDataError(name, "no date in the log (no RMC or ZDA sentence with a date); "
                                     "pass --date YYYY-MM-DD (the UTC date of the first fix)")
         raise NoDataError(name, "no fix and no date in the log (only no-fix epochs without "
                                 "RMC/ZDA dates)")
     if not row.any():
-        raise NoDataError(name, "no GGA or RMC sentence with a time of day "
-                                f"({_summary(report)})")
-
+        raise NoDataError(name, f"no GGA or RMC sentence with a time of day ({_summary(report)})")
+    r = {f: v[row] for f, v in e.items()}
     t_us = day[row].astype(np.int64) * _US_PER_DAY + epoch_sod[row]
     fixes = GnssFixes(
-        t_ns=t_us * 1000, lat_deg=lat[row], lon_deg=lon[row], alt_m=alt[row],
-        fix_quality=qual[row].astype(np.int8),
-        n_sats=np.where(np.isfinite(nsat[row]), nsat[row], -1).astype(np.int16),
-        hdop=hdop[row], pdop=pdop[row], vdop=vdop[row], sigma_e_m=sig_e[row],
-        sigma_n_m=sig_n[row], speed_mps=speed[row], course_deg=course[row])
+        t_ns=t_us * 1000, lat_deg=r["lat"], lon_deg=r["lon"], alt_m=r["alt"],
+        fix_quality=r["q"].astype(np.int8),
+        n_sats=np.where(np.isfinite(r["nsat"]), r["nsat"], -1).astype(np.int16),
+        hdop=r["hdop"], pdop=r["pdop"], vdop=r["vdop"], sigma_e_m=r["sig_e"],
+        sigma_n_m=r["sig_n"], speed_mps=r["speed"], course_deg=r["course"])
     meta["epochs"] = len(fixes)
     meta["epochs_without_gga_rmc"] = int((~row).sum())
     udays = np.unique(day[row])
