@@ -1,7 +1,7 @@
 """Speed of the NMEA reader on a generated one-hour 5 Hz log (GGA+RMC+GSA+GST per epoch).
 
 Run: ``.venv/bin/python benchmarks/read_nmea.py [--hours H] [--rate HZ] [--repeat N]``
-Prints sentences per second (best of N runs, default 5: a loaded machine is noisy) of :func:`gpsdr_cli.io.nmea.parse_nmea`.
+Prints sentences per second (best of N runs, default 5), by wall clock and by CPU time of :func:`gpsdr_cli.io.nmea.parse_nmea`.
 """
 
 from __future__ import annotations
@@ -57,18 +57,24 @@ def generate_log(hours: float = 1.0, rate_hz: float = 5.0, seed: int = 0) -> byt
 
 
 def benchmark(hours: float = 1.0, rate_hz: float = 5.0, repeat: int = 5) -> float:
-    """Parse the generated log ``repeat`` times; print and return the best sentences/s."""
+    """Parse the generated log ``repeat`` times; print and return the best sentences/s.
+
+    Both wall-clock and CPU time (``time.process_time``: what this process used, so a
+    machine shared with other jobs distorts it less) are reported; the CPU figure is
+    returned.
+    """
     data = generate_log(hours, rate_hz)
     n_sent = data.count(b"$")
-    best = math.inf
+    best_wall = best_cpu = math.inf
     for _ in range(repeat):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         fixes, _report, _meta = parse_nmea(data, name="bench.nmea")
-        best = min(best, time.perf_counter() - t)
-    rate = n_sent / best
-    print(f"{n_sent} sentences ({len(data) / 1e6:.1f} MB, {len(fixes)} epochs) in {best:.3f} s: "
-          f"{rate:,.0f} sentences/s")
-    return rate
+        best_wall = min(best_wall, time.perf_counter() - t)
+        best_cpu = min(best_cpu, time.process_time() - c)
+    print(f"{n_sent} sentences ({len(data) / 1e6:.1f} MB, {len(fixes)} epochs), best of {repeat}: "
+          f"wall {best_wall:.3f} s = {n_sent / best_wall:,.0f} sentences/s; "
+          f"CPU {best_cpu:.3f} s = {n_sent / best_cpu:,.0f} sentences/s")
+    return n_sent / best_cpu
 
 
 if __name__ == "__main__":
