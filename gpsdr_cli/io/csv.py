@@ -420,6 +420,15 @@ def read_odo_csv(path: str | Path, opts: dict) -> Drive:
             first = int(np.flatnonzero(~good)[0])
             skipped.add("time not increasing (distance/ticks need dt > 0)",
                         f"{path}:{lines[first + 1]}", int((~good).sum()))
+        if kind == "distance":
+            # After a skipped line the distance covers an unknown part of dt: drop it.
+            # (Cumulative ticks need no such care: their difference spans the same dt.)
+            after_gap = good & (np.diff(lines) > 1)
+            if after_gap.any():
+                skipped.add("distance row after a skipped line (interval unknown)",
+                            f"{path}:{lines[int(np.flatnonzero(after_gap)[0]) + 1]}",
+                            int(after_gap.sum()))
+                good &= ~after_gap
         t_ns = t_ns[1:][good]
         speed = step[good] / dt_s[good]
     if len(t_ns) == 0:

@@ -211,3 +211,14 @@ def test_millisecond_or_nanosecond_stamps_are_named(tmp_path, t_text):
     p = _csv(tmp_path, f"t,yaw_rate\n{t_text},0.1\n")
     with pytest.raises(NoDataError, match=r"time beyond year 2262 \(expected seconds, not ms/us/ns\) at .*:2"):
         read_gyro_csv(p, P["gyro"])
+
+
+def test_distance_after_a_skipped_line_is_dropped_ticks_are_not(tmp_path):
+    t0 = 1_700_000_000
+    d = read_odo_csv(_csv(tmp_path, f"t,distance\n{t0},0\n{t0 + 1},2\n{t0 + 2},x\n{t0 + 3},2\n{t0 + 4},4\n"),
+                     P["odo"])
+    np.testing.assert_array_equal(d.odo.speed_mps, [2.0, 4.0])  # the row after line 4 is dropped
+    assert d.skipped.first["distance row after a skipped line (interval unknown)"].endswith(":5")
+    k = read_odo_csv(_csv(tmp_path, f"t,ticks\n{t0},0\n{t0 + 1},20\n{t0 + 2},x\n{t0 + 3},60\n",
+                          "k.csv"), _opts("odo", ticks_per_m=10.0))
+    np.testing.assert_array_equal(k.odo.speed_mps, [2.0, 2.0])  # 40 ticks over 2 s
