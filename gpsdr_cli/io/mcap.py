@@ -836,8 +836,9 @@ def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log
     if warnings:
         drive.meta["warnings"] = warnings
     if not chosen:
-        found = ", ".join(f"{c.topic} ({c.schema_name or 'no schema'})"
-                          for c in walker.channels.values()) or "no channels"
+        chans = list(walker.channels.values())
+        found = ", ".join(f"{c.topic} ({c.schema_name or 'no schema'})" for c in chans[:8])
+        found = (found + (f" and {len(chans) - 8} more" if len(chans) > 8 else "")) or "no channels"
         damage = f"; {warnings[0]}" if warnings else ""
         raise NoDataError(path_s, f"no readable GNSS, gyro or odometer messages (found: {found}){damage}")
     return drive
