@@ -53,7 +53,8 @@ Field choices, documented here once:
   large, is a gap within the day).  The ``date`` argument is
   only used when the log has no RMC/ZDA date at all: a date in the log always
   wins.  Dates before 2000 or in the future (GPS week-rollover bugs) are kept
-  as given and counted in ``meta['warnings']``.
+  as given, counted in ``meta['warning_counts']`` and explained in
+  ``meta['warnings']`` (a list of one-line messages).
 
 Everything that is skipped is counted by reason in the :class:`SkipReport`
 with the first ``name:line`` where it occurred; ``strict=True`` raises
@@ -792,10 +793,19 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     today = datetime.datetime.now(datetime.UTC).date()
     suspicious = [d.isoformat() for d in dates
                   if d.year < 2000 or d > today + datetime.timedelta(days=1)]
-    meta["warnings"] = {}
+    meta["warnings"] = []
+    meta["warning_counts"] = {}
     if suspicious:
-        meta["warnings"]["suspicious date"] = len(suspicious)
+        meta["warning_counts"]["suspicious date"] = len(suspicious)
         meta["suspicious_dates"] = suspicious
+        meta["warnings"].append(
+            f"{name}: suspicious date {', '.join(suspicious[:3])} kept as given (expected "
+            f"2000-01-01 .. today; a GPS week-rollover bug in the receiver?)")
+    if meta["alt_without_geoid_sep"]:
+        meta["warning_counts"]["altitude without geoid separation"] = meta["alt_without_geoid_sep"]
+        meta["warnings"].append(
+            f"{name}: {meta['alt_without_geoid_sep']} GGA fixes have no geoid separation: "
+            "their alt_m is above mean sea level, not the ellipsoid")
     return fixes, report, meta
 
 

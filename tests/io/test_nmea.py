@@ -230,7 +230,9 @@ def test_no_date_source_asks_for_date_option() -> None:
 def test_week_rollover_date_kept_and_warned() -> None:
     fixes, _, meta = parse_nmea(log(rmc("120000", date="021099")))
     assert fixes.t_ns[0] == t_ns(datetime.date(1999, 10, 2), 12, 0, 0)
-    assert meta["warnings"] == {"suspicious date": 1}
+    assert meta["warning_counts"] == {"suspicious date": 1}
+    assert len(meta["warnings"]) == 1
+    assert meta["warnings"][0].startswith("<nmea>: suspicious date 1999-10-02 kept as given")
     assert meta["suspicious_dates"] == ["1999-10-02"]
 
 
@@ -462,3 +464,11 @@ def test_chunked_scan_gives_identical_results(monkeypatch, chunk: int) -> None:
     assert report.first == ref[1].first
     assert meta == ref[2]
     assert report.counts["no checksum (truncated sentence)"] == 5
+
+
+def test_altitude_without_geoid_separation_is_msl_and_warned() -> None:
+    data = log(ck("GPGGA,120000,4807.038,N,01131.000,E,1,08,0.9,545.4,M,,M,,"), rmc("120000"))
+    fixes, _, meta = parse_nmea(data, name="g.nmea")
+    assert fixes.alt_m[0] == pytest.approx(545.4, abs=1e-9)  # m, MSL as given
+    assert meta["warning_counts"] == {"altitude without geoid separation": 1}
+    assert meta["warnings"][0].startswith("g.nmea: 1 GGA fixes have no geoid separation")

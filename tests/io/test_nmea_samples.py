@@ -183,7 +183,7 @@ def test_pynmea2_sentence_literals() -> None:
         pytest.skip("../shared/data/nmea_samples not present")
     drive = read_nmea(path)
     assert drive.skipped.counts["unknown sentence (proprietary $P...)"] >= 40
-    assert drive.meta["warnings"] == {"suspicious date": 2}  # 1994 dates of the NMEA textbook
+    assert drive.meta["warning_counts"] == {"suspicious date": 2}  # 1994 dates of the NMEA textbook
     assert (drive.gnss.fix_quality >= 0).all()
 
 
