@@ -723,6 +723,8 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     :class:`NoDataError` when no epoch with a time (and a date) can be built.
     """
     data = bytes(data)  # bytearray / memoryview welcome
+    if isinstance(date, datetime.datetime):
+        date = date.date()
     if len(data) == 0:
         raise InputError(name, "empty file (expected NMEA 0183 text lines like $GPGGA,...*hh)")
     if _utf16_kind(data[:4096]) is not None:

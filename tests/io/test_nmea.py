@@ -183,6 +183,8 @@ def test_midnight_rollover_without_dates_uses_argument() -> None:
     assert fixes.t_ns.tolist() == expected.tolist()
     assert meta["date_source"] == "argument"
     assert meta["dates"] == ["2024-05-17", "2024-05-18"]
+    as_datetime = datetime.datetime(2024, 5, 17, 8, 0, tzinfo=datetime.UTC)
+    assert parse_nmea(data, date=as_datetime)[0].t_ns.tolist() == expected.tolist()
 
 
 def test_forward_gap_stays_on_the_same_day() -> None:
