@@ -18,15 +18,16 @@ sentence, see ``benchmarks/read_nmea.py``):
    one numpy cast; only a column holding a non-number falls back to a
    per-value loop, which marks that field bad.
 4. Group sentences into receiver epochs: a sentence with a time of day
-   (GGA, RMC, GST, ZDA) whose time differs from the previous timed sentence
-   opens a new epoch; sentences without a time (GSA, VTG) belong to the epoch
+   (GGA, RMC, GST, ZDA) whose time (or date) differs from the previous timed
+   sentence's opens a new epoch; sentences without a time (GSA, VTG) belong to the epoch
    of the timed sentence before them (the first epoch if none precedes).  One
    row per epoch that has a GGA or an RMC; within an epoch the last non-empty
    value of each field wins (so one GSA per constellation merges into one row).
 
 Conventions (see :mod:`gpsdr_cli.conventions`): ``t_ns`` int64 ns UTC (time
-of day rounded to the microsecond);
-lat/lon degrees WGS84 (``ddmm.mmmm`` + hemisphere converted); speeds m/s.
+of day rounded to the microsecond); lat/lon degrees WGS84 (``ddmm.mmmm`` +
+hemisphere converted); speeds m/s.  Field numbers below follow NMEA 0183 4.11
+with field 0 = the address (``GPGGA``).
 
 Field choices, documented here once:
 
@@ -52,7 +53,8 @@ Field choices, documented here once:
   day decreasing by more than 12 h is the next day; an increase, however
   large, is a gap within the day).  The ``date`` argument is
   only used when the log has no RMC/ZDA date at all: a date in the log always
-  wins.  Dates before 2000 or in the future (GPS week-rollover bugs) are kept
+  wins.  Dates before GPS time (1980-01-06) are malformed; dates before 2000
+  or in the future (GPS week-rollover bugs) are kept
   as given, counted in ``meta['warning_counts']`` and explained in
   ``meta['warnings']`` (a list of one-line messages).
 
