@@ -30,6 +30,7 @@ import collections
 import hashlib
 import multiprocessing as mp
 import os
+import signal
 import sys
 import tempfile
 import time
@@ -40,6 +41,8 @@ import numpy as np
 from gpsdr_cli.filters import NAMES
 from gpsdr_cli.testing import faults as F
 
+#: Cases per worker task (progress is reported per finished task).
+CHUNK = 1000
 #: Share of cases per target (the e2e targets are ~20x slower than a reader).
 WEIGHTS = {"nmea": 0.3, "gyro_csv": 0.15, "odo_csv": 0.15, "mcap": 0.2, "e2e_files": 0.12,
            "e2e_mcap": 0.08}
@@ -57,7 +60,7 @@ def _worker(args: tuple[int, int, int, str, str | None]) -> tuple[collections.Co
     base = Path(tempfile.mkdtemp(prefix=f"gpsdr-fuzz-{worker_id}-",
                                  dir="/dev/shm" if os.path.isdir("/dev/shm") else None))
     for i in range(n):
-        case_seed = seed * 1_000_003 + worker_id * 10_000_019 + i
+        case_seed = seed * 1_000_000_007 + worker_id * 100_003 + i
         rng = np.random.default_rng(case_seed)
         target = targets[int(rng.choice(len(targets), p=p))]
         filt = NAMES[int(rng.integers(len(NAMES)))] if target.startswith("e2e") else None
@@ -89,17 +92,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--save", default="fuzz_escapes", help="where to save escaping inputs")
     a = ap.parse_args(argv)
 
+    # SIGTERM -> SystemExit, so the pool's context manager terminates the workers too
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     seed_dir = Path(tempfile.mkdtemp(prefix="gpsdr-fuzz-seed-"))
     F.fuzz_seed_files(seed_dir)
     jobs = max(1, min(a.jobs, a.cases))
-    chunks = [a.cases // jobs + (1 if k < a.cases % jobs else 0) for k in range(jobs)]
-    tasks = [(k, chunks[k], a.seed, str(seed_dir), a.save) for k in range(jobs)]
+    n_tasks = max(jobs, -(-a.cases // CHUNK))
+    sizes = [a.cases // n_tasks + (1 if k < a.cases % n_tasks else 0) for k in range(n_tasks)]
+    tasks = [(k, sizes[k], a.seed, str(seed_dir), a.save) for k in range(n_tasks)]
     t0 = time.perf_counter()
-    if jobs == 1:
-        results = [_worker(tasks[0])]
-    else:
-        with mp.get_context("spawn").Pool(jobs) as pool:
-            results = pool.map(_worker, tasks)
+    results = []
+    done = 0
+    with mp.get_context("spawn").Pool(jobs) as pool:
+        for res in pool.imap_unordered(_worker, tasks):
+            results.append(res)
+            done += sum(res[0].values())
+            print(f"\r{done}/{a.cases} cases, {time.perf_counter() - t0:.0f} s", end="",
+                  file=sys.stderr, flush=True)
+    print(file=sys.stderr)
     elapsed = time.perf_counter() - t0
     counts: collections.Counter = collections.Counter()
     examples: dict[str, str] = {}

@@ -1197,17 +1197,50 @@ def case_metrics(inputs: CaseInputs, outcome: Outcome, *, settle_s: float = 60.0
 
 #: Fuzz targets: which file is mutated and what runs on it.
 FUZZ_TARGETS: tuple[str, ...] = ("nmea", "gyro_csv", "odo_csv", "mcap", "e2e_files", "e2e_mcap")
-FUZZ_FILES = ("gps.nmea", "gyro.csv", "odo.csv", "drive.mcap")
+FUZZ_FILES = ("gps.nmea", "gyro.csv", "odo.csv", "drive.mcap", "raw.mcap")
 
 
 def fuzz_seed_files(out_dir: Any, seed: int = 3, duration_s: float = 12.0) -> dict[str, bytes]:
-    """Small valid inputs to mutate: a 12 s urban drive (GNSS 5 Hz, DR 10 Hz) as files."""
+    """Small valid inputs to mutate: a 12 s urban drive (GNSS 5 Hz, DR 10 Hz) as files
+    (plus ``raw.mcap``, the MCAP uncompressed in small chunks); returns their bytes."""
     from ..simulate import simulate_drive, write_drive
 
     sim = simulate_drive("urban_canyon", seed, duration_s, gnss_rate_hz=5.0, gyro_rate_hz=10.0,
                          odo_rate_hz=10.0)
     paths = write_drive(sim, out_dir)
+    raw = paths["drive.mcap"].with_name("raw.mcap")
+    raw.write_bytes(mcap_uncompressed(paths["drive.mcap"].read_bytes()))
+    paths["raw.mcap"] = raw
     return {name: paths[name].read_bytes() for name in FUZZ_FILES}
+
+
+def mcap_uncompressed(data: bytes, chunk_size: int = 2048) -> bytes:
+    """The same MCAP rewritten without compression in small chunks.
+
+    Mutations of a zstd chunk mostly just fail its decompression; uncompressed
+    small chunks let them reach the record and message parsers.
+    """
+    import io
+
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    out = io.BytesIO()
+    w = Writer(out, chunk_size=chunk_size, compression=CompressionType.NONE)
+    w.start(profile="ros2", library="gpsdr-fuzz")
+    schemas: dict[int, int] = {}
+    channels: dict[int, int] = {}
+    for schema, channel, msg in make_reader(io.BytesIO(data)).iter_messages():
+        if schema is not None and schema.id not in schemas:
+            schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+        if channel.id not in channels:
+            channels[channel.id] = w.register_channel(
+                channel.topic, channel.message_encoding,
+                schemas.get(channel.schema_id, 0), channel.metadata)
+        w.add_message(channels[channel.id], msg.log_time, msg.data, msg.publish_time,
+                      msg.sequence)
+    w.finish()
+    return out.getvalue()
 
 
 def _where(err: BaseException) -> str:
@@ -1246,7 +1279,7 @@ def fuzz_case(target: str, seeds: dict[str, bytes], rng: np.random.Generator, wo
     elif target == "odo_csv":
         names = ["odo.csv"]
     elif target in ("mcap", "e2e_mcap"):
-        names = ["drive.mcap"]
+        names = ["drive.mcap" if rng.random() < 0.3 else "raw.mcap"]
     elif target == "e2e_files":
         k = int(rng.integers(1, 4))
         names = list(rng.choice(["gps.nmea", "gyro.csv", "odo.csv"], k, replace=False))
@@ -1281,14 +1314,14 @@ def fuzz_case(target: str, seeds: dict[str, bytes], rng: np.random.Generator, wo
         if target == "mcap":
             from ..io.mcap import read_mcap
 
-            read_mcap(written["drive.mcap"])
+            read_mcap(written[names[0]])
             return "ok", files
         from ..io.readers import read_drive
         from ..pipeline import fuse
 
         p = cfg.merge(params, {"filter": {"name": filter_name}}) if filter_name else params
         if target == "e2e_mcap":
-            drive = read_drive(written["drive.mcap"], params=p)
+            drive = read_drive(written[names[0]], params=p)
         else:
             drive = read_drive(gps=written["gps.nmea"], gyro=written["gyro.csv"],
                                odo=written["odo.csv"], params=p)
