@@ -37,7 +37,9 @@ Speed from ``twist.linear.x`` assumes a body-frame twist.  Some GNSS drivers
 when the lateral component is large while moving, the horizontal norm is used
 instead and a warning says so.  An Imu whose ``angular_velocity_covariance[0]``
 is -1 declares that it has no angular velocity (sensor_msgs convention); such
-messages are skipped and counted, not read as zero yaw rate.
+messages are skipped and counted, not read as zero yaw rate (unless their z
+rates vary, which makes the flag sloppy metadata: then they are kept, with a
+warning).
 """
 
 from __future__ import annotations
@@ -719,10 +721,13 @@ def _build(kind: str, chan: _Channel, *, path: str, use_log_time: bool, date: dt
         return _gnss_from_fixes(chan, t_ns, skipped, where)
     if kind == "gyro":
         wz = _cat(chan, "wz", np.float64)
-        cov0 = _cat(chan, "wz_cov0", np.float64)
-        absent = cov0 == -1.0
+        absent = _imu_absent(chan)
         skipped.add("Imu without angular velocity (angular_velocity_covariance[0] = -1)", where,
                     int(absent.sum()))
+        declared = _cat(chan, "wz_cov0", np.float64) == -1.0
+        if (declared & ~absent).any():
+            warnings.append(f"{where}: angular_velocity_covariance[0] = -1 (not provided) but "
+                            "angular_velocity.z varies: read anyway")
         bad = ~absent & ~np.isfinite(wz)
         skipped.add("non-finite yaw rate", where, int(bad.sum()))
         keep = ~absent & ~bad
@@ -745,9 +750,20 @@ def _build(kind: str, chan: _Channel, *, path: str, use_log_time: bool, date: dt
     return Odometry(t_ns=t_ns[~bad], speed_mps=speed[~bad])
 
 
+def _imu_absent(chan: _Channel) -> np.ndarray:
+    """Imu messages without angular velocity: covariance[0] = -1 (sensor_msgs/Imu: "no
+    data"), unless the channel's z rates do vary under that flag (then it is sloppy
+    driver metadata, not missing data, and the rates are kept)."""
+    wz = _cat(chan, "wz", np.float64)
+    declared = _cat(chan, "wz_cov0", np.float64) == -1.0
+    if declared.any() and np.any(wz[declared] != 0.0):
+        return np.zeros(len(wz), bool)
+    return declared
+
+
 def _usable(kind: str, chan: _Channel) -> int:
     if kind == "gyro":
-        return int((_cat(chan, "wz_cov0", np.float64) != -1.0).sum())
+        return int((~_imu_absent(chan)).sum())
     if chan.layout == "sentence":
         return len(chan.texts)
     return len(_cat(chan, "log_ns", np.int64))

@@ -536,7 +536,9 @@ def test_enu_twist_and_partial_imu(tmp_path):
     for i in range(30):
         t = T0 + i * 10**8
         tw.append((t, t, ros2_fast.encode("twistcov", t, "gps", vx=0.3, vy=10.0)))
-        imu.append((t, t, ros2_fast.encode("imu", t, "imu", wz=0.2, wz_cov0=-1.0 if i % 3 == 0 else 0.01)))
+        flagged = i % 3 == 0  # flagged "no angular velocity" and all-zero, as drivers write it
+        imu.append((t, t, ros2_fast.encode("imu", t, "imu", wz=0.0 if flagged else 0.2,
+                                           wz_cov0=-1.0 if flagged else 0.01)))
     p = tmp_path / "enu.mcap"
     write_mcap(p, [("/gps/fix_velocity", "twistcov", tw), ("/imu", "imu", imu)])
     d = read_mcap(p)
@@ -544,3 +546,13 @@ def test_enu_twist_and_partial_imu(tmp_path):
     assert any("navigation-frame" in w for w in d.meta["warnings"])
     assert len(d.gyro) == 20
     assert d.skipped.counts["Imu without angular velocity (angular_velocity_covariance[0] = -1)"] == 10
+
+
+def test_imu_flagged_without_angular_velocity_but_varying_is_kept(tmp_path):
+    imu = [(T0 + i, T0 + i, ros2_fast.encode("imu", T0 + i, "imu", wz=0.01 * i, wz_cov0=-1.0))
+           for i in range(10)]
+    p = tmp_path / "sloppy.mcap"
+    write_mcap(p, [("/imu", "imu", imu)])
+    d = read_mcap(p)
+    np.testing.assert_array_equal(d.gyro.yaw_rate_radps, 0.01 * np.arange(10))
+    assert any("read anyway" in w for w in d.meta["warnings"])
