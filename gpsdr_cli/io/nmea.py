@@ -53,7 +53,7 @@ Field choices, documented here once:
   day decreasing by more than 12 h is the next day; an increase, however
   large, is a gap within the day).  The ``date`` argument is
   only used when the log has no RMC/ZDA date at all: a date in the log always
-  wins.  Dates before GPS time (1980-01-06) are malformed; dates before 2000
+  wins.  Dates before 1980 (GPS time began 1980-01-06) are malformed; before 2000
   or in the future (GPS week-rollover bugs) are kept
   as given, counted in ``meta['warning_counts']`` and explained in
   ``meta['warnings']`` (a list of one-line messages).

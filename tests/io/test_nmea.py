@@ -474,3 +474,25 @@ def test_altitude_without_geoid_separation_is_msl_and_warned() -> None:
     assert fixes.alt_m[0] == pytest.approx(545.4, abs=1e-9)  # m, MSL as given
     assert meta["warning_counts"] == {"altitude without geoid separation": 1}
     assert meta["warnings"][0].startswith("g.nmea: 1 GGA fixes have no geoid separation")
+
+
+def test_odd_fields_counted_by_reason() -> None:
+    long_alt = "1" * 60  # longer than any field the reader gathers
+    data = log(ck(f"GPGGA,120000,4807.038,N,01131.000,E,1,08,0.9,{long_alt},M,46.9,M,,"),
+               ck("GPRMC,120000,A,4807.038,N,01131.000,E,1.0,,170524,,,Q"),  # unknown mode Q
+               ck("GPGSA,A,3"),
+               ck("GPVTG,045.0,T,,M,003.0,N,005.6,K,N"),  # mode N: not valid
+               ck("GPZDA,120000,32,05,2024,,"),  # 32 May
+               ck("GPZDA,120000,17,05,24,,"))  # two-digit year
+    fixes, report, _ = parse_nmea(data, name="o.nmea")
+    assert dict(report.counts) == {
+        "malformed altitude in GGA (field ignored)": 1,
+        "malformed mode in RMC (field ignored)": 1,
+        "GSA with too few fields": 1,
+        "malformed date in ZDA (field ignored)": 2,
+    }
+    assert report.first["malformed date in ZDA (field ignored)"] == "o.nmea:5"
+    assert len(fixes) == 1 and fixes.valid[0] and np.isnan(fixes.alt_m[0])
+    assert fixes.fix_quality[0] == 1 and np.isnan(fixes.pdop[0])
+    assert fixes.speed_mps[0] == pytest.approx(KNOT_MPS)  # RMC; the VTG was not valid anyway
+    assert fixes.t_ns[0] == t_ns(DAY, 12, 0, 0)  # the RMC date
