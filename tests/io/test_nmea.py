@@ -496,3 +496,22 @@ def test_odd_fields_counted_by_reason() -> None:
     assert fixes.fix_quality[0] == 1 and np.isnan(fixes.pdop[0])
     assert fixes.speed_mps[0] == pytest.approx(KNOT_MPS)  # RMC; the VTG was not valid anyway
     assert fixes.t_ns[0] == t_ns(DAY, 12, 0, 0)  # the RMC date
+
+
+def test_benchmark_log_parses_exactly() -> None:
+    """The benchmark's generated log (GGA+RMC+GSA+GST at 5 Hz) reads to one valid row per epoch."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).parents[2] / "benchmarks" / "read_nmea.py"
+    spec = importlib.util.spec_from_file_location("bench_read_nmea", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    data = bench.generate_log(hours=0.02, rate_hz=5.0)  # 72 s, 360 epochs
+    fixes, report, meta = parse_nmea(data)
+    assert len(fixes) == 360 and fixes.valid.all() and report.total == 0
+    assert meta["sentences"] == {"GGA": 360, "RMC": 360, "GSA": 360, "GST": 360}
+    assert np.diff(fixes.t_ns).tolist() == [200_000_000] * 359  # 5 Hz exactly
+    assert fixes.t_ns[0] == t_ns(DAY, 12, 0, 0)
+    assert np.allclose(fixes.pdop, 1.5) and np.allclose(fixes.sigma_n_m, 1.8)
+    assert np.all(np.abs(fixes.lat_deg - 48.1173) < 0.0021)  # deg: the generated circle
