@@ -200,3 +200,27 @@ def test_simulated_drive_end_to_end():
     assert r1["distance_m"] == pytest.approx(dist, rel=0.01)
     assert r1["end_error_m"] == pytest.approx(10.0, abs=1e-6)
     assert r1["end_error_pct_distance"] == pytest.approx(1000.0 / dist, rel=0.01)
+
+
+def test_figures_invariant_under_a_common_shift_and_exact_for_any_offset():
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    track0, ref0 = straight_track(n_ep=201)
+
+    @settings(max_examples=40, deadline=None)
+    @given(de=st.floats(-50, 50), dn=st.floats(-50, 50), se=st.floats(-1e5, 1e5),
+           sn=st.floats(-1e5, 1e5))
+    def check(de, dn, se, sn):
+        track = track0.copy()
+        track["e"] = track0["e"] + de + se
+        track["n"] = track0["n"] + dn + sn
+        ref = ref0.assign(e=ref0["e"] + se, n=ref0["n"] + sn)
+        a = row(error_statistics(track, ref, "x", defaults()), "all")
+        r = float(np.hypot(de, dn))
+        assert a["rmse_m"] == pytest.approx(r, abs=1e-6)     # m
+        assert a["cep95_m"] == pytest.approx(r, abs=1e-6)
+        assert a["along_rmse_m"] == pytest.approx(abs(dn), abs=1e-6)  # northbound: along = north
+        assert a["cross_rmse_m"] == pytest.approx(abs(de), abs=1e-6)
+
+    check()
