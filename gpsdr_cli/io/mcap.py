@@ -207,6 +207,11 @@ class _Walker:
         self.n_messages = 0
         self.reached_data_end = False
         self.has_summary = False
+        #: From a CRC-checked summary: chunk record offset -> channel ids in it; per-channel counts.
+        self.chunk_channels: dict[int, frozenset[int]] = {}
+        self.stat_counts: dict[int, int] = {}
+        self.wanted_ids: set[int] = set()
+        self.n_chunks_skipped = 0
 
     # records --------------------------------------------------------------
     def _string(self, buf: bytes, pos: int, end: int) -> tuple[str, int]:
@@ -263,7 +268,12 @@ class _Walker:
             elif op == _OP_CHANNEL:
                 self._channel(buf, pos, nxt)
             elif op == _OP_CHUNK and not in_chunk:
-                self._chunk(buf, pos, nxt)
+                inside = self.chunk_channels.get(pos - 9)
+                if inside and not inside & self.wanted_ids:
+                    self.n_chunks += 1
+                    self.n_chunks_skipped += 1  # the index says: nothing gpsdr reads in there
+                else:
+                    self._chunk(buf, pos, nxt)
             elif op == _OP_DATA_END and not in_chunk:
                 self.reached_data_end = True
             seg = k + 1
@@ -324,8 +334,50 @@ class _Walker:
         self.skipped.add("MCAP chunk damaged (its messages lost)", where)
         self.damage.append(f"{where}: {why}; skipped")
 
+    def _read_summary(self) -> None:
+        """Channels and the chunk index from the summary section, if its CRC checks.
+
+        Lets the walk skip chunks holding only channels gpsdr does not read (camera,
+        lidar): no decompression for them.  Any doubt (no summary, no CRC, a bad
+        CRC, an index without message indexes) leaves every chunk to be read."""
+        data = self.data
+        n = len(data)
+        if n < 8 + 37 + 8 or data[-8:] != MAGIC or data[n - 37] != _OP_FOOTER:
+            return
+        start = _U64.unpack_from(data, n - 28)[0]
+        crc = _U32.unpack_from(data, n - 12)[0]
+        if not (crc and 8 <= start <= n - 37) or zlib.crc32(data[start:n - 12]) != crc:
+            return
+        arr = np.frombuffer(data, np.uint8)
+        ops, body, length, _, _, status, _ = _scan_records(arr, start, n - 37, False)
+        if status:
+            return
+        chunks: dict[int, frozenset[int]] = {}
+        try:
+            for op, pos, ln in zip(ops.tolist(), body.tolist(), length.tolist()):
+                end = pos + ln
+                if op == _OP_SCHEMA:
+                    self._schema(data, pos, end)
+                elif op == _OP_CHANNEL:
+                    self._channel(data, pos, end)
+                elif op == 0x08:  # ChunkIndex: start, end times; chunk offset, length; map
+                    offset = _U64.unpack_from(data, pos + 16)[0]
+                    nbytes = _U32.unpack_from(data, pos + 32)[0]
+                    ids = [_U16.unpack_from(data, pos + 36 + 10 * i)[0] for i in range(nbytes // 10)]
+                    chunks[offset] = frozenset(ids)
+                elif op == 0x0B:  # Statistics: ... channel_message_counts map at +42
+                    nbytes = _U32.unpack_from(data, pos + 42)[0]
+                    for i in range(nbytes // 10):
+                        cid, cnt = struct.unpack_from("<HQ", data, pos + 46 + 10 * i)
+                        self.stat_counts[cid] = cnt
+        except (_Damage, struct.error):
+            return
+        self.chunk_channels = chunks
+        self.wanted_ids = {cid for cid, c in self.channels.items() if self._wanted(c)}
+
     def walk(self) -> None:
         data = self.data
+        self._read_summary()
         try:
             self._records(data, len(MAGIC), len(data), in_chunk=False)
         except _Damage as err:
@@ -840,13 +892,20 @@ def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log
             setattr(drive, kind, stream)
             chosen[kind] = best.topic
     drive.sources[0].streams = tuple(chosen)
+    def count(c: _Channel) -> int:  # channels in skipped chunks: the summary's statistics
+        if walker.n_chunks_skipped and c.id not in walker.wanted_ids:
+            return walker.stat_counts.get(c.id, c.n_msgs)
+        return c.n_msgs
+
     meta["channels"] = [{"topic": c.topic, "schema": c.schema_name, "encoding": c.encoding,
-                         "messages": c.n_msgs} for c in walker.channels.values()]
+                         "messages": count(c)} for c in walker.channels.values()]
     meta["chosen"] = chosen
     if alternatives:
         meta["alternatives"] = alternatives
     meta["messages"] = walker.n_messages
     meta["chunks"] = walker.n_chunks
+    if walker.n_chunks_skipped:
+        meta["chunks_skipped"] = walker.n_chunks_skipped  # held only channels not read
     meta["indexed"] = walker.has_summary
     drive.meta["mcap"] = meta
     if warnings:

@@ -556,3 +556,23 @@ def test_imu_flagged_without_angular_velocity_but_varying_is_kept(tmp_path):
     d = read_mcap(p)
     np.testing.assert_array_equal(d.gyro.yaw_rate_radps, 0.01 * np.arange(10))
     assert any("read anyway" in w for w in d.meta["warnings"])
+
+
+def test_index_lets_camera_only_chunks_be_skipped(tmp_path):
+    """A log with a big image topic: chunks holding only images are not decompressed
+    (the CRC-checked summary says so); the result equals a full, unindexed read."""
+    channels, truth = _drive_channels(20, 100)
+    big = [(T0 + 2_000_000_000 + i * 10**7, T0, b'{"data": "' + b"x" * 20000 + b'"}')
+           for i in range(60)]
+    schemas = {"img:json": ("foxglove.CompressedImage", "jsonschema", b"{}")}
+    indexed, flat = tmp_path / "cam.mcap", tmp_path / "cam_flat.mcap"
+    write_mcap(indexed, [*channels, ("/camera", "img:json", big)], schemas=schemas, chunk_size=30000)
+    write_mcap(flat, [*channels, ("/camera", "img:json", big)], schemas=schemas, chunk_size=30000,
+               index=False)
+    a, b = read_mcap(indexed), read_mcap(flat)
+    assert a.meta["mcap"]["chunks_skipped"] > 10 and "chunks_skipped" not in b.meta["mcap"]
+    for s in ("gnss", "gyro", "odo"):
+        np.testing.assert_array_equal(getattr(a, s).t_ns, getattr(b, s).t_ns)
+    np.testing.assert_array_equal(a.gyro.yaw_rate_radps, truth["wz"])
+    counts = {c["topic"]: c["messages"] for c in a.meta["mcap"]["channels"]}
+    assert counts == {"/fix": 20, "/imu": 100, "/vel": 100, "/camera": 60}
