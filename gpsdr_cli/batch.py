@@ -316,10 +316,16 @@ def plan(specs: Iterable[DriveSpec], opts: BatchOptions,
     return todo
 
 
+Worker = Callable[[DriveSpec, BatchOptions], dict[str, Any]]
+
+
 def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
-              on_done: OnDone | None = None) -> list[dict[str, Any]]:
-    """Process drives in a process pool (``jobs`` workers; 1 = in this process)."""
-    specs = list(specs)
+              on_done: OnDone | None = None, worker: Worker | None = None) -> list[dict[str, Any]]:
+    """Process drives in a process pool (``jobs`` workers; 1 = in this process).
+
+    ``worker`` (default :func:`process_drive`) must be a module-level function.
+    """
+    work = worker or process_drive
     rows: list[dict[str, Any]] = []
 
     def done(row: dict[str, Any]) -> None:
@@ -330,7 +336,7 @@ def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
     specs = plan(specs, opts, done)
     if jobs <= 1 or len(specs) <= 1:
         for spec in specs:
-            done(process_drive(spec, opts))
+            done(work(spec, opts))
         return rows
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -338,16 +344,35 @@ def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
 
     # forkserver: workers do not inherit this process's threads (rich's refresh thread)
     method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context(method)) as pool:
-        futures = {pool.submit(process_drive, s, opts): s for s in specs}
+    ctx = mp.get_context(method)
+    broken: list[DriveSpec] = []
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+        futures = {pool.submit(work, s, opts): s for s in specs}
         for fut in as_completed(futures):
-            spec = futures[fut]
             try:
                 row = fut.result()
-            except BrokenProcessPool as err:
-                row = _row(spec, "failed", f"worker process died: {err}")
+            except BrokenProcessPool:
+                broken.append(futures[fut])
+                continue
             done(row)
+    # A worker that dies (segfault, out-of-memory kill) takes the whole pool down and every
+    # drive in flight with it: rerun each of those alone, so that only the culprit fails.
+    for spec in broken:
+        done(_run_alone(work, spec, opts, ctx))
     return rows
+
+
+def _run_alone(work: Worker, spec: DriveSpec, opts: BatchOptions, ctx: Any) -> dict[str, Any]:
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+        try:
+            return pool.submit(work, spec, opts).result()
+        except BrokenProcessPool:
+            return _row(spec, "failed", "worker process died while processing this drive "
+                        "(crashed or killed, e.g. out of memory)", time.perf_counter() - t0)
 
 
 def run_dask(specs: Iterable[DriveSpec], opts: BatchOptions, scheduler: Any,

@@ -143,3 +143,24 @@ def test_unreachable_scheduler_is_a_usage_error(logs: Path, tmp_path: Path) -> N
     opts = BatchOptions(out_dir=str(tmp_path / "o"), params=config.defaults())
     with pytest.raises(UsageError, match="cannot connect to the dask scheduler tcp://127.0.0.1:9"):
         run_dask(find_drives(str(logs / "2018")), opts, "tcp://127.0.0.1:9", connect_timeout_s=1)
+
+
+def crash_on_broken(spec, opts):  # a module-level worker the process pool can import
+    from gpsdr_cli.batch import _row
+
+    time.sleep(0.5)  # the other drives are in flight when the crash takes the pool down
+    if spec.name == "broken":
+        os._exit(3)  # a hard crash (as a segfault would): no exception, no row
+    return _row(spec, "ok")
+
+
+def test_a_crashing_worker_fails_only_its_drive(logs: Path, tmp_path: Path) -> None:
+    params = config.defaults()
+    params["filter"]["name"] = "ekf"
+    rows = run_local(find_drives(str(logs)), BatchOptions(out_dir=str(tmp_path / "o"),
+                                                          params=params),
+                     jobs=3, worker=crash_on_broken)
+    by = {r["drive"]: r for r in rows}
+    assert {k: v["status"] for k, v in by.items()} == {"2018__good": "ok", "broken": "failed",
+                                                       "plain": "ok"}
+    assert "worker process died" in by["broken"]["error"]
