@@ -125,6 +125,8 @@ heading_err_rw_sd = 0.01   # random walk of q_w, rad per sqrt(s) (absorbs the in
 dist_err_rw_sd = 0.002    # random walk of q_s, m per sqrt(s) (q_s is metres per odometer interval)
 heading_interval_s = 0.1 # heading measurements from the integrated gyro at most this often
 v_lin_mps = 0.1          # below this speed the distance row is linearised along the heading
+dr_stale_s = 1.0         # a DR filter without any update for longer is left out of the fusion
+                         #   (the GNSS filter: after the epochs' outage gap without an accepted fix)
 init_pos_sd_m = 10.0     # initial sigmas of the shared state
 init_vel_sd_mps = 5.0
 init_acc_sd_mps2 = 1.0
@@ -134,7 +136,9 @@ check_spd = false        # fkf and fafkf: Cholesky of every P at every epoch, fa
 
 [fafkf]
 window = 20              # M residuals in the covariance-matching window
-r_min_factor = 0.1       # R_jj clamped to [r_min_factor, r_max_factor] x its initial value
+r_min_factor = 1.0       # R_jj clamped to [r_min_factor, r_max_factor] x its initial value; 1: nominal R is a
+                         #   floor (Te is dominated by H P H^T, so matching drove R to any lower clamp:
+                         #   0.1 tripled the DR-only error)
 r_max_factor = 100.0
 delta_max = 0.2          # largest |Delta| of one fuzzy R step (R_jj *= 1 + Delta)
 residual_clip = 9.0      # a squared residual enters the window clipped to this x Te_jj (outlier guard)

@@ -38,7 +38,11 @@ Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
   ``dt``; only the fused x and the packed upper triangle of P_g (65 floats per
   epoch) are stored.  In FR mode the covariance-weighted fused sequence is the
   centralised filter's (up to the EKF linearisation), so this is the usual RTS
-  smoother; in NR mode it is an approximation.
+  smoother; in NR mode it is an approximation.  Where the fused sequence is
+  not a Kalman posterior (a stale local filter dropped, a heading re-aligned,
+  an unmodelled gyro bias) RTS can run away; a guard restarts the backward
+  recursion from the forward estimate wherever the smoothed position leaves
+  it by more than chi-square(2) = 25 (``info["smoother_restarts"]``).
 * ``fafkf``: the fuzzy-weighted fused sequence is *not* a Kalman posterior
   (its P_g is Carlson's bound, and block weights change the position-velocity
   cross-covariance from epoch to epoch), and RTS over it made the track worse
@@ -54,6 +58,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 
@@ -96,6 +101,11 @@ class Prepared:
 def gate_threshold(prob: float) -> float:
     """chi-square(2) quantile: the 2-dof distribution is exponential, ``-2 ln(1 - p)``."""
     return -2.0 * math.log1p(-prob)
+
+
+def chi2_1(prob: float) -> float:
+    """chi-square(1) quantile: the square of the normal quantile at ``(1 + p)/2``."""
+    return NormalDist().inv_cdf(0.5 * (1.0 + prob)) ** 2
 
 
 def heading_alignment(epochs: Epochs, t_s: np.ndarray, params: Params) -> tuple[float, float, str]:
@@ -222,6 +232,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_RES_CLIP] = ap["residual_clip"]
     par[kf.K_BETA_GNSS] = fp["beta_gnss"]
     par[kf.K_V_LIN] = max(fp["v_lin_mps"], 1e-3)
+    par[kf.K_HEAD_CHI2] = chi2_1(g_p["gate_prob"]) if g_p["gate"] else 0.0
+    par[kf.K_GNSS_STALE_S] = epochs.gap_s
+    par[kf.K_DR_STALE_S] = fp["dr_stale_s"]
     if not (par[kf.K_TAU_EPS] > 0 and 0 < par[kf.K_R_MIN] <= 1.0 <= par[kf.K_R_MAX]):
         raise ConfigError("fkf.gnss_err_tau_s must be > 0 and fafkf.r_min_factor <= 1 <= "
                           f"fafkf.r_max_factor (got {par[kf.K_TAU_EPS]}, {par[kf.K_R_MIN]}, "
@@ -328,7 +341,7 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
     smooth_not_spd = 0
     smoothing = "none"
     if smoothed and kind == "fkf":
-        out, smooth_not_spd = kf.smooth_fused(xs, Ps, prep.dt, prep.static, prep.par)
+        out, smooth_not_spd, restarts = kf.smooth_fused(xs, Ps, prep.dt, prep.static, prep.par)
         smoothing = "rts_fused"
     elif smoothed and prep.flags[kf.F_GNSS_ON] and n > 1:
         out_b = forward(kind, prepare(reverse_epochs(epochs), params), False)[0][::-1].copy()
@@ -337,6 +350,8 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
         out = combine_two_filter(out, out_b)
         smoothing = "forward_backward"
     info = dict(prep.info)
+    if smoothing == "rts_fused":
+        info["smoother_restarts"] = int(restarts)
     info.update({
         "filter": kind, "mode": params["fkf"]["mode"], "smoothed": smoothing != "none",
         "smoothing": smoothing,
@@ -348,6 +363,9 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
         "distance_updates": int(counters[kf.C_DIST]),
         "zupt_epochs": int(counters[kf.C_ZUPT]),
         "r_adaptations": int(counters[kf.C_R_ADAPT]),
+        "heading_rejected": int(counters[kf.C_HEAD_REJECTED]),
+        "heading_realigned": int(counters[kf.C_HEAD_REALIGN]),
+        "stale_filter_epochs": int(counters[kf.C_STALE]),
         "spd_failures": int(counters[kf.C_NOT_SPD]) + int(smooth_not_spd),
     })
     if kind == "fafkf":

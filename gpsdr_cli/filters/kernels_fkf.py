@@ -105,7 +105,17 @@ K_DELTA_MAX = 13   # largest |Delta| of one R adaptation step
 K_RES_CLIP = 14    # r^2 clipped to this x Te before entering the window
 K_BETA_GNSS = 15   # fkf FR: information share of the GNSS filter
 K_V_LIN = 16       # m/s, below this the distance row is linearised along the heading
-N_PAR = 17
+K_HEAD_CHI2 = 17   # chi-square(1) gate on the heading innovation; <= 0 disables it
+K_GNSS_STALE_S = 18  # s, GNSS filter without an accepted fix for longer: left out of the fusion
+K_DR_STALE_S = 19  # s, DR filter without any update for longer: left out of the fusion
+N_PAR = 20
+
+#: RTS guard: smoothed-minus-forward position NEES above this restarts the recursion
+#: (chi-square(2) at 1 - 4e-6)
+SMOOTH_RESTART_NEES = 25.0
+
+#: share given to a stale local filter at a fusion-reset (its P becomes P_g / C_STALE)
+C_STALE_SHARE = 0.05
 
 # ---- integer flags --------------------------------------------------------------------
 F_MODE_FR = 0      # 1: fusion-reset, 0: no reset
@@ -133,7 +143,10 @@ C_DIST = 5
 C_ZUPT = 6
 C_NOT_SPD = 7
 C_R_ADAPT = 8
-N_COUNTERS = 9
+C_HEAD_REJECTED = 9
+C_HEAD_REALIGN = 10
+C_STALE = 11
+N_COUNTERS = 12
 
 # Output columns of the fused track.
 O_E, O_N, O_VE, O_VN, O_VAR_E, O_VAR_N, O_COV_EN = range(7)
@@ -607,7 +620,9 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
     u_last = np.zeros(4)
 
     t_now = 0.0
-    t_last_acc = 0.0
+    t_last_acc = 0.0                                # last accepted GNSS fix
+    t_last_dr = 0.0                                 # last DR update of any kind
+    t_head_acc = 0.0                                # last accepted heading
     psi_hint = psi0
     zupt_sd = par[K_ZUPT_SD]
     omin2 = par[K_OMEGA_MIN] ** 2
@@ -676,6 +691,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
         if dr_on:
             if st:
                 zupt(x2, P2, zupt_sd, h, s, kk)
+                t_last_dr = t_now
             else:
                 do_head = False
                 do_dist = False
@@ -704,15 +720,65 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                             counters[C_R_ADAPT] += 1
                 if do_head:
                     pred = heading_row(x2, h)
-                    update_row(x2, P2, h, wrap_pi(theta[kx] - pred), rfac[2] * r_head, s, kk)
-                    counters[C_HEADING] += 1
+                    y = wrap_pi(theta[kx] - pred)
+                    rh = rfac[2] * r_head
+                    if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph(P2, h) + rh):
+                        if t_now - t_head_acc > par[K_GATE_RESET_S]:
+                            # every heading rejected for gate_reset_s (e.g. a large gyro
+                            # bias outran q_w): re-align, q_w absorbs the discrepancy
+                            x2[IQW] += y
+                            P2[IQW, IQW] += y * y
+                            t_head_acc = t_now
+                            counters[C_HEAD_REALIGN] += 1
+                        else:
+                            counters[C_HEAD_REJECTED] += 1
+                    else:
+                        update_row(x2, P2, h, y, rh, s, kk)
+                        t_head_acc = t_now
+                        t_last_dr = t_now
+                        counters[C_HEADING] += 1
                 if do_dist:
                     pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
                     update_row(x2, P2, h, dist[kx] - pred, rfac[3] * r_dist, s, kk)
+                    t_last_dr = t_now
                     counters[C_DIST] += 1
 
         # ---- master fusion -----------------------------------------------------------
-        if both:
+        g_fresh = t_now - t_last_acc <= par[K_GNSS_STALE_S]
+        d_fresh = t_now - t_last_dr <= par[K_DR_STALE_S]
+        if both and g_fresh != d_fresh:
+            # one local filter has had no measurement for a while (GNSS outage, DR
+            # stream gap): it contributes nothing -- in NR mode the GNSS filter's
+            # extrapolation (or the DR filter's stale state) would otherwise drag
+            # the fused track with the weight the fuzzy controller never lets reach 0
+            counters[C_STALE] += 1
+            if g_fresh:
+                xg[:] = x1
+                Pg[:, :] = P1
+                beta_out[kx, 0] = 1.0
+                beta_out[kx, 1] = 1.0
+            else:
+                xg[:] = x2
+                Pg[:, :] = P2
+                beta_out[kx, 0] = 0.0
+                beta_out[kx, 1] = 0.0
+            if mode_fr:                             # the stale filter restarts from x_g
+                ds = 1.0 / math.sqrt(C_STALE_SHARE)
+                for i in range(NX):
+                    if g_fresh:
+                        d1[i] = 1.0
+                        d2[i] = ds
+                        x2[i] = xg[i]
+                    else:
+                        d1[i] = ds
+                        d2[i] = 1.0
+                        x1[i] = xg[i]
+                    for j in range(NX):
+                        if g_fresh:
+                            P2[i, j] = Pg[i, j] / C_STALE_SHARE
+                        else:
+                            P1[i, j] = Pg[i, j] / C_STALE_SHARE
+        elif both:
             if fusion == FUSE_COV:
                 fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
                                  A1, L1, B1, A2, L2, B2, L, Wk)
@@ -815,14 +881,14 @@ def fafkf_kernel(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, theta, di
 
 @njit(cache=True)
 def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndarray,
-                 par: np.ndarray) -> tuple[np.ndarray, int]:
+                 par: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Fixed-interval RTS smoother over the fused sequence with the master's prediction.
 
     The prior of epoch k+1 is recomputed from the fused posterior of k
     (``Phi(dt[k+1]) x_g``, ``Phi P_g Phi^T + Q``, Q unscaled): nothing but the
     fused x and packed P are stored per epoch.  Returns the smoothed outputs
-    (columns as the forward ``out``) and the count of epochs whose smoothed P
-    failed the SPD test.
+    (columns as the forward ``out``), the count of epochs whose smoothed P
+    failed the SPD test and the count of restarts (see the guard below).
     """
     n = xs.shape[0]
     out = np.zeros((n, N_OUT))
@@ -840,6 +906,7 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
     wL = np.zeros((NX, NX))
     wB = np.zeros((NX, NX))
     not_spd = 0
+    restarts = 0
     for k in range(n - 1, -1, -1):
         if k < n - 1:
             x_post[:] = xs[k]
@@ -849,8 +916,23 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
             predict(x_prior, P_prior, dt[k + 1], static[k + 1], par, ones)
             phi_matrix(dt[k + 1], static[k + 1], par, Phi)
             rts_step(x_post, P_post, x_prior, P_prior, Phi, x_sn, P_sn, x_s, P_s, wL, wB)
-            x_sn[:] = x_s
-            P_sn[:, :] = P_s
+            # guard: the fused sequence is not always a Kalman posterior (stale-filter
+            # switches, heading re-alignments, an unmodelled gyro bias); where the
+            # smoothed position leaves the forward one by more than the chi-square(2)
+            # bound, restart the backward recursion from the forward estimate
+            a = P_post[IE, IE]
+            b = P_post[IE, IN]
+            c = P_post[IN, IN]
+            de = x_s[IE] - x_post[IE]
+            dn = x_s[IN] - x_post[IN]
+            nees = (c * de * de - 2.0 * b * de * dn + a * dn * dn) / (a * c - b * b)
+            if nees > SMOOTH_RESTART_NEES or not math.isfinite(nees):
+                x_sn[:] = x_post
+                P_sn[:, :] = P_post
+                restarts += 1
+            else:
+                x_sn[:] = x_s
+                P_sn[:, :] = P_s
         out[k, O_E] = x_sn[IE]
         out[k, O_N] = x_sn[IN]
         out[k, O_VE] = x_sn[IVE]
@@ -861,4 +943,4 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
         if not (P_sn[IE, IE] > 0.0 and P_sn[IN, IN] > 0.0
                 and P_sn[IE, IN] ** 2 < P_sn[IE, IE] * P_sn[IN, IN]):
             not_spd += 1
-    return out, not_spd
+    return out, not_spd, restarts

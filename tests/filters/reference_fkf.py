@@ -176,7 +176,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
     own2 = list(range(NX)) if fr else [0, 1, 2, 3, 4, 5, 8, 9]
     win = [Window(int(flags[kf.F_WINDOW])) for _ in range(4)]
     zupt_R = par[kf.K_ZUPT_SD] ** 2
-    t, t_acc, psi_hint = 0.0, 0.0, prep.psi0
+    t, t_acc, t_dr, t_head, psi_hint = 0.0, 0.0, 0.0, 0.0, prep.psi0
     xs, Ps = np.zeros((n, NX)), np.zeros((n, NX, NX))
     beta_out = np.full((n, 2), np.nan)
     used = np.zeros(n, bool)
@@ -225,6 +225,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         if dr_on:
             if st:
                 x2, P2 = zupt(x2, P2)
+                t_dr = t
             else:
                 th, dist, t_m = prep.theta[k], prep.dist[k], prep.t_m[k]
                 do_head = do_dist = False
@@ -244,11 +245,40 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                         win[3].push((dist - h) ** 2, H @ P2 @ H + win[3].factor * R_dist, par)
                 if do_head:
                     H, h = row("heading", x2)
-                    x2, P2 = kf_update(x2, P2, H, wrap(th - h), win[2].factor * R_head)
+                    y, R = wrap(th - h), win[2].factor * R_head
+                    chi2 = par[kf.K_HEAD_CHI2]
+                    if chi2 > 0 and y * y > chi2 * (H @ P2 @ H + R):
+                        if t - t_head > par[kf.K_GATE_RESET_S]:     # re-align q_w
+                            x2 = x2.copy()
+                            x2[8] += y
+                            P2 = P2.copy()
+                            P2[8, 8] += y * y
+                            t_head = t
+                    else:
+                        x2, P2 = kf_update(x2, P2, H, y, R)
+                        t_head = t_dr = t
                 if do_dist:
                     H, h = row("dist", x2, t_m, par[kf.K_V_LIN], psi_hint)
                     x2, P2 = kf_update(x2, P2, H, dist - h, win[3].factor * R_dist)
-        if both:
+                    t_dr = t
+        g_fresh = t - t_acc <= par[kf.K_GNSS_STALE_S]
+        d_fresh = t - t_dr <= par[kf.K_DR_STALE_S]
+        if both and g_fresh != d_fresh:                   # a stale filter contributes nothing
+            if g_fresh:
+                xg, Pg = x1.copy(), P1.copy()
+                beta_out[k] = 1.0
+            else:
+                xg, Pg = x2.copy(), P2.copy()
+                beta_out[k] = 0.0
+            if fr:
+                cs = kf.C_STALE_SHARE
+                if g_fresh:
+                    d1, d2 = np.ones(NX), np.full(NX, 1 / math.sqrt(cs))
+                    x2, P2 = xg.copy(), Pg / cs
+                else:
+                    d1, d2 = np.full(NX, 1 / math.sqrt(cs)), np.ones(NX)
+                    x1, P1 = xg.copy(), Pg / cs
+        elif both:
             if fusion == kf.FUSE_COV:
                 Y, yv = np.zeros((NX, NX)), np.zeros(NX)
                 for x, P, own in ((x1, P1, own1), (x2, P2, own2)):
@@ -304,6 +334,25 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
             "beta": beta_out, "gnss_used": used}
 
 
+def two_filter(fwd: dict[str, np.ndarray], bwd: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """fafkf's smoother: forward and (time-reversed, already flipped back) backward tracks
+    fused per epoch by their 2x2 position covariances; velocities by the trace weights."""
+    n = len(fwd["e"])
+    out = {k: np.zeros(n) for k in ("e", "n", "v_e", "v_n", "var_e", "var_n", "cov_en")}
+    for k in range(n):
+        Pf = np.array([[fwd["var_e"][k], fwd["cov_en"][k]], [fwd["cov_en"][k], fwd["var_n"][k]]])
+        Pb = np.array([[bwd["var_e"][k], bwd["cov_en"][k]], [bwd["cov_en"][k], bwd["var_n"][k]]])
+        Yf, Yb = np.linalg.inv(Pf), np.linalg.inv(Pb)
+        Ps = np.linalg.inv(Yf + Yb)
+        xs = Ps @ (Yf @ [fwd["e"][k], fwd["n"][k]] + Yb @ [bwd["e"][k], bwd["n"][k]])
+        wf = np.trace(Pb) / (np.trace(Pf) + np.trace(Pb))
+        out["e"][k], out["n"][k] = xs
+        out["var_e"][k], out["var_n"][k], out["cov_en"][k] = Ps[0, 0], Ps[1, 1], Ps[0, 1]
+        out["v_e"][k] = wf * fwd["v_e"][k] + (1 - wf) * bwd["v_e"][k]
+        out["v_n"][k] = wf * fwd["v_n"][k] + (1 - wf) * bwd["v_n"][k]
+    return out
+
+
 # ----------------------------------------------------------------------------------------
 # A tiny drive generator with known truth (closed-form paths), for the tests.
 
@@ -342,7 +391,7 @@ def tiny_drive(duration_s: float = 120.0, *, speed_mps: float = 10.0, turn_radps
     frame = LocalFrame.centred_on(lat0, lon0)
     t_ns = t0_ns + np.round(t * 1e9).astype(np.int64)
 
-    step = int(round(dr_hz / gnss_hz))
+    step = round(dr_hz / gnss_hz)
     gi = np.arange(0, len(t), step)
     sd = np.full(len(gi), gnss_sd_m)
     if gnss_sd_jump is not None:
