@@ -8,7 +8,8 @@ Conventions: :mod:`gpsdr_cli.conventions` (local east/north metres, int64 ns UTC
 Panels:
   * map (east/north, equal axes): GNSS fixes (grey dots, rejected ones red
     crosses), fused track (blue), reference (black), the fused track inside
-    GNSS outages in orange with each outage's start and end marked;
+    GNSS outages in orange with the start, end and length of each outage of 10 s
+    or more marked;
   * horizontal error against time with outages shaded: against the reference
     when one is given (fused and GNSS-only), else the GNSS-minus-fused
     separation; both with the filter's horizontal 3-sigma envelope;
@@ -87,6 +88,8 @@ def plot_report(track: pd.DataFrame, out_path: str | Path, reference_en: pd.Data
     for k, (i0, i1) in enumerate(runs):
         ax_map.plot(e[i0:i1 + 1], n[i0:i1 + 1], "-", lw=2.5, color="tab:orange",
                     label="fused in GNSS outage" if k == 0 else None, zorder=5)
+        if (t_ns[i1] - t_ns[i0]) / NS_PER_S < 10.0:
+            continue  # short drop-outs: coloured, not labelled (a city drive has dozens)
         ax_map.plot(e[i0], n[i0], ">", color="tab:orange", ms=7, zorder=6)
         ax_map.plot(e[i1], n[i1], "s", color="tab:orange", ms=6, zorder=6)
         ax_map.annotate(f"{(t_ns[i1] - t_ns[i0]) / NS_PER_S:.0f} s", (e[i1], n[i1]),
