@@ -15,6 +15,7 @@ from .options import (
     config_option,
     filter_options,
     format_option,
+    frame_time_options,
     make_params,
     reader_options,
 )
@@ -60,6 +61,7 @@ def stats_next_to(track: Path, fmt: str) -> Path:
 @click.option("--print-config", is_flag=True,
               help="Print the effective parameters as TOML (a --config file) and exit.")
 @format_option
+@frame_time_options
 @reader_options
 @common_options
 def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,

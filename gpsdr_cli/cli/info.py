@@ -18,7 +18,7 @@ from .options import common_options, config_option, reader_options
 @reader_options
 @common_options
 def info(logs: tuple[str, ...], as_json: bool, config_path: str | None, date: Any,
-         gnss_offset: Any, epsg: Any, topics: dict[str, str] | None, log_time: bool,
+         topics: dict[str, str] | None, log_time: bool,
          gyro_units: str | None, gyro_sign: str | None, odo_kind: str | None,
          ticks_per_m: float | None, quiet: bool) -> None:
     """Describe logs: the streams found with record counts, rates and time spans,

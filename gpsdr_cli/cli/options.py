@@ -93,16 +93,10 @@ def parse_topics(ctx: click.Context, param: click.Parameter,
 
 
 def reader_options(fn: F) -> F:
-    """How to read the inputs: date, time offset, frame, MCAP topics, CSV conventions."""
+    """How to read the inputs: NMEA date, MCAP topics and time, CSV conventions."""
     opts = [
         click.option("--date", type=str, callback=parse_date, metavar="YYYY-MM-DD",
                      help="UTC date for NMEA logs without RMC/ZDA dates."),
-        click.option("--gnss-offset", type=str, callback=parse_offset, metavar="SECONDS|auto",
-                     help="Add SECONDS to every GNSS time stamp (receiver latency), or "
-                          "estimate it: auto runs twice and reports the value."),
-        click.option("--epsg", type=int, default=None, metavar="CODE",
-                     help="Local frame = this projected CRS (e.g. 32610 for UTM 10N) "
-                          "instead of a transverse Mercator on the first fix."),
         click.option("--topic", "topics", multiple=True, callback=parse_topics,
                      metavar="KIND=NAME",
                      help="MCAP: take stream KIND (gnss, gyro, odo) from topic NAME; repeatable."),
@@ -120,6 +114,17 @@ def reader_options(fn: F) -> F:
     ]
     for opt in reversed(opts):
         fn = opt(fn)
+    return fn
+
+
+def frame_time_options(fn: F) -> F:
+    """The GNSS time offset and the local frame."""
+    fn = click.option("--epsg", type=int, default=None, metavar="CODE",
+                      help="Local frame = this projected CRS (e.g. 32610 for UTM 10N) "
+                           "instead of a transverse Mercator on the first fix.")(fn)
+    fn = click.option("--gnss-offset", type=str, callback=parse_offset, metavar="SECONDS|auto",
+                      help="Add SECONDS to every GNSS time stamp (receiver latency), or "
+                           "estimate it: auto runs twice and reports the value.")(fn)
     return fn
 
 
