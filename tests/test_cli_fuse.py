@@ -212,3 +212,26 @@ def test_installed_entry_point_exit_codes(drive_dir: Path) -> None:
                              text=True, check=False)
     assert missing.returncode == 1
     assert missing.stderr.count("\n") == 1 and "nope.nmea" in missing.stderr
+
+
+def test_readme_first_command_runs(gpsdr, sample_dir: Path, tmp_path: Path) -> None:
+    """The README's one-line quick start: its `gpsdr ...` part, on a copy of the sample."""
+    import shlex
+
+    from tests.conftest import REPO
+
+    readme = (REPO / "README.md").read_text()
+    first = readme.split("```sh\n", 1)[1].split("\n", 1)[0]
+    assert first.startswith("python3 -m venv .venv && . .venv/bin/activate && pip install -e")
+    gpsdr_part = first.split(" && ")[-1]
+    args = shlex.split(gpsdr_part)
+    assert args[0] == "gpsdr"
+    copy = tmp_path / "sample_logs" / "comma2k19"
+    shutil.copytree(sample_dir, copy)
+    args = [a.replace("sample_logs/", f"{tmp_path}/sample_logs/") for a in args[1:]]
+    result = gpsdr(args)
+    assert result.exit_code == 0, result.output
+    assert (copy / "gps.fused.parquet").exists() and "RMSE" in result.stderr
+    second = readme.split("```sh\n", 2)[2].split("\n", 1)[0]
+    assert second == "pytest"
+    assert "pytest || status=$?" in (REPO / ".ci" / "run").read_text()
