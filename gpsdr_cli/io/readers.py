@@ -49,7 +49,7 @@ def sniff(path: str | Path) -> str:
     problem = text_problem(head)
     if problem and problem.startswith("UTF-16"):
         raise InputError(path, problem)
-    if looks_like_nmea(head):
+    if looks_like_nmea(head) or _nmea_after_noise(head, looks_like_nmea):
         return "nmea"
     if problem:
         raise InputError(path, f"{problem}; expected MCAP, NMEA, CSV or Parquet")
@@ -61,6 +61,19 @@ def sniff(path: str | Path) -> str:
         return "csv"
     raise InputError(path, f"unrecognised format (first line {first[:60]!r}); "
                      "expected MCAP, NMEA, CSV with a header row, or Parquet", line=1)
+
+
+def _nmea_after_noise(head: bytes, looks_like_nmea) -> bool:
+    """NMEA interleaved with binary (e.g. u-blox UBX) may start past the first KB:
+    try the first few ``$`` positions in the head."""
+    pos = head.find(b"$")
+    for _ in range(64):
+        if pos < 0:
+            return False
+        if looks_like_nmea(head[pos:pos + 1024]):
+            return True
+        pos = head.find(b"$", pos + 1)
+    return False
 
 
 def sha256_file(path: str | Path) -> str:

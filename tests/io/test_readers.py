@@ -34,6 +34,9 @@ def test_sniff_by_content_not_name(tmp_path):
     p = tmp_path / "track.csv"
     pq.write_table(pa.table({"time": [1]}), p)
     assert sniff(p) == "parquet"
+    noisy = tmp_path / "ubx_and_nmea.log"  # 3 KB of binary (UBX-like) before the sentences
+    noisy.write_bytes(bytes(range(256)) * 12 + (DRIVE / "gps.nmea").read_bytes()[:3000])
+    assert sniff(noisy) == "nmea"
     q = tmp_path / "log.txt"
     q.write_bytes(b"12:00:01 " + (DRIVE / "gps.nmea").read_bytes()[:2000])  # logger prefix
     assert sniff(q) == "nmea"
