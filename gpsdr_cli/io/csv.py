@@ -326,6 +326,9 @@ def _apply_time(path: str | Path, t_ns: np.ndarray, opts: dict, section: str,
         start = float(_opt(opts, "start_posix_s", 0.0))
         if not math.isfinite(start):
             raise ConfigError(f"{section}.start_posix_s = {start!r}: expected a finite number")
+        if start == 0.0:
+            warnings.append(f"{path}: {section}.time = \"relative\" with {section}.start_posix_s = 0: "
+                            "times fall in 1970 and will not line up with GNSS time")
         return t_ns + np.int64(_seconds_to_ns(start))
     if len(t_ns) and int(t_ns.max()) < _POSIX_PLAUSIBLE_S * NS_PER_S:
         warnings.append(f"{path}: times end at {t_ns.max() / NS_PER_S:.3f} s, before 1973: "
