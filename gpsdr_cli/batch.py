@@ -71,11 +71,17 @@ class DriveSpec:
 
 @dataclass
 class BatchOptions:
+    """What every drive of a batch is processed with (picklable: it goes to the workers)."""
+
     out_dir: str
     params: Params
     fmt: str = "parquet"
     force: bool = False
     extra_meta: dict[str, str] = field(default_factory=dict)
+    auto_gnss_offset: bool = False
+    topics: dict[str, str] | None = None
+    date: Any = None
+    use_log_time: bool = False
 
 
 # --------------------------------------------------------------------------- discovery
@@ -213,9 +219,15 @@ def output_paths(spec: DriveSpec, out_dir: str, fmt: str) -> tuple[Path, Path]:
     return d / f"{spec.name}.fused.{ext}", d / f"{spec.name}.stats.{ext}"
 
 
-def _up_to_date(spec: DriveSpec, track: Path, stats: Path, params: Params, fmt: str) -> bool:
+def request_key(opts: BatchOptions) -> str:
+    """What a drive's outputs were asked for with (stored in the track; resume compares it)."""
     from . import config
 
+    return (config.to_toml(opts.params) + f"# auto_gnss_offset = {opts.auto_gnss_offset}\n"
+            f"# topics = {opts.topics}\n# date = {opts.date}\n# log_time = {opts.use_log_time}\n")
+
+
+def _up_to_date(spec: DriveSpec, track: Path, stats: Path, opts: BatchOptions) -> bool:
     try:
         newest_in = max(Path(p).stat().st_mtime for p in spec.inputs)
         oldest_out = min(track.stat().st_mtime, stats.stat().st_mtime)
@@ -223,15 +235,15 @@ def _up_to_date(spec: DriveSpec, track: Path, stats: Path, params: Params, fmt: 
         return False
     if oldest_out < newest_in:
         return False
-    if fmt != "parquet":
+    if opts.fmt != "parquet":
         return True
     import pyarrow.parquet as pq
 
     try:
         meta = pq.read_schema(track).metadata or {}
-    except OSError:
+    except (OSError, ValueError):
         return False
-    return meta.get(b"params_toml", b"").decode() == config.to_toml(params)
+    return meta.get(b"batch.request", b"").decode() == request_key(opts)
 
 
 def _row(spec: DriveSpec, status: str, error: str = "", duration_s: float = 0.0,
@@ -252,7 +264,7 @@ def process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
     t0 = time.perf_counter()
     track_p, stats_p = output_paths(spec, opts.out_dir, opts.fmt)
     try:
-        if not opts.force and _up_to_date(spec, track_p, stats_p, opts.params, opts.fmt):
+        if not opts.force and _up_to_date(spec, track_p, stats_p, opts):
             summary = _existing_summary(stats_p, opts.fmt)
             return _row(spec, "up to date", "", time.perf_counter() - t0, summary,
                         str(track_p), str(stats_p))
@@ -261,15 +273,17 @@ def process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
         from .pipeline import TRACK_UNITS, fuse, stats_units
 
         drive = read_drive(spec.log, gps=spec.gps, gyro=spec.gyro, odo=spec.odo,
-                           params=opts.params)
+                           params=opts.params, topics=opts.topics, date=opts.date,
+                           use_log_time=opts.use_log_time)
         ref = None
         if spec.reference:
             from .io.reference import read_reference
 
             ref = read_reference(spec.reference)
-        res = fuse(drive, opts.params, ref)
+        res = fuse(drive, opts.params, ref, auto_gnss_offset=opts.auto_gnss_offset)
         stats_p.parent.mkdir(parents=True, exist_ok=True)  # a worker on another machine
-        meta = {**res.metadata, **opts.extra_meta, "drive": spec.name}
+        meta = {**res.metadata, **opts.extra_meta, "drive": spec.name,
+                "batch.request": request_key(opts)}
         write_table(res.stats, stats_p, metadata=meta, units=stats_units(res.stats), fmt=opts.fmt)
         write_table(res.track, track_p, metadata=meta, units=TRACK_UNITS, fmt=opts.fmt)
         return _row(spec, "ok", "", time.perf_counter() - t0, res.summary(),
@@ -308,7 +322,7 @@ def plan(specs: Iterable[DriveSpec], opts: BatchOptions,
     todo: list[DriveSpec] = []
     for spec in specs:
         track_p, stats_p = output_paths(spec, opts.out_dir, opts.fmt)
-        if not opts.force and _up_to_date(spec, track_p, stats_p, opts.params, opts.fmt):
+        if not opts.force and _up_to_date(spec, track_p, stats_p, opts):
             done(_row(spec, "up to date", "", 0.0, _existing_summary(stats_p, opts.fmt),
                       str(track_p), str(stats_p)))
         else:

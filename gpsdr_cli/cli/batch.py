@@ -8,7 +8,15 @@ from typing import Any, Self
 
 import click
 
-from .options import common_options, config_option, filter_options, format_option, make_params
+from .options import (
+    common_options,
+    config_option,
+    filter_options,
+    format_option,
+    frame_time_options,
+    make_params,
+    reader_options,
+)
 
 
 @click.command()
@@ -24,10 +32,15 @@ from .options import common_options, config_option, filter_options, format_optio
               help="Process every drive, also those whose outputs are up to date.")
 @click.option("--scheduler", metavar="tcp://HOST:PORT",
               help="Run on a dask.distributed cluster instead of local processes.")
+@frame_time_options
+@reader_options
 @common_options
 def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
           smooth: bool | None, config_path: str | None, fmt: str, force: bool,
-          scheduler: str | None, quiet: bool) -> None:
+          scheduler: str | None, gnss_offset: str | float | None, epsg: int | None,
+          date: Any, topics: dict[str, str] | None, log_time: bool, gyro_units: str | None,
+          gyro_sign: str | None, odo_kind: str | None, ticks_per_m: float | None,
+          quiet: bool) -> None:
     """Fuse every drive under a directory or matching a glob.
 
     A drive is an MCAP file, or a folder with an NMEA file and gyro/odometer CSVs
@@ -42,6 +55,7 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
       gpsdr batch logs/ -o out/ --jobs 8 --filter fafkf --smooth
       gpsdr batch 'logs/**/*.mcap' -o out/
       gpsdr batch logs/ -o out/ --scheduler tcp://10.0.0.5:8786
+      gpsdr batch 'drives/*/' -o out/ --gnss-offset auto --smooth
     """
     import os
     from pathlib import Path
@@ -57,7 +71,9 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
     )
     from ..io.parquet import write_table
 
-    params = make_params(config_path, filter_name=filter_name, smooth=smooth)
+    params = make_params(config_path, filter_name=filter_name, smooth=smooth,
+                         gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
+                         gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m)
     specs = find_drives(target)
     if not specs:
         from ..errors import InputError
@@ -65,7 +81,9 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
         raise InputError(target, "no drive found (MCAP files, or folders with an NMEA file "
                                  "and gyro/odometer CSVs)")
     Path(out_dir).mkdir(parents=True, exist_ok=True)
-    opts = BatchOptions(out_dir=out_dir, params=params, fmt=fmt, force=force)
+    opts = BatchOptions(out_dir=out_dir, params=params, fmt=fmt, force=force,
+                        auto_gnss_offset=gnss_offset == "auto", topics=topics, date=date,
+                        use_log_time=log_time)
     n_jobs = jobs or os.cpu_count() or 1
 
     with _Bar(len(specs), quiet) as bar:
