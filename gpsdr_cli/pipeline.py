@@ -393,8 +393,18 @@ def order_stats(stats: pd.DataFrame) -> pd.DataFrame:
     return stats[first + rest].reset_index(drop=True)
 
 
+#: Statistics columns evaluation adds beyond the charter's.
+STATS_EXTRA_UNITS: dict[str, str] = {
+    "error_epochs": "count of epochs in the segment that the reference covers",
+    "start_utc": "UTC ISO 8601, start of the outage (outage rows)",
+    "end_utc": "UTC ISO 8601, end of the outage (outage rows)",
+}
+
+
 def stats_units(stats: pd.DataFrame) -> dict[str, str]:
-    return {c: STATS_COLUMNS[c] for c in stats.columns if c in STATS_COLUMNS}
+    """Column -> "unit, meaning" for the statistics file's field metadata."""
+    known = {**STATS_COLUMNS, **STATS_EXTRA_UNITS}
+    return {c: known[c] for c in stats.columns if c in known}
 
 
 # --------------------------------------------------------------------------- stats of a file

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 from typing import Any, Self
@@ -220,6 +221,10 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
         click.echo(f"warning: {note}", file=err)
     if reference:
         s = res.summary()
+        if math.isnan(s["rmse_m"]):  # NaN: no epoch inside the reference's time span
+            click.echo(f"warning: {reference} does not overlap the track in time; "
+                       "no error statistics", file=err)
+            return
         click.echo(f"error vs {reference}: RMSE {s['rmse_m']:.2f} m, CEP95 {s['cep95_m']:.2f} m, "
                    f"max {s['max_m']:.2f} m over {s['epochs']:.0f} epochs", file=err)
         g = res.gnss_only_summary()
