@@ -23,8 +23,10 @@ The vehicle
 The GNSS receiver (per epoch, per axis e/n)
     ``fix = truth(t + stamp_offset) + w + b + jump`` with white noise
     ``w ~ N(0, (gnss_sd_per_pdop_m * PDOP)^2)``, multipath ``b`` a first-order
-    Gauss-Markov process whose sigma and correlation time depend on the
-    environment (open, suburban, urban canyon), rare outlier jumps, and outages
+    Gauss-Markov process whose sigma depends on the environment (open 0.4 m,
+    suburban 1.2 m, urban canyon 4 m per axis) and which decorrelates with the
+    distance driven (50 m in a canyon) and slowly in time when standing
+    (``1/tau = 1/tau_still + speed/distance``), rare outlier jumps, and outages
     (fix quality 0) in tunnels or random drop-outs.  PDOP is a log-normal
     Gauss-Markov series around the environment's mean.  The receiver reports a
     sigma (NMEA GST / NavSatFix covariance) that includes the white part and only
@@ -72,10 +74,10 @@ START_NS = int(_dt.datetime(2024, 5, 14, 8, 0, 0, tzinfo=_dt.UTC).timestamp()) *
 # Environments: index -> name, and their GNSS error parameters.
 ENV_NAMES = ("open", "suburban", "urban")
 _ENV = {
-    #          pdop_mean pdop_log_sd mp_sd_m mp_tau_s gst_mp_share outlier_p dropout_p
-    "open": (1.5, 0.12, 0.4, 60.0, 1.0, 0.0, 0.0),
-    "suburban": (2.2, 0.2, 1.2, 30.0, 0.7, 0.001, 0.0005),
-    "urban": (3.8, 0.3, 4.0, 20.0, 0.3, 0.004, 0.002),
+    #          pdop_mean pdop_log_sd mp_sd_m mp_tau_s gst_mp_share outlier_p dropout_p mp_dist_m
+    "open": (1.5, 0.12, 0.4, 120.0, 1.0, 0.0, 0.0, 300.0),
+    "suburban": (2.2, 0.2, 1.2, 60.0, 0.7, 0.001, 0.0005, 100.0),
+    "urban": (3.8, 0.3, 4.0, 60.0, 0.3, 0.004, 0.002, 50.0),
 }
 
 
@@ -489,8 +491,12 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
     rel = (t_fix - t_truth[0]) / NS_PER_S
     k_truth = np.minimum(np.searchsorted(t_truth, t_fix), len(t_truth) - 1)
     env = env_idx[k_truth]
-    par = np.array([_ENV[name] for name in ENV_NAMES])[env]  # (m, 7)
-    pdop_mean, pdop_lsd, mp_sd, mp_tau, gst_share, p_out, p_drop = par.T
+    par = np.array([_ENV[name] for name in ENV_NAMES])[env]  # (m, 8)
+    pdop_mean, pdop_lsd, mp_sd, mp_tau_still, gst_share, p_out, p_drop, mp_dist = par.T
+    # multipath decorrelates with the distance driven (the reflection geometry changes)
+    # and slowly with time when standing: 1/tau = 1/tau_still + speed/distance
+    speed_fix = np.interp(rel, (t_truth - t_truth[0]) / NS_PER_S, truth["speed"].to_numpy())
+    mp_tau = 1.0 / (1.0 / mp_tau_still + speed_fix / mp_dist)
 
     # PDOP: log-normal Gauss-Markov around the environment's mean (tau 30 s), floor 1
     pdop = np.maximum(pdop_mean * np.exp(_gauss_markov(rng, m, dt, 30.0, pdop_lsd)), 1.0)
@@ -566,7 +572,7 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
     valid = ~no_fix
     used_env = sorted({ENV_NAMES[i] for i in np.unique(env[valid])}) if valid.any() else []
     mp_rms = float(np.sqrt(np.mean(mp_sd[valid] ** 2))) if valid.any() else 0.0
-    mp_tau_mean = float(np.mean(mp_tau[valid])) if valid.any() else 60.0
+    mp_tau_mean = float(np.median(mp_tau[valid])) if valid.any() else 60.0
     noise = {
         "gnss_rate_hz": float(rate_hz),
         "gnss_stamp_offset_s": float(stamp_offset_s),
@@ -574,7 +580,10 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
         "gnss_sd_note": "white noise 1-sigma per axis (east, north) = gnss_sd_per_pdop_m x PDOP",
         "gnss_environments": {name: dict(zip(
             ("pdop_mean", "pdop_log_sd", "multipath_sd_m", "multipath_tau_s", "gst_multipath_share",
-             "outlier_prob", "dropout_prob"), _ENV[name], strict=True)) for name in used_env},
+             "outlier_prob", "dropout_prob", "multipath_decorrelation_m"), _ENV[name], strict=True))
+            for name in used_env},
+        "multipath_tau_note": "per epoch 1/tau = 1/multipath_tau_s + speed/multipath_decorrelation_m; "
+                              "multipath_tau_s at top level is the drive's median",
         "multipath_sd_m": mp_rms, "multipath_tau_s": mp_tau_mean,
         "gnss_true_sd_rms_m": float(np.sqrt(np.mean((white_sd**2 + mp_sd**2)[valid])))
         if valid.any() else 0.0,
