@@ -133,6 +133,11 @@ def test_bad_input_files_are_one_line_errors(gpsdr, drive_dir: Path, tmp_path: P
         assert result.exit_code == 1, (args, result.output)
         line = one_line_error(result)
         assert str(bad) in line and expect.lower() in line.lower(), line
+    for args in (["stats", bad], ["plot", bad, "-o", tmp_path / "r.png"],
+                 ["stats", drive_dir / "gps.nmea", "--reference", bad]):
+        result = gpsdr(args)
+        assert result.exit_code == 1, (args, result.output)
+        assert str(args[1]) in one_line_error(result)
 
 
 def test_bad_csv_names_the_line(gpsdr, drive_dir: Path) -> None:
