@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import sys
 import traceback
+import warnings
 from typing import Any
 
 import click
@@ -62,7 +63,12 @@ class GpsdrGroup(click.Group):
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
-            return super().invoke(ctx)
+            with warnings.catch_warnings():
+                if not STATE["debug"]:
+                    # library warnings (pyproj, numpy) are noise to a user; what matters
+                    # about the inputs is reported by gpsdr itself. --debug shows them.
+                    warnings.simplefilter("ignore")
+                return super().invoke(ctx)
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
             raise
         except BrokenPipeError:

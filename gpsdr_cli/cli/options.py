@@ -26,6 +26,10 @@ def _set_flag(name: str) -> Callable[[click.Context, click.Parameter, bool], boo
     def callback(ctx: click.Context, param: click.Parameter, value: bool) -> bool:
         if value:
             STATE[name] = True
+            if name == "debug":
+                import warnings
+
+                warnings.simplefilter("default")  # main.py silences them otherwise
         return value
     return callback
 
