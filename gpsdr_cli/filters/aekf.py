@@ -37,7 +37,7 @@ from ..align import Epochs
 from ..config import Params
 from ..errors import ConfigError
 from ..models.cs_model import N_STATES
-from ..smoothing import rts_smooth
+from ..smoothing import rts_checkpointed
 from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
@@ -219,6 +219,10 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     return prm, flg
 
 
+#: Epochs per checkpoint segment of the smoother (memory: one segment of packed P).
+SEGMENT_EPOCHS = 4096
+
+
 def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> FilterResult:
     """Forward pass (and RTS when ``params["filter"]["smooth"]``) of the CS-model filter."""
     n = len(epochs)
@@ -226,31 +230,48 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     r_e, r_n, ka, sigma_const = gnss_noise(epochs, params, adaptive)
     x0, P0, psi0, heading_known = initial_state(epochs, params)
     prm, flg = kernel_params(params, adaptive, smooth)
-    flg[kn.F_HEADING_KNOWN] = int(heading_known)
+    st = np.zeros(kn.N_ST)
+    st[kn.S_PSI] = psi0
+    st[kn.S_REJ_SINCE] = -1.0
+    st[kn.S_SH_R] = 1.0
+    st[kn.S_HEADING_KNOWN] = float(heading_known)
     f64 = np.float64
-    x_out = np.empty((n, N_STATES))
-    pcov = np.empty((n, 3))
-    sd = np.empty((n, 2))
+    x_out = np.empty((N_STATES, n))  # rows: contiguous track columns, no copies
+    pcov = np.empty((3, n))
+    sd = np.empty((2, n))
     gnss_used = np.zeros(n, bool)
     gnss_rej = np.zeros(n, bool)
     nis = np.empty(n)
     static = np.zeros(n, bool)
     hold = np.zeros(n, bool)
-    P_store = np.empty((n if smooth else 0, kn.N_PACKED))
+    seg = min(SEGMENT_EPOCHS, max(n, 1))
+    P_seg = np.empty((seg if smooth else 0, kn.N_PACKED))
     prior_store = np.empty((n if smooth else 0, kn.N_PRIOR))
     info_v = np.zeros(kn.N_INFO)
-    gnss_e = np.where(epochs.has_gnss, epochs.gnss_e, 0.0).astype(f64)
-    gnss_n = np.where(epochs.has_gnss, epochs.gnss_n, 0.0).astype(f64)
-    omega = np.where(epochs.has_gyro, -epochs.yaw_rate_radps, 0.0)  # d(psi)/dt = -yaw_rate
-    odo = np.where(epochs.has_odo, epochs.odo_speed_mps, 0.0)
-    if n:
-        kn.cs_filter_kernel(
-            np.ascontiguousarray(epochs.dt_s, f64), np.ascontiguousarray(epochs.has_gnss, bool),
-            gnss_e, gnss_n, np.nan_to_num(r_e, nan=1.0), np.nan_to_num(r_n, nan=1.0),
-            np.ascontiguousarray(ka, f64), np.ascontiguousarray(epochs.has_gyro, bool), omega,
-            np.ascontiguousarray(epochs.has_odo, bool), odo,
-            np.ascontiguousarray(epochs.gnss_outage, bool), x0, P0, float(psi0), prm, flg,
-            x_out, pcov, gnss_used, gnss_rej, nis, static, hold, sd, P_store, prior_store, info_v)
+    info_v[kn.I_MIN_DIAG] = math.inf
+    c64 = np.ascontiguousarray  # no copies of the (already contiguous) inputs: memory
+    inputs = (
+        c64(epochs.dt_s, f64), c64(epochs.has_gnss, bool), c64(epochs.gnss_e, f64),
+        c64(epochs.gnss_n, f64), c64(r_e, f64), c64(r_n, f64), c64(ka, f64),
+        c64(epochs.has_gyro, bool), c64(epochs.yaw_rate_radps, f64), c64(epochs.has_odo, bool),
+        c64(epochs.odo_speed_mps, f64), c64(epochs.gnss_outage, bool))
+    del r_e, r_n, ka
+
+    def run_segment(k0: int, k1: int, x: np.ndarray, P: np.ndarray, s: np.ndarray,
+                    P_buf: np.ndarray, counters: np.ndarray | None = None) -> None:
+        kn.cs_filter_kernel(*inputs, x, P, s, k0, k1, k0, prm, flg, x_out, pcov, gnss_used,
+                            gnss_rej, nis, static, hold, sd, P_buf, prior_store,
+                            np.zeros(kn.N_INFO) if counters is None else counters)
+
+    x, P = x0.copy(), P0.copy()
+    checkpoints: list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray]] = []
+    if n and not smooth:
+        run_segment(0, n, x, P, st, P_seg, info_v)
+    elif n:
+        for k0 in range(0, n, seg):
+            k1 = min(k0 + seg, n)
+            checkpoints.append((k0, k1, x.copy(), P.copy(), st.copy()))
+            run_segment(k0, k1, x, P, st, P_seg, info_v)
     info = {
         "filter": name,
         "gnss_rejected": int(gnss_rej.sum()),
@@ -265,24 +286,25 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         "ekf_gnss_sigma_m": sigma_const,
     }
     if smooth and n:
-        rts_smooth(epochs.dt_s, hold, prm, x_out, P_store, prior_store, pcov, sd)
-    del P_store, prior_store
+        rts_checkpointed(run_segment, checkpoints, epochs.dt_s, hold, prm, x_out, prior_store,
+                         pcov, sd, P_seg)
+    del P_seg, checkpoints
     return _result(epochs, x_out, pcov, sd, gnss_used, gnss_rej, nis, static, info)
 
 
 def _result(epochs: Epochs, x: np.ndarray, pcov: np.ndarray, sd: np.ndarray,
             gnss_used: np.ndarray, gnss_rej: np.ndarray, nis: np.ndarray, static: np.ndarray,
             info: dict) -> FilterResult:
+    """FilterResult over row views of x (8, n), pcov (3, n), sd (2, n): no copies."""
     extras = {
-        "a_e": x[:, 2].copy(), "a_n": x[:, 5].copy(),
+        "a_e": x[2], "a_n": x[5],
         # the drift state eps is in d(psi)/dt = -yaw_rate; report the bias of the gyro reading
-        "gyro_bias_radps": -x[:, 6], "odo_scale": x[:, 7].copy(),
-        "gyro_bias_sd_radps": sd[:, 0].copy(), "odo_scale_sd": sd[:, 1].copy(),
+        "gyro_bias_radps": -x[6], "odo_scale": x[7],
+        "gyro_bias_sd_radps": sd[0], "odo_scale_sd": sd[1],
     }
-    return FilterResult(t_ns=epochs.t_ns, e=x[:, 0].copy(), n=x[:, 3].copy(), v_e=x[:, 1].copy(),
-                        v_n=x[:, 4].copy(), var_e=pcov[:, 0].copy(), var_n=pcov[:, 1].copy(),
-                        cov_en=pcov[:, 2].copy(), gnss_used=gnss_used, gnss_rejected=gnss_rej,
-                        nis=nis, static=static, extras=extras, info=info)
+    return FilterResult(t_ns=epochs.t_ns, e=x[0], n=x[3], v_e=x[1], v_n=x[4], var_e=pcov[0],
+                        var_n=pcov[1], cov_en=pcov[2], gnss_used=gnss_used,
+                        gnss_rejected=gnss_rej, nis=nis, static=static, extras=extras, info=info)
 
 
 @register("aekf")

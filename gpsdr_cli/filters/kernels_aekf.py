@@ -48,8 +48,11 @@ P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 N_PRM = 20
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
-F_HEADING_KNOWN, F_DRIFT_CONSIDER, F_HEADING_CONSIDER = 8, 9, 10
-N_FLG = 11
+F_DRIFT_CONSIDER, F_HEADING_CONSIDER = 8, 9
+N_FLG = 10
+# internal state carried between segments (``st``)
+S_PSI, S_STATIC, S_T, S_REJ_SINCE, S_SH_R, S_SH_M, S_HEADING_KNOWN = range(7)
+N_ST = 7
 # stored prior scalars per epoch (columns of ``prior_prm``)
 Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N = range(6)
 N_PRIOR = 6
@@ -261,8 +264,9 @@ def rebuild_prior(P: np.ndarray, T: float, alpha: float, tau_eps: float, q_eps: 
 @njit(cache=True)
 def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n: np.ndarray,
                      r_e: np.ndarray, r_n: np.ndarray, ka: np.ndarray, has_gyro: np.ndarray,
-                     omega: np.ndarray, has_odo: np.ndarray, odo: np.ndarray, outage: np.ndarray,
-                     x0: np.ndarray, P0: np.ndarray, psi0: float, prm: np.ndarray,
+                     yaw: np.ndarray, has_odo: np.ndarray, odo: np.ndarray, outage: np.ndarray,
+                     x: np.ndarray, P: np.ndarray, st: np.ndarray, k_start: int, k_end: int,
+                     p_off: int, prm: np.ndarray,
                      flg: np.ndarray, x_out: np.ndarray, pcov_out: np.ndarray,
                      gnss_used: np.ndarray, gnss_rej: np.ndarray, nis_out: np.ndarray,
                      static_out: np.ndarray, hold_out: np.ndarray, sd_out: np.ndarray,
@@ -270,17 +274,22 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     """Forward pass of the ekf/aekf over n epochs; writes the ``*_out`` arrays in place.
 
     Inputs per epoch: ``dt`` s; GNSS ``z_e, z_n`` m with variances ``r_e, r_n`` m^2
-    (already regime-scaled); ``ka`` K_a factor; ``omega`` = -yaw_rate rad/s;
-    ``odo`` speed m/s; ``outage`` epoch inside a GNSS outage.  ``x0, P0``: state at epoch 0; ``psi0`` initial remembered
-    heading (rad, clockwise from north).  ``prm``/``flg``: see the P_*/F_* indices.
-    Outputs: ``x_out`` (n, 8) posterior states; ``pcov_out`` (n, 3) var_e, var_n,
-    cov_en; ``sd_out`` (n, 2) sigma of eps and k_s; ``P_store`` (n, 36) and
-    ``prior_store`` (n, 6) when ``flg[F_STORE]``; ``info`` counters (I_*).
+    (already regime-scaled); ``ka`` K_a factor; ``yaw`` gyro yaw rate rad/s (CCW+,
+    so the heading rate is ``-yaw``); inputs are read only where their flag is set;
+    ``odo`` speed m/s; ``outage`` epoch inside a GNSS outage.
+    Runs epochs ``k_start <= k < k_end`` from the state ``x, P`` (after epoch
+    k_start - 1, or the initial state at epoch 0), updated in place, and the
+    internal state ``st`` (S_* indices: remembered heading, static flag, time,
+    gate and Sage-Husa memory), read at the start and written at the end; so
+    the pass can be cut into segments and a segment re-run bit for bit from a
+    checkpoint (the checkpointed smoother).  ``prm``/``flg``: P_*/F_* indices.
+    Outputs (one row per quantity, so every track column is a contiguous view):
+    ``x_out`` (8, n) posterior states; ``pcov_out`` (3, n) var_e, var_n, cov_en;
+    ``sd_out`` (2, n) sigma of eps and k_s; when ``flg[F_STORE]``,
+    ``P_store[k - p_off]`` the packed P(k|k) and ``prior_store[k]`` the prior
+    scalars; ``info`` counters (I_*), accumulated (the caller initialises them).
     """
-    n_ep = dt.shape[0]
     n = N_STATES
-    x = x0.copy()
-    P = P0.copy()
     H = np.zeros(n)
     K = np.zeros(n)
     PHt = np.zeros(n)
@@ -297,23 +306,18 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     sage = flg[F_SAGE_HUSA] != 0
     check = flg[F_CHECK_SPD] != 0
     store = flg[F_STORE] != 0
-    heading_known = flg[F_HEADING_KNOWN] != 0
+    heading_known = st[S_HEADING_KNOWN] != 0.0
     drift_consider = flg[F_DRIFT_CONSIDER]
     heading_consider = flg[F_HEADING_CONSIDER] != 0
     omega_min = prm[P_OMEGA_MIN]
     sigma_a = prm[P_SIGMA_A]
-    psi_mem = psi0
-    is_static = False
-    t = 0.0
-    rej_since = -1.0
-    sh_r = 1.0
-    sh_m = 0
-    info[I_SPD_FAIL] = 0.0
-    info[I_MIN_DIAG] = math.inf
-    info[I_SKIPPED] = 0.0
-    info[I_GATE_RESETS] = 0.0
-    info[I_NONFINITE] = 0.0
-    for k in range(n_ep):
+    psi_mem = st[S_PSI]
+    is_static = st[S_STATIC] != 0.0
+    t = st[S_T]
+    rej_since = st[S_REJ_SINCE]
+    sh_r = st[S_SH_R]
+    sh_m = int(st[S_SH_M])
+    for k in range(k_start, k_end):
         T = dt[k]
         qa_e = 0.0
         qa_n = 0.0
@@ -419,7 +423,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
         if has_gyro[k]:
             if is_static:
-                if not unit_update(x, P, 6, omega[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh):
+                if not unit_update(x, P, 6, -yaw[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh):
                     info[I_SKIPPED] += 1.0
             elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
                 h = omega_row(x, H)
@@ -429,7 +433,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 cons = CONS_EPS if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else 0
                 if heading_consider and outage[k]:
                     cons |= CONS_VEL
-                if not row_update(x, P, H, NZ_OMEGA, omega[k] - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
+                if not row_update(x, P, H, NZ_OMEGA, -yaw[k] - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
                     info[I_SKIPPED] += 1.0
         # ---- remembered heading for the odometer row near standstill
         sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
@@ -437,27 +441,34 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             psi_mem = math.atan2(x[1], x[4])
             heading_known = True
         elif has_gyro[k] and k > 0:
-            psi_mem += (omega[k] - x[6]) * T
+            psi_mem += (-yaw[k] - x[6]) * T
         # ---- outputs and health
         for i in range(n):
-            x_out[k, i] = x[i]
+            x_out[i, k] = x[i]
             if not math.isfinite(x[i]):
                 info[I_NONFINITE] += 1.0
-        pcov_out[k, 0] = P[0, 0]
-        pcov_out[k, 1] = P[3, 3]
-        pcov_out[k, 2] = P[0, 3]
-        sd_out[k, 0] = math.sqrt(max(P[6, 6], 0.0))
-        sd_out[k, 1] = math.sqrt(max(P[7, 7], 0.0))
+        pcov_out[0, k] = P[0, 0]
+        pcov_out[1, k] = P[3, 3]
+        pcov_out[2, k] = P[0, 3]
+        sd_out[0, k] = math.sqrt(max(P[6, 6], 0.0))
+        sd_out[1, k] = math.sqrt(max(P[7, 7], 0.0))
         for i in range(n):
             if P[i, i] < info[I_MIN_DIAG] or not math.isfinite(P[i, i]):
                 info[I_MIN_DIAG] = P[i, i] if math.isfinite(P[i, i]) else -math.inf
         if check and not cholesky(P, L):
             info[I_SPD_FAIL] += 1.0
         if store:
-            pack(P, P_store[k])
+            pack(P, P_store[k - p_off])
             prior_store[k, Q_QA_E] = qa_e
             prior_store[k, Q_QA_N] = qa_n
             prior_store[k, Q_LAM] = lam
             prior_store[k, Q_GAIN] = g
             prior_store[k, Q_ADD_E] = add_e
             prior_store[k, Q_ADD_N] = add_n
+    st[S_PSI] = psi_mem
+    st[S_STATIC] = 1.0 if is_static else 0.0
+    st[S_T] = t
+    st[S_REJ_SINCE] = rej_since
+    st[S_SH_R] = sh_r
+    st[S_SH_M] = sh_m
+    st[S_HEADING_KNOWN] = 1.0 if heading_known else 0.0
