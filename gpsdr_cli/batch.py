@@ -25,6 +25,7 @@ import glob
 import os
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -259,6 +260,12 @@ def _row(spec: DriveSpec, status: str, error: str = "", duration_s: float = 0.0,
 
 def process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
     """Fuse one drive and write its outputs; never raises (errors become the row)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a worker's warnings would garble the progress bar
+        return _process_drive(spec, opts)
+
+
+def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
     from .errors import GpsdrError
 
     t0 = time.perf_counter()
