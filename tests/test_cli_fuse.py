@@ -240,3 +240,18 @@ def test_readme_first_command_runs(gpsdr, sample_dir: Path, tmp_path: Path) -> N
     second = readme.split("```sh\n", 2)[2].split("\n", 1)[0]
     assert second == "pytest"
     assert "pytest || status=$?" in (REPO / ".ci" / "run").read_text()
+
+
+def test_info_on_a_track(gpsdr, drive_dir: Path) -> None:
+    assert gpsdr(["fuse", *streams(drive_dir), "--filter", "ekf", "-q"]).exit_code == 0
+    result = gpsdr(["info", drive_dir / "gps.fused.parquet"])
+    assert result.exit_code == 0, result.output
+    assert "parquet" in result.stdout and "filter: ekf" in result.stdout
+    assert "rows: " in result.stdout
+
+
+def test_group_level_debug_shows_the_traceback(gpsdr, tmp_path: Path) -> None:
+    result = gpsdr(["--debug", "fuse", "--gps", tmp_path / "none.nmea"])
+    assert result.exit_code == 1
+    assert "Traceback" in result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith("gpsdr: error: ")
