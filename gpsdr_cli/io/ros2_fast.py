@@ -7,7 +7,9 @@ gathers over the raw bytes (several M msg/s).  The layout is the OMG CDR v1
 (XCDR1) rules ROS 2 uses: a 4-byte encapsulation header (``00 01`` = little
 endian), then every primitive aligned to its own size counted from the end of
 that header; strings are a uint32 length (including the NUL) and the bytes;
-fixed arrays (``float64[9]``) have no length prefix.
+fixed arrays (``float64[9]``) have no length prefix.  The same layouts in ROS 1
+serialisation (converted bags) differ only in framing: no encapsulation header,
+no padding, a uint32 ``seq`` before the stamp, strings without the NUL.
 
 Anything the fast path cannot vouch for (big-endian or parameter-list
 encapsulation, a length that runs past the message, nanoseconds >= 1e9) is
