@@ -124,6 +124,9 @@ heading_sd_rad = 0.01    # sigma of the gyro-integrated heading measurement
 heading_err_rw_sd = 0.01   # random walk of q_w, rad per sqrt(s) (absorbs the integrated gyro bias)
 dist_err_rw_sd = 0.002    # random walk of q_s, m per sqrt(s) (q_s is metres per odometer interval)
 heading_interval_s = 0.1 # heading measurements from the integrated gyro at most this often
+heading_course_window_s = 30.0  # gyro heading steered to the GNSS course averaged over this window
+                         #   (removes the integrated gyro bias; 0: aligned once at the start, seed 002)
+course_min_speed_mps = 3.0  # GNSS course used for that only at this speed or more
 v_lin_mps = 0.1          # below this speed the distance row is linearised along the heading
 dr_stale_s = 1.0         # a DR filter without any update for longer is left out of the fusion
                          #   (the GNSS filter: after the epochs' outage gap without an accepted fix)

@@ -20,7 +20,8 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   aligned at ``t_a`` to the first GNSS course over ground given with speed
   >= ``[standstill] omega_min_speed_mps``; without one, to the course between
   two fixes 2 s apart that are at least max(5 m, 4 sigma) apart; without any,
-  to ``[frame] initial_heading_deg`` (else 0).  Used at gyro epochs at most
+  to ``[frame] initial_heading_deg`` (else 0).  Then (our choice, beyond the
+  paper) slowly steered to the GNSS course by :func:`course_correction`.  Used at gyro epochs at most
   every ``[fkf] heading_interval_s`` (the integrated heading's errors are
   correlated; updating at the gyro's full rate would treat them as white).
 * ``S = |odo speed| x T_m`` at odometer epochs, ``T_m`` the time since the
@@ -138,6 +139,34 @@ def heading_alignment(epochs: Epochs, t_s: np.ndarray, params: Params) -> tuple[
     return float(t_s[0]), 0.0, "none"
 
 
+def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarray,
+                      params: Params) -> np.ndarray:
+    """Slow correction (rad) of the integrated gyro heading towards the GNSS course, at ``tg``.
+
+    ``d_k = wrap(course_k - psi_g(t_k))`` at fixes with a course and speed >=
+    ``[fkf] course_min_speed_mps``, unwrapped, averaged over a centred window of
+    ``[fkf] heading_course_window_s`` (0: off, the heading stays aligned once,
+    as in the paper) and interpolated linearly in time -- across GNSS outages
+    too, since a log post-processor knows both ends.  A complementary filter:
+    the gyro keeps the short-term heading, the course removes the integrated
+    gyro bias (a 4 deg/s bias otherwise outruns the random walk q_w).
+    """
+    fp = params["fkf"]
+    window = fp["heading_course_window_s"]
+    ok = (epochs.has_gnss & np.isfinite(epochs.gnss_course_rad)
+          & (epochs.gnss_speed_mps >= fp["course_min_speed_mps"]))
+    k = np.flatnonzero(ok)
+    if window <= 0 or len(k) < 2:
+        return np.zeros(len(tg))
+    tk = t_s[k]
+    d = np.unwrap(np.angle(np.exp(1j * (epochs.gnss_course_rad[k] - np.interp(tk, tg, psi_g)))))
+    c = np.concatenate(([0.0], np.cumsum(d)))
+    lo = np.searchsorted(tk, tk - 0.5 * window, side="left")
+    hi = np.searchsorted(tk, tk + 0.5 * window, side="right")
+    d_mean = (c[hi] - c[lo]) / (hi - lo)                 # centred moving average
+    return np.interp(tg, tk, d_mean)
+
+
 def prepare(epochs: Epochs, params: Params) -> Prepared:
     """Kernel inputs from epochs and parameters (see the module docstring)."""
     fp = params["fkf"]
@@ -170,6 +199,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         integral = np.zeros(len(g))
         integral[1:] = np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(tg))
         psi_g = psi_a + integral - np.interp(t_a, tg, integral)
+        psi_g = psi_g + course_correction(epochs, t_s, tg, psi_g, params)
         _, first = np.unique(np.floor(tg / max(fp["heading_interval_s"], 1e-9)), return_index=True)
         use = g[first]
         theta[use] = np.angle(np.exp(1j * psi_g[first]))     # wrapped to (-pi, pi]

@@ -114,8 +114,7 @@ N_PAR = 20
 #: (chi-square(2) at 1 - 4e-6)
 SMOOTH_RESTART_NEES = 25.0
 
-#: share given to a stale local filter at a fusion-reset (its P becomes P_g / C_STALE)
-C_STALE_SHARE = 0.05
+
 
 # ---- integer flags --------------------------------------------------------------------
 F_MODE_FR = 0      # 1: fusion-reset, 0: no reset
@@ -746,11 +745,13 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
         # ---- master fusion -----------------------------------------------------------
         g_fresh = t_now - t_last_acc <= par[K_GNSS_STALE_S]
         d_fresh = t_now - t_last_dr <= par[K_DR_STALE_S]
-        if both and g_fresh != d_fresh:
-            # one local filter has had no measurement for a while (GNSS outage, DR
-            # stream gap): it contributes nothing -- in NR mode the GNSS filter's
-            # extrapolation (or the DR filter's stale state) would otherwise drag
-            # the fused track with the weight the fuzzy controller never lets reach 0
+        if both and not mode_fr and g_fresh != d_fresh:
+            # NR: a local filter that has had no measurement for a while (GNSS
+            # outage, DR stream gap) contributes nothing -- the GNSS filter's lone
+            # extrapolation would otherwise drag the fused track with the weight the
+            # fuzzy controller never lets reach 0 (a 10-min gap: 19 km).  FR needs no
+            # such rule: a stale filter is reset to x_g every epoch and carries only
+            # its share of the common prior.
             counters[C_STALE] += 1
             if g_fresh:
                 xg[:] = x1
@@ -762,22 +763,6 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 Pg[:, :] = P2
                 beta_out[kx, 0] = 0.0
                 beta_out[kx, 1] = 0.0
-            if mode_fr:                             # the stale filter restarts from x_g
-                ds = 1.0 / math.sqrt(C_STALE_SHARE)
-                for i in range(NX):
-                    if g_fresh:
-                        d1[i] = 1.0
-                        d2[i] = ds
-                        x2[i] = xg[i]
-                    else:
-                        d1[i] = ds
-                        d2[i] = 1.0
-                        x1[i] = xg[i]
-                    for j in range(NX):
-                        if g_fresh:
-                            P2[i, j] = Pg[i, j] / C_STALE_SHARE
-                        else:
-                            P1[i, j] = Pg[i, j] / C_STALE_SHARE
         elif both:
             if fusion == FUSE_COV:
                 fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,

@@ -263,21 +263,13 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                     t_dr = t
         g_fresh = t - t_acc <= par[kf.K_GNSS_STALE_S]
         d_fresh = t - t_dr <= par[kf.K_DR_STALE_S]
-        if both and g_fresh != d_fresh:                   # a stale filter contributes nothing
+        if both and not fr and g_fresh != d_fresh:        # NR: a stale filter is left out
             if g_fresh:
                 xg, Pg = x1.copy(), P1.copy()
                 beta_out[k] = 1.0
             else:
                 xg, Pg = x2.copy(), P2.copy()
                 beta_out[k] = 0.0
-            if fr:
-                cs = kf.C_STALE_SHARE
-                if g_fresh:
-                    d1, d2 = np.ones(NX), np.full(NX, 1 / math.sqrt(cs))
-                    x2, P2 = xg.copy(), Pg / cs
-                else:
-                    d1, d2 = np.full(NX, 1 / math.sqrt(cs)), np.ones(NX)
-                    x1, P1 = xg.copy(), Pg / cs
         elif both:
             if fusion == kf.FUSE_COV:
                 Y, yv = np.zeros((NX, NX)), np.zeros(NX)
