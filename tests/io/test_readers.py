@@ -89,6 +89,9 @@ def test_read_drive_real_mcap_keeps_warnings():
 def test_read_drive_mcap_for_one_stream():
     d = read_drive(gps=DRIVE / "gps.nmea", odo=SMALL_MCAP, params=P)
     assert len(d.gnss) == 579 and len(d.odo) == 100 and d.gyro is None
+    d = read_drive(gps=SMALL_MCAP, gyro=DRIVE / "gyro.csv", params=P)
+    assert len(d.gnss) == 20 and len(d.gyro) == 6256 and d.odo is None
+    assert d.sources[0].streams == ("gnss",)
     with pytest.raises(NoDataError, match="no gyro messages"):
         read_drive(gyro=REAL_MCAP, params=P)
 
