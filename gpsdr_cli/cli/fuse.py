@@ -21,7 +21,7 @@ from .options import (
     reader_options,
 )
 
-#: Logs with more epochs than this get a progress display (on a terminal, unless -q).
+#: Inputs larger than this (bytes, all files together) get a progress line (terminal, not -q).
 LONG_LOG_BYTES = 20_000_000
 
 
