@@ -133,3 +133,17 @@ def test_one_record_with_a_far_future_time_stamp(tmp_path: Path) -> None:
         assert type(err).__name__ != "NonFiniteOutputError", str(err)
         return
     assert F.track_problems(res.track, n_epochs=len(res.epochs)) == []
+
+
+@pytest.mark.parametrize("cell", [b"1e999999", b"1715673603.901e3080000", b"-1e999999"])
+def test_csv_time_with_a_huge_exponent(tmp_path: Path, cell: bytes) -> None:
+    """readers: a time cell like '1.9e3080000' raised decimal.Overflow out of the CSV reader."""
+    from gpsdr_cli.io.csv import read_gyro_csv
+
+    p = tmp_path / "gyro.csv"
+    p.write_bytes(b"t,yaw_rate\n1715673600.0,0.1\n" + cell + b",0.1\n1715673600.2,0.1\n")
+    try:
+        d = read_gyro_csv(p, config.defaults()["gyro"])
+    except GpsdrError:
+        return
+    assert d.gyro is not None and np.isfinite(d.gyro.yaw_rate_radps).all()
