@@ -330,7 +330,23 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame,
         progress(f"running {params['filter']['name']}"
                  + (" + RTS smoother" if params["filter"]["smooth"] else ""))
     result = run(epochs, params)
-    return epochs, result, track_frame(epochs, result, frame), work.skipped
+    track = track_frame(epochs, result, frame)
+    if work.gnss is not None and len(work.gnss):
+        shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
+        track["pdop"] = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
+    return epochs, result, track, work.skipped
+
+
+def latest_gnss_pdop(epochs: Epochs, gnss_t_ns: np.ndarray) -> np.ndarray:
+    """PDOP of the latest GNSS record at or before each epoch; NaN before the first record
+    and where that record carried no PDOP (track_frame's forward fill cannot tell a record
+    without PDOP from an epoch without a record)."""
+    t = np.asarray(epochs.t_ns, np.int64)
+    is_record = np.isin(t, np.asarray(gnss_t_ns, np.int64))
+    last = np.maximum.accumulate(np.where(is_record, np.arange(len(t)), -1)) if len(t) else \
+        np.zeros(0, np.int64)
+    pdop = np.asarray(epochs.pdop, float)
+    return np.where(last >= 0, pdop[np.maximum(last, 0)], np.nan)
 
 
 def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,

@@ -248,3 +248,16 @@ def test_a_stray_time_stamp_is_dropped_and_counted(drive: Drive, reference) -> N
     # two long sessions an hour and a half apart are both kept
     t = np.concatenate([np.arange(1000), 5400 + np.arange(800)]) * 1_000_000_000
     assert stray_mask(t).all()
+
+
+def test_pdop_is_null_after_a_gnss_record_without_one(drive: Drive) -> None:
+    d = copy.deepcopy(drive)
+    d.gnss.pdop[100:200] = np.nan  # receiver stopped sending GSA for 10 s
+    res = fuse(d, config.defaults())
+    t = res.track["time"].astype("int64").to_numpy()
+    rec = d.gnss.t_ns
+    inside = (t >= rec[100]) & (t < rec[200])
+    after = t >= rec[200]
+    assert inside.sum() > 1000
+    assert np.isnan(res.track["pdop"].to_numpy()[inside]).all()
+    assert (res.track["pdop"].to_numpy()[after] == 1.8).all()
