@@ -226,3 +226,19 @@ def test_failed_track_write_keeps_the_existing_statistics(runs, tmp_path: Path) 
                                    "--stats", str(stats), "-q"])
     assert res.exit_code == 1 and F.error_line_problems(res.stderr) == []
     assert stats.read_bytes() == b"precious stats"
+
+
+@pytest.mark.parametrize("filter_name", FILTERS)
+@pytest.mark.parametrize("gap_s", [3000.0, 1e5])
+def test_long_gap_before_the_last_fix(filter_name: str, gap_s: float) -> None:
+    """A logger paused for 50 min (or a day), then one more fix: a track or a clean error.
+    (fkf: ZeroDivisionError out of the kernel at a 3000 s gap, found by fuzzing.)"""
+    from gpsdr_cli import config
+
+    sim = F.base_sim(duration_s=20.0)
+    g = F.take(sim.drive.gnss, np.r_[np.arange(len(sim.drive.gnss)), len(sim.drive.gnss) - 1])
+    g.t_ns[-1] += round(gap_s * NS_PER_S)
+    drive = F.copy_drive(sim.drive)
+    drive.gnss = g
+    out = F.run_inmemory(drive, config.merge(config.defaults(), {"filter": {"name": filter_name}}))
+    assert F.outcome_problems(out, "either") == []
