@@ -161,9 +161,10 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     tk = t_s[k]
     d = np.unwrap(np.angle(np.exp(1j * (epochs.gnss_course_rad[k] - np.interp(tk, tg, psi_g)))))
     c = np.concatenate(([0.0], np.cumsum(d)))
-    lo = np.searchsorted(tk, tk - 0.5 * window, side="left")
-    hi = np.searchsorted(tk, tk + 0.5 * window, side="right")
-    d_mean = (c[hi] - c[lo]) / (hi - lo)                 # centred moving average
+    half = np.minimum(0.5 * window, np.minimum(tk - tk[0], tk[-1] - tk))
+    lo = np.searchsorted(tk, tk - half, side="left")
+    hi = np.searchsorted(tk, tk + half, side="right")
+    d_mean = (c[hi] - c[lo]) / (hi - lo)     # centred average, shrinking at the ends: no lag
     return np.interp(tg, tk, d_mean)
 
 
