@@ -82,8 +82,10 @@ def plot_report(track: pd.DataFrame, out_path: str | Path, reference_en: pd.Data
         ax_map.plot(ge[okg & rejected], gn[okg & rejected], "x", ms=4, color="tab:red",
                     label=f"rejected fixes ({int((okg & rejected).sum())})", zorder=2)
     if reference_en is not None and len(reference_en):
-        ax_map.plot(reference_en["e"], reference_en["n"], "-", lw=1.0, color="k",
-                    label="reference", zorder=3)
+        tr = reference_en["t_ns"].to_numpy(np.int64)
+        span = (tr >= t_ns[0] - NS_PER_S) & (tr <= t_ns[-1] + NS_PER_S)  # the track's stretch only
+        ax_map.plot(reference_en["e"].to_numpy()[span], reference_en["n"].to_numpy()[span], "-",
+                    lw=1.0, color="k", label="reference", zorder=3)
     ax_map.plot(e, n, "-", lw=1.2, color="tab:blue", label="fused", zorder=4)
     for k, (i0, i1) in enumerate(runs):
         ax_map.plot(e[i0:i1 + 1], n[i0:i1 + 1], "-", lw=2.5, color="tab:orange",
