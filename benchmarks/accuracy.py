@@ -1,9 +1,10 @@
 """Accuracy benchmark: every registered filter, forward and RTS-smoothed, on every
-simulated scenario (fixed seed) and on the real comma2k19 drive, next to GNSS alone
+simulated scenario (fixed seeds 1, 2, 3, figures pooled) and on the real comma2k19 drive, next to GNSS alone
 and the oracle (the same filter told the true noise: ``simulate.oracle_params`` and
 ``simulate.oracle_drive``).
 
     .venv/bin/python benchmarks/accuracy.py                 # everything -> benchmarks/accuracy.md
+    .venv/bin/python benchmarks/accuracy.py --seeds 1       # one seed per scenario (2-3 min)
     .venv/bin/python benchmarks/accuracy.py --quick         # 3-minute drives, no one_hour
     .venv/bin/python benchmarks/accuracy.py --scenarios tunnels --filters ekf,aekf
 
@@ -45,7 +46,6 @@ from gpsdr_cli.evaluation import (
 from gpsdr_cli.simulate import SCENARIOS, oracle_drive, oracle_params, simulate_drive
 
 COMMA = ROOT.parent / "shared" / "data" / "comma2k19"
-SEED = 1
 
 
 @dataclass
@@ -120,9 +120,9 @@ def figures(track: pd.DataFrame, ref: pd.DataFrame, name: str, params: dict) -> 
 
 
 def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_modes: list[bool],
-              oracle: bool, keep: dict) -> list[Row]:
-    sim = simulate_drive(scenario, seed=SEED, duration_s=duration_s)
-    label = f"{scenario} (seed {SEED}, {sim.truth['t_ns'].size / 100 / 60:.0f} min)"
+              oracle: bool, keep: dict, seed: int) -> list[Row]:
+    sim = simulate_drive(scenario, seed=seed, duration_s=duration_s)
+    label = f"{scenario} (seed {seed}, {sim.truth['t_ns'].size / 100 / 60:.0f} min)"
     rows: list[Row] = []
     truth_ll = sim.truth[["t_ns", "lat", "lon"]]
     odrive = oracle_drive(sim)
@@ -217,6 +217,31 @@ def bench_comma(names: list[str], smooth_modes: list[bool], keep: dict) -> list[
     return rows
 
 
+def pool(per_seed: list[list[Row]], scenario: str, seeds: list[int]) -> list[Row]:
+    """One row per method over several seeds: RMSE and oracle RMSE as root mean squares,
+    CEP95 and drifts as means, max as the max."""
+    out: list[Row] = []
+    label = f"{scenario} (seeds {','.join(map(str, seeds))})"
+    for i, first in enumerate(per_seed[0]):
+        rs = [rows[i] for rows in per_seed if i < len(rows) and rows[i].method == first.method]
+
+        def mean(attr: str, rs=rs) -> float:
+            v = np.array([getattr(r, attr) for r in rs], float)
+            return float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
+
+        def rms(attr: str, rs=rs) -> float:
+            v = np.array([getattr(r, attr) for r in rs], float)
+            return float(np.sqrt(np.nanmean(v * v))) if np.isfinite(v).any() else math.nan
+
+        mx = np.array([r.max_m for r in rs], float)
+        out.append(Row(label, first.method, rms("rmse_m"), mean("cep95_m"),
+                       float(np.nanmax(mx)) if np.isfinite(mx).any() else math.nan,
+                       mean("mse_m2"), mean("drift60_pct"), rms("oracle_rmse_m"),
+                       mean("oracle_drift60_pct"), mean("seconds"),
+                       "; ".join(sorted({r.note for r in rs if r.note}))))
+    return out
+
+
 def fmt(x: float, nd: int = 2) -> str:
     return "-" if x is None or not np.isfinite(x) else f"{x:.{nd}f}"
 
@@ -282,11 +307,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-comma", action="store_true")
     ap.add_argument("--no-smooth", action="store_true")
     ap.add_argument("--no-oracle", action="store_true")
-    ap.add_argument("--seed", type=int, default=1, help="simulation seed (default 1)")
+    ap.add_argument("--seeds", default="1,2,3", help="simulation seeds, comma-separated (default 1,2,3); "
+                    "with several, each figure is pooled over the seeds (RMSE as the root of "
+                    "the mean square, CEP95 and drift as means, max as the max)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "accuracy.md"))
     args = ap.parse_args(argv)
-    global SEED
-    SEED = args.seed
+    seeds = [int(x) for x in args.seeds.split(",") if x.strip()]
     names = available_filters([s for s in args.filters.split(",") if s] or None)
     scen = [s for s in args.scenarios.split(",") if s]
     if args.quick:
@@ -297,8 +323,10 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     for sc in scen:
         print(f"# {sc} ...", file=sys.stderr)
-        rows += bench_sim(sc, names, 180.0 if args.quick and sc != "tunnels" else None,
-                          smooth_modes, not (args.no_oracle or args.quick), keep)
+        per_seed = [bench_sim(sc, names, 180.0 if args.quick and sc != "tunnels" else None,
+                              smooth_modes, not (args.no_oracle or args.quick), keep, seed)
+                    for seed in seeds]
+        rows += per_seed[0] if len(seeds) == 1 else pool(per_seed, sc, seeds)
     if not args.no_comma and COMMA.exists():
         print("# comma2k19 ...", file=sys.stderr)
         rows += bench_comma(names, smooth_modes, keep)
@@ -306,7 +334,7 @@ def main(argv: list[str] | None = None) -> int:
     tgt = targets(rows)
     text = (f"# gpsdr accuracy benchmark\n\n`.venv/bin/python benchmarks/accuracy.py"
             f"{' ' + ' '.join(argv or sys.argv[1:]) if (argv or sys.argv[1:]) else ''}` "
-            f"(seed {SEED}, filters: {', '.join(names)}; {time.perf_counter() - t0:.0f} s)\n\n"
+            f"(seeds {args.seeds}, filters: {', '.join(names)}; {time.perf_counter() - t0:.0f} s)\n\n"
             "Errors are horizontal, against the simulator's truth (or comma2k19's reference), over "
             "every filter epoch; GNSS only: the fixes themselves. 60-s drift: error at the end of "
             "each 50-70 s GNSS outage as % of the distance driven in it. Oracle: the same filter "
