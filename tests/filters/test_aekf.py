@@ -292,3 +292,34 @@ def test_pdop_regimes_and_continuous():
     np.testing.assert_allclose(k, [1, 1, 3, 10, 10])
     assert 1.0 < pdop_factors(np.array([3.75]), g)[0][0] < 3.0
     np.testing.assert_allclose(ka[[0, 2, 4]], [1, 0.9, 0.003])
+
+
+def _slice(ep: Epochs, k: int) -> Epochs:
+    fields = {f: getattr(ep, f)[:k] for f in ("t_ns", "dt_s", "has_gnss", "gnss_e", "gnss_n",
+                                             "gnss_sd_e", "gnss_sd_n", "pdop", "gnss_speed_mps",
+                                             "gnss_course_rad", "has_gyro", "yaw_rate_radps",
+                                             "has_odo", "odo_speed_mps", "gnss_outage")}
+    return Epochs(gap_s=ep.gap_s, **fields)
+
+
+@pytest.mark.parametrize("name", FILTERS)
+@pytest.mark.parametrize("smooth", [False, True])
+@pytest.mark.parametrize("k", [0, 1, 2, 25])
+def test_tiny_inputs(name, smooth, k):
+    """Empty, one-epoch and few-epoch drives: right lengths, finite values, no exception."""
+    ep, _ = tiny_drive(10.0, seed=40, dr_hz=10.0)
+    p = params_with({"filter": {"smooth": smooth}})
+    res = get(name)(_slice(ep, k), p)
+    assert len(res) == k and len(res.e) == k and len(res.var_n) == k
+    assert np.all(np.isfinite(res.e)) and np.all(res.var_e > 0)
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_start_at_standstill_without_gnss_course(name):
+    """Vehicle parked at the first fix (no course): v = 0 with ZUPTs, then drives off; the
+    remembered heading waits for the fixes, the track converges (< 2 m after 20 s of driving)."""
+    ep, tr = tiny_drive(90.0, seed=41, dr_hz=20.0, stops=((0.0, 20.0),), gnss_vel=False)
+    res = run(name, ep, params_with())
+    assert res.static[(tr.t_s > 1.0) & (tr.t_s < 19.0)].all()
+    err = horizontal_error(res, tr)
+    assert err[tr.t_s > 45.0].max() < 2.0
