@@ -40,7 +40,15 @@ of rejections).  DR local filter (eqs. (7)-(14), erratum: h3, h4 divide by
 The heading row is skipped below ``omega_min_speed`` (of the predicted state:
 the Jacobian divides by v2); below ``v_lin`` the distance row is linearised
 along the latest heading instead of ``v/|v|``: no division by a speed that
-can be zero.  Heading residuals are wrapped to (-pi, pi].
+can be zero.  Heading residuals are wrapped to (-pi, pi] and gated
+(chi-square(1) at ``[gnss] gate_prob``); after ``gate_reset_s`` of rejected
+headings q_w is re-aligned (``q_w += y``, its variance raised by ``y^2``), so
+a heading that outran the q_w random walk cannot lock the DR filter out.
+
+Stale local filters (NR mode): a filter without an accepted measurement for
+longer than the epochs' outage gap (GNSS) or ``[fkf] dr_stale_s`` (DR) is
+left out of the fusion while the other is fresh; in FR mode it needs no such
+rule (it is reset to x_g each epoch and carries only its share of the prior).
 
 Updates are sequential scalar rows with the Joseph form
 ``P = (I - K h) P (I - K h)^T + K r K^T`` (computed in O(n^2) for a row) and
