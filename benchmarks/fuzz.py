@@ -1,13 +1,17 @@
 """Fuzz gpsdr's readers and ``fuse`` end to end with mutated files; print the outcome counts.
 
     .venv/bin/python benchmarks/fuzz.py --cases 100000 [--jobs 2] [--seed 0] [--save DIR]
+                                        [--max-seconds S]
+    .venv/bin/python benchmarks/fuzz.py --one INDEX [--seed 0] [--save DIR]   # replay one case
 
 Seeds: a 12 s simulated urban drive written as gps.nmea, gyro.csv, odo.csv and
-drive.mcap (:func:`gpsdr_cli.testing.faults.fuzz_seed_files`).  Each case
-mutates one to three of those files (bit flips, random bytes, inserted tokens
-such as ``nan``/``1e308``/``$GPGGA``, deletions, duplicated ranges, swapped
-lines, rare truncation; NMEA checksums recomputed half of the time so mutated
-fields reach the field parsers) and runs one target:
+drive.mcap, plus the MCAP rewritten uncompressed in small chunks
+(:func:`gpsdr_cli.testing.faults.fuzz_seed_files`).  Case ``i`` draws from a
+generator seeded with ``seed * 1_000_000_007 + i``: a target, a filter, and 1-8
+mutations of one to three of those files (bit flips, random bytes, inserted
+tokens such as ``nan``/``1e308``/``$GPGGA``, deletions, duplicated ranges,
+swapped lines, rare truncation; NMEA checksums recomputed half of the time so
+mutated fields reach the field parsers).  Targets:
 
 - ``nmea``: ``parse_nmea``; ``gyro_csv``/``odo_csv``: the CSV readers;
   ``mcap``: ``read_mcap``;
@@ -15,12 +19,13 @@ fields reach the field parsers) and runs one target:
   drawn from ``gpsdr_cli.filters.NAMES``, then the track checked (one row per
   epoch, finite required columns).
 
-Contract: only GpsdrError subclasses escape, and no successful run yields a
-NaN in a required column.  Anything else is counted as an escape; the first
-input of each distinct escape is saved under ``--save`` for reproduction.
-Why not atheris: it needs a clang-built CPython extension and gives coverage
-guidance mostly for C code; the readers' hot paths are numpy, so random
-structured mutation finds the same classes of bugs here.
+Contract: only GpsdrError subclasses escape, no successful run yields a NaN in
+a required column, and nothing crashes the process.  Anything else is a bug:
+its first input is saved under ``--save``; a case that kills its worker (a
+segfault in a compiled library) is replayed alone with ``--one`` to confirm it
+and counted as ``crash:SIG<n>``.  Why not atheris: it needs a clang-built
+CPython extension and guides by C coverage; the readers' hot paths are numpy
+and pyarrow, so structured random mutation finds the same classes of bugs.
 """
 
 from __future__ import annotations
@@ -31,9 +36,12 @@ import hashlib
 import multiprocessing as mp
 import os
 import signal
+import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
@@ -42,46 +50,90 @@ from gpsdr_cli.filters import NAMES
 from gpsdr_cli.testing import faults as F
 
 #: Cases per worker task (progress is reported per finished task).
-CHUNK = 1000
+CHUNK = 500
 #: Share of cases per target (the e2e targets are ~20x slower than a reader).
 WEIGHTS = {"nmea": 0.3, "gyro_csv": 0.15, "odo_csv": 0.15, "mcap": 0.2, "e2e_files": 0.12,
            "e2e_mcap": 0.08}
 
 
-def _worker(args: tuple[int, int, int, str, str | None]) -> tuple[collections.Counter, dict]:
-    """Run ``n`` cases from ``seed``; return outcome counts and one example per bug key."""
-    worker_id, n, seed, seed_dir, save_dir = args
-    seeds = {name: (Path(seed_dir) / name).read_bytes() for name in F.FUZZ_FILES}
+def draw(seed: int, index: int) -> tuple[np.random.Generator, str, str | None, int]:
+    """Case ``index``'s generator, target and filter (deterministic)."""
+    case_seed = seed * 1_000_000_007 + index
+    rng = np.random.default_rng(case_seed)
     targets = list(WEIGHTS)
     p = np.array([WEIGHTS[t] for t in targets])
-    p /= p.sum()
+    target = targets[int(rng.choice(len(targets), p=p / p.sum()))]
+    filt = NAMES[int(rng.integers(len(NAMES)))] if target.startswith("e2e") else None
+    return rng, target, filt, case_seed
+
+
+def _save(save_dir: str, full: str, files: dict[str, bytes], filt: str | None, index: int) -> str:
+    h = hashlib.sha1(full.encode()).hexdigest()[:10]
+    d = Path(save_dir) / f"{full.split(':', 1)[0]}-{h}"
+    d.mkdir(parents=True, exist_ok=True)
+    for name, data in files.items():
+        (d / name).write_bytes(data)
+    (d / "outcome.txt").write_text(f"{full}\nfilter={filt}\nindex={index}\n")
+    return str(d)
+
+
+def _worker(args: tuple[int, int, int, int, str, str | None, str, float, frozenset[int]]
+            ) -> tuple[int, collections.Counter, dict]:
+    """Run cases ``start .. start+n-1`` (minus ``skip``); counts and one example per bug key.
+
+    Before each case its index goes into the task's breadcrumb file, so the
+    parent can tell which case was running when a worker died.
+    """
+    task_id, start, n, seed, seed_dir, save_dir, crumb_dir, deadline, skip = args
+    seeds = {name: (Path(seed_dir) / name).read_bytes() for name in F.FUZZ_FILES}
     counts: collections.Counter = collections.Counter()
     examples: dict[str, str] = {}
-    base = Path(tempfile.mkdtemp(prefix=f"gpsdr-fuzz-{worker_id}-",
+    base = Path(tempfile.mkdtemp(prefix=f"gpsdr-fuzz-{task_id}-",
                                  dir="/dev/shm" if os.path.isdir("/dev/shm") else None))
-    for i in range(n):
-        case_seed = seed * 1_000_000_007 + worker_id * 100_003 + i
-        rng = np.random.default_rng(case_seed)
-        target = targets[int(rng.choice(len(targets), p=p))]
-        filt = NAMES[int(rng.integers(len(NAMES)))] if target.startswith("e2e") else None
+    crumb = Path(crumb_dir) / f"task-{task_id}"
+    for index in range(start, start + n):
+        if index in skip:
+            continue
+        if time.time() > deadline:
+            break
+        crumb.write_text(str(index))
+        rng, target, filt, _ = draw(seed, index)
         key, files = F.fuzz_case(target, seeds, rng, base, filter_name=filt)
         full = f"{target}:{key}"
         counts[full] += 1
         if F.is_bug(key) and full not in examples:
-            where = ""
-            if save_dir:
-                h = hashlib.sha1(full.encode()).hexdigest()[:10]
-                d = Path(save_dir) / f"{target}-{h}"
-                d.mkdir(parents=True, exist_ok=True)
-                for name, data in files.items():
-                    (d / name).write_bytes(data)
-                (d / "outcome.txt").write_text(f"{full}\nfilter={filt}\ncase_seed={case_seed}\n")
-                where = str(d)
-            examples[full] = where or f"case_seed={case_seed} filter={filt}"
-    for name in F.FUZZ_FILES:
-        (base / name).unlink(missing_ok=True)
+            examples[full] = (_save(save_dir, full, files, filt, index) if save_dir
+                              else f"--one {index} --seed {seed}")
+    crumb.unlink(missing_ok=True)
+    for p in base.iterdir():
+        p.unlink()
     base.rmdir()
-    return counts, examples
+    return task_id, counts, examples
+
+
+def replay(index: int, seed: int, save_dir: str | None) -> str:
+    """Run case ``index`` alone in this process (its files kept under ``save_dir``)."""
+    seed_dir = Path(tempfile.mkdtemp(prefix="gpsdr-fuzz-seed-"))
+    seeds = F.fuzz_seed_files(seed_dir)
+    work = Path(save_dir or tempfile.mkdtemp(prefix="gpsdr-fuzz-one-")) / f"case-{index}"
+    work.mkdir(parents=True, exist_ok=True)
+    rng, target, filt, _ = draw(seed, index)
+    (work / "outcome.txt").write_text(f"{target}: running\nfilter={filt}\nindex={index}\n")
+    key, _ = F.fuzz_case(target, seeds, rng, work, filter_name=filt)
+    (work / "outcome.txt").write_text(f"{target}:{key}\nfilter={filt}\nindex={index}\n")
+    return f"{target}:{key} filter={filt} files={work}"
+
+
+def _confirm_crash(index: int, seed: int, save_dir: str | None) -> tuple[bool, str]:
+    """Replay a suspect case in a fresh process: (crashed?, outcome key)."""
+    cmd = [sys.executable, __file__, "--one", str(index), "--seed", str(seed)]
+    if save_dir:
+        cmd += ["--save", str(Path(save_dir) / "crashes")]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
+    if proc.returncode < 0:
+        _, target, _, _ = draw(seed, index)
+        return True, f"{target}:crash:SIG{signal.Signals(-proc.returncode).name}"
+    return False, ""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -90,38 +142,69 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
     ap.add_argument("--seed", type=int, default=0, help="seed of the case generator")
     ap.add_argument("--save", default="fuzz_escapes", help="where to save escaping inputs")
+    ap.add_argument("--max-seconds", type=float, default=float("inf"),
+                    help="stop starting cases after this long (the report says how many ran)")
+    ap.add_argument("--one", type=int, default=None, metavar="INDEX", help="replay one case")
     a = ap.parse_args(argv)
+    if a.one is not None:
+        print(replay(a.one, a.seed, a.save))
+        return 0
 
-    # SIGTERM -> SystemExit, so the pool's context manager terminates the workers too
+    # SIGTERM -> SystemExit, so the executor's context manager stops the workers too
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     seed_dir = Path(tempfile.mkdtemp(prefix="gpsdr-fuzz-seed-"))
+    crumb_dir = Path(tempfile.mkdtemp(prefix="gpsdr-fuzz-crumbs-"))
     F.fuzz_seed_files(seed_dir)
     jobs = max(1, min(a.jobs, a.cases))
-    n_tasks = max(jobs, -(-a.cases // CHUNK))
-    sizes = [a.cases // n_tasks + (1 if k < a.cases % n_tasks else 0) for k in range(n_tasks)]
-    tasks = [(k, sizes[k], a.seed, str(seed_dir), a.save) for k in range(n_tasks)]
     t0 = time.perf_counter()
-    results = []
-    done = 0
-    with mp.get_context("spawn").Pool(jobs) as pool:
-        for res in pool.imap_unordered(_worker, tasks):
-            results.append(res)
-            done += sum(res[0].values())
-            print(f"\r{done}/{a.cases} cases, {time.perf_counter() - t0:.0f} s", end="",
-                  file=sys.stderr, flush=True)
-    print(file=sys.stderr)
-    elapsed = time.perf_counter() - t0
+    deadline = time.time() + a.max_seconds
+    tasks: dict[int, tuple] = {}
+    for task_id, start in enumerate(range(0, a.cases, CHUNK)):
+        tasks[task_id] = (task_id, start, min(CHUNK, a.cases - start), a.seed, str(seed_dir),
+                          a.save, str(crumb_dir), deadline, frozenset())
     counts: collections.Counter = collections.Counter()
     examples: dict[str, str] = {}
-    for c, ex in results:
-        counts.update(c)
-        for k, v in ex.items():
-            examples.setdefault(k, v)
+    done = 0
+    while tasks:
+        try:
+            with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as ex:
+                futs = {ex.submit(_worker, t): tid for tid, t in tasks.items()}
+                while futs:
+                    finished, _ = wait(futs, return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        tid, c, ex_ = fut.result()
+                        del futs[fut]
+                        del tasks[tid]
+                        counts.update(c)
+                        for k, v in ex_.items():
+                            examples.setdefault(k, v)
+                        done += sum(c.values())
+                        print(f"\r{done}/{a.cases} cases, {time.perf_counter() - t0:.0f} s",
+                              end="", file=sys.stderr, flush=True)
+        except BrokenProcessPool:
+            # a worker died: replay the case each unfinished task was on, alone
+            for tid in list(tasks):
+                crumb = crumb_dir / f"task-{tid}"
+                if not crumb.exists():
+                    continue
+                index = int(crumb.read_text())
+                crumb.unlink()
+                crashed, key = _confirm_crash(index, a.seed, a.save)
+                if crashed:
+                    counts[key] += 1
+                    examples.setdefault(key, f"--one {index} --seed {a.seed}")
+                    t = tasks[tid]
+                    tasks[tid] = (*t[:-1], t[-1] | {index})
+            print(f"\nworker died; crashes so far: "
+                  f"{sum(c for k, c in counts.items() if ':crash:' in k)}", file=sys.stderr)
+    print(file=sys.stderr)
+    elapsed = time.perf_counter() - t0
 
     per_target: collections.Counter = collections.Counter()
     for key, c in counts.items():
         per_target[key.split(":", 1)[0]] += c
-    bugs = {k: c for k, c in counts.items() if F.is_bug(k.split(":", 1)[1])}
+    bugs = {k: c for k, c in counts.items()
+            if F.is_bug(k.split(":", 1)[1]) or ":crash:" in k}
     print(f"cases {sum(counts.values())} in {elapsed:.0f} s ({jobs} jobs), "
           f"distinct outcomes {len(counts)}, escapes {sum(bugs.values())} "
           f"({len(bugs)} distinct)")
@@ -132,8 +215,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{c:>7}  {key}{mark}")
     for key, where in sorted(examples.items()):
         print(f"example {key}: {where}")
-    for name in F.FUZZ_FILES:
-        (seed_dir / name).unlink(missing_ok=True)
+    for d in (seed_dir, crumb_dir):
+        for p in d.iterdir():
+            p.unlink()
+        d.rmdir()
     return 1 if bugs else 0
 
 
