@@ -69,6 +69,7 @@ from ..conventions import NS_PER_S
 from ..errors import ConfigError, NoDataError
 from . import fuzzy, register
 from . import kernels_fkf as kf
+from .adaptive import gate_threshold
 from .base import FilterResult
 
 #: seconds: an odometer reading older than this does not decide standstill
@@ -99,13 +100,11 @@ class Prepared:
     info: dict
 
 
-def gate_threshold(prob: float) -> float:
-    """chi-square(2) quantile: the 2-dof distribution is exponential, ``-2 ln(1 - p)``."""
-    return -2.0 * math.log1p(-prob)
-
-
 def chi2_1(prob: float) -> float:
-    """chi-square(1) quantile: the square of the normal quantile at ``(1 + p)/2``."""
+    """chi-square(1) quantile: the square of the normal quantile at ``(1 + p)/2``.
+
+    (Closed form: :func:`.adaptive.gate_threshold` would import SciPy for dof 1.)
+    """
     return NormalDist().inv_cdf(0.5 * (1.0 + prob)) ** 2
 
 
@@ -255,7 +254,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_ODO_SD] = params["odo"]["noise_sd_mps"]
     par[kf.K_ZUPT_SD] = sp["zupt_sd_mps"]
     par[kf.K_OMEGA_MIN] = max(sp["omega_min_speed_mps"], 1e-3)
-    par[kf.K_GATE_CHI2] = gate_threshold(g_p["gate_prob"]) if g_p["gate"] else 0.0
+    par[kf.K_GATE_CHI2] = gate_threshold(g_p["gate_prob"], 2) if g_p["gate"] else 0.0
     par[kf.K_GATE_RESET_S] = g_p["gate_reset_s"]
     par[kf.K_R_MIN] = ap["r_min_factor"]
     par[kf.K_R_MAX] = ap["r_max_factor"]

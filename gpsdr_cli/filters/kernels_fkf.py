@@ -90,6 +90,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .adaptive import nis_2d
 from .linalg import cholesky, is_spd, rts_step
 
 NX = 10
@@ -667,8 +668,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 rn = rfac[1] * gnss_var_n[kx]
                 s00 += re
                 s11 += rn
-                det = s00 * s11 - s01 * s01
-                nis = (s11 * ye * ye - 2.0 * s01 * ye * yn + s00 * yn * yn) / det
+                nis = nis_2d(ye, yn, s00, s01, s11)
                 nis_out[kx] = nis
                 accept = True
                 if chi2 > 0.0 and nis > chi2:
