@@ -291,8 +291,8 @@ def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
         stats_p.parent.mkdir(parents=True, exist_ok=True)  # a worker on another machine
         meta = {**res.metadata, **opts.extra_meta, "drive": spec.name,
                 "batch.request": request_key(opts)}
-        write_table(res.stats, stats_p, metadata=meta, units=stats_units(res.stats), fmt=opts.fmt)
         write_table(res.track, track_p, metadata=meta, units=TRACK_UNITS, fmt=opts.fmt)
+        write_table(res.stats, stats_p, metadata=meta, units=stats_units(res.stats), fmt=opts.fmt)
         return _row(spec, "ok", "", time.perf_counter() - t0, res.summary(),
                     str(track_p), str(stats_p))
     except GpsdrError as err:

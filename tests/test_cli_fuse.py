@@ -255,3 +255,14 @@ def test_group_level_debug_shows_the_traceback(gpsdr, tmp_path: Path) -> None:
     assert result.exit_code == 1
     assert "Traceback" in result.stderr
     assert result.stderr.strip().splitlines()[-1].startswith("gpsdr: error: ")
+
+
+def test_missing_output_directory_fails_first_and_writes_nothing(gpsdr, drive_dir: Path,
+                                                                 tmp_path: Path) -> None:
+    stats = tmp_path / "stats.parquet"
+    stats.write_bytes(b"old stats")
+    result = gpsdr(["fuse", *streams(drive_dir), "-o", tmp_path / "no" / "t.parquet",
+                    "--stats", stats])
+    assert result.exit_code == 1
+    assert "does not exist" in one_line_error(result)
+    assert stats.read_bytes() == b"old stats"

@@ -107,6 +107,11 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
     for out in (track_path, stats_out):
         if out is not None and out != "-" and any(_same(out, p) for p in inputs):
             raise UsageError(f"{out}: refusing to overwrite an input file; give another -o/--stats")
+    for out in (track_path, stats_out):  # fail before the work, and before writing anything
+        if out is not None and out != "-" and not Path(out).resolve().parent.is_dir():
+            from ..errors import InputError
+
+            raise InputError(out, f"cannot write: directory {Path(out).parent} does not exist")
     if track_path == "-" and fmt == "parquet" and sys.stdout.isatty():
         raise UsageError("refusing to write binary Parquet to a terminal; "
                          "redirect stdout, give -o FILE or --format csv")
@@ -128,10 +133,11 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
         stages("writing outputs")
         from ..io.parquet import write_table
 
+        # the track first: if it cannot be written, an existing statistics file stays as is
+        write_table(res.track, track_path, metadata=res.metadata, units=TRACK_UNITS, fmt=fmt)
         if stats_out is not None:
             write_table(res.stats, stats_out, metadata=res.metadata,
                         units=stats_units(res.stats), fmt=fmt)
-        write_table(res.track, track_path, metadata=res.metadata, units=TRACK_UNITS, fmt=fmt)
 
     if not quiet:
         _report(res, track_path, stats_out, reference, gnss_offset == "auto")
