@@ -142,6 +142,8 @@ def _text_to_ns(text: str) -> int | None:
         return None
     if not d.is_finite():
         return None
+    if d and d.adjusted() > 12:  # beyond int64 ns; checked first: scaleb would raise decimal.Overflow
+        raise OverflowError(text)
     ns = d.scaleb(9).to_integral_value()
     if abs(ns) >= 2**63:
         raise OverflowError(text)
