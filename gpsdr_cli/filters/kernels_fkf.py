@@ -487,6 +487,44 @@ def fuse_information(x1: np.ndarray, P1: np.ndarray, idx1: np.ndarray,
 
 
 @njit(cache=True)
+def fuse_two(x1: np.ndarray, P1: np.ndarray, x2: np.ndarray, P2: np.ndarray,
+             xg: np.ndarray, Pg: np.ndarray, S: np.ndarray, L: np.ndarray,
+             W: np.ndarray, Sinv: np.ndarray, M: np.ndarray) -> None:
+    """:func:`fuse_information` for two filters over all states, with one factorisation.
+
+    ``(P1^-1 + P2^-1)^-1 = P1 (P1 + P2)^-1 P2`` and
+    ``x_g = x1 + P1 (P1 + P2)^-1 (x2 - x1)``: one Cholesky of ``P1 + P2``
+    instead of three (FR mode, where every state is fused).  ``P_g = M P2``
+    with ``M = P1 (P1 + P2)^-1`` is a product, not a difference: no
+    cancellation when one filter is far more certain than the other.
+    """
+    for i in range(NX):
+        for j in range(NX):
+            S[i, j] = P1[i, j] + P2[i, j]
+    cholesky(S, L)
+    chol_inverse(L, W, Sinv)
+    for i in range(NX):
+        for j in range(NX):
+            acc = 0.0
+            for m in range(NX):
+                acc += P1[i, m] * Sinv[m, j]
+            M[i, j] = acc
+    for i in range(NX):
+        acc = x1[i]
+        for m in range(NX):
+            acc += M[i, m] * (x2[m] - x1[m])
+        xg[i] = acc
+        for j in range(i, NX):
+            v = 0.0
+            w = 0.0
+            for m in range(NX):
+                v += M[i, m] * P2[m, j]
+                w += M[j, m] * P2[m, i]
+            Pg[i, j] = 0.5 * (v + w)
+            Pg[j, i] = Pg[i, j]
+
+
+@njit(cache=True)
 def normalise_pair(a: float, b: float, log_scale: bool) -> tuple[float, float]:
     """Normalise two non-negative evaluation factors to [0, 1] (ALGORITHMS.md 2, our choice).
 
@@ -773,8 +811,11 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 beta_out[kx, 1] = 0.0
         elif both:
             if fusion == FUSE_COV:
-                fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
-                                 A1, L1, B1, A2, L2, B2, L, Wk)
+                if mode_fr:
+                    fuse_two(x1, P1, x2, P2, xg, Pg, Y, L, Wk, A1, B1)
+                else:
+                    fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
+                                     A1, L1, B1, A2, L2, B2, L, Wk)
                 beta_out[kx, 0] = 0.5 * (Pg[IE, IE] / P1[IE, IE] + Pg[IN, IN] / P1[IN, IN])
                 beta_out[kx, 1] = 0.5 * (Pg[IVE, IVE] / P1[IVE, IVE] + Pg[IVN, IVN] / P1[IVN, IVN])
                 for i in range(NX):
