@@ -64,7 +64,8 @@ Master fusion (each epoch):
   never eps_e, eps_n -- their copies there are the never-updated prior, and
   fusing them would count that prior twice and pull the other filter's
   estimate towards zero.  In FR mode every state is fused (the reset gives
-  each filter a consistent share of all of them).
+  each filter a consistent share of all of them), as ``P1 (P1 + P2)^-1 P2``
+  with a single factorisation (:func:`fuse_two`).
 * fuzzy weights (fafkf, seed 002 eq. (19)-(20)): ``x_g = W1 x1 + W2 x2`` with
   diagonal weight matrices ``W1 + W2 = I``; ``P_g = W1 P1 W1 + W2 P2 W2``
   (the covariance of that combination when the local errors are bounded by
