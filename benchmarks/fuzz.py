@@ -187,8 +187,11 @@ def main(argv: list[str] | None = None) -> int:
                 crumb = crumb_dir / f"task-{tid}"
                 if not crumb.exists():
                     continue
-                index = int(crumb.read_text())
+                text = crumb.read_text().strip()
                 crumb.unlink()
+                if not text:  # the worker died while writing it: nothing to replay
+                    continue
+                index = int(text)
                 crashed, key = _confirm_crash(index, a.seed, a.save)
                 if crashed:
                     counts[key] += 1
