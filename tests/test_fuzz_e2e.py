@@ -147,3 +147,21 @@ def test_csv_time_with_a_huge_exponent(tmp_path: Path, cell: bytes) -> None:
     except GpsdrError:
         return
     assert d.gyro is not None and np.isfinite(d.gyro.yaw_rate_radps).all()
+
+
+@pytest.mark.parametrize("cell", [b"1e-320100000", b"1715673605.1e-320100000"])
+def test_csv_time_with_a_huge_negative_exponent_does_not_crash(tmp_path: Path, cell: bytes) -> None:
+    """readers: pyarrow's decimal128 conversion of '1e-320100000' segfaulted the process
+    (gpsdr fuse --gyro F exited 139, no error line).  Run in a child so pytest survives."""
+    import subprocess
+    import sys
+
+    p = tmp_path / "gyro.csv"
+    p.write_bytes(b"t,yaw_rate\n1715673600.0,0.1\n" + cell + b",0.1\n1715673600.2,0.1\n")
+    code = ("import sys\nfrom gpsdr_cli import config\nfrom gpsdr_cli.errors import GpsdrError\n"
+            "from gpsdr_cli.io.csv import read_gyro_csv\n"
+            "try:\n    read_gyro_csv(sys.argv[1], config.defaults()['gyro'])\n"
+            "except GpsdrError:\n    pass\n")
+    proc = subprocess.run([sys.executable, "-c", code, str(p)], capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr[-300:]}"
