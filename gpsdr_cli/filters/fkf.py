@@ -265,6 +265,12 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_HEAD_CHI2] = chi2_1(g_p["gate_prob"]) if g_p["gate"] else 0.0
     par[kf.K_GNSS_STALE_S] = epochs.gap_s
     par[kf.K_DR_STALE_S] = fp["dr_stale_s"]
+    positive = {"fkf.heading_sd_rad": fp["heading_sd_rad"], "odo.noise_sd_mps": par[kf.K_ODO_SD],
+                "standstill.zupt_sd_mps": sp["zupt_sd_mps"], "fkf.gnss_err_sd_m": fp["gnss_err_sd_m"]}
+    for key, value in positive.items():
+        if not value > 0:
+            raise ConfigError(f"{key} = {value}: expected a sigma > 0 (a zero sigma makes a "
+                              "measurement or state exact and the filter divide by zero)")
     if not (par[kf.K_TAU_EPS] > 0 and 0 < par[kf.K_R_MIN] <= 1.0 <= par[kf.K_R_MAX]):
         raise ConfigError("fkf.gnss_err_tau_s must be > 0 and fafkf.r_min_factor <= 1 <= "
                           f"fafkf.r_max_factor (got {par[kf.K_TAU_EPS]}, {par[kf.K_R_MIN]}, "

@@ -163,6 +163,14 @@ N_OUT = 7
 
 NPACK = NX * (NX + 1) // 2
 
+#: Ceiling on each state's sigma after a prediction (m, m/s, m/s^2, m, m/s, m/s^2, m, m,
+#: rad, m): a logger pause of 50 min grows the white-jerk position variance to ~1e16 m^2,
+#: and the next fix's update cancelled it to rounding noise (a variance of -1, then a
+#: ZeroDivisionError; found by the fault tests).  At 1e14 m^2 the update keeps 1e-2 m^2
+#: accuracy; gaps under ~15 min never reach the ceiling (4 km/1e4 m caps broke the
+#: 10-min-gap smoother).  Applied as P <- D P D (a congruence: P stays SPD).
+SD_CEILING = np.array([1e7, 3e4, 100.0, 1e7, 3e4, 100.0, 100.0, 100.0, math.pi, 10.0])
+
 
 @njit(cache=True)
 def pack(P: np.ndarray, out: np.ndarray) -> None:
@@ -271,6 +279,24 @@ def predict(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: np.ndarra
     P[IEPS_N, IEPS_N] += qe * d[IEPS_N] ** 2
     P[IQW, IQW] += par[K_QW_RW] ** 2 * T * d[IQW] ** 2   # random walks q_w, q_s
     P[IQS, IQS] += par[K_QS_RW] ** 2 * T * d[IQS] ** 2
+    cap_variance(P)
+
+
+@njit(cache=True)
+def cap_variance(P: np.ndarray) -> None:
+    """P <- D P D with D_ii = min(1, SD_CEILING_i / sigma_i): sigmas at most the ceiling."""
+    scaled = False
+    for i in range(NX):
+        if P[i, i] > SD_CEILING[i] ** 2:
+            scaled = True
+    if not scaled:
+        return
+    dsc = np.empty(NX)
+    for i in range(NX):
+        dsc[i] = min(1.0, SD_CEILING[i] / math.sqrt(P[i, i])) if P[i, i] > 0.0 else 1.0
+    for i in range(NX):
+        for j in range(NX):
+            P[i, j] *= dsc[i] * dsc[j]
 
 
 @njit(cache=True)
@@ -817,8 +843,10 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 else:
                     fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
                                      A1, L1, B1, A2, L2, B2, L, Wk)
-                beta_out[kx, 0] = 0.5 * (Pg[IE, IE] / P1[IE, IE] + Pg[IN, IN] / P1[IN, IN])
-                beta_out[kx, 1] = 0.5 * (Pg[IVE, IVE] / P1[IVE, IVE] + Pg[IVN, IVN] / P1[IVN, IVN])
+                beta_out[kx, 0] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
+                                         + Pg[IN, IN] / max(P1[IN, IN], 1e-300))
+                beta_out[kx, 1] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
+                                         + Pg[IVN, IVN] / max(P1[IVN, IVN], 1e-300))
                 for i in range(NX):
                     w[i] = par[K_BETA_GNSS]
             else:

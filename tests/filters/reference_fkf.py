@@ -57,6 +57,15 @@ def Q_of(T: float, static: bool, par: np.ndarray) -> np.ndarray:
     return Q
 
 
+def cap(P: np.ndarray) -> np.ndarray:
+    """Sigma ceiling after a prediction, as a congruence D P D (kernels_fkf.SD_CEILING)."""
+    sd = np.sqrt(np.diag(P))
+    if np.all(sd <= kf.SD_CEILING):
+        return P
+    D = np.minimum(1.0, kf.SD_CEILING / sd)
+    return P * np.outer(D, D)
+
+
 def kf_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float
               ) -> tuple[np.ndarray, np.ndarray]:
     """One scalar row: K = P H^T / S, Joseph form."""
@@ -195,8 +204,8 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         if T > 0:
             Phi, Q = Phi_of(T, st, par[kf.K_TAU_EPS]), Q_of(T, st, par)
             x1, x2 = Phi @ x1, Phi @ x2
-            P1 = Phi @ P1 @ Phi.T + np.outer(d1, d1) * Q
-            P2 = Phi @ P2 @ Phi.T + np.outer(d2, d2) * Q
+            P1 = cap(Phi @ P1 @ Phi.T + np.outer(d1, d1) * Q)
+            P2 = cap(Phi @ P2 @ Phi.T + np.outer(d2, d2) * Q)
         if gnss_on:
             if st:
                 x1, P1 = zupt(x1, P1)
@@ -315,7 +324,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
             T, st = prep.dt[k + 1], bool(prep.static[k + 1])
             Phi = Phi_of(T, st, par[kf.K_TAU_EPS])
             x_prior = Phi @ xs[k]
-            P_prior = Phi @ Ps[k] @ Phi.T + Q_of(T, st, par)
+            P_prior = cap(Phi @ Ps[k] @ Phi.T + Q_of(T, st, par))
             C = np.linalg.solve(P_prior, Phi @ Ps[k]).T   # P Phi^T P_prior^-1
             x_s = xs[k] + C @ (x_s - x_prior)
             P_s = Ps[k] + C @ (P_s - P_prior) @ C.T
