@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     print("legend: rmse/max/drift in m against the truth; sx = sigma growth across the outage; "
           "e/s = end error / sigma; rej = fixes rejected; errN = clean one-line error, exit N")
     for b in bugs:
-        print("BUG " + b)
+        print(("BAD " if ": accuracy: " in b else "BUG ") + b.replace(": accuracy: ", ": "))
     if not a.keep:
         shutil.rmtree(root, ignore_errors=True)
     return 1 if bugs else 0
