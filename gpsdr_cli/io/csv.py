@@ -185,6 +185,10 @@ def _read_table(path: str | Path, data: bytes, t_column: str, columns: list[str]
     return t_ns, values, lines, info
 
 
+#: An exponent of four or more digits: no real time stamp or sensor value has one.
+_LONG_EXPONENT = re.compile(rb"[eE][+-]?0*[0-9]{4,}")
+
+
 class _FastPathFailed(Exception):
     """pyarrow rejected the file; parse it line by line instead."""
 
@@ -199,6 +203,10 @@ def _fast_path(data: bytes, body: int, names: list[str], delim: str, t_column: s
         raise _FastPathFailed  # pyarrow needs unique, non-empty names
     if body >= len(data):
         return np.zeros(0, np.int64), {c: np.zeros(0) for c in columns}, np.zeros(0, np.int64), 0
+    if _LONG_EXPONENT.search(data, body):
+        # pyarrow 26's decimal128 parser crashes the process (SIGSEGV) on exponents such as
+        # 1e-320100000; the line-by-line path handles them as out-of-range values.
+        raise _FastPathFailed
     types = {t_column: pa.decimal128(28, 9)}
     types.update({c: pa.float64() for c in columns})
     try:
