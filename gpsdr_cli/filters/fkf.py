@@ -138,6 +138,18 @@ def heading_alignment(epochs: Epochs, t_s: np.ndarray, params: Params) -> tuple[
     return float(t_s[0]), 0.0, "none"
 
 
+def despike(values: np.ndarray, threshold: float) -> tuple[np.ndarray, int]:
+    """Samples further than ``threshold`` from the median of their 5-sample neighbourhood
+    replaced by that median (single-sample glitches: a 100 rad/s gyro reading would
+    otherwise stay in the integrated heading for good).  Returns (values, count)."""
+    if len(values) < 5 or not threshold > 0:
+        return values, 0
+    padded = np.concatenate((values[:1].repeat(2), values, values[-1:].repeat(2)))
+    med = np.median(np.lib.stride_tricks.sliding_window_view(padded, 5), axis=1)
+    bad = np.abs(values - med) > threshold
+    return np.where(bad, med, values), int(bad.sum())
+
+
 def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarray,
                       params: Params) -> np.ndarray:
     """Slow correction (rad) of the integrated gyro heading towards the GNSS course, at ``tg``.
@@ -195,7 +207,8 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     g = np.flatnonzero(epochs.has_gyro)
     if len(g):
         tg = t_s[g]
-        rate = -epochs.yaw_rate_radps[g]            # d(psi)/dt, clockwise-positive
+        rate, gyro_spikes = despike(-epochs.yaw_rate_radps[g], fp["gyro_spike_radps"])
+        # rate: d(psi)/dt, clockwise-positive
         integral = np.zeros(len(g))
         integral[1:] = np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(tg))
         psi_g = psi_a + integral - np.interp(t_a, tg, integral)
@@ -206,15 +219,17 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         psi0 = float(psi_a - np.interp(t_a, tg, integral) + np.interp(0.0, tg, integral))
     else:
         psi0 = psi_a
+        gyro_spikes = 0
 
     # ---- odometer distance S and standstill -----------------------------------------
     dist = np.full(n, np.nan)
     t_m = np.zeros(n)
     o = np.flatnonzero(epochs.has_odo)
+    odo_spikes = 0
     speed0 = math.nan
     static = np.zeros(n, bool)
     if len(o):
-        speed = np.abs(epochs.odo_speed_mps[o])
+        speed, odo_spikes = despike(np.abs(epochs.odo_speed_mps[o]), fp["odo_spike_mps"])
         t_m[o[1:]] = np.diff(t_s[o])
         dist[o[1:]] = speed[1:] * t_m[o[1:]]
         speed0 = float(speed[0])
@@ -223,7 +238,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             have = last >= 0
             lastc = np.maximum(last, 0)
             fresh = have & (t_s - t_s[lastc] <= STALE_ODO_S)
-            static = fresh & (np.abs(epochs.odo_speed_mps[lastc]) < sp["speed_mps"])
+            held = np.zeros(n)
+            held[o] = speed
+            static = fresh & (held[lastc] < sp["speed_mps"])
 
     # ---- initial state ---------------------------------------------------------------
     x0 = np.zeros(kf.NX)
@@ -289,6 +306,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     var_e = np.where(epochs.has_gnss, epochs.gnss_sd_e, 1.0) ** 2
     var_n = np.where(epochs.has_gnss, epochs.gnss_sd_n, 1.0) ** 2
     info = {"heading_alignment": source, "heading_alignment_t_s": t_a,
+            "gyro_spikes_removed": gyro_spikes, "odo_spikes_removed": odo_spikes,
             "local_filters": ",".join(name for name, on in (("gnss", gnss_on), ("dr", dr_on)) if on)}
     return Prepared(dt=np.ascontiguousarray(epochs.dt_s, dtype=float),
                     has_gnss=np.ascontiguousarray(epochs.has_gnss, dtype=bool),
@@ -400,6 +418,7 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
         "zupt_epochs": int(counters[kf.C_ZUPT]),
         "r_adaptations": int(counters[kf.C_R_ADAPT]),
         "heading_rejected": int(counters[kf.C_HEAD_REJECTED]),
+        "distance_rejected": int(counters[kf.C_DIST_REJECTED]),
         "heading_realigned": int(counters[kf.C_HEAD_REALIGN]),
         "stale_filter_epochs": int(counters[kf.C_STALE]),
         "spd_failures": int(counters[kf.C_NOT_SPD]) + int(smooth_not_spd),

@@ -155,7 +155,8 @@ C_R_ADAPT = 8
 C_HEAD_REJECTED = 9
 C_HEAD_REALIGN = 10
 C_STALE = 11
-N_COUNTERS = 12
+C_DIST_REJECTED = 12
+N_COUNTERS = 13
 
 # Output columns of the fused track.
 O_E, O_N, O_VE, O_VN, O_VAR_E, O_VAR_N, O_COV_EN = range(7)
@@ -811,9 +812,14 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                         counters[C_HEADING] += 1
                 if do_dist:
                     pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
-                    update_row(x2, P2, h, dist[kx] - pred, rfac[3] * r_dist, s, kk)
-                    t_last_dr = t_now
-                    counters[C_DIST] += 1
+                    y = dist[kx] - pred
+                    rd = rfac[3] * r_dist
+                    if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph(P2, h) + rd):
+                        counters[C_DIST_REJECTED] += 1      # odometer glitch: gated
+                    else:
+                        update_row(x2, P2, h, y, rd, s, kk)
+                        t_last_dr = t_now
+                        counters[C_DIST] += 1
 
         # ---- master fusion -----------------------------------------------------------
         g_fresh = t_now - t_last_acc <= par[K_GNSS_STALE_S]

@@ -268,8 +268,11 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                         t_head = t_dr = t
                 if do_dist:
                     H, h = row("dist", x2, t_m, par[kf.K_V_LIN], psi_hint)
-                    x2, P2 = kf_update(x2, P2, H, dist - h, win[3].factor * R_dist)
-                    t_dr = t
+                    y, R = dist - h, win[3].factor * R_dist
+                    chi2 = par[kf.K_HEAD_CHI2]
+                    if not (chi2 > 0 and y * y > chi2 * (H @ P2 @ H + R)):
+                        x2, P2 = kf_update(x2, P2, H, y, R)
+                        t_dr = t
         g_fresh = t - t_acc <= par[kf.K_GNSS_STALE_S]
         d_fresh = t - t_dr <= par[kf.K_DR_STALE_S]
         if both and not fr and g_fresh != d_fresh:        # NR: a stale filter is left out
