@@ -57,6 +57,16 @@ ka_poor = 0.003
 gate = true              # chi-square innovation gate on GNSS fixes
 gate_prob = 0.9999       # gate at this chi-square(2) quantile
 gate_reset_s = 10.0      # after this long with every fix rejected, accept again (no lock-out)
+gate_mode = "inflate"    # ekf/aekf: reject | inflate (NIS above the gate: accept with R x NIS/gate, robust;
+                         #   above gate_inflate_max x the gate still rejected; benchmark: ekf one_hour 6.4 -> 4.1 m,
+                         #   urban 6.8 -> 5.0 m (seed 3), tunnels RTS 15 -> 3 m (seed 1))
+gate_inflate_max = 10.0  # inflate mode: largest R factor (a 100 m jump at a 2.5 m sigma is ~80 x the gate;
+                         #   benchmark: 5, 10, 20 within 0.1 m; 10 keeps 40 m outliers out)
+gate_inflate_after_s = 0.0  # inflate mode: only after the fixes have failed the gate this long (s); a shorter
+                         #   burst is rejected as in reject mode (benchmark: 0.3 s / 1 s cost the ekf on one_hour
+                         #   seed 3 3.75 -> 4.9 / 6.2 m; the aekf within 0.1 m)
+gate_warmup_fixes = 5    # ekf/aekf: no gate before this many fixes were accepted (a first fix 30 m off
+                         #   must not lock the good ones out)
 
 [gyro]
 t_column = "t"
@@ -70,6 +80,8 @@ bias_tau_s = 300.0       # Gauss-Markov correlation time of the gyro drift (MEMS
                          #   steady turn-on bias is better served by a long tau, e.g. 36000 s)
 bias_sd_radps = 0.005    # steady-state sigma of the drift
 bias_init_sd_radps = 0.1 # initial sigma of the drift (covers a 4 deg/s bias)
+bias_init_sd_dr_radps = 0.005  # ekf/aekf: the same when the drive has no GNSS fix at all: the drift is then
+                         #   observable only at standstill, and a 0.1 rad/s prior lets the heading run free
 
 [odo]
 t_column = "t"
@@ -104,6 +116,13 @@ drift_consider = "outage"  # never | outage | always: the yaw-rate and odometer 
                          #   (Schmidt consider state; Joseph keeps P exact) so sustained turns cannot leak into it
 heading_consider = false # in outages the yaw-rate update does not correct the velocity either: removes the EKF's
                          #   spurious heading information (120 s tunnel: 260 -> 80 m) but cannot follow sharp turns
+turn_propagation = true  # our choice: the prediction turns v and a by the gyro's heading increment
+                         #   (-(yaw_rate) - eps) T, in mean and covariance (heading driven by the gyro); false:
+                         #   seed 000 exactly (benchmark: tunnels aekf 59.6 -> 16.0 m forward, RTS 57.5 -> 3.1 m)
+turn_omega_row = "lateral"  # with turn_propagation, the seed 000 yaw-rate row: skip | lateral (what is left of
+                         #   it: the residual acceleration has no lateral part; benchmark: skip let the Newton step
+                         #   reverse v while braking to a stop, 79 m open sky)
+gyro_hold_s = 0.5        # with turn_propagation, a gyro rate turns the epochs up to this long after it
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)

@@ -1,21 +1,26 @@
 """Fixed-interval Rauch-Tung-Striebel smoother over the ekf/aekf forward pass (ALGORITHMS.md 5).
 
 Checkpointed: the forward kernel (:mod:`gpsdr_cli.filters.kernels_aekf`) keeps,
-per epoch, only the posterior state (8 floats) and the six scalars from which
+per epoch, only the posterior state (8 floats) and the seven scalars from which
 P(k+1|k) is rebuilt exactly from P(k|k) (process-noise scales, fading and
-adaptive-factor multipliers, gate-reset inflation), plus a checkpoint of the
+adaptive-factor multipliers, gate-reset inflation, gyro rate of the turn), plus a checkpoint of the
 filter state every segment (4096 epochs).  The backward pass re-runs each
 segment forward from its checkpoint (bit-identical), storing the packed upper
 triangle of P(k|k) for that segment only, then walks it backwards; Phi is
 recomputed from dt.  Cost: one extra forward pass.  Memory: about
-(8 + 6) x 8 = 112 B per epoch (40 MB for a one-hour drive at 100 Hz) instead
+(8 + 7) x 8 = 120 B per epoch (43 MB for a one-hour drive at 100 Hz) instead
 of 2 x 64 x 8 for two full covariance stacks (368 MB).  Each backward step is
 :func:`gpsdr_cli.filters.linalg.rts_step` (a Cholesky solve, no inverse).
 
 Mean transition for the smoother gain: the covariance transition Phi (Singer
 blocks) is the one that produced P(k+1|k), so it is the Phi in
 ``C = P(k|k) Phi^T P(k+1|k)^-1``; the predicted mean is the current
-statistical model's (Newton) prediction, as in the forward pass.
+statistical model's (Newton) prediction, as in the forward pass.  With
+``aekf.turn_propagation`` the forward pass also turned the velocity and
+acceleration by the gyro (the rate used is stored per epoch), so the
+transition is ``J Phi`` with J the Jacobian of that turn at the predicted mean
+(:func:`gpsdr_cli.filters.kernels_aekf.turn_jacobian`) and the predicted mean
+is the turned one.
 """
 
 from __future__ import annotations
@@ -31,9 +36,12 @@ from .filters.kernels_aekf import (
     P_EPS_MEAN_DECAY,
     P_Q_EPS,
     P_Q_KS,
+    P_R_OMEGA,
     P_TAU_EPS,
+    Q_W,
     predict_mean,
     rebuild_prior,
+    turn_jacobian,
     unpack,
 )
 from .filters.linalg import rts_step
@@ -94,9 +102,12 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
                     P_prior[i, j] = P_post[i, j]
             f_mean = math.exp(-T / tau_eps) if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0
             predict_mean(x_prior, T, f_mean, hold[k + 1])
-            rebuild_prior(P_prior, T, alpha, tau_eps, prm[P_Q_EPS], prm[P_Q_KS],
-                          prior_store[k + 1], hold[k + 1], qbuf)
             _phi_dense(T, alpha, tau_eps, hold[k + 1], F)
+            w = prior_store[k + 1, Q_W]
+            if math.isfinite(w):  # aekf.turn_propagation: F = J Phi at the predicted mean
+                turn_jacobian(F, x_prior, T, w)
+            rebuild_prior(P_prior, x_prior, T, alpha, tau_eps, prm[P_Q_EPS], prm[P_Q_KS],
+                          prm[P_R_OMEGA], prior_store[k + 1], hold[k + 1], qbuf)
             rts_step(x_post, P_post, x_prior, P_prior, F, x_s_next, P_s_next, x_s, P_s, L, B)
         else:  # no time step: the smoothed estimate carries over
             for i in range(n):

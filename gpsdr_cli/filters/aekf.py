@@ -20,6 +20,16 @@ What is adaptive here (``[gnss]``, ``[aekf]``, ``[adaptive]`` in config.py):
 - options for every filter: seed 001 adaptive factor, fading memory,
   Sage-Husa R, chi-square gate, standstill (ZUPT + held position).
 
+Our choices beyond seed 000 (``[aekf]``, ``[gnss]``; the benchmark chose the
+defaults, ``turn_propagation = false`` and ``gate_mode = "reject"`` give the
+earlier behaviour): the gyro turns the velocity and acceleration in the
+prediction (heading driven by the gyro in mean and covariance, the drift
+observed through the GNSS positions; :func:`kernels_aekf.turn_predict`); the
+gate starts after ``gate_warmup_fixes`` accepted fixes and, in ``"inflate"``
+mode, accepts a fix above the gate with R scaled by NIS/gate (separate count
+``info["gnss_inflated"]``; ``gnss_rejected`` counts hard rejections only);
+a drive without any GNSS fix starts the drift at ``gyro.bias_init_sd_dr_radps``.
+
 Initialisation (our choice, documented in :func:`initial_state`): first usable
 GNSS fix; velocity from the receiver's speed/course, else from the next fix,
 else unknown (zero with a large variance, odometer row deferred until the
@@ -112,7 +122,8 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
     speed/course at k0 (sigma GNSS_VEL_SD_MPS); else difference to the next fix
     within INIT_DIFF_MAX_S; else zero with variance ``init_vel_sd^2 + u^2``
     (u the first odometer speed) and the heading unknown.
-    DR-only: e = n = 0 (the frame origin, sigma 1 m), heading
+    DR-only: e = n = 0 (the frame origin, sigma 1 m), drift sigma
+    ``gyro.bias_init_sd_dr_radps``, heading
     ``frame.initial_heading_deg`` with a 5 deg sigma, or 0 with a 180 deg sigma
     when NaN; velocity = first odometer speed along it.
     """
@@ -159,7 +170,10 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
                     sd ** 2 + sd1 ** 2) / dt1
         P0[1, 1] = P0[4, 4] = a["init_vel_sd_mps"] ** 2 + u0 ** 2
         return x0, P0, 0.0, False
-    # DR-only: start at the frame origin with the configured heading
+    # DR-only: start at the frame origin with the configured heading.  Our choice: the drift
+    # prior is gyro.bias_init_sd_dr_radps (no GNSS will ever tell the bias; only standstills
+    # do, and a 0.1 rad/s prior made the yaw-rate row feed the gyro into eps, not the heading)
+    P0[6, 6] = params["gyro"]["bias_init_sd_dr_radps"] ** 2
     psi = math.radians(params["frame"]["initial_heading_deg"])
     psi_sd = DR_HEADING_SD_RAD
     if not math.isfinite(psi):
@@ -201,6 +215,10 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.P_SH_RMIN] = ad["sage_husa_r_min"]
     prm[kn.P_SH_RMAX] = ad["sage_husa_r_max"]
     prm[kn.P_EPS_MEAN_DECAY] = float(a["drift_mean_decay"])
+    prm[kn.P_GYRO_HOLD] = a["gyro_hold_s"]
+    prm[kn.P_GATE_INFLATE_MAX] = g["gate_inflate_max"]
+    prm[kn.P_GATE_WARMUP] = g["gate_warmup_fixes"]
+    prm[kn.P_GATE_INFLATE_AFTER] = g["gate_inflate_after_s"]
     flg = np.zeros(kn.N_FLG, np.int64)
     flg[kn.F_ADAPT_Q] = int(adaptive)
     flg[kn.F_STANDSTILL] = int(st["enabled"])
@@ -216,6 +234,16 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
                           f"{', '.join(modes)}")
     flg[kn.F_DRIFT_CONSIDER] = modes[a["drift_consider"]]
     flg[kn.F_HEADING_CONSIDER] = int(a["heading_consider"])
+    flg[kn.F_TURN] = int(a["turn_propagation"])
+    rows = {"skip": kn.OMEGA_SKIP, "lateral": kn.OMEGA_LATERAL}
+    if a["turn_omega_row"] not in rows:
+        raise ConfigError(f"aekf.turn_omega_row = {a['turn_omega_row']!r}: expected one of "
+                          f"{', '.join(rows)}")
+    flg[kn.F_TURN_OMEGA] = rows[a["turn_omega_row"]]
+    gates = {"reject": kn.GATE_REJECT, "inflate": kn.GATE_INFLATE}
+    if g["gate_mode"] not in gates:
+        raise ConfigError(f"gnss.gate_mode = {g['gate_mode']!r}: expected one of {', '.join(gates)}")
+    flg[kn.F_GATE_MODE] = gates[g["gate_mode"]]
     return prm, flg
 
 
@@ -235,6 +263,8 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     st[kn.S_REJ_SINCE] = -1.0
     st[kn.S_SH_R] = 1.0
     st[kn.S_HEADING_KNOWN] = float(heading_known)
+    st[kn.S_W] = 0.0
+    st[kn.S_W_T] = -math.inf  # no gyro rate held yet
     f64 = np.float64
     x_out = np.empty((N_STATES, n))  # rows: contiguous track columns, no copies
     pcov = np.empty((3, n))
@@ -277,6 +307,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         "gnss_rejected": int(gnss_rej.sum()),
         "gnss_used": int(gnss_used.sum()),
         "gate_resets": int(info_v[kn.I_GATE_RESETS]),
+        "gnss_inflated": int(info_v[kn.I_INFLATED]),
         "updates_skipped": int(info_v[kn.I_SKIPPED]),
         "nonfinite_states": int(info_v[kn.I_NONFINITE]),
         "min_p_diag": float(info_v[kn.I_MIN_DIAG]) if n else math.nan,

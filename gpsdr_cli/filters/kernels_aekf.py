@@ -11,22 +11,29 @@ Per epoch k (asynchronous cycle, ALGORITHMS.md 0):
    (current statistical model), covariance by the Singer blocks, exploiting
    the block structure (two 3x3 axis blocks + two scalars) instead of 8x8
    products; fading memory multiplies ``Phi P Phi^T``; in static mode
-   (seed 004) the axes are held (no propagation, no position noise);
-2. GNSS fix (if any): chi-square gate on the 2-D NIS (with a no-lock-out
-   reset), seed 001 adaptive factor on P(k|k-1), Sage-Husa scale on R, then two
-   sequential scalar updates (e, n);
+   (seed 004) the axes are held (no propagation, no position noise); with
+   ``aekf.turn_propagation`` (our choice) the gyro then turns the velocity and
+   acceleration (:func:`turn_predict`);
+2. GNSS fix (if any): chi-square gate on the 2-D NIS (none before
+   ``gnss.gate_warmup_fixes`` accepted fixes; a no-lock-out reset; in
+   ``gate_mode = "inflate"``, once fixes have failed the gate for
+   ``gate_inflate_after_s``, a fix between the gate and ``gate_inflate_max``
+   times it is accepted with R scaled by NIS/gate), seed 001 adaptive factor on
+   P(k|k-1), Sage-Husa scale on R, then two sequential scalar updates (e, n);
 3. odometer (if any): below ``standstill.speed_mps`` a zero-velocity update of
    v_e, v_n, a_e, a_n; else the speed ``u = k_s |v|``;
 4. gyro (if any): at standstill the rate measures the drift alone; above
-   ``omega_min_speed_mps`` the seed 000 heading-rate row; in between skipped.
+   ``omega_min_speed_mps`` the seed 000 heading-rate row (with the turn
+   propagation: skipped, or reduced to "no lateral residual acceleration",
+   ``aekf.turn_omega_row``); in between skipped.
 
 Every scalar update uses the Joseph form and re-symmetrises P.  A remembered
 heading (from the velocity above the direction threshold, gyro-integrated
 below it) keeps the odometer row defined when the vehicle starts from rest.
 
 For the RTS smoother the kernel optionally stores the packed upper triangle of
-P(k|k) and the six scalars that rebuild P(k|k-1) from it exactly
-(:func:`rebuild_prior`), instead of a second packed matrix: 42 instead of 72
+P(k|k) and the seven scalars that rebuild P(k|k-1) from it exactly
+(:func:`rebuild_prior`), instead of a second packed matrix: 43 instead of 72
 floats per epoch.
 """
 
@@ -45,20 +52,26 @@ from .linalg import cholesky, symmetrize
 P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_ODO = range(9)
 P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = range(9, 15)
 P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
-N_PRM = 20
+P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER = range(20, 24)
+N_PRM = 24
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
-F_DRIFT_CONSIDER, F_HEADING_CONSIDER = 8, 9
-N_FLG = 10
+F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE = range(8, 13)
+N_FLG = 13
+#: values of flg[F_TURN_OMEGA] (the seed 000 yaw-rate row when aekf.turn_propagation is on)
+OMEGA_SKIP, OMEGA_LATERAL = 0, 1
+#: values of flg[F_GATE_MODE] (gnss.gate_mode)
+GATE_REJECT, GATE_INFLATE = 0, 1
 # internal state carried between segments (``st``)
 S_PSI, S_STATIC, S_T, S_REJ_SINCE, S_SH_R, S_SH_M, S_HEADING_KNOWN = range(7)
-N_ST = 7
+S_W, S_W_T, S_N_FIX = 7, 8, 9
+N_ST = 10
 # stored prior scalars per epoch (columns of ``prior_prm``)
-Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N = range(6)
-N_PRIOR = 6
+Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N, Q_W = range(7)
+N_PRIOR = 7
 # counters (``info`` vector)
-I_SPD_FAIL, I_MIN_DIAG, I_SKIPPED, I_GATE_RESETS, I_NONFINITE = range(5)
-N_INFO = 5
+I_SPD_FAIL, I_MIN_DIAG, I_SKIPPED, I_GATE_RESETS, I_NONFINITE, I_INFLATED = range(6)
+N_INFO = 6
 N_PACKED = N_STATES * (N_STATES + 1) // 2
 #: nonzero columns of the odometer row (v_e, v_n, k_s) and the heading-rate row
 NZ_ODO = np.array([1, 4, 7], np.int64)
@@ -250,11 +263,101 @@ def inflate_kinematic(P: np.ndarray, g: float) -> None:
 
 
 @njit(cache=True)
-def rebuild_prior(P: np.ndarray, T: float, alpha: float, tau_eps: float, q_eps: float,
-                  q_ks: float, pr: np.ndarray, hold: bool, qbuf: np.ndarray) -> None:
-    """P(k-1|k-1) -> the P(k|k-1) the forward pass used (predict, adaptive factor, gate reset)."""
+def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -> None:
+    """Rotate velocity and acceleration by the gyro heading increment (aekf.turn_propagation).
+
+    Our choice (ALGORITHMS.md 1 leaves the heading out of the state): after the
+    current statistical prediction, ``(v_e, v_n)`` and ``(a_e, a_n)`` turn
+    clockwise by ``dpsi = (w - eps) T`` where ``w = -yaw_rate`` is the gyro's
+    heading rate (CCW-positive gyro, heading clockwise) and ``eps`` the drift
+    state: ``v_e' = c v_e + s v_n``, ``v_n' = -s v_e + c v_n`` (c, s of dpsi).
+    Covariance: ``P <- J P J^T + r_w T^2 g g^T`` with J the Jacobian of that map
+    (the rotation on the velocity and acceleration pairs, and
+    ``d v'/d eps = -T g`` with ``g = d v'/d dpsi = (v_n', -v_e')``, likewise for a)
+    and r_w the gyro noise variance per sample.  So the gyro drives the heading
+    in the mean and the covariance, and the drift becomes observable through the
+    GNSS positions (as in a strapdown INS) instead of through the heading-rate row.
+    """
+    n = N_STATES
+    dpsi = (w - x[6]) * T
+    c = math.cos(dpsi)
+    s = math.sin(dpsi)
+    ve = x[1]
+    vn = x[4]
+    ae = x[2]
+    an = x[5]
+    x[1] = c * ve + s * vn
+    x[4] = -s * ve + c * vn
+    x[2] = c * ae + s * an
+    x[5] = -s * ae + c * an
+    g1 = x[4]
+    g4 = -x[1]
+    g2 = x[5]
+    g5 = -x[2]
+    for j in range(n):  # rows: J P
+        p1 = P[1, j]
+        p4 = P[4, j]
+        p2 = P[2, j]
+        p5 = P[5, j]
+        p6 = P[6, j]
+        P[1, j] = c * p1 + s * p4 - T * g1 * p6
+        P[4, j] = -s * p1 + c * p4 - T * g4 * p6
+        P[2, j] = c * p2 + s * p5 - T * g2 * p6
+        P[5, j] = -s * p2 + c * p5 - T * g5 * p6
+    for i in range(n):  # columns: (J P) J^T
+        p1 = P[i, 1]
+        p4 = P[i, 4]
+        p2 = P[i, 2]
+        p5 = P[i, 5]
+        p6 = P[i, 6]
+        P[i, 1] = c * p1 + s * p4 - T * g1 * p6
+        P[i, 4] = -s * p1 + c * p4 - T * g4 * p6
+        P[i, 2] = c * p2 + s * p5 - T * g2 * p6
+        P[i, 5] = -s * p2 + c * p5 - T * g5 * p6
+    q = r_w * T * T
+    gv = (g1, g2, g4, g5)
+    gi = (1, 2, 4, 5)
+    for a in range(4):
+        for b in range(4):
+            P[gi[a], gi[b]] += q * gv[a] * gv[b]
+    symmetrize(P)
+
+
+@njit(cache=True)
+def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
+    """F <- J F with J the Jacobian of :func:`turn_predict` at its input mean x (dense, smoother)."""
+    dpsi = (w - x[6]) * T
+    c = math.cos(dpsi)
+    s = math.sin(dpsi)
+    g1 = -s * x[1] + c * x[4]  # v_n' (the rotated velocity), d v_e'/d dpsi
+    g4 = -(c * x[1] + s * x[4])  # -v_e'
+    g2 = -s * x[2] + c * x[5]
+    g5 = -(c * x[2] + s * x[5])
+    for j in range(N_STATES):
+        p1 = F[1, j]
+        p4 = F[4, j]
+        p2 = F[2, j]
+        p5 = F[5, j]
+        p6 = F[6, j]
+        F[1, j] = c * p1 + s * p4 - T * g1 * p6
+        F[4, j] = -s * p1 + c * p4 - T * g4 * p6
+        F[2, j] = c * p2 + s * p5 - T * g2 * p6
+        F[5, j] = -s * p2 + c * p5 - T * g5 * p6
+
+
+@njit(cache=True)
+def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps: float,
+                  q_eps: float, q_ks: float, r_w: float, pr: np.ndarray, hold: bool,
+                  qbuf: np.ndarray) -> None:
+    """P(k-1|k-1) -> the P(k|k-1) the forward pass used (predict, turn, adaptive factor, gate reset).
+
+    ``x`` enters as the current statistical prediction of the mean and leaves
+    rotated when the forward pass turned it (``pr[Q_W]`` finite).
+    """
     f_eps = math.exp(-T / tau_eps)
     predict_cov(P, T, alpha, f_eps, pr[Q_QA_E], pr[Q_QA_N], q_eps, q_ks, pr[Q_LAM], hold, qbuf)
+    if math.isfinite(pr[Q_W]):
+        turn_predict(x, P, T, pr[Q_W], r_w)
     if pr[Q_GAIN] != 1.0:
         inflate_kinematic(P, pr[Q_GAIN])
     P[0, 0] += pr[Q_ADD_E]
@@ -317,6 +420,13 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     rej_since = st[S_REJ_SINCE]
     sh_r = st[S_SH_R]
     sh_m = int(st[S_SH_M])
+    turn = flg[F_TURN] != 0
+    turn_omega = flg[F_TURN_OMEGA]
+    gate_inflate = flg[F_GATE_MODE] == GATE_INFLATE
+    r_w = prm[P_R_OMEGA]
+    w_held = st[S_W]
+    w_t = st[S_W_T]
+    n_fix = st[S_N_FIX]
     for k in range(k_start, k_end):
         T = dt[k]
         qa_e = 0.0
@@ -325,6 +435,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         g = 1.0
         add_e = 0.0
         add_n = 0.0
+        w_use = math.nan
         hold = standstill and is_static
         # ---- 1. predict (seed 000 CS model; seed 004 static hold; fading memory)
         if k > 0 and T > 0.0:
@@ -342,6 +453,13 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             predict_mean(x, T, f_eps if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
             predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[P_Q_EPS], prm[P_Q_KS], lam, hold, qbuf)
             t += T
+            if turn and not hold:  # our choice: the gyro turns v and a (aekf.turn_propagation)
+                if has_gyro[k] and math.isfinite(yaw[k]):
+                    w_use = -yaw[k]  # the rate read at the end of the step
+                elif t - w_t <= prm[P_GYRO_HOLD]:
+                    w_use = w_held  # a slower gyro: its last rate, held briefly
+                if math.isfinite(w_use):
+                    turn_predict(x, P, T, w_use, r_w)
         # ---- 2. GNSS position fix
         nis_out[k] = math.nan
         gnss_used[k] = False
@@ -358,11 +476,20 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             nis_out[k] = nis
             accept = True
             reset = False
-            if gate:
-                if nis > prm[P_GATE_THR]:
+            r_fac = 1.0
+            if gate and n_fix >= prm[P_GATE_WARMUP]:  # no gate before the filter has converged
+                thr = prm[P_GATE_THR]
+                if nis > thr:
                     if rej_since < 0.0:
                         rej_since = t
-                    if t - rej_since >= prm[P_GATE_RESET]:
+                    if (gate_inflate and nis <= thr * prm[P_GATE_INFLATE_MAX]
+                            and t - rej_since >= prm[P_GATE_INFLATE_AFTER]):
+                        # robust "opposite lever" (ALGORITHMS.md 3) once the fixes have
+                        # disagreed for gate_inflate_after_s (a short multipath burst is still
+                        # rejected): accept with R scaled so that the NIS equals the gate
+                        r_fac = nis / thr
+                        info[I_INFLATED] += 1.0
+                    elif t - rej_since >= prm[P_GATE_RESET]:
                         reset = True  # no lock-out: accept and inflate P by the innovation
                         rej_since = -1.0
                         info[I_GATE_RESETS] += 1.0
@@ -372,7 +499,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 else:
                     rej_since = -1.0
             if accept:
-                if innov:  # seed 001: P(k|k-1) /= alpha
+                if innov and r_fac == 1.0:  # seed 001: P(k|k-1) /= alpha (not on a fix the
+                    # gate down-weighted as an outlier: in reject mode it would not be used at all)
                     af = adaptive_factor(ye, yn, s00 + s11, prm[P_INNOV_C])
                     if af < 1.0:
                         g = 1.0 / af
@@ -389,10 +517,13 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     sh_m += 1
                     re = r_e[k] * sh_r
                     rn = r_n[k] * sh_r
+                re *= r_fac
+                rn *= r_fac
                 ok1 = unit_update(x, P, 0, ye, re, K, PHt, Bh)
                 ok2 = unit_update(x, P, 3, z_n[k] - x[3], rn, K, PHt, Bh)
                 if ok1 and ok2:
                     gnss_used[k] = True
+                    n_fix += 1.0
                 else:
                     info[I_SKIPPED] += 1.0
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
@@ -425,15 +556,23 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             if is_static:
                 if not unit_update(x, P, 6, -yaw[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh):
                     info[I_SKIPPED] += 1.0
+            elif turn and turn_omega == OMEGA_SKIP:
+                pass  # the gyro already turned the velocity in the prediction
             elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
                 h = omega_row(x, H)
+                z = -yaw[k]
+                if turn:  # OMEGA_LATERAL: the turn is in the prediction; what is left of the
+                    # seed 000 row says the residual acceleration has no lateral part
+                    z = 0.0
+                    h -= x[6]
+                    H[6] = 0.0
                 # drift as a consider state while moving (aekf.drift_consider): without an
                 # absolute reference a sustained turn (the Singer covariance lets a decay while
                 # the mean holds it) or a speed update (through P[eps, v]) must not move eps
                 cons = CONS_EPS if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else 0
                 if heading_consider and outage[k]:
                     cons |= CONS_VEL
-                if not row_update(x, P, H, NZ_OMEGA, -yaw[k] - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
+                if not row_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
                     info[I_SKIPPED] += 1.0
         # ---- remembered heading for the odometer row near standstill
         sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
@@ -442,6 +581,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             heading_known = True
         elif has_gyro[k] and k > 0:
             psi_mem += (-yaw[k] - x[6]) * T
+        if has_gyro[k] and math.isfinite(yaw[k]):
+            w_held = -yaw[k]
+            w_t = t
         # ---- outputs and health
         for i in range(n):
             x_out[i, k] = x[i]
@@ -465,6 +607,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             prior_store[k, Q_GAIN] = g
             prior_store[k, Q_ADD_E] = add_e
             prior_store[k, Q_ADD_N] = add_n
+            prior_store[k, Q_W] = w_use
     st[S_PSI] = psi_mem
     st[S_STATIC] = 1.0 if is_static else 0.0
     st[S_T] = t
@@ -472,3 +615,6 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     st[S_SH_R] = sh_r
     st[S_SH_M] = sh_m
     st[S_HEADING_KNOWN] = 1.0 if heading_known else 0.0
+    st[S_W] = w_held
+    st[S_W_T] = w_t
+    st[S_N_FIX] = n_fix

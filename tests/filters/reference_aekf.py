@@ -38,6 +38,25 @@ def joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
     return x, 0.5 * (P + P.T)
 
 
+def turn(x: np.ndarray, T: float, w: float, r_w: float) -> tuple[np.ndarray, np.ndarray,
+                                                                 np.ndarray]:
+    """aekf.turn_propagation: (x', J, Q_w) of turning v and a clockwise by (w - eps) T."""
+    dpsi = (w - x[6]) * T
+    c, s = math.cos(dpsi), math.sin(dpsi)
+    Rm = np.array([[c, s], [-s, c]])  # acts on (east, north), clockwise by dpsi
+    xr = x.copy()
+    xr[[1, 4]] = Rm @ x[[1, 4]]
+    xr[[2, 5]] = Rm @ x[[2, 5]]
+    g = np.zeros(8)  # d x'/d dpsi
+    g[1], g[4] = xr[4], -xr[1]
+    g[2], g[5] = xr[5], -xr[2]
+    J = np.eye(8)
+    J[np.ix_([1, 4], [1, 4])] = Rm
+    J[np.ix_([2, 5], [2, 5])] = Rm
+    J[:, 6] += -T * g  # d dpsi / d eps = -T
+    return xr, J, r_w * T * T * np.outer(g, g)
+
+
 def unit(i: int) -> np.ndarray:
     H = np.zeros(8)
     H[i] = 1.0
@@ -60,6 +79,11 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     gate = bool(params["gnss"]["gate"])
     sa_py = cs_sigma_a2.py_func
     mode = params["aekf"]["drift_consider"]
+    turn_on = bool(params["aekf"]["turn_propagation"])
+    turn_row = params["aekf"]["turn_omega_row"]
+    r_w = params["gyro"]["noise_sd_radps"] ** 2
+    w_held, w_t = 0.0, -math.inf
+    n_fix = 0
     is_static = False
     t = 0.0
     rej_since = -1.0
@@ -91,6 +115,17 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             P = lam * F @ P @ F.T + Q
             P = 0.5 * (P + P.T)
             t += T
+            if turn_on and not hold:
+                w = math.nan
+                if epochs.has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
+                    w = -epochs.yaw_rate_radps[k]
+                elif t - w_t <= params["aekf"]["gyro_hold_s"]:
+                    w = w_held
+                if math.isfinite(w):
+                    x, J, Qw = turn(x, T, w, r_w)
+                    F = J @ F
+                    P = J @ P @ J.T + Qw
+                    P = 0.5 * (P + P.T)
         xs_prior[k], Ps_prior[k], Fs[k] = x, P, F  # the smoother's prior (P updated below)
         if epochs.has_gnss[k]:
             z = np.array([epochs.gnss_e[k], epochs.gnss_n[k]])
@@ -100,12 +135,17 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             R = np.diag([r_e[k], r_n[k]]) * sh_r
             S = Hg @ P @ Hg.T + R
             nis[k] = float(y @ np.linalg.solve(S, y))
-            accept, reset = True, False
-            if gate:
-                if nis[k] > prm[kn.P_GATE_THR]:
+            accept, reset, r_fac = True, False, 1.0
+            thr = prm[kn.P_GATE_THR]
+            gn = params["gnss"]
+            if gate and n_fix >= gn["gate_warmup_fixes"]:
+                if nis[k] > thr:
                     if rej_since < 0:
                         rej_since = t
-                    if t - rej_since >= prm[kn.P_GATE_RESET]:
+                    if (gn["gate_mode"] == "inflate" and nis[k] <= thr * gn["gate_inflate_max"]
+                            and t - rej_since >= gn["gate_inflate_after_s"]):
+                        r_fac = nis[k] / thr
+                    elif t - rej_since >= prm[kn.P_GATE_RESET]:
                         reset, rej_since = True, -1.0
                     else:
                         accept = False
@@ -113,7 +153,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 else:
                     rej_since = -1.0
             if accept:
-                if ad["innovation_factor"]:  # seed 001
+                if ad["innovation_factor"] and r_fac == 1.0:  # seed 001
                     beta = math.sqrt(float(y @ y) / np.trace(S))
                     a_f = 1.0 if beta <= ad["innovation_c"] else ad["innovation_c"] / beta
                     if a_f < 1.0:  # on the kinematic block only (see kernels_aekf)
@@ -129,9 +169,10 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     sample = (y @ y - P[0, 0] - P[3, 3]) / (r_e[k] + r_n[k])
                     sh_r = min(max((1 - d) * sh_r + d * min(max(sample, lo), hi), lo), hi)
                     sh_m += 1
-                x, P = joseph(x, P, unit(0), z[0] - x[0], r_e[k] * sh_r)
-                x, P = joseph(x, P, unit(3), z[1] - x[3], r_n[k] * sh_r)
+                x, P = joseph(x, P, unit(0), z[0] - x[0], r_e[k] * sh_r * r_fac)
+                x, P = joseph(x, P, unit(3), z[1] - x[3], r_n[k] * sh_r * r_fac)
                 used[k] = True
+                n_fix += 1
         cons = (6,) if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else ()
         cons_w = cons + ((1, 4) if params["aekf"]["heading_consider"] and epochs.gnss_outage[k]
                          else ())
@@ -158,6 +199,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             r_w = params["gyro"]["noise_sd_radps"] ** 2
             if is_static:
                 x, P = joseph(x, P, unit(6), w - x[6], r_w)
+            elif turn_on and turn_row == "skip":
+                pass
             elif math.hypot(x[1], x[4]) >= omega_min:
                 ve, ae, vn, an = x[1], x[2], x[4], x[5]
                 v2 = ve ** 2 + vn ** 2
@@ -166,12 +209,18 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 H[1] = (-an * v2 - 2 * ve * c) / v2 ** 2
                 H[4] = (ae * v2 - 2 * vn * c) / v2 ** 2
                 H[2], H[5], H[6] = vn / v2, -ve / v2, 1.0
-                x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w, cons_w)
+                if turn_on:  # "lateral": 0 = c / v2, the turn itself is in the prediction
+                    H[6] = 0.0
+                    x, P = joseph(x, P, H, -c / v2, r_w, cons_w)
+                else:
+                    x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w, cons_w)
         v = math.hypot(x[1], x[4])
         if v >= omega_min:
             psi_mem, heading_known = math.atan2(x[1], x[4]), True
         elif epochs.has_gyro[k] and k > 0:
             psi_mem += (-epochs.yaw_rate_radps[k] - x[6]) * T
+        if epochs.has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
+            w_held, w_t = -epochs.yaw_rate_radps[k], t
         xs[k], Ps[k] = x, P
     if smooth and n > 1:
         xs, Ps = _rts(xs, Ps, xs_prior, Ps_prior, Fs)

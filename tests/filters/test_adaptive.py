@@ -63,14 +63,29 @@ def test_sage_husa_converges_and_is_guarded():
     assert sage_husa_r(1.0, 0, 0.98, 1e9, 0.25, 100.0) == 100.0  # first sample, d = 1
 
 
+def _gate(mode: str) -> dict:
+    p = defaults()
+    p["gnss"]["gate_mode"] = mode
+    return p
+
+
 @pytest.mark.parametrize("name", ["ekf", "aekf"])
 def test_gate_rejects_outliers_and_counts_them(name):
-    """Fixes 40 m off for 2 s (10 fixes) are rejected and counted; the track stays < 3 m."""
+    """Fixes 40 m off for 2 s (10 fixes) are rejected and counted; the track stays < 3 m.
+
+    gate_mode = "inflate": each is rejected (NIS above gate_inflate_max x the
+    gate) or accepted with R scaled by NIS/gate and counted in
+    info["gnss_inflated"]; the track stays < 3 m too.
+    """
     ep, tr = tiny_drive(120.0, seed=11, dr_hz=20.0, outliers=((60.0, 62.0, 40.0),))
-    res = get(name)(ep, defaults())
+    res = get(name)(ep, _gate("reject"))
     window = (tr.t_s >= 60.0) & (tr.t_s < 62.0)
     assert res.gnss_rejected[window & ep.has_gnss].all()
     assert res.info["gnss_rejected"] == int(res.gnss_rejected.sum()) >= 10
+    assert res.info["gnss_inflated"] == 0
+    inf = get(name)(ep, _gate("inflate"))
+    assert int(inf.gnss_rejected[window & ep.has_gnss].sum()) + inf.info["gnss_inflated"] >= 10
+    assert horizontal_error(inf, tr)[tr.t_s > 10.0].max() < 3.0
     assert horizontal_error(res, tr)[tr.t_s > 10.0].max() < 3.0
     p = defaults()
     p["gnss"]["gate"] = False
@@ -87,12 +102,18 @@ def test_gate_never_locks_out(name):
     reset the track follows the shifted fixes within 3 m.
     """
     ep, tr = tiny_drive(120.0, seed=12, dr_hz=20.0, outliers=((50.0, 200.0, 30.0),))
-    res = get(name)(ep, defaults())
+    res = get(name)(ep, _gate("reject"))
     assert res.info["gate_resets"] >= 1
     assert 40 <= res.info["gnss_rejected"] <= 60
     late = tr.t_s > 75.0
     err_shifted = np.hypot(res.e[late] - (tr.e[late] + 30.0), res.n[late] - tr.n[late])
     assert err_shifted.max() < 3.0
+    # inflate: never rejected, down-weighted, pulled over in ~25 s; the step leaks into the
+    # velocity and drift states, so it follows within 3.5 m (measured 3.0 m)
+    inf = get(name)(ep, _gate("inflate"))
+    assert inf.info["gnss_inflated"] >= 20
+    err_shifted = np.hypot(inf.e[late] - (tr.e[late] + 30.0), inf.n[late] - tr.n[late])
+    assert err_shifted.max() < 3.5
 
 
 @pytest.mark.parametrize("option", [{"innovation_factor": True}, {"fading": True},
@@ -100,7 +121,7 @@ def test_gate_never_locks_out(name):
 def test_options_keep_p_spd_under_multipath_bursts(option):
     """Every adaptive option on a drive with outlier bursts, PDOP changes and an outage:
     P SPD at every epoch (Cholesky check), finite, error < 4 m outside the outage
-    (measured 3.2 m with the seed 001 factor, < 3 m with the others)."""
+    (6 m with the seed 001 factor, see below)."""
     ep, tr = tiny_drive(200.0, seed=13, dr_hz=20.0, outages=((120.0, 140.0),),
                         outliers=((40.0, 41.0, 25.0), (90.0, 90.6, -30.0)),
                         bad_pdop=((60.0, 80.0, 5.0),))
@@ -112,4 +133,7 @@ def test_options_keep_p_spd_under_multipath_bursts(option):
     assert np.isfinite(res.e).all() and np.isfinite(res.var_e).all()
     err = horizontal_error(res, tr)
     ok = (tr.t_s > 10.0) & ((tr.t_s < 120.0) | (tr.t_s > 150.0))
-    assert err[ok].max() < 4.0
+    # 6 m with the seed 001 factor: gate_mode "inflate" down-weights the 25 m burst instead of
+    # rejecting it (pulled 3 m), and the factor then inflates P on the fixes after it (measured
+    # 5.4 m; 3.3 m with gate_mode "reject"); < 3 m with the other options
+    assert err[ok].max() < (6.0 if option.get("innovation_factor") else 4.0)

@@ -322,4 +322,6 @@ def test_start_at_standstill_without_gnss_course(name):
     res = run(name, ep, params_with())
     assert res.static[(tr.t_s > 1.0) & (tr.t_s < 19.0)].all()
     err = horizontal_error(res, tr)
-    assert err[tr.t_s > 45.0].max() < 2.0
+    # 2.5 m: gate_mode "inflate" pulls the 52 m drive-off transient of "reject" down to 4 m, but
+    # what is left of it settles slower in the ekf (measured 2.05 m after 45 s, reject 1.1 m)
+    assert err[tr.t_s > 45.0].max() < 2.5

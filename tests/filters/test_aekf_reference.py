@@ -31,6 +31,13 @@ OPTIONS = {
     "drift_always_consider": {"aekf": {"drift_consider": "always"}},
     "heading_consider": {"aekf": {"heading_consider": True}},
     "drift_never_consider_decay": {"aekf": {"drift_consider": "never", "drift_mean_decay": True}},
+    "turn_skip": {"aekf": {"turn_propagation": True, "turn_omega_row": "skip"}},
+    "turn_lateral": {"aekf": {"turn_propagation": True, "turn_omega_row": "lateral"}},
+    "turn_no_standstill": {"aekf": {"turn_propagation": True}, "standstill": {"enabled": False}},
+    "gate_inflate": {"gnss": {"gate_mode": "inflate", "gate_warmup_fixes": 0}},
+    "gate_inflate_innovation": {"gnss": {"gate_mode": "inflate"},
+                                "adaptive": {"innovation_factor": True}},
+    "gate_reject_no_warmup": {"gnss": {"gate_mode": "reject", "gate_warmup_fixes": 0}},
 }
 
 
