@@ -141,7 +141,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
         odo_v = o.speed_mps[keep]
         parts.append(odo_t)
 
-    t = np.unique(np.concatenate(parts)) if parts else np.zeros(0, np.int64)
+    t = sorted_unique(np.concatenate(parts)) if parts else np.zeros(0, np.int64)
     n_ep = len(t)
 
     def scatter(times: np.ndarray, values: np.ndarray, fill: float = np.nan) -> np.ndarray:
@@ -182,6 +182,29 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                   has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s)
 
 
+def sorted_unique(t: np.ndarray) -> np.ndarray:
+    """Distinct values of an int array, ascending.
+
+    Sort plus an adjacent-difference mask: numpy 2's ``np.unique`` hashes integer
+    arrays, which is about 10x slower here (0.23 s vs 0.02 s on a one-hour drive's
+    720 k stamps, already sorted per stream)."""
+    t = np.sort(t, kind="stable")
+    if len(t) < 2:
+        return t
+    keep = np.empty(len(t), bool)
+    keep[0] = True
+    np.not_equal(t[1:], t[:-1], out=keep[1:])
+    return t[keep]
+
+
+def sorted_member(a: np.ndarray, sorted_b: np.ndarray) -> np.ndarray:
+    """``np.isin(a, sorted_b)`` for an ascending ``sorted_b``, by binary search."""
+    if len(sorted_b) == 0:
+        return np.zeros(len(a), bool)
+    i = np.minimum(np.searchsorted(sorted_b, a), len(sorted_b) - 1)
+    return sorted_b[i] == a
+
+
 def outage_mask(t_ns: np.ndarray, fix_t_ns: np.ndarray, gap_s: float) -> np.ndarray:
     """True for epochs inside a stretch without fixes longer than ``gap_s`` seconds.
 
@@ -198,6 +221,6 @@ def outage_mask(t_ns: np.ndarray, fix_t_ns: np.ndarray, gap_s: float) -> np.ndar
     i = np.searchsorted(bounds, t_ns, side="right")  # bounds[i-1] <= t < bounds[i]
     prev_b = bounds[i - 1]
     next_b = bounds[np.minimum(i, len(bounds) - 1)]
-    at_fix = np.isin(t_ns, fix_t_ns)
+    at_fix = sorted_member(t_ns, fix_t_ns)
     length = (next_b - prev_b).astype(float)
     return (length > gap_ns) & ~at_fix
