@@ -80,6 +80,7 @@ bias_tau_s = 300.0       # Gauss-Markov correlation time of the gyro drift (MEMS
                          #   steady turn-on bias is better served by a long tau, e.g. 36000 s)
 bias_sd_radps = 0.005    # steady-state sigma of the drift
 bias_init_sd_radps = 0.1 # initial sigma of the drift (covers a 4 deg/s bias)
+max_rate_radps = 3.0     # ekf/aekf: a reading beyond this (172 deg/s) is a glitch, treated as missing
 bias_init_sd_dr_radps = 0.005  # ekf/aekf: the same when the drive has no GNSS fix at all: the drift is then
                          #   observable only at standstill, and a 0.1 rad/s prior lets the heading run free
 
@@ -93,6 +94,7 @@ start_posix_s = 0.0
 noise_sd_mps = 0.1       # speed sigma; distance sigma over T is noise_sd_mps x T (seed 000: 0.1)
 scale_init_sd = 0.1      # initial sigma of the scale factor k_s (covers a 5 % error)
 scale_rw_sd = 0.0001     # random-walk sigma of k_s per sqrt(s)
+max_speed_mps = 100.0    # ekf/aekf: a reading beyond this is a glitch, treated as missing
 
 [standstill]
 enabled = true           # zero-velocity update and held position while stopped (seed 004)
@@ -142,7 +144,6 @@ gnss_err_tau_s = 60.0    # correlation time of the GNSS position error states ep
 gnss_err_sd_m = 1.0      # steady-state sigma of eps_e, eps_n
 heading_sd_rad = 0.01    # sigma of the gyro-integrated heading measurement
 heading_err_rw_sd = 0.01   # random walk of q_w, rad per sqrt(s) (absorbs the integrated gyro bias)
-dist_err_rw_sd = 0.002    # random walk of q_s, m per sqrt(s) (q_s is metres per odometer interval)
 heading_interval_s = 0.1 # heading measurements from the integrated gyro at most this often
 heading_course_window_s = 30.0  # gyro heading steered to the GNSS course averaged over this window
                          #   (removes the integrated gyro bias; 0: aligned once at the start, seed 002)
@@ -156,7 +157,7 @@ init_pos_sd_m = 10.0     # initial sigmas of the shared state
 init_vel_sd_mps = 5.0
 init_acc_sd_mps2 = 1.0
 init_heading_err_sd_rad = 0.1  # initial sigma of q_w (alignment of the gyro heading)
-init_dist_err_sd_m = 0.05      # initial sigma of q_s
+                               # q_s (odometer scale error): [odo] scale_init_sd, scale_rw_sd
 check_spd = false        # fkf and fafkf: Cholesky of every P at every epoch, failures in info["spd_failures"] (tests)
 
 [fafkf]

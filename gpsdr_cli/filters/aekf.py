@@ -121,7 +121,11 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
     before k0 (odometer integral, else MAX_SPEED_MPS x time).  Velocity: receiver
     speed/course at k0 (sigma GNSS_VEL_SD_MPS); else difference to the next fix
     within INIT_DIFF_MAX_S; else zero with variance ``init_vel_sd^2 + u^2``
-    (u the first odometer speed) and the heading unknown.
+    (u the first odometer speed) and the heading unknown.  Our choice: when the
+    odometer reading nearest the first fix (within INIT_DIFF_MAX_S) says stopped,
+    the velocity is zero (sigma of the zero-velocity update) and the heading
+    unknown, whatever the fixes suggest (a first fix 5 m off differenced over
+    0.2 s gave a 25 m/s "velocity" and a wrong remembered heading).
     DR-only: e = n = 0 (the frame origin, sigma 1 m), drift sigma
     ``gyro.bias_init_sd_dr_radps``, heading
     ``frame.initial_heading_deg`` with a 5 deg sigma, or 0 with a 180 deg sigma
@@ -135,7 +139,7 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
     P0[2, 2] = P0[5, 5] = a["init_acc_sd_mps2"] ** 2
     P0[6, 6] = params["gyro"]["bias_init_sd_radps"] ** 2
     P0[7, 7] = params["odo"]["scale_init_sd"] ** 2
-    odo_idx = np.flatnonzero(epochs.has_odo)
+    odo_idx = np.flatnonzero(sensor_masks(epochs, params)[1])
     u0 = float(epochs.odo_speed_mps[odo_idx[0]]) if len(odo_idx) else 0.0
     fixes = np.flatnonzero(epochs.has_gnss)
     if len(fixes):
@@ -152,6 +156,15 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
         P0[0, 0] = P0[3, 3] = a["init_pos_sd_m"] ** 2 + sd ** 2 + d ** 2
         spd, crs = float(epochs.gnss_speed_mps[k0]), float(epochs.gnss_course_rad[k0])
         omega_min = params["standstill"]["omega_min_speed_mps"]
+        st = params["standstill"]
+        if len(odo_idx) and st["enabled"]:
+            # the odometer reading nearest the first fix: parked there, the velocity is zero
+            # whatever two noisy (or one displaced) fixes suggest, and the heading unknown
+            j = int(odo_idx[np.argmin(np.abs(epochs.t_ns[odo_idx] - epochs.t_ns[k0]))])
+            near = abs(int(epochs.t_ns[j]) - int(epochs.t_ns[k0])) <= INIT_DIFF_MAX_S * 1e9
+            if near and float(epochs.odo_speed_mps[j]) < st["speed_mps"]:
+                P0[1, 1] = P0[4, 4] = st["zupt_sd_mps"] ** 2 + params["odo"]["noise_sd_mps"] ** 2
+                return x0, P0, crs if math.isfinite(crs) else 0.0, False
         if math.isfinite(spd) and math.isfinite(crs):
             x0[1], x0[4] = spd * math.sin(crs), spd * math.cos(crs)
             P0[1, 1] = P0[4, 4] = GNSS_VEL_SD_MPS ** 2
@@ -188,6 +201,20 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
     P0[4, 4] = var_along * c * c + var_cross * s * s
     P0[1, 4] = P0[4, 1] = (var_along - var_cross) * s * c
     return x0, P0, psi, True
+
+
+def sensor_masks(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    """Gyro and odometer readings the filter uses: present, finite and physically plausible.
+
+    Our choice: ``|yaw rate| <= gyro.max_rate_radps`` and ``|speed| <=
+    odo.max_speed_mps``; a reading beyond is a glitch (a 100 rad/s gyro spike
+    turned the velocity by 5 rad in one 20 Hz step, a 1000 m/s odometer spike
+    threw the track kilometres off) and is treated as missing.
+    """
+    with np.errstate(invalid="ignore"):
+        gyro = epochs.has_gyro & (np.abs(epochs.yaw_rate_radps) <= params["gyro"]["max_rate_radps"])
+        odo = epochs.has_odo & (np.abs(epochs.odo_speed_mps) <= params["odo"]["max_speed_mps"])
+    return gyro, odo
 
 
 def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -280,10 +307,11 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     info_v = np.zeros(kn.N_INFO)
     info_v[kn.I_MIN_DIAG] = math.inf
     c64 = np.ascontiguousarray  # no copies of the (already contiguous) inputs: memory
+    use_gyro, use_odo = sensor_masks(epochs, params)
     inputs = (
         c64(epochs.dt_s, f64), c64(epochs.has_gnss, bool), c64(epochs.gnss_e, f64),
         c64(epochs.gnss_n, f64), c64(r_e, f64), c64(r_n, f64), c64(ka, f64),
-        c64(epochs.has_gyro, bool), c64(epochs.yaw_rate_radps, f64), c64(epochs.has_odo, bool),
+        c64(use_gyro, bool), c64(epochs.yaw_rate_radps, f64), c64(use_odo, bool),
         c64(epochs.odo_speed_mps, f64), c64(epochs.gnss_outage, bool))
     del r_e, r_n, ka
 
@@ -308,6 +336,8 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         "gnss_used": int(gnss_used.sum()),
         "gate_resets": int(info_v[kn.I_GATE_RESETS]),
         "gnss_inflated": int(info_v[kn.I_INFLATED]),
+        "gyro_implausible": int(np.count_nonzero(epochs.has_gyro & ~use_gyro)),
+        "odo_implausible": int(np.count_nonzero(epochs.has_odo & ~use_odo)),
         "updates_skipped": int(info_v[kn.I_SKIPPED]),
         "nonfinite_states": int(info_v[kn.I_NONFINITE]),
         "min_p_diag": float(info_v[kn.I_MIN_DIAG]) if n else math.nan,

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from gpsdr_cli.filters import kernels_aekf as kn
-from gpsdr_cli.filters.aekf import gnss_noise, initial_state, kernel_params
+from gpsdr_cli.filters.aekf import gnss_noise, initial_state, kernel_params, sensor_masks
 from gpsdr_cli.models.cs_model import cs_sigma_a2, newton_matrix, phi_matrix, q_matrix
 
 
@@ -68,6 +68,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     n = len(epochs)
     smooth = bool(params["filter"]["smooth"])
     r_e, r_n, ka, _ = gnss_noise(epochs, params, adaptive)
+    has_gyro, has_odo = sensor_masks(epochs, params)  # plausible readings only
     x, P, psi_mem, heading_known = initial_state(epochs, params)
     prm, _ = kernel_params(params, adaptive, smooth)
     alpha, tau_eps = prm[kn.P_ALPHA], prm[kn.P_TAU_EPS]
@@ -117,7 +118,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             t += T
             if turn_on and not hold:
                 w = math.nan
-                if epochs.has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
+                if has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
                     w = -epochs.yaw_rate_radps[k]
                 elif t - w_t <= params["aekf"]["gyro_hold_s"]:
                     w = w_held
@@ -176,7 +177,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         cons = (6,) if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else ()
         cons_w = cons + ((1, 4) if params["aekf"]["heading_consider"] and epochs.gnss_outage[k]
                          else ())
-        if epochs.has_odo[k]:
+        if has_odo[k]:
             u = epochs.odo_speed_mps[k]
             is_static = standstill and u < st["speed_mps"]
             if is_static:  # zero-velocity update (seed 004)
@@ -194,7 +195,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     h = x[7] * (x[1] * d_e + x[4] * d_n)
                     x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons)
         static[k] = is_static
-        if epochs.has_gyro[k]:
+        if has_gyro[k]:
             w = -epochs.yaw_rate_radps[k]  # d(psi)/dt = -yaw_rate
             r_w = params["gyro"]["noise_sd_radps"] ** 2
             if is_static:
@@ -217,9 +218,9 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         v = math.hypot(x[1], x[4])
         if v >= omega_min:
             psi_mem, heading_known = math.atan2(x[1], x[4]), True
-        elif epochs.has_gyro[k] and k > 0:
+        elif has_gyro[k] and k > 0:
             psi_mem += (-epochs.yaw_rate_radps[k] - x[6]) * T
-        if epochs.has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
+        if has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
             w_held, w_t = -epochs.yaw_rate_radps[k], t
         xs[k], Ps[k] = x, P
     if smooth and n > 1:
