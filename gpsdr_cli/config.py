@@ -144,6 +144,7 @@ gnss_err_tau_s = 60.0    # correlation time of the GNSS position error states ep
 gnss_err_sd_m = 1.0      # steady-state sigma of eps_e, eps_n
 heading_sd_rad = 0.01    # sigma of the gyro-integrated heading measurement
 heading_err_rw_sd = 0.01   # random walk of q_w, rad per sqrt(s) (absorbs the integrated gyro bias)
+dist_err_rw_sd = 0.002    # random walk of q_s, m per sqrt(s) (q_s is metres per odometer interval)
 heading_interval_s = 0.1 # heading measurements from the integrated gyro at most this often
 heading_course_window_s = 30.0  # gyro heading steered to the GNSS course averaged over this window
                          #   (removes the integrated gyro bias; 0: aligned once at the start, seed 002)
@@ -157,7 +158,7 @@ init_pos_sd_m = 10.0     # initial sigmas of the shared state
 init_vel_sd_mps = 5.0
 init_acc_sd_mps2 = 1.0
 init_heading_err_sd_rad = 0.1  # initial sigma of q_w (alignment of the gyro heading)
-                               # q_s (odometer scale error): [odo] scale_init_sd, scale_rw_sd
+init_dist_err_sd_m = 0.05      # initial sigma of q_s
 check_spd = false        # fkf and fafkf: Cholesky of every P at every epoch, failures in info["spd_failures"] (tests)
 
 [fafkf]
