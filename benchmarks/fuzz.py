@@ -23,7 +23,7 @@ Contract: only GpsdrError subclasses escape, no successful run yields a NaN in
 a required column, and nothing crashes the process.  Anything else is a bug:
 its first input is saved under ``--save``; a case that kills its worker (a
 segfault in a compiled library) is replayed alone with ``--one`` to confirm it
-and counted as ``crash:SIG<n>``.  Why not atheris: it needs a clang-built
+and counted as ``crash:SIG<NAME>``.  Why not atheris: it needs a clang-built
 CPython extension and guides by C coverage; the readers' hot paths are numpy
 and pyarrow, so structured random mutation finds the same classes of bugs.
 """
@@ -132,7 +132,7 @@ def _confirm_crash(index: int, seed: int, save_dir: str | None) -> tuple[bool, s
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     if proc.returncode < 0:
         _, target, _, _ = draw(seed, index)
-        return True, f"{target}:crash:SIG{signal.Signals(-proc.returncode).name}"
+        return True, f"{target}:crash:{signal.Signals(-proc.returncode).name}"
     return False, ""
 
 
