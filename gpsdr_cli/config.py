@@ -149,6 +149,9 @@ heading_interval_s = 0.1 # heading measurements from the integrated gyro at most
 heading_course_window_s = 30.0  # gyro heading steered to the GNSS course averaged over this window
                          #   (removes the integrated gyro bias; 0: aligned once at the start, seed 002)
 course_min_speed_mps = 3.0  # GNSS course used for that only at this speed or more
+odo_scale_window_s = 300.0  # odometer speeds times sum(GNSS speed) / sum(odometer speed) over the fixes
+                         #   (>= course_min_speed_mps) in a centred window this long: removes the
+                         #   wheel-scale error that q_s cannot hold (0: off, as in seed 002)
 gyro_spike_radps = 1.0   # a yaw rate this far from its 5-sample median is a glitch: replaced (0: off)
 odo_spike_mps = 5.0      # an odometer speed this far from its 5-sample median: replaced (0: off)
 v_lin_mps = 0.1          # below this speed the distance row is linearised along the heading

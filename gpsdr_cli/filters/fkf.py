@@ -25,7 +25,13 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   every ``[fkf] heading_interval_s`` (the integrated heading's errors are
   correlated; updating at the gyro's full rate would treat them as white).
 * ``S = |odo speed| x T_m`` at odometer epochs, ``T_m`` the time since the
-  previous odometer record; sigma ``[odo] noise_sd_mps x T_m``.
+  previous odometer record; sigma ``[odo] noise_sd_mps x T_m``.  The odometer
+  speed is first scaled to the GNSS speed by :func:`odometer_scale` (our
+  choice, beyond the paper: its q_s is an additive error in metres per
+  odometer interval, which cannot hold a wheel-radius error -- comma2k19's CAN
+  speed reads 0.8 % low and the fused track fell 3.5 m behind in 60 s; a
+  scale state ``S = (1 + q_s) T_m v`` instead let (q_s, v) wander along their
+  unobservable ridge in GNSS outages: 1.7 km after 10 min).
 * standstill: the latest odometer speed (at most 1 s old) below
   ``[standstill] speed_mps``.
 * initial state: the first usable fix (else e = n = 0), speed from the first
@@ -74,6 +80,8 @@ from .base import FilterResult
 
 #: seconds: an odometer reading older than this does not decide standstill
 STALE_ODO_S = 1.0
+#: fixes with a speed needed to scale the odometer to the GNSS speed
+MIN_SCALE_FIXES = 20
 #: seconds: fixes this far apart give the fallback course for the heading alignment
 COURSE_BASE_S = 2.0
 
@@ -179,6 +187,41 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     return np.interp(tg, tk, d_mean)
 
 
+def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np.ndarray,
+                   params: Params) -> tuple[np.ndarray, float]:
+    """Scale factor (per odometer record at ``t_odo``) taking the odometer speed to the GNSS's.
+
+    ``k = sum(gnss speed) / sum(odometer speed)`` over the fixes with a speed >=
+    ``[fkf] course_min_speed_mps`` in a window of ``[fkf] odo_scale_window_s``
+    centred on each fix (clipped at the drive's ends), the odometer speed
+    interpolated to the fix times; interpolated linearly to the odometer
+    records; clamped to [0.8, 1.25] (a ratio outside is a unit error, not a
+    wheel).  A post-processor sees the whole drive, so an outage is bridged
+    from both ends.  Needs ``MIN_SCALE_FIXES`` such fixes, else 1.  Returns
+    (k per record, median k).
+    """
+    fp = params["fkf"]
+    window = fp["odo_scale_window_s"]
+    ones = np.ones(len(t_odo))
+    if window <= 0 or len(t_odo) < 2:
+        return ones, 1.0
+    ok = (epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps)
+          & (epochs.gnss_speed_mps >= fp["course_min_speed_mps"])
+          & (t_s >= t_odo[0]) & (t_s <= t_odo[-1]))
+    k = np.flatnonzero(ok)
+    if len(k) < MIN_SCALE_FIXES:
+        return ones, 1.0
+    tk = t_s[k]
+    cg = np.concatenate(([0.0], np.cumsum(epochs.gnss_speed_mps[k])))
+    co = np.concatenate(([0.0], np.cumsum(np.interp(tk, t_odo, speed))))
+    lo = np.searchsorted(tk, tk - 0.5 * window, side="left")
+    hi = np.searchsorted(tk, tk + 0.5 * window, side="right")
+    den = co[hi] - co[lo]
+    ratio = np.where(den > 0.0, (cg[hi] - cg[lo]) / np.where(den > 0.0, den, 1.0), 1.0)
+    ratio = np.clip(ratio, 0.8, 1.25)
+    return np.interp(t_odo, tk, ratio), float(np.median(ratio))
+
+
 def prepare(epochs: Epochs, params: Params) -> Prepared:
     """Kernel inputs from epochs and parameters (see the module docstring)."""
     fp = params["fkf"]
@@ -226,10 +269,13 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     t_m = np.zeros(n)
     o = np.flatnonzero(epochs.has_odo)
     odo_spikes = 0
+    odo_scale = 1.0
     speed0 = math.nan
     static = np.zeros(n, bool)
     if len(o):
         speed, odo_spikes = despike(np.abs(epochs.odo_speed_mps[o]), fp["odo_spike_mps"])
+        scale, odo_scale = odometer_scale(epochs, t_s, t_s[o], speed, params)
+        speed = speed * scale
         t_m[o[1:]] = np.diff(t_s[o])
         dist[o[1:]] = speed[1:] * t_m[o[1:]]
         speed0 = float(speed[0])
@@ -307,6 +353,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     var_n = np.where(epochs.has_gnss, epochs.gnss_sd_n, 1.0) ** 2
     info = {"heading_alignment": source, "heading_alignment_t_s": t_a,
             "gyro_spikes_removed": gyro_spikes, "odo_spikes_removed": odo_spikes,
+            "odo_scale": odo_scale,
             "local_filters": ",".join(name for name, on in (("gnss", gnss_on), ("dr", dr_on)) if on)}
     return Prepared(dt=np.ascontiguousarray(epochs.dt_s, dtype=float),
                     has_gnss=np.ascontiguousarray(epochs.has_gnss, dtype=bool),
