@@ -81,6 +81,8 @@ bias_tau_s = 300.0       # Gauss-Markov correlation time of the gyro drift (MEMS
 bias_sd_radps = 0.005    # steady-state sigma of the drift
 bias_init_sd_radps = 0.1 # initial sigma of the drift (covers a 4 deg/s bias)
 max_rate_radps = 3.0     # ekf/aekf: a reading beyond this (172 deg/s) is a glitch, treated as missing
+saturation_min_count = 20  # ekf/aekf: this many readings exactly at the drive's largest magnitude = a clipping
+                         #   gyro; those readings are treated as missing
 bias_init_sd_dr_radps = 0.005  # ekf/aekf: the same when the drive has no GNSS fix at all: the drift is then
                          #   observable only at standstill, and a 0.1 rad/s prior lets the heading run free
 
@@ -101,6 +103,9 @@ enabled = true           # zero-velocity update and held position while stopped 
 speed_mps = 0.05         # odometer speed below this = stopped
 zupt_sd_mps = 0.01       # sigma of the zero-velocity pseudo-measurement
 omega_min_speed_mps = 0.5  # below this the yaw-rate update is skipped (singular at standstill)
+heading_min_speed_mps = 3.0  # the remembered heading (odometer direction near standstill) is taken from the
+                         #   velocity only above this; below it follows the gyro (braking to a stop, the
+                         #   velocity can reverse; without a gyro the car drove off 147 deg wrong)
 
 [aekf]
 tau_a_s = 20.0           # correlation time of the manoeuvre acceleration (seed 000)

@@ -216,7 +216,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 else:
                     x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w, cons_w)
         v = math.hypot(x[1], x[4])
-        if v >= omega_min:
+        if v >= max(st["heading_min_speed_mps"], omega_min):
             psi_mem, heading_known = math.atan2(x[1], x[4]), True
         elif has_gyro[k] and k > 0:
             psi_mem += (-epochs.yaw_rate_radps[k] - x[6]) * T
