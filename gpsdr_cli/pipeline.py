@@ -270,38 +270,50 @@ STRAY_GAP_S = 3600.0
 STRAY_SHARE = 0.01
 
 
-def stray_mask(t_ns: np.ndarray) -> np.ndarray:
-    """True for records to keep: drops small clusters of records more than STRAY_GAP_S away
-    from the rest of the stream (a corrupt digit in one stamp would otherwise make the
-    filter predict across days)."""
+def stray_mask(t_ns: np.ndarray, all_t_ns: np.ndarray | None = None) -> np.ndarray:
+    """True for records of ``t_ns`` to keep.
+
+    The stamps of every stream (``all_t_ns``, default ``t_ns`` itself) are split into
+    clusters wherever they leave a gap of more than STRAY_GAP_S; a cluster holding less
+    than STRAY_SHARE of all records (and not the largest) is stray: a corrupt digit in a
+    stamp or date would otherwise make the filter predict across days or years.  Judged
+    over all streams together, because a short stream (60 GNSS fixes) gives one corrupt
+    record a share above the threshold on its own.
+    """
     t = np.asarray(t_ns, np.int64)
+    pool = t if all_t_ns is None else np.asarray(all_t_ns, np.int64)
     keep = np.ones(len(t), bool)
-    if len(t) < 3:
+    if len(pool) < 3 or len(t) == 0:
         return keep
-    order = np.argsort(t, kind="stable")
-    gaps = np.diff(t[order]) > STRAY_GAP_S * NS_PER_S
+    ordered = np.sort(pool)
+    gaps = np.diff(ordered) > STRAY_GAP_S * NS_PER_S
     if not gaps.any():
         return keep
     cluster = np.concatenate(([0], np.cumsum(gaps)))
     counts = np.bincount(cluster)
-    small = (counts < STRAY_SHARE * len(t)) & (np.arange(len(counts)) != np.argmax(counts))
-    keep[order] = ~small[cluster]
+    small = (counts < STRAY_SHARE * len(pool)) & (np.arange(len(counts)) != np.argmax(counts))
+    # the cluster of each record of t: clusters are contiguous ranges of the sorted pool
+    starts = ordered[np.concatenate(([0], np.flatnonzero(gaps) + 1))]
+    of_t = np.searchsorted(starts, t, side="right") - 1
+    keep = ~small[np.clip(of_t, 0, len(counts) - 1)]
     return keep
 
 
 def drop_stray_records(drive: Drive) -> Drive:
     """A copy of ``drive`` without stray-stamped records, counted in its SkipReport."""
     out = dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped))
-    for name in ("gnss", "gyro", "odo"):
-        stream = getattr(drive, name)
-        if stream is None or not len(stream):
-            continue
-        keep = stray_mask(stream.t_ns)
+    streams = [(name, getattr(drive, name)) for name in ("gnss", "gyro", "odo")]
+    streams = [(name, s) for name, s in streams if s is not None and len(s)]
+    if not streams:
+        return out
+    all_t = np.concatenate([s.t_ns for _, s in streams])
+    for name, stream in streams:
+        keep = stray_mask(stream.t_ns, all_t)
         if keep.all():
             continue
         k = int(np.flatnonzero(~keep)[0])
         out.skipped.add(f"{name}: time stamp more than {STRAY_GAP_S:.0f} s away from the rest "
-                        "of the stream", f"{name} record {k + 1} ({_iso(stream.t_ns[k])})",
+                        "of the drive", f"{name} record {k + 1} ({_iso(stream.t_ns[k])})",
                         int((~keep).sum()))
         setattr(out, name, dataclasses.replace(
             stream, **{f.name: getattr(stream, f.name)[keep]

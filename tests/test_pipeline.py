@@ -261,3 +261,16 @@ def test_pdop_is_null_after_a_gnss_record_without_one(drive: Drive) -> None:
     assert inside.sum() > 1000
     assert np.isnan(res.track["pdop"].to_numpy()[inside]).all()
     assert (res.track["pdop"].to_numpy()[after] == 1.8).all()
+
+
+def test_one_far_stamp_in_a_short_stream_is_stray_against_the_whole_drive() -> None:
+    """60 GNSS fixes and one dated 22 years later: 1.6 % of its stream, but a speck of the
+    drive's 1261 records; it must be dropped, not predicted across."""
+    from gpsdr_cli.pipeline import stray_mask
+
+    ns = 1_000_000_000
+    gnss = np.concatenate((1_700_000_000 * ns + np.arange(60) * ns, [2_400_000_000 * ns]))
+    dr = 1_700_000_000 * ns + np.arange(1200) * ns // 20
+    keep = stray_mask(gnss, np.concatenate((gnss, dr)))
+    assert keep[:60].all() and not keep[60]
+    assert stray_mask(dr, np.concatenate((gnss, dr))).all()
