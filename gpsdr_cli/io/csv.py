@@ -44,10 +44,14 @@ _POSIX_PLAUSIBLE_S = 1.0e8  # 1973-03-03: earlier "POSIX" times are almost surel
 
 # --------------------------------------------------------------------------- file checks
 
-def read_bytes(path: str | Path) -> bytes:
-    """The whole file, or an :class:`InputError` naming it (missing, unreadable, a directory)."""
+def read_bytes(path: str | Path, limit: int | None = None) -> bytes:
+    """The whole file (or its first ``limit`` bytes), or an :class:`InputError` naming it
+    (missing, unreadable, a directory)."""
     try:
-        return Path(path).read_bytes()
+        if limit is None:
+            return Path(path).read_bytes()
+        with open(path, "rb") as f:
+            return f.read(limit)
     except IsADirectoryError as err:
         raise InputError(path, "is a directory, expected a file") from err
     except FileNotFoundError as err:

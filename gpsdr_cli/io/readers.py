@@ -24,15 +24,9 @@ _HEAD_BYTES = 65536
 
 
 def _head(path: str | Path) -> bytes:
-    try:
-        with open(path, "rb") as f:
-            return f.read(_HEAD_BYTES)
-    except IsADirectoryError as err:
-        raise InputError(path, "is a directory, expected a file") from err
-    except FileNotFoundError as err:
-        raise InputError(path, "no such file") from err
-    except OSError as err:
-        raise InputError(path, f"cannot read: {err.strerror or err}") from err
+    from .csv import read_bytes
+
+    return read_bytes(path, _HEAD_BYTES)
 
 
 def sniff(path: str | Path) -> str:
