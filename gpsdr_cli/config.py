@@ -148,7 +148,8 @@ jerk_psd_m2ps5 = 1.0     # white-jerk spectral density per axis of the shared mo
 gnss_err_tau_s = 60.0    # correlation time of the GNSS position error states eps_e, eps_n
 gnss_err_sd_m = 1.0      # steady-state sigma of eps_e, eps_n
 heading_sd_rad = 0.01    # sigma of the gyro-integrated heading measurement
-heading_err_rw_sd = 0.01   # random walk of q_w, rad per sqrt(s) (absorbs the integrated gyro bias)
+heading_err_rw_sd = 0.005  # random walk of q_w, rad per sqrt(s) (the course steering removes the gyro bias;
+                         #   0.01 let the velocity direction wander in outages: tunnels fkf 27.5 -> 15.6 m, RTS 6.7 -> 3.4 m)
 dist_err_rw_sd = 0.002    # random walk of q_s, m per sqrt(s) (q_s is metres per odometer interval)
 heading_interval_s = 0.1 # heading measurements from the integrated gyro at most this often
 heading_course_window_s = 30.0  # gyro heading steered to the GNSS course averaged over this window
