@@ -130,6 +130,11 @@ turn_omega_row = "lateral"  # with turn_propagation, the seed 000 yaw-rate row: 
                          #   it: the residual acceleration has no lateral part; benchmark: skip let the Newton step
                          #   reverse v while braking to a stop, 79 m open sky)
 gyro_hold_s = 0.5        # with turn_propagation, a gyro rate turns the epochs up to this long after it
+odo_along_track = false  # true: the odometer corrects position, velocity and acceleration along the velocity
+                         #   only (gains projected; Joseph keeps P exact), else a misalignment of P and v turns its
+                         #   speed updates into heading jumps (0.5 deg each in DR).  Benchmark: DR-only comma2k19
+                         #   111 -> 75 m, 10 min outage RMSE 188 -> 146 m, but tunnels forward 16.4 -> 20.3 m
+                         #   and RTS 3.4 -> 5.5 m (seeds 1-3): off by default
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)

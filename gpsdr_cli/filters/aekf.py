@@ -278,6 +278,7 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     flg[kn.F_DRIFT_CONSIDER] = modes[a["drift_consider"]]
     flg[kn.F_HEADING_CONSIDER] = int(a["heading_consider"])
     flg[kn.F_TURN] = int(a["turn_propagation"])
+    flg[kn.F_ODO_ALONG] = int(a["odo_along_track"])
     rows = {"skip": kn.OMEGA_SKIP, "lateral": kn.OMEGA_LATERAL}
     if a["turn_omega_row"] not in rows:
         raise ConfigError(f"aekf.turn_omega_row = {a['turn_omega_row']!r}: expected one of "

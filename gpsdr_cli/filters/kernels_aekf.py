@@ -56,8 +56,8 @@ P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_
 N_PRM = 25
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
-F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE = range(8, 13)
-N_FLG = 13
+F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
+N_FLG = 14
 #: values of flg[F_TURN_OMEGA] (the seed 000 yaw-rate row when aekf.turn_propagation is on)
 OMEGA_SKIP, OMEGA_LATERAL = 0, 1
 #: values of flg[F_GATE_MODE] (gnss.gate_mode)
@@ -211,13 +211,17 @@ def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
 
 @njit(cache=True)
 def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: float, R: float,
-               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int = 0) -> bool:
+               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int = 0,
+               along_e: float = 0.0, along_n: float = 0.0) -> bool:
     """Scalar update with a sparse Jacobian row H (nonzeros at indices ``nz``), Joseph form.
 
     False if S is not positive.  ``consider >= 0``: Schmidt-Kalman "consider"
     their gain is set to zero (they are not corrected by this
     measurement) while its uncertainty still enters S and the
     cross-covariances; the Joseph form keeps P exact for such a suboptimal gain.
+    ``(along_e, along_n)`` a unit vector: the gains of the (e, n), (v_e, v_n) and
+    (a_e, a_n) pairs are projected on it (the measurement corrects those states
+    along that direction only; again exact P through the Joseph form).
     """
     n = N_STATES
     HPHt = 0.0
@@ -237,6 +241,11 @@ def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: f
         for i in range(n):
             if (consider >> i) & 1:
                 K[i] = 0.0
+    if along_e != 0.0 or along_n != 0.0:
+        for o in range(3):
+            dot = K[o] * along_e + K[o + 3] * along_n
+            K[o] = dot * along_e
+            K[o + 3] = dot * along_n
     for i in range(n):
         x[i] += K[i] * y
     joseph_apply(P, K, PHt, HPHt, R, Bh)
@@ -422,6 +431,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     sh_m = int(st[S_SH_M])
     turn = flg[F_TURN] != 0
     turn_omega = flg[F_TURN_OMEGA]
+    odo_along = flg[F_ODO_ALONG] != 0
     gate_inflate = flg[F_GATE_MODE] == GATE_INFLATE
     r_w = prm[P_R_OMEGA]
     w_held = st[S_W]
@@ -547,7 +557,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 if use:
                     h = odo_row(x, ue, un, H)
                     cons = CONS_EPS if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else 0
-                    if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons):
+                    pe = ue if odo_along else 0.0
+                    pn = un if odo_along else 0.0
+                    if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons, pe, pn):
                         info[I_SKIPPED] += 1.0
         static_out[k] = is_static
         hold_out[k] = hold

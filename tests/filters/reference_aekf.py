@@ -57,6 +57,22 @@ def turn(x: np.ndarray, T: float, w: float, r_w: float) -> tuple[np.ndarray, np.
     return xr, J, r_w * T * T * np.outer(g, g)
 
 
+def along_joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
+                 consider: tuple[int, ...], d: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`joseph` with the gains of the (e, n), (v_e, v_n), (a_e, a_n) pairs projected on d."""
+    S = float(H @ P @ H) + R
+    K = P @ H / S
+    if consider:
+        K[list(consider)] = 0.0
+    dv = np.array(d)
+    for o in range(3):
+        K[[o, o + 3]] = dv * float(dv @ K[[o, o + 3]])
+    x = x + K * y
+    A = np.eye(len(x)) - np.outer(K, H)
+    P = A @ P @ A.T + R * np.outer(K, K)
+    return x, 0.5 * (P + P.T)
+
+
 def unit(i: int) -> np.ndarray:
     H = np.zeros(8)
     H[i] = 1.0
@@ -193,7 +209,11 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     H = np.zeros(8)
                     H[1], H[4], H[7] = x[7] * d_e, x[7] * d_n, x[1] * d_e + x[4] * d_n
                     h = x[7] * (x[1] * d_e + x[4] * d_n)
-                    x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons)
+                    if params["aekf"]["odo_along_track"]:
+                        x, P = along_joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons,
+                                            (d_e, d_n))
+                    else:
+                        x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons)
         static[k] = is_static
         if has_gyro[k]:
             w = -epochs.yaw_rate_radps[k]  # d(psi)/dt = -yaw_rate

@@ -35,6 +35,7 @@ OPTIONS = {
     "turn_lateral": {"aekf": {"turn_propagation": True, "turn_omega_row": "lateral"}},
     "turn_no_standstill": {"aekf": {"turn_propagation": True}, "standstill": {"enabled": False}},
     "gate_inflate": {"gnss": {"gate_mode": "inflate", "gate_warmup_fixes": 0}},
+    "odo_along_track": {"aekf": {"odo_along_track": True}},
     "gate_inflate_innovation": {"gnss": {"gate_mode": "inflate"},
                                 "adaptive": {"innovation_factor": True}},
     "gate_reject_no_warmup": {"gnss": {"gate_mode": "reject", "gate_warmup_fixes": 0}},
