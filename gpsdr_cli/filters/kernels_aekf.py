@@ -21,7 +21,8 @@ Per epoch k (asynchronous cycle, ALGORITHMS.md 0):
    times it is accepted with R scaled by NIS/gate), seed 001 adaptive factor on
    P(k|k-1), Sage-Husa scale on R, then two sequential scalar updates (e, n);
 3. odometer (if any): below ``standstill.speed_mps`` a zero-velocity update of
-   v_e, v_n, a_e, a_n; else the speed ``u = k_s |v|``;
+   v_e, v_n, a_e, a_n; else the speed ``u = k_s |v|`` (with
+   ``aekf.odo_along_track`` its gains projected on the velocity direction);
 4. gyro (if any): at standstill the rate measures the drift alone; above
    ``omega_min_speed_mps`` the seed 000 heading-rate row (with the turn
    propagation: skipped, or reduced to "no lateral residual acceleration",
