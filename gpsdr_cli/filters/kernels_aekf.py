@@ -328,9 +328,13 @@ def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -
     gv = (g1, g2, g4, g5)
     gi = (1, 2, 4, 5)
     for a in range(4):
-        for b in range(4):
-            P[gi[a], gi[b]] += q * gv[a] * gv[b]
-    symmetrize(P)
+        for b in range(a, 4):
+            v = q * gv[a] * gv[b]
+            P[gi[a], gi[b]] += v
+            if b != a:
+                P[gi[b], gi[a]] += v
+    # no symmetrize: the same row and column operations keep P symmetric to rounding, and
+    # every update re-mirrors it (speed: this runs at every epoch)
 
 
 @njit(cache=True)
