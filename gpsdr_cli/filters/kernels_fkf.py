@@ -38,7 +38,15 @@ of rejections).  DR local filter (eqs. (7)-(14), erratum: h3, h4 divide by
     S     = T_m sqrt(v2) + q_s        H: d/dv_e = T_m v_e/v, d/dv_n = T_m v_n/v, d/dq_s = 1
 
 The heading row is skipped below ``omega_min_speed`` (of the predicted state:
-the Jacobian divides by v2); below ``v_lin`` the distance row is linearised
+the Jacobian divides by v2) and while the predicted speed is under
+``sqrt(HEAD_SPEED_SNR2)`` sigmas of the speed when no odometer row or
+zero-velocity update was applied for ``[fkf] dr_stale_s`` (with a fresh
+odometer the speed is measured; fafkf's Carlson-bound P_g would otherwise
+inflate the speed variance in a 10-min outage and lock the heading out) (the variance of the velocity
+along itself, which the heading rows do not reduce: no lock-out; below it the
+direction is noise: a
+stop without an odometer left a GNSS-noise velocity pointing backwards, the
+heading residual near pi moved v by 80 m/s, fault case no_odo: 268 m RMSE); below ``v_lin`` the distance row is linearised
 along the latest heading instead of ``v/|v|``: no division by a speed that
 can be zero.  Heading residuals are wrapped to (-pi, pi] and gated
 (chi-square(1) at ``[gnss] gate_prob``); after ``gate_reset_s`` of rejected
@@ -119,6 +127,10 @@ K_HEAD_CHI2 = 17   # chi-square(1) gate on the heading innovation; <= 0 disables
 K_GNSS_STALE_S = 18  # s, GNSS filter without an accepted fix for longer: left out of the fusion
 K_DR_STALE_S = 19  # s, DR filter without any update for longer: left out of the fusion
 N_PAR = 20
+
+#: heading row only while v^2 >= this x var(speed), var(speed) = u^T P_vv u, u = v/|v|:
+#: a speed of 3 sigmas or more
+HEAD_SPEED_SNR2 = 9.0
 
 #: RTS guard: smoothed-minus-forward position NEES above this restarts the recursion
 #: (chi-square(2) at 1 - 4e-6)
@@ -696,6 +708,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
     t_now = 0.0
     t_last_acc = 0.0                                # last accepted GNSS fix
     t_last_dr = 0.0                                 # last DR update of any kind
+    t_last_dist = 0.0                               # last odometer distance or ZUPT update
     t_head_acc = 0.0                                # last accepted heading
     psi_hint = psi0
     zupt_sd = par[K_ZUPT_SD]
@@ -765,12 +778,17 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
             if st:
                 zupt(x2, P2, zupt_sd, h, s, kk)
                 t_last_dr = t_now
+                t_last_dist = t_now
             else:
                 do_head = False
                 do_dist = False
                 if not math.isnan(theta[kx]):
                     psi_hint = theta[kx] - x2[IQW]
-                    if x2[IVE] ** 2 + x2[IVN] ** 2 >= omin2:
+                    v2 = x2[IVE] ** 2 + x2[IVN] ** 2
+                    var_v2 = (x2[IVE] ** 2 * P2[IVE, IVE] + 2.0 * x2[IVE] * x2[IVN] * P2[IVE, IVN]
+                              + x2[IVN] ** 2 * P2[IVN, IVN])      # v^2 x var(speed)
+                    speed_known = t_now - t_last_dist <= par[K_DR_STALE_S]
+                    if v2 >= omin2 and (speed_known or v2 * v2 >= HEAD_SPEED_SNR2 * var_v2):
                         do_head = True
                     else:
                         counters[C_HEADING_SLOW] += 1
@@ -819,6 +837,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                     else:
                         update_row(x2, P2, h, y, rd, s, kk)
                         t_last_dr = t_now
+                        t_last_dist = t_now
                         counters[C_DIST] += 1
 
         # ---- master fusion -----------------------------------------------------------

@@ -186,6 +186,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
     win = [Window(int(flags[kf.F_WINDOW])) for _ in range(4)]
     zupt_R = par[kf.K_ZUPT_SD] ** 2
     t, t_acc, t_dr, t_head, psi_hint = 0.0, 0.0, 0.0, 0.0, prep.psi0
+    t_dist = 0.0
     xs, Ps = np.zeros((n, NX)), np.zeros((n, NX, NX))
     beta_out = np.full((n, 2), np.nan)
     used = np.zeros(n, bool)
@@ -234,13 +235,18 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         if dr_on:
             if st:
                 x2, P2 = zupt(x2, P2)
-                t_dr = t
+                t_dr = t_dist = t
             else:
                 th, dist, t_m = prep.theta[k], prep.dist[k], prep.t_m[k]
                 do_head = do_dist = False
                 if not math.isnan(th):
                     psi_hint = th - x2[8]
-                    do_head = x2[1] ** 2 + x2[4] ** 2 >= par[kf.K_OMEGA_MIN] ** 2
+                    v2 = x2[1] ** 2 + x2[4] ** 2
+                    speed_known = t - t_dist <= par[kf.K_DR_STALE_S]
+                    do_head = (v2 >= par[kf.K_OMEGA_MIN] ** 2 and speed_known) or (
+                        v2 >= par[kf.K_OMEGA_MIN] ** 2
+                        and v2 * v2 >= kf.HEAD_SPEED_SNR2 * (x2[[1, 4]] @ P2[np.ix_([1, 4], [1, 4])]
+                                                                @ x2[[1, 4]]))
                 if not math.isnan(dist) and t_m > 0:
                     do_dist = True
                 R_head = par[kf.K_HEAD_SD] ** 2
@@ -272,7 +278,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                     chi2 = par[kf.K_HEAD_CHI2]
                     if not (chi2 > 0 and y * y > chi2 * (H @ P2 @ H + R)):
                         x2, P2 = kf_update(x2, P2, H, y, R)
-                        t_dr = t
+                        t_dr = t_dist = t
         g_fresh = t - t_acc <= par[kf.K_GNSS_STALE_S]
         d_fresh = t - t_dr <= par[kf.K_DR_STALE_S]
         if both and not fr and g_fresh != d_fresh:        # NR: a stale filter is left out
