@@ -183,7 +183,8 @@ r_min_factor = 1.0       # R_jj clamped to [r_min_factor, r_max_factor] x its in
 r_max_factor = 100.0
 delta_max = 0.2          # largest |Delta| of one fuzzy R step (R_jj *= 1 + Delta)
 residual_clip = 9.0      # a squared residual enters the window clipped to this x Te_jj (outlier guard)
-weights = "block"        # scalar (seed 002) | block (per-state-block weights)
+weights = "scalar"       # scalar (seed 002; default: block drifted 128 m in a 60-s outage, fafkf one_hour
+                         #   8.3 -> 5.8 m, tunnels 16.9 -> 14.8 m; urban 6.2 -> 7.2 m) | block (per-state-block weights)
 normalisation = "share"  # share: value / sum over both filters | log
 """
 
