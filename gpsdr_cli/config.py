@@ -130,6 +130,8 @@ turn_omega_row = "lateral"  # with turn_propagation, the seed 000 yaw-rate row: 
                          #   it: the residual acceleration has no lateral part; benchmark: skip let the Newton step
                          #   reverse v while braking to a stop, 79 m open sky)
 gyro_hold_s = 0.5        # with turn_propagation, a gyro rate turns the epochs up to this long after it
+max_gap_s = 600.0        # a step longer than this is not propagated: position held, its variance grown by
+                         #   (60 m/s x step)^2 (a fix dated 22 years later made the mean and lat/lon infinite)
 odo_along_track = false  # true: the odometer corrects position, velocity and acceleration along the velocity
                          #   only (gains projected; Joseph keeps P exact), else a misalignment of P and v turns its
                          #   speed updates into heading jumps (0.5 deg each in DR).  Benchmark: DR-only comma2k19

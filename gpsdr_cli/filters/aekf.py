@@ -261,6 +261,8 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.P_GATE_INFLATE_MAX] = g["gate_inflate_max"]
     prm[kn.P_GATE_WARMUP] = g["gate_warmup_fixes"]
     prm[kn.P_GATE_INFLATE_AFTER] = g["gate_inflate_after_s"]
+    prm[kn.P_MAX_GAP] = a["max_gap_s"]
+    prm[kn.P_GAP_SPEED] = MAX_SPEED_MPS
     prm[kn.P_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
     flg = np.zeros(kn.N_FLG, np.int64)
     flg[kn.F_ADAPT_Q] = int(adaptive)

@@ -54,7 +54,8 @@ P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_O
 P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = range(9, 15)
 P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_MIN = range(20, 25)
-N_PRM = 25
+P_MAX_GAP, P_GAP_SPEED = 25, 26
+N_PRM = 27
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
@@ -451,7 +452,10 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         add_e = 0.0
         add_n = 0.0
         w_use = math.nan
-        hold = standstill and is_static
+        # a step longer than aekf.max_gap_s (a logger pause, a far-future stamp) is not
+        # propagated: held like a standstill, the position variance grown by (speed bound x T)^2
+        gap = T > prm[P_MAX_GAP]
+        hold = (standstill and is_static) or gap
         # ---- 1. predict (seed 000 CS model; seed 004 static hold; fading memory)
         if k > 0 and T > 0.0:
             if adapt_q:  # seed 000 eqs. (14)-(15)
@@ -468,6 +472,11 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             predict_mean(x, T, f_eps if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
             predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[P_Q_EPS], prm[P_Q_KS], lam, hold, qbuf)
             t += T
+            if gap:
+                add_e = (prm[P_GAP_SPEED] * T) ** 2
+                add_n = add_e
+                P[0, 0] += add_e
+                P[3, 3] += add_n
             if turn and not hold:  # our choice: the gyro turns v and a (aekf.turn_propagation)
                 if has_gyro[k] and math.isfinite(yaw[k]):
                     w_use = -yaw[k]  # the rate read at the end of the step
@@ -514,17 +523,17 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 else:
                     rej_since = -1.0
             if accept:
-                if innov and r_fac == 1.0:  # seed 001: P(k|k-1) /= alpha (not on a fix the
+                if innov and r_fac == 1.0 and not gap:  # seed 001: P(k|k-1) /= alpha (not on a fix the
                     # gate down-weighted as an outlier: in reject mode it would not be used at all)
                     af = adaptive_factor(ye, yn, s00 + s11, prm[P_INNOV_C])
                     if af < 1.0:
                         g = 1.0 / af
                         inflate_kinematic(P, g)
                 if reset:
-                    add_e = ye * ye
-                    add_n = yn * yn
-                    P[0, 0] += add_e
-                    P[3, 3] += add_n
+                    add_e += ye * ye
+                    add_n += yn * yn
+                    P[0, 0] += ye * ye
+                    P[3, 3] += yn * yn
                 if sage:  # seed 004 Sage-Husa on a scale of R, with the divergence guard
                     sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e[k] + r_n[k])
                     sh_r = sage_husa_r(sh_r, sh_m, prm[P_SH_B], sample, prm[P_SH_RMIN],

@@ -116,7 +116,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     static = np.zeros(n, bool)
     for k in range(n):
         T = epochs.dt_s[k]
-        hold = standstill and is_static
+        gap = T > params["aekf"]["max_gap_s"]
+        hold = (standstill and is_static) or gap
         F = np.eye(8)
         if k > 0 and T > 0:
             if adaptive:  # seed 000 eqs. (14)-(15)
@@ -132,6 +133,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             P = lam * F @ P @ F.T + Q
             P = 0.5 * (P + P.T)
             t += T
+            if gap:  # not propagated; position variance grown by (60 m/s x T)^2
+                P = P + np.diag([(60.0 * T) ** 2, 0, 0, (60.0 * T) ** 2, 0, 0, 0, 0])
             if turn_on and not hold:
                 w = math.nan
                 if has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
@@ -170,7 +173,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 else:
                     rej_since = -1.0
             if accept:
-                if ad["innovation_factor"] and r_fac == 1.0:  # seed 001
+                if ad["innovation_factor"] and r_fac == 1.0 and not gap:  # seed 001
                     beta = math.sqrt(float(y @ y) / np.trace(S))
                     a_f = 1.0 if beta <= ad["innovation_c"] else ad["innovation_c"] / beta
                     if a_f < 1.0:  # on the kinematic block only (see kernels_aekf)

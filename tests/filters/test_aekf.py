@@ -325,3 +325,30 @@ def test_start_at_standstill_without_gnss_course(name):
     # 2.5 m: gate_mode "inflate" pulls the 52 m drive-off transient of "reject" down to 4 m, but
     # what is left of it settles slower in the ekf (measured 2.05 m after 45 s, reject 1.1 m)
     assert err[tr.t_s > 45.0].max() < 2.5
+
+
+@pytest.mark.parametrize("name", FILTERS)
+@pytest.mark.parametrize("smooth", [False, True])
+def test_long_pause_is_held_not_propagated(name, smooth):
+    """A 2 h logger pause mid-drive (aekf.max_gap_s = 600 s): the position is held across it
+    (not 2 h x 12 m/s = 86 km ahead), its variance grows by (60 m/s x 7200 s)^2, and two
+    seconds of fixes later the track is back within 5 m of the truth."""
+    ep, tr = tiny_drive(60.0, seed=42, dr_hz=10.0)
+    k = len(ep) // 2
+    k += int(ep.has_gnss[k])  # an epoch without a fix: the held prediction is the output
+    dt = ep.dt_s.copy()
+    dt[k] = 7200.0
+    t_ns = ep.t_ns.copy()
+    t_ns[k:] += 7200 * 10**9
+    fields = {f: getattr(ep, f) for f in ("has_gnss", "gnss_e", "gnss_n", "gnss_sd_e",
+                                          "gnss_sd_n", "pdop", "gnss_speed_mps",
+                                          "gnss_course_rad", "has_gyro", "yaw_rate_radps",
+                                          "has_odo", "odo_speed_mps", "gnss_outage")}
+    paused = Epochs(gap_s=ep.gap_s, t_ns=t_ns, dt_s=dt, **fields)
+    res = run(name, paused, params_with({"filter": {"smooth": smooth}}))
+    assert np.isfinite(res.e).all() and np.isfinite(res.var_e).all()
+    if not smooth:
+        assert abs(res.e[k] - res.e[k - 1]) < 1.0 + 1.3 * 12.0 * 0.1  # held (m)
+        assert res.var_e[k] > 0.9 * (60.0 * 7200.0) ** 2
+    err = horizontal_error(res, tr)
+    assert err[tr.t_s > tr.t_s[k] + 2.0].max() < 5.0
