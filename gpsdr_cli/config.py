@@ -154,7 +154,8 @@ beta_gnss = 0.5          # fkf, FR mode: information share of the GNSS local fil
 jerk_psd_m2ps5 = 1.0     # white-jerk spectral density per axis of the shared model's Q (m^2/s^5)
 gnss_err_tau_s = 60.0    # correlation time of the GNSS position error states eps_e, eps_n
 gnss_err_sd_m = 1.0      # steady-state sigma of eps_e, eps_n
-heading_sd_rad = 0.01    # sigma of the gyro-integrated heading measurement
+heading_sd_rad = 0.03    # sigma of the gyro-integrated heading measurement (0.01: a clipped gyro dragged the
+                         #   track, fault gyro_saturation 6.3 m; 0.03: fafkf urban 7.2 -> 5.8 m, one_hour 5.8 -> 5.1 m)
 heading_err_rw_sd = 0.005  # random walk of q_w, rad per sqrt(s) (the course steering removes the gyro bias;
                          #   0.01 let the velocity direction wander in outages: tunnels fkf 27.5 -> 15.6 m, RTS 6.7 -> 3.4 m)
 dist_err_rw_sd = 0.002    # random walk of q_s, m per sqrt(s) (q_s is metres per odometer interval)
