@@ -133,14 +133,8 @@ FILTERS = ("ekf", "aekf", "fkf", "fafkf")
 #: (fault, filter) -> reason, for bugs in other modules still open at the deadline
 KNOWN_BUGS: dict[tuple[str, str], str] = {
     ('duplicates', 'fkf'): 'fkf: duplicated records (NMEA copies 11 m off, last wins): RMSE 11 m',
-    ('gyro_saturation', 'fkf'): 'fkf: gyro clipped at 0.05 rad/s: RMSE 17 m with good 5 Hz GNSS',
-    ('no_odo', 'fafkf'): 'fkf: GNSS 5 Hz + gyro, no odometer: RMSE far above 5 m',
-    ('no_odo', 'fkf'): 'fkf: GNSS 5 Hz + gyro, no odometer: RMSE far above 5 m',
-    ('odo_dropout', 'fkf'): 'fkf: 30 s without odometer: RMSE far above 5 m with GNSS present',
     ('outage_10min', 'aekf'): 'kf: 10 min outage: end error 4.5 sigma, covariance overconfident',
     ('outage_10min', 'ekf'): 'kf: 10 min outage: end error 6.5 sigma, covariance overconfident',
-    ('outage_10min', 'fafkf'): 'fkf: 10 min outage: 1.4 km error, over 5 m + 10 % of distance',
-    ('outage_60s', 'fafkf'): 'fkf: 60 s outage: 144 m error, over 5 m + 10 % of distance',
 }
 
 
