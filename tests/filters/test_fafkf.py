@@ -3,8 +3,6 @@ adaptation to a GNSS noise jump, fusion weights, never-NaN/never-diverge drives.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
@@ -21,6 +19,7 @@ from tests.filters.test_fkf import (
     _params,
     _rmse,
     assert_matches_reference,
+    survival_case,
 )
 
 #: fafkf's bounds on the horizontal RMS error (m) for the drives of test_fkf.CASES; measured
@@ -138,16 +137,7 @@ def test_fafkf_on_the_simulator_open_sky() -> None:
 @pytest.mark.parametrize(("mode", "weights"), [("fr", "block"), ("fr", "scalar"),
                                                ("nr", "block")])
 def test_fafkf_survives(name: str, mode: str, weights: str) -> None:
-    kwargs, drop, _ = CASES[name]
-    drive, frame, truth = tiny_drive(**kwargs)
-    extra: dict = {"fafkf": {"weights": weights}}
-    if drop == "dr":
-        drive.gyro = drive.odo = None
-    if drop == "gnss":
-        drive.gnss = None
-        extra["frame"] = {"initial_heading_deg": math.degrees(0.7)}
-    params = _params(fkf={"mode": mode}, **extra)
-    epochs = build_epochs(drive, frame, params)
+    epochs, truth, params = survival_case(name, mode, fafkf={"weights": weights})
     for smooth in (False, True):
         result = get("fafkf")(epochs, config.merge(params, {"filter": {"smooth": smooth}}))
         _assert_sane(result, len(epochs))

@@ -202,19 +202,24 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("name", list(CASES))
-@pytest.mark.parametrize("mode", ["nr", "fr"])
-def test_fkf_survives(name: str, mode: str) -> None:
-    kwargs, drop, bound = CASES[name]
+def survival_case(name: str, mode: str, **extra: dict) -> tuple:
+    """Epochs, truth and parameters of the CASES drive ``name`` (streams dropped as it says)."""
+    kwargs, drop, _ = CASES[name]
     drive, frame, truth = tiny_drive(**kwargs)
-    extra = {}
     if drop == "dr":
         drive.gyro = drive.odo = None
     if drop == "gnss":
         drive.gnss = None
         extra["frame"] = {"initial_heading_deg": math.degrees(0.7)}
     params = _params(fkf={"mode": mode}, **extra)
-    epochs = build_epochs(drive, frame, params)
+    return build_epochs(drive, frame, params), truth, params
+
+
+@pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.parametrize("mode", ["nr", "fr"])
+def test_fkf_survives(name: str, mode: str) -> None:
+    bound = CASES[name][2]
+    epochs, truth, params = survival_case(name, mode)
     for smooth in (False, True):
         result = get("fkf")(epochs, config.merge(params, {"filter": {"smooth": smooth}}))
         _assert_sane(result, len(epochs))
