@@ -374,16 +374,10 @@ def read_gyro_csv(path: str | Path, opts: dict) -> Drive:
         rate = np.deg2rad(rate)
     if sign == "cw":
         rate = -rate  # charter: CCW-positive seen from above
-    if len(t_ns) == 0:
-        raise NoDataError(path, f"no usable gyro rows ({info['rows']} rows, "
-                          f"{skipped.total} skipped; first: {_first_skip(skipped)})")
+    _require_rows(path, t_ns, "gyro", info, skipped)
     info.update(units=units, sign=sign)
-    drive = Drive(gyro=YawRates(t_ns=t_ns, yaw_rate_radps=np.ascontiguousarray(rate, np.float64)),
-                  skipped=skipped, sources=[_source(path, data, "gyro")],
-                  meta={"gyro_csv": info})
-    if warnings:
-        drive.meta["warnings"] = warnings
-    return drive
+    stream = YawRates(t_ns=t_ns, yaw_rate_radps=np.ascontiguousarray(rate, np.float64))
+    return _drive(path, data, "gyro", stream, skipped, info, warnings)
 
 
 _ODO_KINDS = ("speed", "distance", "ticks")
@@ -448,13 +442,25 @@ def read_odo_csv(path: str | Path, opts: dict) -> Drive:
                 good &= ~after_gap
         t_ns = t_ns[1:][good]
         speed = step[good] / dt_s[good]
-    if len(t_ns) == 0:
-        raise NoDataError(path, f"no usable odometer rows ({info['rows']} rows, "
-                          f"{skipped.total} skipped; first: {_first_skip(skipped)})")
+    _require_rows(path, t_ns, "odometer", info, skipped)
     info.update(kind=kind, column=column)
-    drive = Drive(odo=Odometry(t_ns=t_ns, speed_mps=np.ascontiguousarray(speed, np.float64)),
-                  skipped=skipped, sources=[_source(path, data, "odo")],
-                  meta={"odo_csv": info})
+    stream = Odometry(t_ns=t_ns, speed_mps=np.ascontiguousarray(speed, np.float64))
+    return _drive(path, data, "odo", stream, skipped, info, warnings)
+
+
+def _require_rows(path: str | Path, t_ns: np.ndarray, what: str, info: dict,
+                  skipped: SkipReport) -> None:
+    if len(t_ns) == 0:
+        raise NoDataError(path, f"no usable {what} rows ({info['rows']} rows, "
+                          f"{skipped.total} skipped; first: {_first_skip(skipped)})")
+
+
+def _drive(path: str | Path, data: bytes, name: str, stream: YawRates | Odometry,
+           skipped: SkipReport, info: dict, warnings: list[str]) -> Drive:
+    """The reader's Drive: ``stream`` as ``drive.<name>``, its report, source and meta."""
+    drive = Drive(skipped=skipped, sources=[_source(path, data, name)],
+                  meta={f"{name}_csv": info})
+    setattr(drive, name, stream)
     if warnings:
         drive.meta["warnings"] = warnings
     return drive
