@@ -105,6 +105,25 @@ def _only(drive: Drive, stream: str) -> Drive:
     return drive
 
 
+def share_heap_with_arrow() -> None:
+    """Make pyarrow allocate from the C heap that numpy uses.
+
+    pyarrow's default pool (mimalloc) keeps the pages of freed CSV tables for
+    itself, where numpy cannot reuse them: on a one-hour drive that held ~30 MB
+    of peak RSS for nothing (benchmarks/speed.py, peak RSS of ``gpsdr fuse``).
+    Arrow's own switch (``ARROW_DEFAULT_MEMORY_POOL=system``) does the same from
+    the environment; a user's explicit choice there is kept.
+    """
+    import os
+
+    if os.environ.get("ARROW_DEFAULT_MEMORY_POOL"):
+        return
+    import pyarrow as pa
+
+    if pa.default_memory_pool().backend_name != "system":
+        pa.set_memory_pool(pa.system_memory_pool())
+
+
 def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
                gyro: str | Path | None = None, odo: str | Path | None = None, params: Params,
                topics: dict[str, str] | None = None, date: dt.date | None = None,
@@ -118,6 +137,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
     """
     if log is None and gps is None and gyro is None and odo is None:
         raise UsageError("no input: give a LOG (MCAP or NMEA) or --gps/--gyro/--odo files")
+    share_heap_with_arrow()
     drive = Drive()
     warnings: list[str] = []
 
