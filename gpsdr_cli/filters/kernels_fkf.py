@@ -30,8 +30,17 @@ GNSS local filter (seed 002 eqs. (4)-(6), erratum: row 2 selects n)::
 
     z1 = [e + eps_e, n + eps_n],  R1 = diag(f_e sd_e^2, f_n sd_n^2)
 
-with a chi-square gate on the 2-dof NIS (accept anyway after ``gate_reset_s``
-of rejections).  DR local filter (eqs. (7)-(14), erratum: h3, h4 divide by
+with a chi-square gate on the 2-dof NIS.  The gate is off until ``[gnss]
+gate_warmup_fixes`` fixes were accepted (the initial state is one fix: when
+that one was an outlier, e.g. the 11 m-off copy of a duplicated NMEA record,
+the gate otherwise rejected every good fix and kept only the copies, fault
+case ``duplicates``: fkf 10.1 m RMSE).  No lock-out: a gated fix is accepted
+anyway when every fix was gated for ``gate_reset_s`` or when most recent
+fixes were -- an exponentially weighted share of gated fixes (time constant
+``gate_reset_s / ln 2``, so an unbroken run reaches 1/2 after
+``gate_reset_s``) above 1/2: the state, not the fixes, is then the outlier
+(a minority of bad fixes that keep passing would otherwise hold the
+all-gated timer off for ever).  DR local filter (eqs. (7)-(14), erratum: h3, h4 divide by
 ``v``)::
 
     Theta = atan2(v_e, v_n) + q_w     H: d/dv_e = v_n/v2, d/dv_n = -v_e/v2, d/dq_w = 1
@@ -126,7 +135,8 @@ K_V_LIN = 16       # m/s, below this the distance row is linearised along the he
 K_HEAD_CHI2 = 17   # chi-square(1) gate on the heading innovation; <= 0 disables it
 K_GNSS_STALE_S = 18  # s, GNSS filter without an accepted fix for longer: left out of the fusion
 K_DR_STALE_S = 19  # s, DR filter without any update for longer: left out of the fusion
-N_PAR = 20
+K_GATE_WARMUP = 20  # no GNSS gate before this many fixes were accepted
+N_PAR = 21
 
 #: heading row only while v^2 >= this x var(speed), var(speed) = u^T P_vv u, u = v/|v|:
 #: a speed of 3 sigmas or more
@@ -714,6 +724,10 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
     zupt_sd = par[K_ZUPT_SD]
     omin2 = par[K_OMEGA_MIN] ** 2
     chi2 = par[K_GATE_CHI2]
+    n_acc = 0                                       # GNSS fixes accepted so far
+    rej_share = 0.0                                 # recent share of gated fixes (EWMA)
+    t_last_fix = 0.0
+    tau_rej = par[K_GATE_RESET_S] / math.log(2.0)   # all gated for gate_reset_s: share 1/2
 
     for kx in range(n):
         T = dt[kx] if kx > 0 else 0.0
@@ -750,11 +764,17 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 nis = nis_2d(ye, yn, s00, s01, s11)
                 nis_out[kx] = nis
                 accept = True
-                if chi2 > 0.0 and nis > chi2:
-                    if t_now - t_last_acc > par[K_GATE_RESET_S]:
+                a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
+                t_last_fix = t_now
+                if chi2 > 0.0 and nis > chi2 and n_acc >= par[K_GATE_WARMUP]:
+                    if (t_now - t_last_acc > par[K_GATE_RESET_S]
+                            or a_rej * rej_share + (1.0 - a_rej) > 0.5):
+                        # no lock-out: every fix rejected for gate_reset_s, or most of
+                        # the recent ones -- the state, not the fixes, is then the outlier
                         counters[C_GATE_RESETS] += 1
                     else:
                         accept = False
+                rej_share = a_rej * rej_share + (0.0 if accept else 1.0 - a_rej)
                 if accept:
                     h[:] = 0.0
                     h[IE] = 1.0
@@ -766,6 +786,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                     update_row(x1, P1, h, gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk)
                     gnss_used[kx] = True
                     counters[C_GNSS_USED] += 1
+                    n_acc += 1
                     t_last_acc = t_now
                 else:
                     gnss_rej[kx] = True

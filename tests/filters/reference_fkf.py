@@ -187,6 +187,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
     zupt_R = par[kf.K_ZUPT_SD] ** 2
     t, t_acc, t_dr, t_head, psi_hint = 0.0, 0.0, 0.0, 0.0, prep.psi0
     t_dist = 0.0
+    n_acc, share, t_fix = 0, 0.0, 0.0
     xs, Ps = np.zeros((n, NX)), np.zeros((n, NX, NX))
     beta_out = np.full((n, 2), np.nan)
     used = np.zeros(n, bool)
@@ -223,12 +224,19 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 S = HPH + R
                 nis = float(y @ np.linalg.solve(S, y))
                 chi2 = par[kf.K_GATE_CHI2]
-                accept = not (chi2 > 0 and nis > chi2 and t - t_acc <= par[kf.K_GATE_RESET_S])
+                tau = par[kf.K_GATE_RESET_S] / math.log(2.0)
+                a = math.exp(-(t - t_fix) / tau) if tau > 0 else 0.0
+                t_fix = t
+                accept = not (chi2 > 0 and nis > chi2 and n_acc >= par[kf.K_GATE_WARMUP]
+                              and t - t_acc <= par[kf.K_GATE_RESET_S]
+                              and a * share + (1 - a) <= 0.5)
+                share = a * share + (1 - a) * (not accept)
                 if accept:
                     for j, name in enumerate(("e", "n")):
                         H, h = row(name, x1)
                         x1, P1 = kf_update(x1, P1, H, z[j] - h, R[j, j])
                     used[k] = True
+                    n_acc += 1
                     t_acc = t
         else:
             t_acc = t
