@@ -152,10 +152,9 @@ def despike(values: np.ndarray, threshold: float) -> tuple[np.ndarray, int]:
     otherwise stay in the integrated heading for good).  Returns (values, count)."""
     if len(values) < 5 or not threshold > 0:
         return values, 0
-    padded = np.concatenate((values[:1].repeat(2), values, values[-1:].repeat(2)))
-    med = np.median(np.lib.stride_tricks.sliding_window_view(padded, 5), axis=1)
-    bad = np.abs(values - med) > threshold
-    return np.where(bad, med, values), int(bad.sum())
+    out = np.empty(len(values))
+    count = kf.despike5(np.ascontiguousarray(values, dtype=float), float(threshold), out)
+    return out, int(count)
 
 
 def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarray,
