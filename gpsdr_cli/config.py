@@ -76,8 +76,9 @@ sign = "ccw"             # ccw: positive counter-clockwise seen from above (REP-
 time = "posix"           # posix: UTC POSIX seconds | relative: seconds + start_posix_s
 start_posix_s = 0.0
 noise_sd_radps = 0.0017453  # 0.1 deg/s per sample (seed 000)
-bias_tau_s = 300.0       # Gauss-Markov correlation time of the gyro drift (MEMS; a gyro with a large,
-                         #   steady turn-on bias is better served by a long tau, e.g. 36000 s)
+bias_tau_s = 3600.0      # Gauss-Markov correlation time of the gyro drift (MEMS in-run wander; a turn-on bias
+                         #   with a 300 s tau made the outage sigmas 5x the error: the heading variance now grows
+                         #   with the drift's)
 bias_sd_radps = 0.005    # steady-state sigma of the drift
 bias_init_sd_radps = 0.1 # initial sigma of the drift (covers a 4 deg/s bias)
 max_rate_radps = 3.0     # ekf/aekf: a reading beyond this (172 deg/s) is a glitch, treated as missing
@@ -102,6 +103,10 @@ max_speed_mps = 100.0    # ekf/aekf: a reading beyond this is a glitch, treated 
 enabled = true           # zero-velocity update and held position while stopped (seed 004)
 speed_mps = 0.05         # odometer speed below this = stopped
 zupt_sd_mps = 0.01       # sigma of the zero-velocity pseudo-measurement
+zupt_keeps_position = "outage"  # never | outage | always (ekf/aekf): the zero-velocity update does not move
+                         #   the position (consider states): through P's velocity-position correlation it halved
+                         #   the position sigma at a stop inside a GNSS outage, though a stop says nothing about
+                         #   where the car is
 omega_min_speed_mps = 0.5  # below this the yaw-rate update is skipped (singular at standstill)
 heading_min_speed_mps = 3.0  # the remembered heading (odometer direction near standstill) is taken from the
                          #   velocity only above this; below it follows the gyro (braking to a stop, the
@@ -132,11 +137,25 @@ turn_omega_row = "lateral"  # with turn_propagation, the seed 000 yaw-rate row: 
 gyro_hold_s = 0.5        # with turn_propagation, a gyro rate turns the epochs up to this long after it
 max_gap_s = 600.0        # a step longer than this is not propagated: position held, its variance grown by
                          #   (60 m/s x step)^2 (a fix dated 22 years later made the mean and lat/lon infinite)
-odo_along_track = false  # true: the odometer corrects position, velocity and acceleration along the velocity
-                         #   only (gains projected; Joseph keeps P exact), else a misalignment of P and v turns its
-                         #   speed updates into heading jumps (0.5 deg each in DR).  Benchmark: DR-only comma2k19
-                         #   111 -> 75 m, 10 min outage RMSE 188 -> 146 m, but tunnels forward 16.4 -> 20.3 m
-                         #   and RTS 3.4 -> 5.5 m (seeds 1-3): off by default
+odo_along_track = true   # the odometer corrects position, velocity and acceleration along the velocity only
+                         #   (gains projected; Joseph keeps P exact): a speed carries no heading information, and
+                         #   with the full gain a misalignment of P and v turned its updates into heading jumps
+                         #   (0.5 deg each in DR) and erased the heading variance (10 min outage 6.4 sigma).
+                         #   Benchmark (seeds 1-3, with the two keys below): tunnels forward 16.4 -> 20.9 m (RTS
+                         #   3.4 -> 3.6 m) is the cost; one_hour 4.7 -> 4.0 m, urban 5.1 -> 4.7 m
+lateral_acc_only = "outage"  # never | outage | always: with turn_omega_row = "lateral", that row corrects the
+                         #   acceleration only (the rest consider states): "no lateral residual acceleration" holds
+                         #   for any heading, but through P's correlations it moved v and the position and shrank
+                         #   their heading variance (with a braking car, by up to 2 deg per update)
+innovation_whitening = false  # aekf only: R scaled by (1 + rho)/(1 - rho), rho the lag-one correlation of the
+                         #   normalised GNSS innovations (time-correlated multipath carries less information)
+whitening_b = 0.99       # forgetting factor per fix of the innovation correlation estimate
+whitening_max = 25.0     # largest R factor
+whitening_gap_s = 2.0    # fixes farther apart than this are not paired
+heading_floor = true     # our choice: a consider heading variance (gyro noise + drift, reset from P at GNSS
+                         #   fixes while moving) floors P's cross-track velocity variance at speed^2 x it: the
+                         #   model has no heading state, and a stop (ZUPT) or the speed/lateral rows erased the
+                         #   heading uncertainty (10 min outage: end error 6.4 / 4.4 sigma for ekf / aekf)
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)

@@ -203,6 +203,28 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
     return x0, P0, psi, True
 
 
+def initial_heading_var(x0: np.ndarray, P0: np.ndarray, heading_known: bool,
+                        params: Params) -> float:
+    """Heading variance (rad^2) the heading floor (``aekf.heading_floor``) starts from.
+
+    Moving (speed >= ``standstill.omega_min_speed_mps``): the cross-track velocity
+    variance of P0 over the speed squared; a known heading at rest (a DR-only
+    start): the ``frame.initial_heading_deg`` sigma (5 deg, or a uniform heading
+    when it is NaN); an unknown heading: 0, no floor until a GNSS fix while
+    moving sets it from P.
+    """
+    if not heading_known:
+        return 0.0
+    sp = math.hypot(x0[1], x0[4])
+    if sp >= params["standstill"]["omega_min_speed_mps"]:
+        ce, cn = x0[4] / sp, -x0[1] / sp
+        pc = ce * ce * P0[1, 1] + 2.0 * ce * cn * P0[1, 4] + cn * cn * P0[4, 4]
+        return min(pc / sp ** 2, kn.VPSI_MAX)
+    if math.isfinite(params["frame"]["initial_heading_deg"]):
+        return DR_HEADING_SD_RAD ** 2
+    return kn.VPSI_MAX
+
+
 def sensor_masks(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray]:
     """Gyro and odometer readings the filter uses: present, finite and physically plausible.
 
@@ -263,6 +285,9 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.P_GATE_INFLATE_AFTER] = g["gate_inflate_after_s"]
     prm[kn.P_MAX_GAP] = a["max_gap_s"]
     prm[kn.P_GAP_SPEED] = MAX_SPEED_MPS
+    prm[kn.P_WH_B] = a["whitening_b"]
+    prm[kn.P_WH_MAX] = a["whitening_max"]
+    prm[kn.P_WH_GAP] = a["whitening_gap_s"]
     prm[kn.P_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
     flg = np.zeros(kn.N_FLG, np.int64)
     flg[kn.F_ADAPT_Q] = int(adaptive)
@@ -281,6 +306,16 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     flg[kn.F_HEADING_CONSIDER] = int(a["heading_consider"])
     flg[kn.F_TURN] = int(a["turn_propagation"])
     flg[kn.F_ODO_ALONG] = int(a["odo_along_track"])
+    flg[kn.F_HEADING_FLOOR] = int(a["heading_floor"])
+    if a["lateral_acc_only"] not in modes:
+        raise ConfigError(f"aekf.lateral_acc_only = {a['lateral_acc_only']!r}: expected one of "
+                          f"{', '.join(modes)}")
+    flg[kn.F_LATERAL_ACC] = modes[a["lateral_acc_only"]]
+    flg[kn.F_WHITEN] = int(adaptive and a["innovation_whitening"])  # the ekf keeps a fixed R
+    if st["zupt_keeps_position"] not in modes:
+        raise ConfigError(f"standstill.zupt_keeps_position = {st['zupt_keeps_position']!r}: expected "
+                          f"one of {', '.join(modes)}")
+    flg[kn.F_ZUPT_POS] = modes[st["zupt_keeps_position"]]
     rows = {"skip": kn.OMEGA_SKIP, "lateral": kn.OMEGA_LATERAL}
     if a["turn_omega_row"] not in rows:
         raise ConfigError(f"aekf.turn_omega_row = {a['turn_omega_row']!r}: expected one of "
@@ -311,6 +346,8 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     st[kn.S_HEADING_KNOWN] = float(heading_known)
     st[kn.S_W] = 0.0
     st[kn.S_W_T] = -math.inf  # no gyro rate held yet
+    st[kn.S_VPSI] = initial_heading_var(x0, P0, heading_known, params)
+    st[kn.S_WH_T] = -math.inf  # no previous innovation yet
     f64 = np.float64
     x_out = np.empty((N_STATES, n))  # rows: contiguous track columns, no copies
     pcov = np.empty((3, n))

@@ -54,23 +54,27 @@ P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_O
 P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = range(9, 15)
 P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_MIN = range(20, 25)
-P_MAX_GAP, P_GAP_SPEED = 25, 26
-N_PRM = 27
+P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP = range(25, 30)
+N_PRM = 30
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
-N_FLG = 14
+F_HEADING_FLOOR, F_LATERAL_ACC, F_WHITEN, F_ZUPT_POS = 14, 15, 16, 17
+N_FLG = 18
 #: values of flg[F_TURN_OMEGA] (the seed 000 yaw-rate row when aekf.turn_propagation is on)
 OMEGA_SKIP, OMEGA_LATERAL = 0, 1
 #: values of flg[F_GATE_MODE] (gnss.gate_mode)
 GATE_REJECT, GATE_INFLATE = 0, 1
 # internal state carried between segments (``st``)
 S_PSI, S_STATIC, S_T, S_REJ_SINCE, S_SH_R, S_SH_M, S_HEADING_KNOWN = range(7)
-S_W, S_W_T, S_N_FIX = 7, 8, 9
-N_ST = 10
+S_W, S_W_T, S_N_FIX, S_VPSI, S_CPE = 7, 8, 9, 10, 11
+S_WH_C0, S_WH_C1, S_WH_UE, S_WH_UN, S_WH_T, S_WH_M = range(12, 18)
+N_ST = 18
+#: largest heading variance (rad^2) of the heading floor: a heading uniform on (-pi, pi]
+VPSI_MAX = math.pi ** 2 / 3.0
 # stored prior scalars per epoch (columns of ``prior_prm``)
-Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N, Q_W = range(7)
-N_PRIOR = 7
+Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N, Q_W, Q_FL_EE, Q_FL_NN, Q_FL_EN = range(10)
+N_PRIOR = 10
 # counters (``info`` vector)
 I_SPD_FAIL, I_MIN_DIAG, I_SKIPPED, I_GATE_RESETS, I_NONFINITE, I_INFLATED = range(6)
 N_INFO = 6
@@ -81,6 +85,8 @@ NZ_OMEGA = np.array([1, 2, 4, 5, 6], np.int64)
 #: consider-state bit masks: the gyro drift; the velocity (for aekf.heading_consider)
 CONS_EPS = 1 << 6
 CONS_VEL = (1 << 1) | (1 << 4)
+CONS_NOT_ACC = 0xFF & ~((1 << 2) | (1 << 5))
+CONS_POS = (1 << 0) | (1 << 3)
 
 
 @njit(cache=True)
@@ -195,8 +201,11 @@ def joseph_apply(P: np.ndarray, K: np.ndarray, PHt: np.ndarray, HPHt: float, R: 
 
 @njit(cache=True)
 def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
-                K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray) -> bool:
-    """Scalar update with H = unit row ``idx`` (Joseph form).  False if S is not positive."""
+                K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int) -> bool:
+    """Scalar update with H = unit row ``idx`` (Joseph form).  False if S is not positive.
+
+    ``consider``: bit mask of states whose gain is zero (see :func:`row_update`).
+    """
     n = N_STATES
     HPHt = P[idx, idx]
     S = HPHt + R
@@ -204,7 +213,7 @@ def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
         return False
     for i in range(n):
         PHt[i] = P[i, idx]
-        K[i] = PHt[i] / S
+        K[i] = 0.0 if (consider >> i) & 1 else PHt[i] / S
     for i in range(n):
         x[i] += K[i] * y
     joseph_apply(P, K, PHt, HPHt, R, Bh)
@@ -367,12 +376,18 @@ def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps:
     """P(k-1|k-1) -> the P(k|k-1) the forward pass used (predict, turn, adaptive factor, gate reset).
 
     ``x`` enters as the current statistical prediction of the mean and leaves
-    rotated when the forward pass turned it (``pr[Q_W]`` finite).
+    rotated when the forward pass turned it (``pr[Q_W]`` finite); the heading
+    floor's deficit (``pr[Q_FL_*]``) is added after the turn, as in the forward pass.
     """
     f_eps = math.exp(-T / tau_eps)
     predict_cov(P, T, alpha, f_eps, pr[Q_QA_E], pr[Q_QA_N], q_eps, q_ks, pr[Q_LAM], hold, qbuf)
     if math.isfinite(pr[Q_W]):
         turn_predict(x, P, T, pr[Q_W], r_w)
+    if pr[Q_FL_EE] != 0.0 or pr[Q_FL_NN] != 0.0:  # heading floor
+        P[1, 1] += pr[Q_FL_EE]
+        P[4, 4] += pr[Q_FL_NN]
+        P[1, 4] += pr[Q_FL_EN]
+        P[4, 1] = P[1, 4]
     if pr[Q_GAIN] != 1.0:
         inflate_kinematic(P, pr[Q_GAIN])
     P[0, 0] += pr[Q_ADD_E]
@@ -443,6 +458,22 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     w_held = st[S_W]
     w_t = st[S_W_T]
     n_fix = st[S_N_FIX]
+    hfloor = flg[F_HEADING_FLOOR] != 0
+    vpsi = st[S_VPSI]
+    cpe = st[S_CPE]
+    heading_min = prm[P_HEADING_MIN]
+    whiten = flg[F_WHITEN] != 0
+    # standstill.zupt_keeps_position: the zero-velocity update does not move the position (a stop
+    # says nothing about where the car is), but P's velocity-position correlation (a heading
+    # error's, which shrinks with the speed in truth and not in the linear model) made it halve
+    # the position sigma at every stop in an outage
+    zupt_pos = flg[F_ZUPT_POS]  # 0 never, 1 in GNSS outages, 2 always
+    wh_c0 = st[S_WH_C0]
+    wh_c1 = st[S_WH_C1]
+    wh_ue = st[S_WH_UE]
+    wh_un = st[S_WH_UN]
+    wh_t = st[S_WH_T]
+    wh_m = st[S_WH_M]
     for k in range(k_start, k_end):
         T = dt[k]
         qa_e = 0.0
@@ -452,6 +483,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         add_e = 0.0
         add_n = 0.0
         w_use = math.nan
+        fl_ee = 0.0
+        fl_nn = 0.0
+        fl_en = 0.0
         # a step longer than aekf.max_gap_s (a logger pause, a far-future stamp) is not
         # propagated: held like a standstill, the position variance grown by (speed bound x T)^2
         gap = T > prm[P_MAX_GAP]
@@ -469,6 +503,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             if fading:
                 lam = fading_factor(prm[P_FADING], T)
             f_eps = math.exp(-T / tau_eps)
+            p66 = P[6, 6]
             predict_mean(x, T, f_eps if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
             predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[P_Q_EPS], prm[P_Q_KS], lam, hold, qbuf)
             t += T
@@ -484,6 +519,35 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     w_use = w_held  # a slower gyro: its last rate, held briefly
                 if math.isfinite(w_use):
                     turn_predict(x, P, T, w_use, r_w)
+            if hfloor:
+                # ---- heading floor (aekf.heading_floor, our choice): the model has no heading
+                # state, so the heading error lives in the cross-track velocity variance, which
+                # a stop (ZUPT) erases and the speed and lateral rows can shrink without heading
+                # information.  A consider heading variance vpsi follows the gyro-integrated
+                # heading error dpsi' = dpsi - T d_eps + T n_w (drift covariance from P; reset
+                # from P at GNSS fixes while moving, below) and the prior's cross-track
+                # velocity variance is kept >= speed^2 vpsi: the deficit enters as process
+                # noise of this step, so the smoother treats it like Q
+                if math.isfinite(w_use) or (hold and has_gyro[k]):
+                    vpsi = min(vpsi + T * T * (p66 + r_w) - 2.0 * T * cpe, VPSI_MAX)
+                    cpe = f_eps * (cpe - T * p66)
+                elif not hold:  # the gyro does not drive the heading in this step: no floor
+                    vpsi = 0.0
+                    cpe = 0.0
+                sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+                if not hold and sp >= omega_min:
+                    ce = x[4] / sp  # cross-track unit: (d v / d psi) / speed
+                    cn = -x[1] / sp
+                    d = sp * sp * vpsi - (ce * ce * P[1, 1] + 2.0 * ce * cn * P[1, 4]
+                                          + cn * cn * P[4, 4])
+                    if d > 0.0:
+                        fl_ee = d * ce * ce
+                        fl_nn = d * cn * cn
+                        fl_en = d * ce * cn
+                        P[1, 1] += fl_ee
+                        P[4, 4] += fl_nn
+                        P[1, 4] += fl_en
+                        P[4, 1] = P[1, 4]
         # ---- 2. GNSS position fix
         nis_out[k] = math.nan
         gnss_used[k] = False
@@ -491,8 +555,17 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         if has_gnss[k]:
             ye = z_e[k] - x[0]
             yn = z_n[k] - x[3]
-            re = r_e[k] * sh_r
-            rn = r_n[k] * sh_r
+            # innovation whitening (aekf.innovation_whitening, Mehra 1970): an optimal filter's
+            # innovations are white; a lag-one correlation rho of the normalised innovations
+            # says the fixes' errors are time-correlated (multipath) and carry less independent
+            # information than R claims: R is scaled by the AR(1) variance factor of an average,
+            # (1 + rho)/(1 - rho), within [1, P_WH_MAX]
+            f_wh = 1.0
+            if whiten and wh_c0 > 0.0:
+                rho = min(max(wh_c1 / wh_c0, 0.0), 0.999)
+                f_wh = min((1.0 + rho) / (1.0 - rho), prm[P_WH_MAX])
+            re = r_e[k] * sh_r * f_wh
+            rn = r_n[k] * sh_r * f_wh
             s00 = P[0, 0] + re
             s11 = P[3, 3] + rn
             s01 = P[0, 3]
@@ -539,12 +612,25 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     sh_r = sage_husa_r(sh_r, sh_m, prm[P_SH_B], sample, prm[P_SH_RMIN],
                                        prm[P_SH_RMAX])
                     sh_m += 1
-                    re = r_e[k] * sh_r
-                    rn = r_n[k] * sh_r
+                    re = r_e[k] * sh_r * f_wh
+                    rn = r_n[k] * sh_r * f_wh
+                if whiten and not reset and r_fac == 1.0:
+                    # normalised innovations; their lag-one product only between fixes at most
+                    # P_WH_GAP s apart (an outage restarts the pair)
+                    ue = ye / math.sqrt(P[0, 0] + re)
+                    un = yn / math.sqrt(P[3, 3] + rn)
+                    d_wh = (1.0 - prm[P_WH_B]) / (1.0 - prm[P_WH_B] ** (wh_m + 1.0))
+                    wh_c0 = (1.0 - d_wh) * wh_c0 + d_wh * 0.5 * (ue * ue + un * un)
+                    if t - wh_t <= prm[P_WH_GAP]:
+                        wh_c1 = (1.0 - d_wh) * wh_c1 + d_wh * 0.5 * (ue * wh_ue + un * wh_un)
+                    wh_ue = ue
+                    wh_un = un
+                    wh_t = t
+                    wh_m += 1.0
                 re *= r_fac
                 rn *= r_fac
-                ok1 = unit_update(x, P, 0, ye, re, K, PHt, Bh)
-                ok2 = unit_update(x, P, 3, z_n[k] - x[3], rn, K, PHt, Bh)
+                ok1 = unit_update(x, P, 0, ye, re, K, PHt, Bh, 0)
+                ok2 = unit_update(x, P, 3, z_n[k] - x[3], rn, K, PHt, Bh, 0)
                 if ok1 and ok2:
                     gnss_used[k] = True
                     n_fix += 1.0
@@ -555,8 +641,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             u = odo[k]
             is_static = standstill and u < prm[P_STATIC_SPEED]
             if is_static:
+                zupt_cons = CONS_POS if (zupt_pos == 2 or (zupt_pos == 1 and outage[k])) else 0
                 for idx in (1, 4, 2, 5):
-                    if not unit_update(x, P, idx, -x[idx], prm[P_R_ZUPT], K, PHt, Bh):
+                    if not unit_update(x, P, idx, -x[idx], prm[P_R_ZUPT], K, PHt, Bh, zupt_cons):
                         info[I_SKIPPED] += 1.0
             else:
                 sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
@@ -580,7 +667,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
         if has_gyro[k]:
             if is_static:
-                if not unit_update(x, P, 6, -yaw[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh):
+                if not unit_update(x, P, 6, -yaw[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh, 0):
                     info[I_SKIPPED] += 1.0
             elif turn and turn_omega == OMEGA_SKIP:
                 pass  # the gyro already turned the velocity in the prediction
@@ -600,11 +687,19 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 cons = CONS_EPS if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else 0
                 if heading_consider and outage[k]:
                     cons |= CONS_VEL
+                if turn and (flg[F_LATERAL_ACC] == 2 or (flg[F_LATERAL_ACC] == 1 and outage[k])):
+                    cons |= CONS_NOT_ACC
                 if not row_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
                     info[I_SKIPPED] += 1.0
-        # ---- remembered heading for the odometer row near standstill
         sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
-        if sp >= prm[P_HEADING_MIN]:  # slower, while braking, the Newton step can reverse v
+        if hfloor and gnss_used[k] and sp >= heading_min:  # the heading floor restarts from P
+            ce = x[4] / sp
+            cn = -x[1] / sp
+            vpsi = min((ce * ce * P[1, 1] + 2.0 * ce * cn * P[1, 4] + cn * cn * P[4, 4])
+                       / (sp * sp), VPSI_MAX)
+            cpe = (ce * P[1, 6] + cn * P[4, 6]) / sp
+        # ---- remembered heading for the odometer row near standstill
+        if sp >= heading_min:  # slower, while braking, the Newton step can reverse v
             psi_mem = math.atan2(x[1], x[4])
             heading_known = True
         elif has_gyro[k] and k > 0:
@@ -636,6 +731,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             prior_store[k, Q_ADD_E] = add_e
             prior_store[k, Q_ADD_N] = add_n
             prior_store[k, Q_W] = w_use
+            prior_store[k, Q_FL_EE] = fl_ee
+            prior_store[k, Q_FL_NN] = fl_nn
+            prior_store[k, Q_FL_EN] = fl_en
     st[S_PSI] = psi_mem
     st[S_STATIC] = 1.0 if is_static else 0.0
     st[S_T] = t
@@ -646,3 +744,11 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     st[S_W] = w_held
     st[S_W_T] = w_t
     st[S_N_FIX] = n_fix
+    st[S_VPSI] = vpsi
+    st[S_CPE] = cpe
+    st[S_WH_C0] = wh_c0
+    st[S_WH_C1] = wh_c1
+    st[S_WH_UE] = wh_ue
+    st[S_WH_UN] = wh_un
+    st[S_WH_T] = wh_t
+    st[S_WH_M] = wh_m

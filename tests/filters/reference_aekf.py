@@ -18,7 +18,13 @@ import math
 import numpy as np
 
 from gpsdr_cli.filters import kernels_aekf as kn
-from gpsdr_cli.filters.aekf import gnss_noise, initial_state, kernel_params, sensor_masks
+from gpsdr_cli.filters.aekf import (
+    gnss_noise,
+    initial_heading_var,
+    initial_state,
+    kernel_params,
+    sensor_masks,
+)
 from gpsdr_cli.models.cs_model import cs_sigma_a2, newton_matrix, phi_matrix, q_matrix
 
 
@@ -100,6 +106,14 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     turn_row = params["aekf"]["turn_omega_row"]
     r_w = params["gyro"]["noise_sd_radps"] ** 2
     w_held, w_t = 0.0, -math.inf
+    hfloor = bool(params["aekf"]["heading_floor"])
+    vpsi, cpe = initial_heading_var(x, P, heading_known, params), 0.0  # heading floor (kernels_aekf)
+    heading_min = max(st["heading_min_speed_mps"], omega_min)
+    lat_mode = params["aekf"]["lateral_acc_only"]
+    a_p = params["aekf"]
+    whiten = adaptive and bool(a_p["innovation_whitening"])  # Mehra: correlated innovations
+    wh_c0 = wh_c1 = 0.0
+    wh_prev, wh_t, wh_m = np.zeros(2), -math.inf, 0
     n_fix = 0
     is_static = False
     t = 0.0
@@ -126,6 +140,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             else:
                 s2e = s2n = sigma_a ** 2
             lam = prm[kn.P_FADING] ** T if ad["fading"] and prm[kn.P_FADING] > 1 else 1.0
+            p66 = P[6, 6]
+            w = math.nan
             F = phi_matrix(T, alpha, tau_eps, hold)
             Q = q_matrix(T, alpha, 2 * alpha * s2e, 2 * alpha * s2n, prm[kn.P_Q_EPS],
                          prm[kn.P_Q_KS], hold)
@@ -136,7 +152,6 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             if gap:  # not propagated; position variance grown by (60 m/s x T)^2
                 P = P + np.diag([(60.0 * T) ** 2, 0, 0, (60.0 * T) ** 2, 0, 0, 0, 0])
             if turn_on and not hold:
-                w = math.nan
                 if has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
                     w = -epochs.yaw_rate_radps[k]
                 elif t - w_t <= params["aekf"]["gyro_hold_s"]:
@@ -146,13 +161,30 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     F = J @ F
                     P = J @ P @ J.T + Qw
                     P = 0.5 * (P + P.T)
+            if hfloor:  # consider heading error: dpsi' = dpsi - T d_eps + T n_w
+                if math.isfinite(w) or (hold and has_gyro[k]):
+                    vpsi = min(vpsi + T * T * (p66 + r_w) - 2 * T * cpe, kn.VPSI_MAX)
+                    cpe = math.exp(-T / tau_eps) * (cpe - T * p66)
+                elif not hold:
+                    vpsi = cpe = 0.0
+                v = math.hypot(x[1], x[4])
+                if not hold and v >= omega_min:  # prior cross-track velocity var >= v^2 vpsi
+                    ce, cn = x[4] / v, -x[1] / v  # summed as the kernel does (cancellation)
+                    d = v * v * vpsi - (ce * ce * P[1, 1] + 2.0 * ce * cn * P[1, 4]
+                                        + cn * cn * P[4, 4])
+                    if d > 0.0:
+                        P[np.ix_([1, 4], [1, 4])] += d * np.outer([ce, cn], [ce, cn])
         xs_prior[k], Ps_prior[k], Fs[k] = x, P, F  # the smoother's prior (P updated below)
         if epochs.has_gnss[k]:
             z = np.array([epochs.gnss_e[k], epochs.gnss_n[k]])
             Hg = np.zeros((2, 8))
             Hg[0, 0] = Hg[1, 3] = 1.0
             y = z - Hg @ x
-            R = np.diag([r_e[k], r_n[k]]) * sh_r
+            f_wh = 1.0
+            if whiten and wh_c0 > 0.0:  # R x (1 + rho)/(1 - rho), rho the lag-one correlation
+                rho = min(max(wh_c1 / wh_c0, 0.0), 0.999)
+                f_wh = min((1 + rho) / (1 - rho), a_p["whitening_max"])
+            R = np.diag([r_e[k], r_n[k]]) * sh_r * f_wh
             S = Hg @ P @ Hg.T + R
             nis[k] = float(y @ np.linalg.solve(S, y))
             accept, reset, r_fac = True, False, 1.0
@@ -189,19 +221,32 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     sample = (y @ y - P[0, 0] - P[3, 3]) / (r_e[k] + r_n[k])
                     sh_r = min(max((1 - d) * sh_r + d * min(max(sample, lo), hi), lo), hi)
                     sh_m += 1
-                x, P = joseph(x, P, unit(0), z[0] - x[0], r_e[k] * sh_r * r_fac)
-                x, P = joseph(x, P, unit(3), z[1] - x[3], r_n[k] * sh_r * r_fac)
+                re, rn = r_e[k] * sh_r * f_wh, r_n[k] * sh_r * f_wh
+                if whiten and not reset and r_fac == 1.0:
+                    u = y / np.sqrt([P[0, 0] + re, P[3, 3] + rn])  # normalised innovations
+                    b = a_p["whitening_b"]
+                    d = (1 - b) / (1 - b ** (wh_m + 1))
+                    wh_c0 = (1 - d) * wh_c0 + d * 0.5 * float(u @ u)
+                    if t - wh_t <= a_p["whitening_gap_s"]:
+                        wh_c1 = (1 - d) * wh_c1 + d * 0.5 * float(u @ wh_prev)
+                    wh_prev, wh_t, wh_m = u, t, wh_m + 1
+                x, P = joseph(x, P, unit(0), z[0] - x[0], re * r_fac)
+                x, P = joseph(x, P, unit(3), z[1] - x[3], rn * r_fac)
                 used[k] = True
                 n_fix += 1
         cons = (6,) if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else ()
         cons_w = cons + ((1, 4) if params["aekf"]["heading_consider"] and epochs.gnss_outage[k]
                          else ())
+        if turn_on and (lat_mode == "always" or (lat_mode == "outage" and epochs.gnss_outage[k])):
+            cons_w = (0, 1, 3, 4, 6, 7)  # the lateral row corrects the acceleration only
         if has_odo[k]:
             u = epochs.odo_speed_mps[k]
             is_static = standstill and u < st["speed_mps"]
             if is_static:  # zero-velocity update (seed 004)
+                zk = st["zupt_keeps_position"]  # position as consider states
+                keep = (0, 3) if zk == "always" or (zk == "outage" and epochs.gnss_outage[k]) else ()
                 for i in (1, 4, 2, 5):
-                    x, P = joseph(x, P, unit(i), -x[i], st["zupt_sd_mps"] ** 2)
+                    x, P = joseph(x, P, unit(i), -x[i], st["zupt_sd_mps"] ** 2, keep)
             else:
                 v = math.hypot(x[1], x[4])
                 if v >= omega_min:
@@ -239,7 +284,11 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 else:
                     x, P = joseph(x, P, H, w - (c / v2 + x[6]), r_w, cons_w)
         v = math.hypot(x[1], x[4])
-        if v >= max(st["heading_min_speed_mps"], omega_min):
+        if hfloor and used[k] and v >= heading_min:  # the heading floor restarts from P
+            c = np.array([x[4], -x[1]]) / v
+            vpsi = min(float(c @ P[np.ix_([1, 4], [1, 4])] @ c) / v ** 2, kn.VPSI_MAX)
+            cpe = float(c @ P[[1, 4], 6]) / v
+        if v >= heading_min:
             psi_mem, heading_known = math.atan2(x[1], x[4]), True
         elif has_gyro[k] and k > 0:
             psi_mem += (-epochs.yaw_rate_radps[k] - x[6]) * T

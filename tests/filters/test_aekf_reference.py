@@ -39,6 +39,13 @@ OPTIONS = {
     "gate_inflate_innovation": {"gnss": {"gate_mode": "inflate"},
                                 "adaptive": {"innovation_factor": True}},
     "gate_reject_no_warmup": {"gnss": {"gate_mode": "reject", "gate_warmup_fixes": 0}},
+    "no_heading_floor": {"aekf": {"heading_floor": False, "odo_along_track": False,
+                                  "lateral_acc_only": "never"}},
+    "lateral_acc_always": {"aekf": {"lateral_acc_only": "always"},
+                           "standstill": {"zupt_keeps_position": "always"}},
+    "innovation_whitening": {"aekf": {"innovation_whitening": True, "whitening_b": 0.95}},
+    "whitening_sage_husa": {"aekf": {"innovation_whitening": True},
+                            "adaptive": {"sage_husa": True}},
 }
 
 

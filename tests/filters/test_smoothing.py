@@ -21,8 +21,9 @@ def outage_drive():
 def test_smoother_bridges_outage(name, outage_drive):
     """Across a 40 s outage the smoothed error is much lower than the forward one.
 
-    Measured (seed 21): forward max ~5-10 m, smoothed < 1 m; bounds: smoothed max
-    inside the outage < 2 m and < 40 % of the forward max; overall RMSE lower.
+    Measured (seed 21): forward max 1.1 m (5-10 m before the heading floor and the
+    along-track odometer), smoothed 0.5 m; bounds: smoothed max inside the outage
+    < 2 m and < 60 % of the forward max; overall RMSE lower.
     """
     ep, tr = outage_drive
     p = defaults()
@@ -34,7 +35,7 @@ def test_smoother_bridges_outage(name, outage_drive):
     e_f, e_s = horizontal_error(fwd, tr), horizontal_error(sm, tr)
     out = (tr.t_s > 80.0) & (tr.t_s < 120.0)
     assert e_s[out].max() < 2.0
-    assert e_s[out].max() < 0.4 * e_f[out].max()
+    assert e_s[out].max() < 0.6 * e_f[out].max()
     assert np.sqrt(np.mean(e_s ** 2)) < np.sqrt(np.mean(e_f ** 2))
 
 
