@@ -132,8 +132,6 @@ FILTERS = ("ekf", "aekf", "fkf", "fafkf")
 
 #: (fault, filter) -> reason, for bugs in other modules still open at the deadline
 KNOWN_BUGS: dict[tuple[str, str], str] = {
-    ('outage_10min', 'aekf'): 'kf: 10 min outage: end error 4.5 sigma, covariance overconfident',
-    ('outage_10min', 'ekf'): 'kf: 10 min outage: end error 6.5 sigma, covariance overconfident',
 }
 
 
