@@ -225,6 +225,14 @@ def initial_heading_var(x0: np.ndarray, P0: np.ndarray, heading_known: bool,
     return kn.VPSI_MAX
 
 
+def gnss_velocity(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    """Receiver velocity (m/s, east and north) where a fix reports speed and course, else NaN."""
+    spd, crs = epochs.gnss_speed_mps, epochs.gnss_course_rad
+    ok = epochs.has_gnss & np.isfinite(spd) & np.isfinite(crs) & (spd >= params["aekf"]["gnss_velocity_min_mps"])
+    with np.errstate(invalid="ignore"):
+        return np.where(ok, spd * np.sin(crs), np.nan), np.where(ok, spd * np.cos(crs), np.nan)
+
+
 def sensor_masks(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray]:
     """Gyro and odometer readings the filter uses: present, finite and physically plausible.
 
@@ -288,6 +296,8 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.P_WH_B] = a["whitening_b"]
     prm[kn.P_WH_MAX] = a["whitening_max"]
     prm[kn.P_WH_GAP] = a["whitening_gap_s"]
+    prm[kn.P_WH_NIS] = gate_threshold(a["whitening_nis_prob"])
+    prm[kn.P_GVEL_VAR] = a["gnss_velocity_sd_mps"] ** 2 if a["gnss_velocity"] else 0.0
     prm[kn.P_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
     flg = np.zeros(kn.N_FLG, np.int64)
     flg[kn.F_ADAPT_Q] = int(adaptive)
@@ -364,11 +374,12 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     info_v[kn.I_MIN_DIAG] = math.inf
     c64 = np.ascontiguousarray  # no copies of the (already contiguous) inputs: memory
     use_gyro, use_odo = sensor_masks(epochs, params)
+    gv_e, gv_n = gnss_velocity(epochs, params)
     inputs = (
         c64(epochs.dt_s, f64), c64(epochs.has_gnss, bool), c64(epochs.gnss_e, f64),
         c64(epochs.gnss_n, f64), c64(r_e, f64), c64(r_n, f64), c64(ka, f64),
         c64(use_gyro, bool), c64(epochs.yaw_rate_radps, f64), c64(use_odo, bool),
-        c64(epochs.odo_speed_mps, f64), c64(epochs.gnss_outage, bool))
+        c64(epochs.odo_speed_mps, f64), c64(epochs.gnss_outage, bool), gv_e, gv_n)
     del r_e, r_n, ka
 
     def run_segment(k0: int, k1: int, x: np.ndarray, P: np.ndarray, s: np.ndarray,

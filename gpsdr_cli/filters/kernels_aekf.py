@@ -54,8 +54,8 @@ P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_O
 P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = range(9, 15)
 P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_MIN = range(20, 25)
-P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP = range(25, 30)
-N_PRM = 30
+P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP, P_GVEL_VAR, P_WH_NIS = range(25, 32)
+N_PRM = 32
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
@@ -222,8 +222,8 @@ def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
 
 @njit(cache=True)
 def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: float, R: float,
-               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int = 0,
-               along_e: float = 0.0, along_n: float = 0.0) -> bool:
+               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int,
+               along_e: float, along_n: float) -> bool:
     """Scalar update with a sparse Jacobian row H (nonzeros at indices ``nz``), Joseph form.
 
     False if S is not positive.  ``consider >= 0``: Schmidt-Kalman "consider"
@@ -398,6 +398,7 @@ def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps:
 def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n: np.ndarray,
                      r_e: np.ndarray, r_n: np.ndarray, ka: np.ndarray, has_gyro: np.ndarray,
                      yaw: np.ndarray, has_odo: np.ndarray, odo: np.ndarray, outage: np.ndarray,
+                     gv_e: np.ndarray, gv_n: np.ndarray,
                      x: np.ndarray, P: np.ndarray, st: np.ndarray, k_start: int, k_end: int,
                      p_off: int, prm: np.ndarray,
                      flg: np.ndarray, x_out: np.ndarray, pcov_out: np.ndarray,
@@ -468,6 +469,14 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     # error's, which shrinks with the speed in truth and not in the linear model) made it halve
     # the position sigma at every stop in an outage
     zupt_pos = flg[F_ZUPT_POS]  # 0 never, 1 in GNSS outages, 2 always
+    # state indices and the empty consider mask as int64 values, not integer literals: numba
+    # compiles a helper once per literal argument (cold start: 4 copies of unit_update)
+    i_e = np.int64(0)
+    i_n = np.int64(3)
+    i_eps = np.int64(6)
+    i_ve = np.int64(1)
+    i_vn = np.int64(4)
+    no_cons = np.int64(0)
     wh_c0 = st[S_WH_C0]
     wh_c1 = st[S_WH_C1]
     wh_ue = st[S_WH_UE]
@@ -614,9 +623,12 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     sh_m += 1
                     re = r_e[k] * sh_r * f_wh
                     rn = r_n[k] * sh_r * f_wh
-                if whiten and not reset and r_fac == 1.0:
+                if whiten and not reset and r_fac == 1.0 and nis <= prm[P_WH_NIS]:
                     # normalised innovations; their lag-one product only between fixes at most
-                    # P_WH_GAP s apart (an outage restarts the pair)
+                    # P_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
+                    # under P_WH_NIS: a filter error (a drive-off with an unknown heading, the
+                    # end of an outage) also makes the innovations correlated, and inflating R
+                    # then slowed its correction (11 m instead of 7 m, 10 s later)
                     ue = ye / math.sqrt(P[0, 0] + re)
                     un = yn / math.sqrt(P[3, 3] + rn)
                     d_wh = (1.0 - prm[P_WH_B]) / (1.0 - prm[P_WH_B] ** (wh_m + 1.0))
@@ -629,11 +641,15 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     wh_m += 1.0
                 re *= r_fac
                 rn *= r_fac
-                ok1 = unit_update(x, P, 0, ye, re, K, PHt, Bh, 0)
-                ok2 = unit_update(x, P, 3, z_n[k] - x[3], rn, K, PHt, Bh, 0)
+                ok1 = unit_update(x, P, i_e, ye, re, K, PHt, Bh, no_cons)
+                ok2 = unit_update(x, P, i_n, z_n[k] - x[3], rn, K, PHt, Bh, no_cons)
                 if ok1 and ok2:
                     gnss_used[k] = True
                     n_fix += 1.0
+                    if math.isfinite(gv_e[k]) and math.isfinite(gv_n[k]) and prm[P_GVEL_VAR] > 0.0:
+                        # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
+                        unit_update(x, P, i_ve, gv_e[k] - x[1], prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
+                        unit_update(x, P, i_vn, gv_n[k] - x[4], prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
                 else:
                     info[I_SKIPPED] += 1.0
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
@@ -667,7 +683,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
         if has_gyro[k]:
             if is_static:
-                if not unit_update(x, P, 6, -yaw[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh, 0):
+                if not unit_update(x, P, i_eps, -yaw[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh, no_cons):
                     info[I_SKIPPED] += 1.0
             elif turn and turn_omega == OMEGA_SKIP:
                 pass  # the gyro already turned the velocity in the prediction
@@ -689,7 +705,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     cons |= CONS_VEL
                 if turn and (flg[F_LATERAL_ACC] == 2 or (flg[F_LATERAL_ACC] == 1 and outage[k])):
                     cons |= CONS_NOT_ACC
-                if not row_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], K, PHt, Bh, cons):
+                if not row_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], K, PHt, Bh, cons, 0.0, 0.0):
                     info[I_SKIPPED] += 1.0
         sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
         if hfloor and gnss_used[k] and sp >= heading_min:  # the heading floor restarts from P

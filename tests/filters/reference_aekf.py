@@ -20,6 +20,7 @@ import numpy as np
 from gpsdr_cli.filters import kernels_aekf as kn
 from gpsdr_cli.filters.aekf import (
     gnss_noise,
+    gnss_velocity,
     initial_heading_var,
     initial_state,
     kernel_params,
@@ -91,6 +92,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     smooth = bool(params["filter"]["smooth"])
     r_e, r_n, ka, _ = gnss_noise(epochs, params, adaptive)
     has_gyro, has_odo = sensor_masks(epochs, params)  # plausible readings only
+    gv_e, gv_n = gnss_velocity(epochs, params)  # receiver speed/course as (v_e, v_n), or NaN
     x, P, psi_mem, heading_known = initial_state(epochs, params)
     prm, _ = kernel_params(params, adaptive, smooth)
     alpha, tau_eps = prm[kn.P_ALPHA], prm[kn.P_TAU_EPS]
@@ -222,7 +224,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     sh_r = min(max((1 - d) * sh_r + d * min(max(sample, lo), hi), lo), hi)
                     sh_m += 1
                 re, rn = r_e[k] * sh_r * f_wh, r_n[k] * sh_r * f_wh
-                if whiten and not reset and r_fac == 1.0:
+                if (whiten and not reset and r_fac == 1.0
+                        and nis[k] <= -2.0 * math.log1p(-a_p["whitening_nis_prob"])):
                     u = y / np.sqrt([P[0, 0] + re, P[3, 3] + rn])  # normalised innovations
                     b = a_p["whitening_b"]
                     d = (1 - b) / (1 - b ** (wh_m + 1))
@@ -234,6 +237,10 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 x, P = joseph(x, P, unit(3), z[1] - x[3], rn * r_fac)
                 used[k] = True
                 n_fix += 1
+                if a_p["gnss_velocity"] and np.isfinite(gv_e[k]) and np.isfinite(gv_n[k]):
+                    r_v = a_p["gnss_velocity_sd_mps"] ** 2
+                    x, P = joseph(x, P, unit(1), gv_e[k] - x[1], r_v)
+                    x, P = joseph(x, P, unit(4), gv_n[k] - x[4], r_v)
         cons = (6,) if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else ()
         cons_w = cons + ((1, 4) if params["aekf"]["heading_consider"] and epochs.gnss_outage[k]
                          else ())

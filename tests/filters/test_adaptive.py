@@ -108,14 +108,16 @@ def test_gate_never_locks_out(name):
     late = tr.t_s > 75.0
     err_shifted = np.hypot(res.e[late] - (tr.e[late] + 30.0), res.n[late] - tr.n[late])
     assert err_shifted.max() < 3.0
-    # inflate: never rejected, down-weighted, pulled over in ~30 s; the step leaks into the
-    # velocity and drift states, and the drift (gyro.bias_tau_s = 3600 s) lets it go slowly,
-    # so from 30 s after the jump it follows within 4.5 m (measured 3.7 m; 5.7 m at 25 s)
+    # inflate: fixes within gate_inflate_max x the gate are accepted down-weighted, the rest
+    # rejected until the reset; with the receiver velocity (aekf.gnss_velocity) P is small, so
+    # most of the 30 m step is rejected and the reset takes it (measured: ekf 2 inflated and
+    # 1 reset, aekf 28 and 1); from 30 s after the jump it follows within 1.5 m (measured
+    # 0.7 m; without the receiver velocity 3.7-5.2 m, the step leaking into the drift)
     inf = get(name)(ep, _gate("inflate"))
-    assert inf.info["gnss_inflated"] >= 20
+    assert inf.info["gnss_inflated"] >= 1 and inf.info["gate_resets"] >= 1
     later = tr.t_s > 80.0
     err_shifted = np.hypot(inf.e[later] - (tr.e[later] + 30.0), inf.n[later] - tr.n[later])
-    assert err_shifted.max() < 4.5
+    assert err_shifted.max() < 1.5
 
 
 @pytest.mark.parametrize("option", [{"innovation_factor": True}, {"fading": True},
@@ -139,3 +141,37 @@ def test_options_keep_p_spd_under_multipath_bursts(option):
     # rejecting it (pulled 3 m), and the factor then inflates P on the fixes after it (measured
     # 5.4 m; 3.3 m with gate_mode "reject"); < 3 m with the other options
     assert err[ok].max() < (6.0 if option.get("innovation_factor") else 4.0)
+
+
+@pytest.mark.parametrize("name", ["ekf", "aekf"])
+def test_innovation_whitening_on_correlated_fixes(name):
+    """Fixes with a Gauss-Markov error (3 m, tau 10 s) on top of the reported 1 m white noise.
+
+    aekf.innovation_whitening (Mehra 1970) sees the lag-one correlation of the
+    innovations and scales R by (1 + rho)/(1 - rho): measured RMSE 3.52 -> 2.86 m and
+    NEES (error^2 over var_e + var_n, 1 when honest) 226 -> 45.  Bounds: RMSE at
+    least 10 % lower, NEES at least 60 % lower.  The ekf keeps its fixed R: identical
+    tracks with the option on or off.
+    """
+    ep, tr = tiny_drive(300.0, seed=31, dr_hz=10.0, gnss_sd_m=1.0)
+    rng = np.random.default_rng(5)
+    fix = ep.has_gnss
+    mp = np.zeros((len(ep), 2))
+    phi = math.exp(-0.1 / 10.0)
+    for k in range(1, len(ep)):
+        mp[k] = phi * mp[k - 1] + 3.0 * math.sqrt(1.0 - phi * phi) * rng.standard_normal(2)
+    ep.gnss_e = np.where(fix, ep.gnss_e + mp[:, 0], np.nan)
+    ep.gnss_n = np.where(fix, ep.gnss_n + mp[:, 1], np.nan)
+    out = {}
+    for whiten in (False, True):
+        p = defaults()
+        p["aekf"]["innovation_whitening"] = whiten
+        res = get(name)(ep, p)
+        late = tr.t_s > 30.0
+        err2 = horizontal_error(res, tr)[late] ** 2
+        out[whiten] = (math.sqrt(err2.mean()), float(np.mean(err2 / (res.var_e + res.var_n)[late])))
+    if name == "ekf":
+        assert out[True] == out[False]
+    else:
+        assert out[True][0] < 0.9 * out[False][0]
+        assert out[True][1] < 0.4 * out[False][1]

@@ -383,3 +383,27 @@ def test_outage_sigma_survives_a_stop(name):
             assert err[end] < 3.7 * sig[end]
             assert sig[end] > sig[after] >= sig[before]
     assert sig_at[False][1] < 0.7 * sig_at[False][0]  # the mechanism the option removes
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_receiver_velocity_sharpens_dr(name):
+    """aekf.gnss_velocity: the receiver's speed and course update v_e, v_n with each fix.
+
+    Drive with a 0.01 rad/s gyro bias, a 4 % odometer error and a 30 s outage.
+    Measured (seed 23): RMSE 0.63 -> 0.37 m, largest error in the outage 1.95 -> 0.70 m,
+    velocity RMSE 0.063 -> 0.037 m/s.  Bounds: each at least 25 % lower with it.
+    """
+    ep, tr = tiny_drive(200.0, seed=23, dr_hz=20.0, gyro_bias_radps=0.01, odo_scale=1.04,
+                        outages=((100.0, 130.0),))
+    out = (tr.t_s > 100.0) & (tr.t_s < 130.0)
+    figs = {}
+    for use in (False, True):
+        p = params_with()
+        p["aekf"]["gnss_velocity"] = use
+        res = run(name, ep, p)
+        err = horizontal_error(res, tr)
+        dv = np.hypot(res.v_e - tr.v_e, res.v_n - tr.v_n)
+        late = tr.t_s > 20.0
+        figs[use] = np.array([np.sqrt(np.mean(err[late] ** 2)), err[out].max(),
+                              np.sqrt(np.mean(dv[late] ** 2))])
+    assert np.all(figs[True] < 0.75 * figs[False])

@@ -43,7 +43,8 @@ OPTIONS = {
                                   "lateral_acc_only": "never"}},
     "lateral_acc_always": {"aekf": {"lateral_acc_only": "always"},
                            "standstill": {"zupt_keeps_position": "always"}},
-    "innovation_whitening": {"aekf": {"innovation_whitening": True, "whitening_b": 0.95}},
+    "no_whitening_no_velocity": {"aekf": {"innovation_whitening": False, "gnss_velocity": False}},
+    "whitening_fast": {"aekf": {"whitening_b": 0.9, "whitening_max": 4.0}},
     "whitening_sage_husa": {"aekf": {"innovation_whitening": True},
                             "adaptive": {"sage_husa": True}},
 }

@@ -43,19 +43,22 @@ def test_smoother_bridges_outage(name, outage_drive):
 def test_smoothed_covariance_never_larger(name, outage_drive):
     """P_s <= P_f (position variances), equal at the last epoch; smoothed sigmas honest.
 
-    RTS is optimal only over an optimal forward pass: with the drift as a consider
-    state in outages (the default) the forward gains are deliberately suboptimal
-    and P_s may exceed P_f slightly (measured 4 % at an outage start), so the
-    strict check runs with ``drift_consider = "never"`` and the default gets 10 %.
+    RTS is optimal only over an optimal forward pass: with consider states in outages
+    (the default: drift, the lateral row's velocity and position, the odometer's
+    cross-track gains) the forward gains are deliberately suboptimal and P_s may
+    exceed P_f slightly (measured 16 % in the second before an outage, where the
+    receiver velocity made P_f small), so the strict check runs without them and
+    the default gets 25 %.
     """
     ep, tr = outage_drive
     p = defaults()
     fwd_d = get(name)(ep, p)
     p["filter"]["smooth"] = True
     sm_d = get(name)(ep, p)
-    assert np.all(sm_d.var_e <= 1.1 * fwd_d.var_e) and np.all(sm_d.var_n <= 1.1 * fwd_d.var_n)
+    assert np.all(sm_d.var_e <= 1.25 * fwd_d.var_e) and np.all(sm_d.var_n <= 1.25 * fwd_d.var_n)
     p = defaults()
-    p["aekf"]["drift_consider"] = "never"
+    p["aekf"].update(drift_consider="never", lateral_acc_only="never", odo_along_track=False)
+    p["standstill"]["zupt_keeps_position"] = "never"
     fwd = get(name)(ep, p)
     p["filter"]["smooth"] = True
     sm = get(name)(ep, p)
