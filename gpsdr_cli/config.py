@@ -183,6 +183,11 @@ beta_gnss = 0.5          # fkf, FR mode: information share of the GNSS local fil
 jerk_psd_m2ps5 = 1.0     # white-jerk spectral density per axis of the shared model's Q (m^2/s^5)
 gnss_err_tau_s = 60.0    # correlation time of the GNSS position error states eps_e, eps_n
 gnss_err_sd_m = 1.0      # steady-state sigma of eps_e, eps_n
+gnss_err_dist_m = 0.0    # eps_e, eps_n also decorrelate over this distance driven (m; 0: time only, seed 002):
+                         #   multipath follows the antenna's displacement.  Off: mixed benchmark -- 300 m gave
+                         #   urban fkf/fafkf 5.65/5.75 -> 5.52/5.58 m, one_hour 5.48/5.01 -> 5.34/4.84 m, but the
+                         #   fault suite's open-sky drive 1.5/0.8 -> 1.7/0.9 m (gnss_clock_back fafkf 9.6 -> 13.9 m)
+                         #   and comma2k19 +0.02..0.07 m
 heading_sd_rad = 0.03    # sigma of the gyro-integrated heading measurement (0.01: a clipped gyro dragged the
                          #   track, fault gyro_saturation 6.3 m; 0.03: fafkf urban 7.2 -> 5.8 m, one_hour 5.8 -> 5.1 m)
 heading_err_rw_sd = 0.005  # random walk of q_w, rad per sqrt(s) (the course steering removes the gyro bias;

@@ -319,6 +319,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_GATE_CHI2] = gate_threshold(g_p["gate_prob"], 2) if g_p["gate"] else 0.0
     par[kf.K_GATE_RESET_S] = g_p["gate_reset_s"]
     par[kf.K_GATE_WARMUP] = g_p["gate_warmup_fixes"]
+    par[kf.K_EPS_DIST] = fp["gnss_err_dist_m"]
     par[kf.K_R_MIN] = ap["r_min_factor"]
     par[kf.K_R_MAX] = ap["r_max_factor"]
     par[kf.K_DELTA_MAX] = ap["delta_max"]

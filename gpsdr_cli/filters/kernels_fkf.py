@@ -13,12 +13,15 @@ Model (ALGORITHMS.md section 2), shared by both local filters::
     Phi = diag(Phi_e(T), Phi_n(T), exp(-T/tau_eps), exp(-T/tau_eps), I2)   # seed 002 eq. (2)
     Phi_e = Phi_n = [[1, T, T^2/2], [0, 1, T], [0, 0, 1]]    # eq. (3), erratum: T^2/2
 
-``eps_e, eps_n`` GNSS position error (Gauss-Markov, ``tau_eps``), ``q_w`` the
+``eps_e, eps_n`` GNSS position error (Gauss-Markov, ``tau_eps``; our choice
+beyond the paper: its factor is ``exp(-T/tau - |v| T/D)``, the error also
+decorrelating over the distance ``D = [fkf] gnss_err_dist_m`` driven, since
+multipath follows the antenna's displacement -- :func:`eps_decay`), ``q_w`` the
 heading-sensor error and ``q_s`` the odometer distance error (random walks).
 Q (our choice, the paper gives none): per axis the white-jerk discretisation
 ``q_j * [[T^5/20, T^4/8, T^3/6], [T^4/8, T^3/3, T^2/2], [T^3/6, T^2/2, T]]``
 (exact for the Newton Phi above, ``q_j = jerk_psd``, m^2/s^5); for eps
-``sd^2 (1 - exp(-2T/tau))`` (keeps its variance stationary at ``sd^2``); for
+``sd^2 (1 - f^2)``, f that factor (keeps its variance stationary at ``sd^2``); for
 q_w, q_s ``rw_sd^2 T``.  Phi is applied in place using its block structure
 (row and column operations), never as a dense 10x10 product.
 
@@ -136,7 +139,8 @@ K_HEAD_CHI2 = 17   # chi-square(1) gate on the heading innovation; <= 0 disables
 K_GNSS_STALE_S = 18  # s, GNSS filter without an accepted fix for longer: left out of the fusion
 K_DR_STALE_S = 19  # s, DR filter without any update for longer: left out of the fusion
 K_GATE_WARMUP = 20  # no GNSS gate before this many fixes were accepted
-N_PAR = 21
+K_EPS_DIST = 21    # m, eps_e, eps_n also decorrelate over this distance driven; <= 0: off
+N_PAR = 22
 
 #: heading row only while v^2 >= this x var(speed), var(speed) = u^T P_vv u, u = v/|v|:
 #: a speed of 3 sigmas or more
@@ -315,6 +319,7 @@ def predict_uncapped(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: 
     """:func:`predict` without the sigma ceiling (the caller applies it)."""
     if not T > 0.0:
         return
+    f = eps_decay(x, T, par)
     if not static:
         h2 = 0.5 * T * T
         for b in range(0, 6, 3):                    # axes e (0..2) and n (3..5)
@@ -342,7 +347,6 @@ def predict_uncapped(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: 
             P[b + 1, b + 2] += q * T2 / 2.0 * d1 * d2
             P[b + 2, b + 1] += q * T2 / 2.0 * d1 * d2
             P[b + 2, b + 2] += q * T * d2 * d2
-    f = math.exp(-T / par[K_TAU_EPS])               # Gauss-Markov eps_e, eps_n
     for s in range(IEPS_E, IEPS_N + 1):
         x[s] *= f
         for j in range(NX):
@@ -354,6 +358,21 @@ def predict_uncapped(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: 
     P[IEPS_N, IEPS_N] += qe * d[IEPS_N] ** 2
     P[IQW, IQW] += par[K_QW_RW] ** 2 * T * d[IQW] ** 2   # random walks q_w, q_s
     P[IQS, IQS] += par[K_QS_RW] ** 2 * T * d[IQS] ** 2
+
+
+@njit(cache=True)
+def eps_decay(x: np.ndarray, T: float, par: np.ndarray) -> float:
+    """Gauss-Markov factor of eps_e, eps_n over T s: ``exp(-T/tau - |v| T/D)``.
+
+    Multipath decorrelates with the antenna's displacement (the reflecting
+    geometry changes), not with time alone: ``1/tau_eff = 1/tau + |v|/D``,
+    ``|v|`` the speed of the state being predicted, ``D = [fkf]
+    gnss_err_dist_m`` (<= 0: time only, seed 002).
+    """
+    rate = 1.0 / par[K_TAU_EPS]
+    if par[K_EPS_DIST] > 0.0:
+        rate += math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN]) / par[K_EPS_DIST]
+    return math.exp(-T * rate)
 
 
 @njit(cache=True)
@@ -374,8 +393,8 @@ def cap_variance(P: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def phi_matrix(T: float, static: bool, par: np.ndarray, Phi: np.ndarray) -> None:
-    """The dense Phi of a step (for the smoother; the filters apply it in place)."""
+def phi_matrix(T: float, static: bool, par: np.ndarray, Phi: np.ndarray, x: np.ndarray) -> None:
+    """The dense Phi of a step from state x (for the smoother; the filters apply it in place)."""
     for i in range(NX):
         for j in range(NX):
             Phi[i, j] = 1.0 if i == j else 0.0
@@ -384,7 +403,7 @@ def phi_matrix(T: float, static: bool, par: np.ndarray, Phi: np.ndarray) -> None
             Phi[b, b + 1] = T
             Phi[b, b + 2] = 0.5 * T * T
             Phi[b + 1, b + 2] = T
-    f = math.exp(-T / par[K_TAU_EPS])
+    f = eps_decay(x, T, par)
     Phi[IEPS_E, IEPS_E] = f
     Phi[IEPS_N, IEPS_N] = f
 
@@ -590,39 +609,56 @@ def fuse_information(x1: np.ndarray, P1: np.ndarray, idx1: np.ndarray,
 @njit(cache=True)
 def fuse_two(x1: np.ndarray, P1: np.ndarray, x2: np.ndarray, P2: np.ndarray,
              xg: np.ndarray, Pg: np.ndarray, S: np.ndarray, L: np.ndarray,
-             W: np.ndarray, Sinv: np.ndarray, M: np.ndarray) -> None:
+             Y: np.ndarray, u: np.ndarray) -> None:
     """:func:`fuse_information` for two filters over all states, with one factorisation.
 
-    ``(P1^-1 + P2^-1)^-1 = P1 (P1 + P2)^-1 P2`` and
-    ``x_g = x1 + P1 (P1 + P2)^-1 (x2 - x1)``: one Cholesky of ``P1 + P2``
-    instead of three (FR mode, where every state is fused).  ``P_g = M P2``
-    with ``M = P1 (P1 + P2)^-1`` is a product, not a difference: no
-    cancellation when one filter is far more certain than the other.
+    ``(P1^-1 + P2^-1)^-1 = Pa - Pa (P1 + P2)^-1 Pa`` and
+    ``x_g = xa + Pa (P1 + P2)^-1 (xb - xa)`` for either labelling (a, b) of
+    the two filters; with ``P1 + P2 = L L^T`` and ``Y = L^-1 Pa`` (forward
+    substitution): ``P_g = Pa - Y^T Y`` (symmetric by construction) and
+    ``x_g = xa + Y^T L^-1 (xb - xa)``.  One Cholesky and triangular solves, no
+    explicit inverse (half the work of ``P1 (P1 + P2)^-1 P2`` through
+    ``(P1 + P2)^-1``).  ``a`` is the filter with the smaller trace: the
+    difference then starts from the smaller covariance, so its cancellation
+    stays at rounding level.  ``S``, ``L``, ``Y`` (10, 10) and ``u`` (10,) are scratch.
     """
+    ta = 0.0
+    tb = 0.0
+    for i in range(NX):
+        ta += P1[i, i]
+        tb += P2[i, i]
+    if ta <= tb:
+        xa, Pa, xb = x1, P1, x2
+    else:
+        xa, Pa, xb = x2, P2, x1
     for i in range(NX):
         for j in range(NX):
             S[i, j] = P1[i, j] + P2[i, j]
     cholesky(S, L)
-    chol_inverse(L, W, Sinv)
     for i in range(NX):
-        for j in range(NX):
-            acc = 0.0
-            for m in range(NX):
-                acc += P1[i, m] * Sinv[m, j]
-            M[i, j] = acc
+        S[i, 0] = 1.0 / L[i, i]                     # reciprocal pivots (column 0 of S)
+    for c in range(NX):                             # Y = L^-1 Pa
+        for i in range(NX):
+            acc = Pa[i, c]
+            for m in range(i):
+                acc -= L[i, m] * Y[m, c]
+            Y[i, c] = acc * S[i, 0]
+    for i in range(NX):                             # u = L^-1 (xb - xa)
+        acc = xb[i] - xa[i]
+        for m in range(i):
+            acc -= L[i, m] * u[m]
+        u[i] = acc * S[i, 0]
     for i in range(NX):
-        acc = x1[i]
+        acc = xa[i]
         for m in range(NX):
-            acc += M[i, m] * (x2[m] - x1[m])
+            acc += Y[m, i] * u[m]
         xg[i] = acc
         for j in range(i, NX):
-            v = 0.0
-            w = 0.0
+            v = Pa[i, j]
             for m in range(NX):
-                v += M[i, m] * P2[m, j]
-                w += M[j, m] * P2[m, i]
-            Pg[i, j] = 0.5 * (v + w)
-            Pg[j, i] = Pg[i, j]
+                v -= Y[m, i] * Y[m, j]
+            Pg[i, j] = v
+            Pg[j, i] = v
 
 
 @njit(cache=True)
@@ -843,9 +879,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                         counters[C_R_ADAPT] += 1
                 re = rfac[0] * gnss_var_e[kx]
                 rn = rfac[1] * gnss_var_n[kx]
-                s00 += re
-                s11 += rn
-                nis = nis_2d(ye, yn, s00, s01, s11)
+                nis = nis_2d(ye, yn, s00 + re, s01, s11 + rn)
                 nis_out[kx] = nis
                 accept = True
                 a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
@@ -969,7 +1003,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
         elif both:
             if fusion == FUSE_COV:
                 if mode_fr:
-                    fuse_two(x1, P1, x2, P2, xg, Pg, Y, L, Wk, A1, B1)
+                    fuse_two(x1, P1, x2, P2, xg, Pg, Y, L, Wk, yv)
                 else:
                     fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
                                      A1, L1, B1, A2, L2, B2, L, Wk)
@@ -1111,7 +1145,7 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
             x_prior[:] = x_post
             P_prior[:, :] = P_post
             predict(x_prior, P_prior, dt[k + 1], static[k + 1], par, ones)
-            phi_matrix(dt[k + 1], static[k + 1], par, Phi)
+            phi_matrix(dt[k + 1], static[k + 1], par, Phi, x_post)
             rts_step(x_post, P_post, x_prior, P_prior, Phi, x_sn, P_sn, x_s, P_s, wL, wB)
             # guard: the fused sequence is not always a Kalman posterior (stale-filter
             # switches, heading re-alignments, an unmodelled gyro bias); where the

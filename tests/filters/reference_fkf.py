@@ -29,18 +29,27 @@ POS_BLOCK = [kf.IE, kf.IN]
 VEL_BLOCK = [kf.IVE, kf.IAE, kf.IVN, kf.IAN]
 
 
-def Phi_of(T: float, static: bool, tau: float) -> np.ndarray:
+def eps_factor(T: float, par: np.ndarray, x: np.ndarray) -> float:
+    """Gauss-Markov factor of eps over T: time constant tau, and the distance |v| T driven
+    over the decorrelation distance D (when D > 0)."""
+    rate = 1.0 / par[kf.K_TAU_EPS]
+    if par[kf.K_EPS_DIST] > 0:
+        rate += math.hypot(x[1], x[4]) / par[kf.K_EPS_DIST]
+    return math.exp(-T * rate)
+
+
+def Phi_of(T: float, static: bool, par: np.ndarray, x: np.ndarray) -> np.ndarray:
     """seed 002 eqs. (2)-(3) with the T^2/2 erratum; kinematics held at standstill."""
     Phi = np.eye(NX)
     if not static:
         axis = np.array([[1.0, T, 0.5 * T * T], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
         Phi[0:3, 0:3] = axis
         Phi[3:6, 3:6] = axis
-    Phi[6, 6] = Phi[7, 7] = math.exp(-T / tau)
+    Phi[6, 6] = Phi[7, 7] = eps_factor(T, par, x)
     return Phi
 
 
-def Q_of(T: float, static: bool, par: np.ndarray) -> np.ndarray:
+def Q_of(T: float, static: bool, par: np.ndarray, x: np.ndarray) -> np.ndarray:
     """White-jerk kinematics, stationary Gauss-Markov eps, random-walk q_w, q_s."""
     Q = np.zeros((NX, NX))
     if not static:
@@ -50,7 +59,7 @@ def Q_of(T: float, static: bool, par: np.ndarray) -> np.ndarray:
                              [T**3 / 6, T**2 / 2, T]])
         Q[0:3, 0:3] = axis
         Q[3:6, 3:6] = axis
-    f = math.exp(-T / par[kf.K_TAU_EPS])
+    f = eps_factor(T, par, x)
     Q[6, 6] = Q[7, 7] = par[kf.K_EPS_SD] ** 2 * (1 - f * f)
     Q[8, 8] = par[kf.K_QW_RW] ** 2 * T
     Q[9, 9] = par[kf.K_QS_RW] ** 2 * T
@@ -204,10 +213,11 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         t += T
         st = bool(prep.static[k])
         if T > 0:
-            Phi, Q = Phi_of(T, st, par[kf.K_TAU_EPS]), Q_of(T, st, par)
-            x1, x2 = Phi @ x1, Phi @ x2
-            P1 = cap(Phi @ P1 @ Phi.T + np.outer(d1, d1) * Q)
-            P2 = cap(Phi @ P2 @ Phi.T + np.outer(d2, d2) * Q)
+            Phi1, Q1 = Phi_of(T, st, par, x1), Q_of(T, st, par, x1)
+            Phi2, Q2 = Phi_of(T, st, par, x2), Q_of(T, st, par, x2)
+            x1, x2 = Phi1 @ x1, Phi2 @ x2
+            P1 = cap(Phi1 @ P1 @ Phi1.T + np.outer(d1, d1) * Q1)
+            P2 = cap(Phi2 @ P2 @ Phi2.T + np.outer(d2, d2) * Q2)
         if gnss_on:
             if st:
                 x1, P1 = zupt(x1, P1)
@@ -339,12 +349,16 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         out_x, out_P = xs.copy(), Ps.copy()
         for k in range(n - 2, -1, -1):
             T, st = prep.dt[k + 1], bool(prep.static[k + 1])
-            Phi = Phi_of(T, st, par[kf.K_TAU_EPS])
+            Phi = Phi_of(T, st, par, xs[k])
             x_prior = Phi @ xs[k]
-            P_prior = cap(Phi @ Ps[k] @ Phi.T + Q_of(T, st, par))
+            P_prior = cap(Phi @ Ps[k] @ Phi.T + Q_of(T, st, par, xs[k]))
             C = np.linalg.solve(P_prior, Phi @ Ps[k]).T   # P Phi^T P_prior^-1
             x_s = xs[k] + C @ (x_s - x_prior)
             P_s = Ps[k] + C @ (P_s - P_prior) @ C.T
+            dpos = x_s[[0, 3]] - xs[k][[0, 3]]          # guard: restart from the forward
+            nees = float(dpos @ np.linalg.solve(Ps[k][np.ix_([0, 3], [0, 3])], dpos))
+            if not nees <= kf.SMOOTH_RESTART_NEES:
+                x_s, P_s = xs[k].copy(), Ps[k].copy()
             out_x[k], out_P[k] = x_s, P_s
         xs, Ps = out_x, out_P
     return {"e": xs[:, 0], "n": xs[:, 3], "v_e": xs[:, 1], "v_n": xs[:, 4],

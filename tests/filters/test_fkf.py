@@ -76,10 +76,10 @@ def test_predict_is_phi_p_phi_t_plus_q_with_the_erratum() -> None:
         for d in (np.ones(10), np.full(10, 1 / math.sqrt(0.3))):
             xk, Pk = x.copy(), P.copy()
             kf.predict(xk, Pk, T, static, par, d)
-            Phi = Phi_of(T, static, par[kf.K_TAU_EPS])
+            Phi = Phi_of(T, static, par, x)
             if not static:
                 assert Phi[0, 2] == pytest.approx(T * T / 2)   # erratum: T^2/2, not T^2
-            expected = Phi @ P @ Phi.T + np.outer(d, d) * Q_of(T, static, par)
+            expected = Phi @ P @ Phi.T + np.outer(d, d) * Q_of(T, static, par, x)
             assert np.allclose(Pk, expected, rtol=1e-13, atol=1e-13)
             assert np.allclose(xk, Phi @ x, rtol=1e-13, atol=1e-13)
 
@@ -122,8 +122,9 @@ def busy_drive():
 @pytest.mark.parametrize("mode", ["nr", "fr"])
 @pytest.mark.parametrize("smooth", [False, True])
 def test_fkf_kernel_reproduces_the_reference(busy_drive, mode: str, smooth: bool) -> None:
+    """With eps also decorrelating over 100 m driven (the fafkf reference tests: time only)."""
     drive, frame, _ = busy_drive
-    params = _params(fkf={"mode": mode}, filter={"smooth": smooth})
+    params = _params(fkf={"mode": mode, "gnss_err_dist_m": 100.0}, filter={"smooth": smooth})
     epochs = build_epochs(drive, frame, params)
     result = get("fkf")(epochs, params)
     ref = run_reference(fkf.prepare(epochs, params), "fkf", smooth=smooth)
