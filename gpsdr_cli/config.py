@@ -188,6 +188,10 @@ gnss_err_dist_m = 0.0    # eps_e, eps_n also decorrelate over this distance driv
                          #   urban fkf/fafkf 5.65/5.75 -> 5.52/5.58 m, one_hour 5.48/5.01 -> 5.34/4.84 m, but the
                          #   fault suite's open-sky drive 1.5/0.8 -> 1.7/0.9 m (gnss_clock_back fafkf 9.6 -> 13.9 m)
                          #   and comma2k19 +0.02..0.07 m
+gnss_velocity = true     # the GNSS local filter also takes the receiver's velocity (speed and course from
+                         #   RMC/VTG: Doppler, barely touched by multipath) with each accepted fix (our choice)
+gnss_velocity_sd_mps = 0.2  # its sigma per axis (m/s)
+gnss_velocity_min_mps = 1.0  # below this speed the course is noise: not used
 heading_sd_rad = 0.03    # sigma of the gyro-integrated heading measurement (0.01: a clipped gyro dragged the
                          #   track, fault gyro_saturation 6.3 m; 0.03: fafkf urban 7.2 -> 5.8 m, one_hour 5.8 -> 5.1 m)
 heading_err_rw_sd = 0.005  # random walk of q_w, rad per sqrt(s) (the course steering removes the gyro bias;

@@ -32,6 +32,9 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   speed reads 0.8 % low and the fused track fell 3.5 m behind in 60 s; a
   scale state ``S = (1 + q_s) T_m v`` instead let (q_s, v) wander along their
   unobservable ridge in GNSS outages: 1.7 km after 10 min).
+* receiver velocity ``(speed sin(course), speed cos(course))`` at fixes with
+  speed >= ``[fkf] gnss_velocity_min_mps`` (else NaN): the GNSS local
+  filter's velocity rows (``[fkf] gnss_velocity``).
 * standstill: the latest odometer speed (at most 1 s old) below
   ``[standstill] speed_mps``.
 * initial state: the first usable fix (else e = n = 0), speed from the first
@@ -96,6 +99,8 @@ class Prepared:
     gnss_n: np.ndarray
     gnss_var_e: np.ndarray
     gnss_var_n: np.ndarray
+    gnss_ve: np.ndarray
+    gnss_vn: np.ndarray
     theta: np.ndarray
     dist: np.ndarray
     t_m: np.ndarray
@@ -320,6 +325,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_GATE_RESET_S] = g_p["gate_reset_s"]
     par[kf.K_GATE_WARMUP] = g_p["gate_warmup_fixes"]
     par[kf.K_EPS_DIST] = fp["gnss_err_dist_m"]
+    par[kf.K_GVEL_VAR] = fp["gnss_velocity_sd_mps"] ** 2 if fp["gnss_velocity"] else 0.0
     par[kf.K_R_MIN] = ap["r_min_factor"]
     par[kf.K_R_MAX] = ap["r_max_factor"]
     par[kf.K_DELTA_MAX] = ap["delta_max"]
@@ -350,6 +356,11 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     flags[kf.F_STORE] = bool(params["filter"]["smooth"])
     flags[kf.F_CHECK_SPD] = bool(fp["check_spd"])
 
+    spd, crs = epochs.gnss_speed_mps, epochs.gnss_course_rad
+    moving = (epochs.has_gnss & np.isfinite(spd) & np.isfinite(crs)
+              & (spd >= fp["gnss_velocity_min_mps"]))
+    gv_e = np.where(moving, spd * np.sin(np.where(moving, crs, 0.0)), np.nan)
+    gv_n = np.where(moving, spd * np.cos(np.where(moving, crs, 0.0)), np.nan)
     var_e = np.where(epochs.has_gnss, epochs.gnss_sd_e, 1.0) ** 2
     var_n = np.where(epochs.has_gnss, epochs.gnss_sd_n, 1.0) ** 2
     info = {"heading_alignment": source, "heading_alignment_t_s": t_a,
@@ -359,7 +370,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     return Prepared(dt=np.ascontiguousarray(epochs.dt_s, dtype=float),
                     has_gnss=np.ascontiguousarray(epochs.has_gnss, dtype=bool),
                     gnss_e=np.nan_to_num(epochs.gnss_e), gnss_n=np.nan_to_num(epochs.gnss_n),
-                    gnss_var_e=var_e, gnss_var_n=var_n, theta=theta, dist=dist, t_m=t_m,
+                    gnss_var_e=var_e, gnss_var_n=var_n, gnss_ve=gv_e, gnss_vn=gv_n, theta=theta, dist=dist, t_m=t_m,
                     static=static, x0=x0, P0=P0, psi0=psi0, par=par, flags=flags, info=info)
 
 
@@ -427,7 +438,7 @@ def forward(kind: str, prep: Prepared, store: bool) -> tuple:
     flags = prep.flags.copy()
     flags[kf.F_STORE] = store
     return kernel(prep.dt, prep.has_gnss, prep.gnss_e, prep.gnss_n, prep.gnss_var_e,
-                  prep.gnss_var_n, prep.theta, prep.dist, prep.t_m, prep.static, prep.x0,
+                  prep.gnss_var_n, prep.gnss_ve, prep.gnss_vn, prep.theta, prep.dist, prep.t_m, prep.static, prep.x0,
                   prep.P0, prep.psi0, prep.par, flags, fuzzy.R_TABLE, fuzzy.W_TABLE)
 
 
@@ -463,6 +474,7 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
         "heading_updates": int(counters[kf.C_HEADING]),
         "heading_skipped_slow": int(counters[kf.C_HEADING_SLOW]),
         "distance_updates": int(counters[kf.C_DIST]),
+        "gnss_velocity_updates": int(counters[kf.C_GVEL]),
         "zupt_epochs": int(counters[kf.C_ZUPT]),
         "r_adaptations": int(counters[kf.C_R_ADAPT]),
         "heading_rejected": int(counters[kf.C_HEAD_REJECTED]),

@@ -245,6 +245,12 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                     for j, name in enumerate(("e", "n")):
                         H, h = row(name, x1)
                         x1, P1 = kf_update(x1, P1, H, z[j] - h, R[j, j])
+                    gv = (prep.gnss_ve[k], prep.gnss_vn[k])
+                    if par[kf.K_GVEL_VAR] > 0 and not np.isnan(gv).any():
+                        for j, i in enumerate((1, 4)):            # receiver velocity v_e, v_n
+                            H = np.zeros(NX)
+                            H[i] = 1
+                            x1, P1 = kf_update(x1, P1, H, gv[j] - x1[i], par[kf.K_GVEL_VAR])
                     used[k] = True
                     n_acc += 1
                     t_acc = t
