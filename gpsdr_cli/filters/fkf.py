@@ -53,7 +53,10 @@ Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
   an unmodelled gyro bias) RTS can run away; a guard restarts the backward
   recursion from the forward estimate wherever the smoothed position leaves
   it by more than chi-square(2) = 25 (``info["smoother_restarts"]``).
-* ``fafkf``: the fuzzy-weighted fused sequence is *not* a Kalman posterior
+* ``fafkf`` with ``[fafkf] weights = "shares"`` (covariance-weighted fusion):
+  the same fused RTS as fkf.
+* ``fafkf`` with the paper's convex weights (``"scalar"``, ``"block"``): the
+  fuzzy-weighted fused sequence is *not* a Kalman posterior
   (its P_g is Carlson's bound, and block weights change the position-velocity
   cross-covariance from epoch to epoch), and RTS over it made the track worse
   (5.2 m instead of 1.0 m RMS on the simulator's open-sky drive).  It is
@@ -240,8 +243,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
                                 "expected at least one stream with data")
     if fp["mode"] not in ("nr", "fr"):
         raise ConfigError(f"fkf.mode = {fp['mode']!r}: expected \"nr\" or \"fr\"")
-    if ap["weights"] not in ("scalar", "block"):
-        raise ConfigError(f"fafkf.weights = {ap['weights']!r}: expected \"scalar\" or \"block\"")
+    if ap["weights"] not in ("shares", "scalar", "block"):
+        raise ConfigError(f"fafkf.weights = {ap['weights']!r}: expected \"shares\", "
+                          "\"scalar\" or \"block\"")
     if ap["normalisation"] not in ("share", "log"):
         raise ConfigError(f"fafkf.normalisation = {ap['normalisation']!r}: "
                           "expected \"share\" or \"log\"")
@@ -348,7 +352,8 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
 
     flags = np.zeros(kf.N_FLAGS, np.int64)
     flags[kf.F_MODE_FR] = fp["mode"] == "fr"
-    flags[kf.F_FUSION] = kf.FUSE_BLOCK if ap["weights"] == "block" else kf.FUSE_SCALAR
+    flags[kf.F_FUSION] = {"shares": kf.FUSE_SHARES, "scalar": kf.FUSE_SCALAR,
+                          "block": kf.FUSE_BLOCK}[ap["weights"]]
     flags[kf.F_NORM] = ap["normalisation"] == "log"
     flags[kf.F_WINDOW] = ap["window"]
     flags[kf.F_GNSS_ON] = gnss_on
@@ -449,11 +454,12 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
         raise NoDataError(None, f"{kind}: no epochs to filter; expected at least one record")
     prep = prepare(epochs, params)
     smoothed = bool(params["filter"]["smooth"])
-    out, used, rej, nis, beta, rfac, counters, xs, Ps = forward(
-        kind, prep, smoothed and kind == "fkf")
+    # RTS needs a Kalman posterior: covariance-weighted fusion (fkf, fafkf "shares")
+    rts = kind == "fkf" or params["fafkf"]["weights"] == "shares"
+    out, used, rej, nis, beta, rfac, counters, xs, Ps = forward(kind, prep, smoothed and rts)
     smooth_not_spd = 0
     smoothing = "none"
-    if smoothed and kind == "fkf":
+    if smoothed and rts:
         out, smooth_not_spd, restarts = kf.smooth_fused(xs, Ps, prep.dt, prep.static, prep.par)
         smoothing = "rts_fused"
     elif smoothed and prep.flags[kf.F_GNSS_ON] and n > 1:

@@ -97,6 +97,8 @@ Master fusion (each epoch):
   acceleration) get the controller's beta (one scalar, or one per block:
   position block [e, n] and velocity block [v, a]); each sensor-error state
   comes from the filter that observes it.
+* fuzzy shares (fafkf, ``weights = "shares"``): covariance weighting as for
+  fkf, the controller's beta the FR information share ``c_1``.
 
 Modes: NR (no reset, seed 002's choice) keeps the local filters apart; FR
 (fusion-reset, Carlson 1990) sets ``x_i = x_g``, ``P_i = P_g / c_i`` after
@@ -160,7 +162,8 @@ SMOOTH_RESTART_NEES = 25.0
 # ---- integer flags --------------------------------------------------------------------
 F_MODE_FR = 0      # 1: fusion-reset, 0: no reset
 F_ADAPT_R = 1      # 1: fuzzy adaptive R
-F_FUSION = 2       # 0: covariance weighting, 1: fuzzy scalar weight, 2: fuzzy block weights
+F_FUSION = 2       # 0: covariance weighting, 1: fuzzy scalar weight, 2: fuzzy block weights,
+                   # 3: covariance weighting with fuzzy information shares
 F_NORM = 3         # 0: share, 1: log
 F_WINDOW = 4       # M, residual window length
 F_GNSS_ON = 5      # the GNSS local filter exists (the drive has fixes)
@@ -172,6 +175,7 @@ N_FLAGS = 9
 FUSE_COV = 0
 FUSE_SCALAR = 1
 FUSE_BLOCK = 2
+FUSE_SHARES = 3    # covariance weighting, the fuzzy reliability as the FR information share
 
 # ---- counters -------------------------------------------------------------------------
 C_GNSS_USED = 0
@@ -1018,18 +1022,29 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 beta_out[kx, 0] = 0.0
                 beta_out[kx, 1] = 0.0
         elif both:
-            if fusion == FUSE_COV:
+            if fusion == FUSE_COV or fusion == FUSE_SHARES:
+                if fusion == FUSE_SHARES:           # fuzzy reliability -> information share
+                    de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
+                                                u_last[2] ** 2 + u_last[3] ** 2, log_scale)
+                    bp = fuzzy_beta(block_pe(P1, d1, 0), block_pe(P2, d2, 0),
+                                    de1n, de2n, log_scale, w_table)
+                else:
+                    bp = par[K_BETA_GNSS]
                 if mode_fr:
                     fuse_two(x1, P1, x2, P2, xg, Pg, Y, L, Wk, yv)
                 else:
                     fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
                                      A1, L1, B1, A2, L2, B2, L, Wk)
-                beta_out[kx, 0] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
-                                         + Pg[IN, IN] / max(P1[IN, IN], 1e-300))
-                beta_out[kx, 1] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
-                                         + Pg[IVN, IVN] / max(P1[IVN, IVN], 1e-300))
+                if fusion == FUSE_SHARES:
+                    beta_out[kx, 0] = bp
+                    beta_out[kx, 1] = bp
+                else:
+                    beta_out[kx, 0] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
+                                             + Pg[IN, IN] / max(P1[IN, IN], 1e-300))
+                    beta_out[kx, 1] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
+                                             + Pg[IVN, IVN] / max(P1[IVN, IVN], 1e-300))
                 for i in range(NX):
-                    w[i] = par[K_BETA_GNSS]
+                    w[i] = bp
             else:
                 de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
                                             u_last[2] ** 2 + u_last[3] ** 2, log_scale)

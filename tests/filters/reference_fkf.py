@@ -178,7 +178,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
     fr = bool(flags[kf.F_MODE_FR])
     adaptive = kind == "fafkf"
     fusion = kf.FUSE_COV if kind == "fkf" else (
-        kf.FUSE_SCALAR if flags[kf.F_FUSION] == kf.FUSE_SCALAR else kf.FUSE_BLOCK)
+        flags[kf.F_FUSION] if flags[kf.F_FUSION] != kf.FUSE_COV else kf.FUSE_BLOCK)
     log = bool(flags[kf.F_NORM])
     gnss_on, dr_on = bool(flags[kf.F_GNSS_ON]), bool(flags[kf.F_DR_ON])
     both = gnss_on and dr_on
@@ -313,7 +313,11 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 xg, Pg = x2.copy(), P2.copy()
                 beta_out[k] = 0.0
         elif both:
-            if fusion == kf.FUSE_COV:
+            if fusion in (kf.FUSE_COV, kf.FUSE_SHARES):
+                if fusion == kf.FUSE_SHARES:              # fuzzy information share
+                    de = normalise(win[0].u ** 2 + win[1].u ** 2,
+                                   win[2].u ** 2 + win[3].u ** 2, log)
+                    bp = beta(P1, P2, d1, d2, list(range(NX)), de, log)
                 Y, yv = np.zeros((NX, NX)), np.zeros(NX)
                 for x, P, own in ((x1, P1, own1), (x2, P2, own2)):
                     ix = np.ix_(own, own)
@@ -322,9 +326,13 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 Pg = np.linalg.solve(Y, np.eye(NX))
                 Pg = 0.5 * (Pg + Pg.T)
                 xg = np.linalg.solve(Y, yv)
-                w = np.full(NX, par[kf.K_BETA_GNSS])
-                beta_out[k] = [0.5 * (Pg[0, 0] / P1[0, 0] + Pg[3, 3] / P1[3, 3]),
-                               0.5 * (Pg[1, 1] / P1[1, 1] + Pg[4, 4] / P1[4, 4])]
+                if fusion == kf.FUSE_SHARES:
+                    w = np.full(NX, bp)
+                    beta_out[k] = [bp, bp]
+                else:
+                    w = np.full(NX, par[kf.K_BETA_GNSS])
+                    beta_out[k] = [0.5 * (Pg[0, 0] / P1[0, 0] + Pg[3, 3] / P1[3, 3]),
+                                   0.5 * (Pg[1, 1] / P1[1, 1] + Pg[4, 4] / P1[4, 4])]
             else:
                 de = normalise(win[0].u ** 2 + win[1].u ** 2, win[2].u ** 2 + win[3].u ** 2, log)
                 if fusion == kf.FUSE_BLOCK:

@@ -37,7 +37,7 @@ def busy_drive():
 
 
 @pytest.mark.parametrize("mode", ["nr", "fr"])
-@pytest.mark.parametrize("weights", ["scalar", "block"])
+@pytest.mark.parametrize("weights", ["shares", "scalar", "block"])
 @pytest.mark.parametrize("normalisation", ["share", "log"])
 def test_fafkf_kernel_reproduces_the_reference(busy_drive, mode: str, weights: str,
                                                normalisation: str) -> None:
@@ -56,9 +56,23 @@ def test_fafkf_kernel_reproduces_the_reference(busy_drive, mode: str, weights: s
 
 
 @pytest.mark.parametrize("mode", ["nr", "fr"])
-def test_fafkf_smoothing_reproduces_the_reference(busy_drive, mode: str) -> None:
+def test_fafkf_rts_smoothing_reproduces_the_reference(busy_drive, mode: str) -> None:
+    """Weights "shares": the fusion is covariance-weighted, so the fused RTS of fkf applies."""
     drive, frame, _ = busy_drive
-    params = _params(fkf={"mode": mode}, filter={"smooth": True})
+    params = _params(fkf={"mode": mode}, fafkf={"weights": "shares"}, filter={"smooth": True})
+    epochs = build_epochs(drive, frame, params)
+    result = get("fafkf")(epochs, params)
+    assert result.info["smoothing"] == "rts_fused"
+    assert_matches_reference(result, run_reference(fkf.prepare(epochs, params), "fafkf",
+                                                   smooth=True))
+    _assert_sane(result, len(epochs))
+
+
+@pytest.mark.parametrize("mode", ["nr", "fr"])
+def test_fafkf_smoothing_reproduces_the_reference(busy_drive, mode: str) -> None:
+    """The paper's convex weights: not a Kalman posterior, smoothed forward + backward."""
+    drive, frame, _ = busy_drive
+    params = _params(fkf={"mode": mode}, fafkf={"weights": "scalar"}, filter={"smooth": True})
     epochs = build_epochs(drive, frame, params)
     result = get("fafkf")(epochs, params)
     assert result.info["smoothing"] == "forward_backward"
@@ -134,8 +148,8 @@ def test_fafkf_on_the_simulator_open_sky() -> None:
 
 
 @pytest.mark.parametrize("name", list(CASES))
-@pytest.mark.parametrize(("mode", "weights"), [("fr", "block"), ("fr", "scalar"),
-                                               ("nr", "block")])
+@pytest.mark.parametrize(("mode", "weights"), [("fr", "shares"), ("fr", "block"),
+                                               ("fr", "scalar"), ("nr", "block")])
 def test_fafkf_survives(name: str, mode: str, weights: str) -> None:
     epochs, truth, params = survival_case(name, mode, fafkf={"weights": weights})
     for smooth in (False, True):
