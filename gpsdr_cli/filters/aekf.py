@@ -382,11 +382,14 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         c64(epochs.odo_speed_mps, f64), c64(epochs.gnss_outage, bool), gv_e, gv_n)
     del r_e, r_n, ka
 
+    opts = kn.kernel_options(flg)
+    wk = np.zeros((5, N_STATES))
+
     def run_segment(k0: int, k1: int, x: np.ndarray, P: np.ndarray, s: np.ndarray,
                     P_buf: np.ndarray, counters: np.ndarray | None = None) -> None:
         kn.cs_filter_kernel(*inputs, x, P, s, k0, k1, k0, prm, flg, x_out, pcov, gnss_used,
                             gnss_rej, nis, static, hold, sd, P_buf, prior_store,
-                            np.zeros(kn.N_INFO) if counters is None else counters)
+                            np.zeros(kn.N_INFO) if counters is None else counters, wk, **opts)
 
     x, P = x0.copy(), P0.copy()
     checkpoints: list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray]] = []

@@ -13,7 +13,9 @@ axis.  Covariance propagation: Singer discretisation per axis with alpha = 1/tau
 ``exp(-T/tau_eps)`` and 1; the kernels exploit that, these helpers also build
 the dense matrices for the reference implementation and the FilterPy benchmark.
 
-Every function is numba-compiled (``cache=True``) and callable from Python too.
+Every function is numba-compiled (``cache=True``, ``error_model="numpy"``: the
+divisions are guarded) and callable from Python too; the small ones are inlined
+into the filter kernel (``inline="always"``: fewer compilations at cold start).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ SINGER_SERIES_MAX_AT = 0.05
 CS_VAR_FACTOR = (4.0 - math.pi) / math.pi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def singer_phi(T: float, alpha: float) -> tuple[float, float, float]:
     """Singer transition corner terms (phi13, phi23, phi33) for step T (s), alpha = 1/tau_a (1/s).
 
@@ -48,7 +50,7 @@ def singer_phi(T: float, alpha: float) -> tuple[float, float, float]:
     return (aT - 1.0 + ex) / (alpha * alpha), (1.0 - ex) / alpha, ex
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def singer_q(T: float, alpha: float, q: np.ndarray) -> None:
     """Per-axis Singer q(T) into q = [q11, q12, q13, q22, q23, q33]; Q_axis = 2 alpha sigma_a^2 q.
 
@@ -69,17 +71,20 @@ def singer_q(T: float, alpha: float, q: np.ndarray) -> None:
         q[5] = T
         return
     a = alpha
+    a2 = a * a  # powers as products: ``**`` made this function 0.4 s of the cold compile
+    a3 = a2 * a
+    aT2 = aT * aT
     e1 = math.exp(-aT)
-    e2 = math.exp(-2.0 * aT)
-    q[0] = (1.0 - e2 + 2.0 * aT + 2.0 * aT ** 3 / 3.0 - 2.0 * aT * aT - 4.0 * aT * e1) / (2.0 * a ** 5)
-    q[1] = (e2 + 1.0 - 2.0 * e1 + 2.0 * aT * e1 - 2.0 * aT + aT * aT) / (2.0 * a ** 4)
-    q[2] = (1.0 - e2 - 2.0 * aT * e1) / (2.0 * a ** 3)
-    q[3] = (4.0 * e1 - 3.0 - e2 + 2.0 * aT) / (2.0 * a ** 3)
-    q[4] = (e2 + 1.0 - 2.0 * e1) / (2.0 * a * a)
+    e2 = e1 * e1
+    q[0] = (1.0 - e2 + 2.0 * aT + 2.0 * aT2 * aT / 3.0 - 2.0 * aT2 - 4.0 * aT * e1) / (2.0 * a3 * a2)
+    q[1] = (e2 + 1.0 - 2.0 * e1 + 2.0 * aT * e1 - 2.0 * aT + aT2) / (2.0 * a2 * a2)
+    q[2] = (1.0 - e2 - 2.0 * aT * e1) / (2.0 * a3)
+    q[3] = (4.0 * e1 - 3.0 - e2 + 2.0 * aT) / (2.0 * a3)
+    q[4] = (e2 + 1.0 - 2.0 * e1) / (2.0 * a2)
     q[5] = (1.0 - e2) / (2.0 * a)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def cs_sigma_a2(a_hat: float, a_max: float, a_min_mag: float, ka: float,
                 sigma_floor: float) -> float:
     """Adaptive acceleration variance (m^2/s^4) of the current statistical model.
@@ -104,7 +109,7 @@ def cs_sigma_a2(a_hat: float, a_max: float, a_min_mag: float, ka: float,
     return max(f2, s2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def omega_row(x: np.ndarray, H: np.ndarray) -> float:
     """Heading-rate measurement h(x) (rad/s, clockwise+) and its Jacobian row into H (seed 000).
 
@@ -124,7 +129,7 @@ def omega_row(x: np.ndarray, H: np.ndarray) -> float:
     return c / v2 + x[IEPS]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def odo_row(x: np.ndarray, ue: float, un: float, H: np.ndarray) -> float:
     """Odometer speed measurement u = k_s * v along the unit direction (ue, un), and its row.
 
