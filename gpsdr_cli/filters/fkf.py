@@ -264,7 +264,11 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         integral[1:] = np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(tg))
         psi_g = psi_a + integral - np.interp(t_a, tg, integral)
         psi_g = psi_g + course_correction(epochs, t_s, tg, psi_g, params)
-        _, first = np.unique(np.floor(tg / max(fp["heading_interval_s"], 1e-9)), return_index=True)
+        slot = np.floor(tg / max(fp["heading_interval_s"], 1e-9))
+        if np.all(slot[1:] >= slot[:-1]):               # epochs are in time order: O(n)
+            first = np.flatnonzero(np.concatenate(([True], slot[1:] != slot[:-1])))
+        else:
+            _, first = np.unique(slot, return_index=True)
         use = g[first]
         theta[use] = np.angle(np.exp(1j * psi_g[first]))     # wrapped to (-pi, pi]
         psi0 = float(psi_a - np.interp(t_a, tg, integral) + np.interp(0.0, tg, integral))
@@ -361,13 +365,17 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     flags[kf.F_STORE] = bool(params["filter"]["smooth"])
     flags[kf.F_CHECK_SPD] = bool(fp["check_spd"])
 
-    spd, crs = epochs.gnss_speed_mps, epochs.gnss_course_rad
-    moving = (epochs.has_gnss & np.isfinite(spd) & np.isfinite(crs)
-              & (spd >= fp["gnss_velocity_min_mps"]))
-    gv_e = np.where(moving, spd * np.sin(np.where(moving, crs, 0.0)), np.nan)
-    gv_n = np.where(moving, spd * np.cos(np.where(moving, crs, 0.0)), np.nan)
-    var_e = np.where(epochs.has_gnss, epochs.gnss_sd_e, 1.0) ** 2
-    var_n = np.where(epochs.has_gnss, epochs.gnss_sd_n, 1.0) ** 2
+    f = np.flatnonzero(epochs.has_gnss)                # only the fix epochs are computed
+    spd, crs = epochs.gnss_speed_mps[f], epochs.gnss_course_rad[f]
+    mv = f[np.isfinite(spd) & np.isfinite(crs) & (spd >= fp["gnss_velocity_min_mps"])]
+    gv_e = np.full(n, np.nan)
+    gv_n = np.full(n, np.nan)
+    gv_e[mv] = epochs.gnss_speed_mps[mv] * np.sin(epochs.gnss_course_rad[mv])
+    gv_n[mv] = epochs.gnss_speed_mps[mv] * np.cos(epochs.gnss_course_rad[mv])
+    var_e = np.ones(n)
+    var_n = np.ones(n)
+    var_e[f] = epochs.gnss_sd_e[f] ** 2
+    var_n[f] = epochs.gnss_sd_n[f] ** 2
     info = {"heading_alignment": source, "heading_alignment_t_s": t_a,
             "gyro_spikes_removed": gyro_spikes, "odo_spikes_removed": odo_spikes,
             "odo_scale": odo_scale,

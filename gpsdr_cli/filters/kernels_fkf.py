@@ -88,8 +88,15 @@ Master fusion (each epoch):
   never eps_e, eps_n -- their copies there are the never-updated prior, and
   fusing them would count that prior twice and pull the other filter's
   estimate towards zero.  In FR mode every state is fused (the reset gives
-  each filter a consistent share of all of them), as ``P1 (P1 + P2)^-1 P2``
-  with a single factorisation (:func:`fuse_two`).
+  each filter a consistent share of all of them), with a single factorisation
+  (:func:`fuse_two`).  In FR mode with one share per filter the local filters
+  start each epoch as ``x_g, P_g/c_i`` (``c_1 + c_2 = 1``), so in information
+  form ``P_g'^-1 = P_g^-1 + sum_rows h^T h / r``: the fusion equals every
+  local row applied to the fused state, with the innovation
+  ``y + h (x_i - x_g)`` of the row's linearisation point
+  (:func:`local_and_central_row`) -- one O(n^2) row instead of a 10x10
+  fusion per epoch.  The two are the same up to rounding; :func:`fuse_two`
+  still serves epochs where a P_i was capped or q_w re-aligned (not rows).
 * fuzzy weights (fafkf, seed 002 eq. (19)-(20)): ``x_g = W1 x1 + W2 x2`` with
   diagonal weight matrices ``W1 + W2 = I``; ``P_g = W1 P1 W1 + W2 P2 W2``
   (the covariance of that combination when the local errors are bounded by
@@ -221,27 +228,25 @@ def despike5(values: np.ndarray, threshold: float, out: np.ndarray) -> int:
     took 60 % of fafkf's pre-pass on a one-hour drive.
     """
     n = values.shape[0]
-    w = np.empty(5)
     count = 0
     for i in range(n):
-        nan = False
-        for j in range(5):
-            k = min(max(i + j - 2, 0), n - 1)
-            w[j] = values[k]
-            if math.isnan(w[j]):
-                nan = True
+        a = values[max(i - 2, 0)]
+        b = values[max(i - 1, 0)]
         v = values[i]
-        if nan:
+        c = values[min(i + 1, n - 1)]
+        d = values[min(i + 2, n - 1)]
+        if math.isnan(a) or math.isnan(b) or math.isnan(v) or math.isnan(c) or math.isnan(d):
             out[i] = v
             continue
-        for a in range(1, 5):                       # insertion sort of 5
-            key = w[a]
-            b = a - 1
-            while b >= 0 and w[b] > key:
-                w[b + 1] = w[b]
-                b -= 1
-            w[b + 1] = key
-        med = w[2]
+        # median of five with min/max exchanges: drop the smaller of the two pairs' minima
+        # and the larger of their maxima, then the median of the remaining three
+        lo1 = min(a, b)
+        hi1 = max(a, b)
+        lo2 = min(c, d)
+        hi2 = max(c, d)
+        lo = max(lo1, lo2)                          # the two smallest minus the smallest
+        hi = min(hi1, hi2)                          # the two largest minus the largest
+        med = max(min(lo, hi), min(max(lo, hi), v))
         if abs(v - med) > threshold:
             out[i] = med
             count += 1
@@ -386,20 +391,23 @@ def eps_decay(x: np.ndarray, T: float, par: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def cap_variance(P: np.ndarray) -> None:
-    """P <- D P D with D_ii = min(1, SD_CEILING_i / sigma_i): sigmas at most the ceiling."""
+def cap_variance(P: np.ndarray) -> bool:
+    """P <- D P D with D_ii = min(1, SD_CEILING_i / sigma_i): sigmas at most the ceiling.
+
+    Returns True when P was scaled."""
     scaled = False
     for i in range(NX):
         if P[i, i] > SD_CEILING[i] ** 2:
             scaled = True
     if not scaled:
-        return
+        return False
     dsc = np.empty(NX)
     for i in range(NX):
         dsc[i] = min(1.0, SD_CEILING[i] / math.sqrt(P[i, i])) if P[i, i] > 0.0 else 1.0
     for i in range(NX):
         for j in range(NX):
             P[i, j] *= dsc[i] * dsc[j]
+    return True
 
 
 @njit(cache=True)
@@ -451,6 +459,36 @@ def update_row(x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, r: float,
             P[i, j] = v
             P[j, i] = v
     return sig
+
+
+@njit(cache=True)
+def local_and_central_row(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray,
+                          central: bool, h: np.ndarray, y: float, r: float,
+                          s: np.ndarray, k: np.ndarray) -> None:
+    """One local row (innovation y at the local x), and, when ``central``, the same row on
+    the running fused state (xc, Pc) first.
+
+    Information form of a row: ``P^-1 += h^T h / r``, ``P^-1 x += h^T z~ / r`` with the
+    linearised measurement ``z~ = y + h x`` at the local state; on the fused state the
+    innovation is therefore ``z~ - h xc = y + h (x - xc)``.
+    """
+    if central:
+        yc = y
+        for i in range(NX):
+            if h[i] != 0.0:
+                yc += h[i] * (x[i] - xc[i])
+        update_row(xc, Pc, h, yc, r, s, k)
+    update_row(x, P, h, y, r, s, k)
+
+
+@njit(cache=True)
+def zupt_central(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray, central: bool,
+                 sd: float, h: np.ndarray, s: np.ndarray, k: np.ndarray) -> None:
+    """:func:`zupt` on a local filter, its rows also on the fused state when ``central``."""
+    for idx in (IVE, IVN, IAE, IAN):
+        h[:] = 0.0
+        h[idx] = 1.0
+        local_and_central_row(x, P, xc, Pc, central, h, -x[idx], sd * sd, s, k)
 
 
 @njit(cache=True)
@@ -516,25 +554,30 @@ def distance_row(x: np.ndarray, h: np.ndarray, t_m: float, v_lin: float, psi_hin
 
 @njit(cache=True)
 def adapt_r(j: int, r2: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt: np.ndarray,
-            par: np.ndarray, r_table: np.ndarray, rfac: np.ndarray, u_last: np.ndarray) -> bool:
+            par: np.ndarray, r_table: np.ndarray, rfac: np.ndarray, u_last: np.ndarray,
+            rsum: np.ndarray) -> bool:
     """Covariance matching for component j (seed 002 eqs. (15)-(18)) + the fuzzy R controller.
 
     Pushes the squared prior residual (clipped to ``res_clip x Te``) into the
     window; once it holds M values: ``Ra = mean``, ``u = (Te - Ra)/Te``,
     ``Delta = delta_max * table(u)``, ``f_j *= 1 + Delta`` clamped.  Returns
-    True when R was adapted.
+    True when R was adapted.  ``rsum[j]`` keeps the window's sum (updated by the
+    value in and the value out, summed afresh once per M pushes against drift).
     """
     m = ring.shape[1]
     v = min(r2, par[K_RES_CLIP] * te)
+    rsum[j] += v - ring[j, pos[j]]
     ring[j, pos[j]] = v
     pos[j] = (pos[j] + 1) % m
+    if pos[j] == 0:
+        acc = 0.0
+        for i in range(m):
+            acc += ring[j, i]
+        rsum[j] = acc
     cnt[j] += 1
     if cnt[j] < m:
         return False
-    ra = 0.0
-    for i in range(m):
-        ra += ring[j, i]
-    ra /= m                                         # seed 002 eq. (16)
+    ra = rsum[j] / m                                # seed 002 eq. (16)
     u = (te - ra) / te                              # Dis_jj / Te_jj, eqs. (17)-(18)
     u = min(max(u, -1.0), 1.0)
     u_last[j] = u
@@ -726,6 +769,19 @@ def block_pe(P: np.ndarray, d: np.ndarray, block: int) -> float:
 
 
 @njit(cache=True)
+def pe_scalar(P: np.ndarray, d: float) -> float:
+    """:func:`block_pe` over all states when D = d I: ``tr(P P^T) / d^4``."""
+    diag = 0.0
+    off = 0.0
+    for i in range(NX):
+        diag += P[i, i] * P[i, i]
+        for j in range(i + 1, NX):
+            off += P[i, j] * P[i, j]
+    d2 = d * d
+    return (diag + 2.0 * off) / (d2 * d2)
+
+
+@njit(cache=True)
 def fuzzy_beta(pe1: float, pe2: float, de1n: float, de2n: float, log_scale: bool,
                w_table: np.ndarray) -> float:
     """beta_1 = W_1/(W_1 + W_2) from the fusion controller (seed 002 eq. (20))."""
@@ -769,6 +825,8 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
     both = gnss_on and dr_on
     # FR with one share per filter (all of w equal): see the prediction in the loop
     shared = mode_fr and both and fusion != FUSE_BLOCK
+    cov_fusion = shared and (fusion == FUSE_COV or fusion == FUSE_SHARES)
+    central = False
     ones = np.ones(NX)
 
     out = np.zeros((n, N_OUT))
@@ -826,6 +884,9 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
     pos = np.zeros(4, np.int64)
     cnt = np.zeros(4, np.int64)
     rfac = np.ones(4)
+    rsum = np.zeros(4)                              # window sums (adapt_r)
+    y_dist = 0.0
+    hph_dist = 0.0
     u_last = np.zeros(4)
 
     t_now = 0.0
@@ -861,8 +922,12 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 for j in range(NX):
                     P1[i, j] = Pg[i, j] * s1
                     P2[i, j] = Pg[i, j] * s2
-            cap_variance(P1)
-            cap_variance(P2)
+            capped1 = cap_variance(P1)
+            capped2 = cap_variance(P2)
+            # covariance fusion of the two (FR, one share) = the rows of both applied to the
+            # predicted fused state: exact in the information form as long as P_i = P_g/c_i
+            # held at the prediction (no cap) and every local change was a Kalman row
+            central = cov_fusion and not (capped1 or capped2)
         else:
             if gnss_on:
                 predict(x1, P1, T, st, par, d1)
@@ -874,7 +939,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
         # ---- GNSS local filter -------------------------------------------------------
         if gnss_on:
             if st:
-                zupt(x1, P1, zupt_sd, h, s, kk)
+                zupt_central(x1, P1, xg, Pg, central, zupt_sd, h, s, kk)
             if has_gnss[kx]:
                 ye = gnss_e[kx] - (x1[IE] + x1[IEPS_E])
                 yn = gnss_n[kx] - (x1[IN] + x1[IEPS_N])
@@ -883,10 +948,10 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 s01 = P1[IE, IN] + P1[IE, IEPS_N] + P1[IEPS_E, IN] + P1[IEPS_E, IEPS_N]
                 if adaptive:
                     if adapt_r(0, ye * ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
-                               par, r_table, rfac, u_last):
+                               par, r_table, rfac, u_last, rsum):
                         counters[C_R_ADAPT] += 1
                     if adapt_r(1, yn * yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
-                               par, r_table, rfac, u_last):
+                               par, r_table, rfac, u_last, rsum):
                         counters[C_R_ADAPT] += 1
                 re = rfac[0] * gnss_var_e[kx]
                 rn = rfac[1] * gnss_var_n[kx]
@@ -908,20 +973,24 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                     h[:] = 0.0
                     h[IE] = 1.0
                     h[IEPS_E] = 1.0
-                    update_row(x1, P1, h, gnss_e[kx] - (x1[IE] + x1[IEPS_E]), re, s, kk)
+                    local_and_central_row(x1, P1, xg, Pg, central, h,
+                                          gnss_e[kx] - (x1[IE] + x1[IEPS_E]), re, s, kk)
                     h[:] = 0.0
                     h[IN] = 1.0
                     h[IEPS_N] = 1.0
-                    update_row(x1, P1, h, gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk)
+                    local_and_central_row(x1, P1, xg, Pg, central, h,
+                                          gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk)
                     if par[K_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
                                                       or math.isnan(gnss_vn[kx])):
                         # receiver (Doppler) velocity with the accepted fix (our choice)
                         h[:] = 0.0
                         h[IVE] = 1.0
-                        update_row(x1, P1, h, gnss_ve[kx] - x1[IVE], par[K_GVEL_VAR], s, kk)
+                        local_and_central_row(x1, P1, xg, Pg, central, h, gnss_ve[kx] - x1[IVE],
+                                              par[K_GVEL_VAR], s, kk)
                         h[:] = 0.0
                         h[IVN] = 1.0
-                        update_row(x1, P1, h, gnss_vn[kx] - x1[IVN], par[K_GVEL_VAR], s, kk)
+                        local_and_central_row(x1, P1, xg, Pg, central, h, gnss_vn[kx] - x1[IVN],
+                                              par[K_GVEL_VAR], s, kk)
                         counters[C_GVEL] += 1
                     gnss_used[kx] = True
                     counters[C_GNSS_USED] += 1
@@ -936,7 +1005,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
         # ---- DR local filter ---------------------------------------------------------
         if dr_on:
             if st:
-                zupt(x2, P2, zupt_sd, h, s, kk)
+                zupt_central(x2, P2, xg, Pg, central, zupt_sd, h, s, kk)
                 t_last_dr = t_now
                 t_last_dist = t_now
             else:
@@ -961,13 +1030,15 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                         pred = heading_row(x2, h)
                         y = wrap_pi(theta[kx] - pred)
                         if adapt_r(2, y * y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
-                                   par, r_table, rfac, u_last):
+                                   par, r_table, rfac, u_last, rsum):
                             counters[C_R_ADAPT] += 1
                     if do_dist:
                         pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
-                        y = dist[kx] - pred
-                        if adapt_r(3, y * y, hph(P2, h) + rfac[3] * r_dist, ring, pos, cnt,
-                                   par, r_table, rfac, u_last):
+                        y_dist = dist[kx] - pred
+                        hph_dist = hph(P2, h)
+                        y = y_dist
+                        if adapt_r(3, y * y, hph_dist + rfac[3] * r_dist, ring, pos, cnt,
+                                   par, r_table, rfac, u_last, rsum):
                             counters[C_R_ADAPT] += 1
                 if do_head:
                     pred = heading_row(x2, h)
@@ -978,24 +1049,28 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                             # every heading rejected for gate_reset_s (e.g. a large gyro
                             # bias outran q_w): re-align, q_w absorbs the discrepancy
                             x2[IQW] += y
+                            central = False         # not a Kalman row: fuse the two
                             P2[IQW, IQW] += y * y
                             t_head_acc = t_now
                             counters[C_HEAD_REALIGN] += 1
                         else:
                             counters[C_HEAD_REJECTED] += 1
                     else:
-                        update_row(x2, P2, h, y, rh, s, kk)
+                        local_and_central_row(x2, P2, xg, Pg, central, h, y, rh, s, kk)
                         t_head_acc = t_now
                         t_last_dr = t_now
                         counters[C_HEADING] += 1
                 if do_dist:
-                    pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
-                    y = dist[kx] - pred
+                    if not (adaptive and not do_head):  # else h, y, hPh of the window's row
+                        pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
+                        y_dist = dist[kx] - pred
+                        hph_dist = hph(P2, h)
+                    y = y_dist
                     rd = rfac[3] * r_dist
-                    if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph(P2, h) + rd):
+                    if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph_dist + rd):
                         counters[C_DIST_REJECTED] += 1      # odometer glitch: gated
                     else:
-                        update_row(x2, P2, h, y, rd, s, kk)
+                        local_and_central_row(x2, P2, xg, Pg, central, h, y, rd, s, kk)
                         t_last_dr = t_now
                         t_last_dist = t_now
                         counters[C_DIST] += 1
@@ -1026,11 +1101,13 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 if fusion == FUSE_SHARES:           # fuzzy reliability -> information share
                     de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
                                                 u_last[2] ** 2 + u_last[3] ** 2, log_scale)
-                    bp = fuzzy_beta(block_pe(P1, d1, 0), block_pe(P2, d2, 0),
+                    bp = fuzzy_beta(pe_scalar(P1, d1[0]), pe_scalar(P2, d2[0]),
                                     de1n, de2n, log_scale, w_table)
                 else:
                     bp = par[K_BETA_GNSS]
-                if mode_fr:
+                if central:
+                    pass                            # xg, Pg: the rows applied centrally
+                elif mode_fr:
                     fuse_two(x1, P1, x2, P2, xg, Pg, Y, L, Wk, yv)
                 else:
                     fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
