@@ -462,6 +462,37 @@ def update_row(x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, r: float,
 
 
 @njit(cache=True)
+def unit_row(x: np.ndarray, P: np.ndarray, idx: int, y: float, r: float, s: np.ndarray,
+             k: np.ndarray) -> None:
+    """:func:`update_row` for ``h = e_idx`` (one state measured directly), the same floats:
+    ``s`` is P's column, ``h P h^T`` its element (no scan of h)."""
+    for i in range(NX):
+        s[i] = P[i, idx]
+    sig = r + s[idx]
+    inv = 1.0 / sig
+    for i in range(NX):
+        k[i] = s[i] * inv
+        x[i] += k[i] * y
+    for i in range(NX):
+        ki = k[i]
+        si = s[i]
+        for j in range(i, NX):
+            v = P[i, j] - ki * s[j] - si * k[j] + sig * ki * k[j]
+            P[i, j] = v
+            P[j, i] = v
+
+
+@njit(cache=True)
+def local_and_central_unit(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray,
+                           central: bool, idx: int, y: float, r: float, s: np.ndarray,
+                           k: np.ndarray) -> None:
+    """:func:`local_and_central_row` for ``h = e_idx``."""
+    if central:
+        unit_row(xc, Pc, idx, y + (x[idx] - xc[idx]), r, s, k)
+    unit_row(x, P, idx, y, r, s, k)
+
+
+@njit(cache=True)
 def local_and_central_row(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray,
                           central: bool, h: np.ndarray, y: float, r: float,
                           s: np.ndarray, k: np.ndarray) -> None:
@@ -486,9 +517,7 @@ def zupt_central(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray, c
                  sd: float, h: np.ndarray, s: np.ndarray, k: np.ndarray) -> None:
     """:func:`zupt` on a local filter, its rows also on the fused state when ``central``."""
     for idx in (IVE, IVN, IAE, IAN):
-        h[:] = 0.0
-        h[idx] = 1.0
-        local_and_central_row(x, P, xc, Pc, central, h, -x[idx], sd * sd, s, k)
+        local_and_central_unit(x, P, xc, Pc, central, idx, -x[idx], sd * sd, s, k)
 
 
 @njit(cache=True)
@@ -983,14 +1012,10 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                     if par[K_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
                                                       or math.isnan(gnss_vn[kx])):
                         # receiver (Doppler) velocity with the accepted fix (our choice)
-                        h[:] = 0.0
-                        h[IVE] = 1.0
-                        local_and_central_row(x1, P1, xg, Pg, central, h, gnss_ve[kx] - x1[IVE],
-                                              par[K_GVEL_VAR], s, kk)
-                        h[:] = 0.0
-                        h[IVN] = 1.0
-                        local_and_central_row(x1, P1, xg, Pg, central, h, gnss_vn[kx] - x1[IVN],
-                                              par[K_GVEL_VAR], s, kk)
+                        local_and_central_unit(x1, P1, xg, Pg, central, IVE,
+                                               gnss_ve[kx] - x1[IVE], par[K_GVEL_VAR], s, kk)
+                        local_and_central_unit(x1, P1, xg, Pg, central, IVN,
+                                               gnss_vn[kx] - x1[IVN], par[K_GVEL_VAR], s, kk)
                         counters[C_GVEL] += 1
                     gnss_used[kx] = True
                     counters[C_GNSS_USED] += 1
