@@ -37,6 +37,7 @@ from .filters.kernels_aekf import (
     P_Q_EPS,
     P_Q_KS,
     P_R_OMEGA,
+    P_SCALE_VAR,
     P_TAU_EPS,
     Q_W,
     predict_mean,
@@ -107,7 +108,8 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
             if math.isfinite(w):  # aekf.turn_propagation: F = J Phi at the predicted mean
                 turn_jacobian(F, x_prior, T, w)
             rebuild_prior(P_prior, x_prior, T, alpha, tau_eps, prm[P_Q_EPS], prm[P_Q_KS],
-                          prm[P_R_OMEGA], prior_store[k + 1], hold[k + 1], qbuf)
+                          prm[P_R_OMEGA], prior_store[k + 1], hold[k + 1], qbuf,
+                          prm[P_SCALE_VAR])
             rts_step(x_post, P_post, x_prior, P_prior, F, x_s_next, P_s_next, x_s, P_s, L, B)
         else:  # no time step: the smoothed estimate carries over
             for i in range(n):

@@ -297,6 +297,7 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.P_WH_MAX] = a["whitening_max"]
     prm[kn.P_WH_GAP] = a["whitening_gap_s"]
     prm[kn.P_WH_NIS] = gate_threshold(a["whitening_nis_prob"])
+    prm[kn.P_SCALE_VAR] = gy["scale_sd"] ** 2
     prm[kn.P_GVEL_VAR] = a["gnss_velocity_sd_mps"] ** 2 if a["gnss_velocity"] else 0.0
     prm[kn.P_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
     flg = np.zeros(kn.N_FLG, np.int64)
@@ -358,6 +359,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     st[kn.S_W_T] = -math.inf  # no gyro rate held yet
     st[kn.S_VPSI] = initial_heading_var(x0, P0, heading_known, params)
     st[kn.S_WH_T] = -math.inf  # no previous innovation yet
+    st[kn.S_WH_T2] = -math.inf
     f64 = np.float64
     x_out = np.empty((N_STATES, n))  # rows: contiguous track columns, no copies
     pcov = np.empty((3, n))

@@ -62,8 +62,8 @@ P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_O
 P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = range(9, 15)
 P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_MIN = range(20, 25)
-P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP, P_GVEL_VAR, P_WH_NIS = range(25, 32)
-N_PRM = 32
+P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP, P_GVEL_VAR, P_WH_NIS, P_SCALE_VAR = range(25, 33)
+N_PRM = 33
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
@@ -76,8 +76,9 @@ GATE_REJECT, GATE_INFLATE = 0, 1
 # internal state carried between segments (``st``)
 S_PSI, S_STATIC, S_T, S_REJ_SINCE, S_SH_R, S_SH_M, S_HEADING_KNOWN = range(7)
 S_W, S_W_T, S_N_FIX, S_VPSI, S_CPE = 7, 8, 9, 10, 11
-S_WH_C0, S_WH_C1, S_WH_UE, S_WH_UN, S_WH_T, S_WH_M = range(12, 18)
-N_ST = 18
+S_WH_C0, S_WH_C1, S_WH_UE, S_WH_UN, S_WH_T, S_WH_M, S_WH_STATIC = range(12, 19)
+S_WH_C2, S_WH_UE2, S_WH_UN2, S_WH_T2 = range(19, 23)
+N_ST = 23
 #: largest heading variance (rad^2) of the heading floor: a heading uniform on (-pi, pi]
 VPSI_MAX = math.pi ** 2 / 3.0
 # stored prior scalars per epoch (columns of ``prior_prm``)
@@ -407,7 +408,7 @@ def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
 @njit(cache=True, error_model="numpy")
 def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps: float,
                   q_eps: float, q_ks: float, r_w: float, pr: np.ndarray, hold: bool,
-                  qbuf: np.ndarray) -> None:
+                  qbuf: np.ndarray, scale_var: float) -> None:
     """P(k-1|k-1) -> the P(k|k-1) the forward pass used (predict, turn, adaptive factor, gate reset).
 
     ``x`` enters as the current statistical prediction of the mean and leaves
@@ -417,7 +418,7 @@ def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps:
     f_eps = math.exp(-T / tau_eps)
     predict_cov(P, T, alpha, f_eps, pr[Q_QA_E], pr[Q_QA_N], q_eps, q_ks, pr[Q_LAM], hold, qbuf)
     if math.isfinite(pr[Q_W]):
-        turn_predict(x, P, T, pr[Q_W], r_w)
+        turn_predict(x, P, T, pr[Q_W], r_w + scale_var * abs(pr[Q_W]) / T)
     if pr[Q_FL_EE] != 0.0 or pr[Q_FL_NN] != 0.0:  # heading floor
         P[1, 1] += pr[Q_FL_EE]
         P[4, 4] += pr[Q_FL_NN]
@@ -516,8 +517,13 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     wh_c1 = st[S_WH_C1]
     wh_ue = st[S_WH_UE]
     wh_un = st[S_WH_UN]
+    wh_c2 = st[S_WH_C2]
+    wh_ue2 = st[S_WH_UE2]
+    wh_un2 = st[S_WH_UN2]
+    wh_t2 = st[S_WH_T2]
     wh_t = st[S_WH_T]
     wh_m = st[S_WH_M]
+    wh_static = st[S_WH_STATIC]
     for k in range(k_start, k_end):
         T = dt[k]
         qa_e = 0.0
@@ -527,6 +533,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         add_e = 0.0
         add_n = 0.0
         w_use = math.nan
+        r_turn = r_w
         fl_ee = 0.0
         fl_nn = 0.0
         fl_en = 0.0
@@ -562,7 +569,11 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 elif t - w_t <= prm[P_GYRO_HOLD]:
                     w_use = w_held  # a slower gyro: its last rate, held briefly
                 if math.isfinite(w_use):
-                    turn_predict(x, P, T, w_use, r_w)
+                    # gyro.scale_sd (our choice): a scale error turns the heading by s x the
+                    # angle turned; as a random walk per radian turned its variance grows by
+                    # scale_sd^2 |w T| (a 90 deg turn: 0.36 deg for 0.5 %, exact 0.45 deg)
+                    r_turn = r_w + prm[P_SCALE_VAR] * abs(w_use) / T
+                    turn_predict(x, P, T, w_use, r_turn)
             if floor_off is None:
                 # ---- heading floor (aekf.heading_floor, our choice): the model has no heading
                 # state, so the heading error lives in the cross-track velocity variance, which
@@ -573,7 +584,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 # velocity variance is kept >= speed^2 vpsi: the deficit enters as process
                 # noise of this step, so the smoother treats it like Q
                 if math.isfinite(w_use) or (hold and has_gyro[k]):
-                    vpsi = min(vpsi + T * T * (p66 + r_w) - 2.0 * T * cpe, VPSI_MAX)
+                    r_h = r_turn if math.isfinite(w_use) else r_w
+                    vpsi = min(vpsi + T * T * (p66 + r_h) - 2.0 * T * cpe, VPSI_MAX)
                     cpe = f_eps * (cpe - T * p66)
                 elif not hold:  # the gyro does not drive the heading in this step: no floor
                     vpsi = 0.0
@@ -605,13 +617,27 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             # information than R claims: R is scaled by the AR(1) variance factor of an average,
             # (1 + rho)/(1 - rho), within [1, P_WH_MAX]
             f_wh = 1.0
-            if whiten_off is None and wh_c0 > 0.0:
-                rho = min(max(wh_c1 / wh_c0, 0.0), 0.999)
-                f_wh = min((1.0 + rho) / (1.0 - rho), prm[P_WH_MAX])
+            if whiten_off is None and wh_c0 > 0.0 and wh_c1 > 0.0:
+                # white + first-order Gauss-Markov innovations: lag-one and lag-two
+                # autocovariances c1 = s_c r, c2 = s_c r^2 give the correlation r of the
+                # coloured part and its share s_c of c0; R is scaled by the variance factor
+                # of an average of such a sequence, ((c0 - s_c) + s_c (1 + r)/(1 - r)) / c0
+                r_c = min(max(wh_c2 / wh_c1, 0.0), 0.999)
+                s_c = min(wh_c1 / max(r_c, 1e-3), wh_c0)
+                f_wh = min(((wh_c0 - s_c) + s_c * (1.0 + r_c) / (1.0 - r_c)) / wh_c0,
+                           prm[P_WH_MAX])
+            if whiten_off is None and is_static:
+                # parked, the antenna does not move and its multipath does not change: the
+                # m-th fix of a stop carries ~1/m of a fix's information (all m together about
+                # as much as one, not m), so R x m (our choice; aekf.innovation_whitening)
+                wh_static += 1.0
+                f_wh = max(f_wh, wh_static)
             re = r_e[k] * sh_r * f_wh
             rn = r_n[k] * sh_r * f_wh
-            s00 = P[0, 0] + re
-            s11 = P[3, 3] + rn
+            # NIS, gate and the seed 001 factor with the nominal R: the whitening factor scales
+            # the information of a fix, not the spread of its error (which the NIS tests)
+            s00 = P[0, 0] + r_e[k] * sh_r
+            s11 = P[3, 3] + r_n[k] * sh_r
             s01 = P[0, 3]
             nis = nis_2d(ye, yn, s00, s01, s11)
             nis_out[k] = nis
@@ -658,18 +684,25 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     sh_m += 1
                     re = r_e[k] * sh_r * f_wh
                     rn = r_n[k] * sh_r * f_wh
-                if whiten_off is None and not reset and r_fac == 1.0 and nis <= prm[P_WH_NIS]:
+                if (whiten_off is None and not reset and r_fac == 1.0 and nis <= prm[P_WH_NIS]
+                        and not is_static  # a stop has its own rule (R x m, above)
+                        and P[0, 0] + P[3, 3] < (r_e[k] + r_n[k]) * sh_r):  # converged only
                     # normalised innovations; their lag-one product only between fixes at most
                     # P_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
                     # under P_WH_NIS: a filter error (a drive-off with an unknown heading, the
                     # end of an outage) also makes the innovations correlated, and inflating R
                     # then slowed its correction (11 m instead of 7 m, 10 s later)
-                    ue = ye / math.sqrt(P[0, 0] + re)
-                    un = yn / math.sqrt(P[3, 3] + rn)
+                    ue = ye / math.sqrt(P[0, 0] + r_e[k] * sh_r)
+                    un = yn / math.sqrt(P[3, 3] + r_n[k] * sh_r)
                     d_wh = (1.0 - prm[P_WH_B]) / (1.0 - prm[P_WH_B] ** (wh_m + 1.0))
                     wh_c0 = (1.0 - d_wh) * wh_c0 + d_wh * 0.5 * (ue * ue + un * un)
                     if t - wh_t <= prm[P_WH_GAP]:
                         wh_c1 = (1.0 - d_wh) * wh_c1 + d_wh * 0.5 * (ue * wh_ue + un * wh_un)
+                    if t - wh_t2 <= 2.0 * prm[P_WH_GAP]:
+                        wh_c2 = (1.0 - d_wh) * wh_c2 + d_wh * 0.5 * (ue * wh_ue2 + un * wh_un2)
+                    wh_ue2 = wh_ue
+                    wh_un2 = wh_un
+                    wh_t2 = wh_t
                     wh_ue = ue
                     wh_un = un
                     wh_t = t
@@ -691,6 +724,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         if has_odo[k]:
             u = odo[k]
             is_static = standstill and u < prm[P_STATIC_SPEED]
+            if not is_static:
+                wh_static = 0.0  # a new stop starts a new count of its fixes
             if is_static:
                 zupt_cons = CONS_POS if (zupt_pos == 2 or (zupt_pos == 1 and outage[k])) else 0
                 for idx in (1, 4, 2, 5):
@@ -801,5 +836,10 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     st[S_WH_C1] = wh_c1
     st[S_WH_UE] = wh_ue
     st[S_WH_UN] = wh_un
+    st[S_WH_C2] = wh_c2
+    st[S_WH_UE2] = wh_ue2
+    st[S_WH_UN2] = wh_un2
+    st[S_WH_T2] = wh_t2
     st[S_WH_T] = wh_t
     st[S_WH_M] = wh_m
+    st[S_WH_STATIC] = wh_static

@@ -114,8 +114,9 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     lat_mode = params["aekf"]["lateral_acc_only"]
     a_p = params["aekf"]
     whiten = adaptive and bool(a_p["innovation_whitening"])  # Mehra: correlated innovations
-    wh_c0 = wh_c1 = 0.0
+    wh_c0 = wh_c1 = wh_c2 = 0.0
     wh_prev, wh_t, wh_m = np.zeros(2), -math.inf, 0
+    wh_prev2, wh_t2, wh_static = np.zeros(2), -math.inf, 0
     n_fix = 0
     is_static = False
     t = 0.0
@@ -158,14 +159,16 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     w = -epochs.yaw_rate_radps[k]
                 elif t - w_t <= params["aekf"]["gyro_hold_s"]:
                     w = w_held
-                if math.isfinite(w):
-                    x, J, Qw = turn(x, T, w, r_w)
+                if math.isfinite(w):  # gyro noise + scale error (random walk per radian turned)
+                    x, J, Qw = turn(x, T, w, r_w + params["gyro"]["scale_sd"] ** 2 * abs(w) / T)
                     F = J @ F
                     P = J @ P @ J.T + Qw
                     P = 0.5 * (P + P.T)
             if hfloor:  # consider heading error: dpsi' = dpsi - T d_eps + T n_w
                 if math.isfinite(w) or (hold and has_gyro[k]):
-                    vpsi = min(vpsi + T * T * (p66 + r_w) - 2 * T * cpe, kn.VPSI_MAX)
+                    r_h = r_w + (params["gyro"]["scale_sd"] ** 2 * abs(w) / T if math.isfinite(w)
+                                 else 0.0)
+                    vpsi = min(vpsi + T * T * (p66 + r_h) - 2 * T * cpe, kn.VPSI_MAX)
                     cpe = math.exp(-T / tau_eps) * (cpe - T * p66)
                 elif not hold:
                     vpsi = cpe = 0.0
@@ -183,10 +186,15 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             Hg[0, 0] = Hg[1, 3] = 1.0
             y = z - Hg @ x
             f_wh = 1.0
-            if whiten and wh_c0 > 0.0:  # R x (1 + rho)/(1 - rho), rho the lag-one correlation
-                rho = min(max(wh_c1 / wh_c0, 0.0), 0.999)
-                f_wh = min((1 + rho) / (1 - rho), a_p["whitening_max"])
-            R = np.diag([r_e[k], r_n[k]]) * sh_r * f_wh
+            if whiten and wh_c0 > 0.0 and wh_c1 > 0.0:  # white + Gauss-Markov innovations:
+                r_c = min(max(wh_c2 / wh_c1, 0.0), 0.999)  # c1 = s r, c2 = s r^2
+                s_c = min(wh_c1 / max(r_c, 1e-3), wh_c0)
+                f_wh = min(((wh_c0 - s_c) + s_c * (1 + r_c) / (1 - r_c)) / wh_c0,
+                           a_p["whitening_max"])
+            if whiten and is_static:  # the m-th fix of a stop: R x m
+                wh_static += 1
+                f_wh = max(f_wh, wh_static)
+            R = np.diag([r_e[k], r_n[k]]) * sh_r  # nominal: NIS, gate, seed 001 factor
             S = Hg @ P @ Hg.T + R
             nis[k] = float(y @ np.linalg.solve(S, y))
             accept, reset, r_fac = True, False, 1.0
@@ -224,14 +232,18 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     sh_r = min(max((1 - d) * sh_r + d * min(max(sample, lo), hi), lo), hi)
                     sh_m += 1
                 re, rn = r_e[k] * sh_r * f_wh, r_n[k] * sh_r * f_wh
-                if (whiten and not reset and r_fac == 1.0
-                        and nis[k] <= -2.0 * math.log1p(-a_p["whitening_nis_prob"])):
-                    u = y / np.sqrt([P[0, 0] + re, P[3, 3] + rn])  # normalised innovations
+                if (whiten and not reset and r_fac == 1.0 and not is_static
+                        and nis[k] <= -2.0 * math.log1p(-a_p["whitening_nis_prob"])
+                        and P[0, 0] + P[3, 3] < (r_e[k] + r_n[k]) * sh_r):  # converged
+                    u = y / np.sqrt([P[0, 0] + r_e[k] * sh_r, P[3, 3] + r_n[k] * sh_r])
                     b = a_p["whitening_b"]
                     d = (1 - b) / (1 - b ** (wh_m + 1))
                     wh_c0 = (1 - d) * wh_c0 + d * 0.5 * float(u @ u)
                     if t - wh_t <= a_p["whitening_gap_s"]:
                         wh_c1 = (1 - d) * wh_c1 + d * 0.5 * float(u @ wh_prev)
+                    if t - wh_t2 <= 2 * a_p["whitening_gap_s"]:
+                        wh_c2 = (1 - d) * wh_c2 + d * 0.5 * float(u @ wh_prev2)
+                    wh_prev2, wh_t2 = wh_prev, wh_t
                     wh_prev, wh_t, wh_m = u, t, wh_m + 1
                 x, P = joseph(x, P, unit(0), z[0] - x[0], re * r_fac)
                 x, P = joseph(x, P, unit(3), z[1] - x[3], rn * r_fac)
@@ -249,6 +261,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         if has_odo[k]:
             u = epochs.odo_speed_mps[k]
             is_static = standstill and u < st["speed_mps"]
+            if not is_static:
+                wh_static = 0
             if is_static:  # zero-velocity update (seed 004)
                 zk = st["zupt_keeps_position"]  # position as consider states
                 keep = (0, 3) if zk == "always" or (zk == "outage" and epochs.gnss_outage[k]) else ()
