@@ -65,7 +65,7 @@ gate_inflate_max = 10.0  # inflate mode: largest R factor (a 100 m jump at a 2.5
 gate_inflate_after_s = 0.0  # inflate mode: only after the fixes have failed the gate this long (s); a shorter
                          #   burst is rejected as in reject mode (benchmark: 0.3 s / 1 s cost the ekf on one_hour
                          #   seed 3 3.75 -> 4.9 / 6.2 m; the aekf within 0.1 m)
-gate_warmup_fixes = 5    # ekf/aekf: no gate before this many fixes were accepted (a first fix 30 m off
+gate_warmup_fixes = 5    # every filter: no gate before this many fixes were accepted (a first fix 30 m off
                          #   must not lock the good ones out)
 
 [gyro]
