@@ -59,3 +59,11 @@ def test_report_rejects_unplottable(tmp_path, track_and_ref):
         plot_report(track.iloc[:0], tmp_path / "empty.png")
     with pytest.raises(InputError):
         plot_report(track.drop(columns=["e"]), tmp_path / "no_e.png")
+
+
+def test_default_title_names_the_smoother() -> None:
+    from gpsdr_cli.cli.plot import default_title
+
+    assert default_title({"filter": "aekf", "smoothed": "true"}) == "aekf + RTS"
+    assert default_title({"filter": "fkf", "smoothed": "false"}) == "fkf"
+    assert default_title({}) == ""

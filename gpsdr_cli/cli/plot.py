@@ -34,6 +34,12 @@ def plot(track: str, reference: str | None, output: str, title: str, quiet: bool
         from ..io.reference import read_reference
 
         df, _, ref_en = prepare_track(df, meta, read_reference(reference), name=track)
-    path = plot_report(df, output, reference_en=ref_en, title=title or meta.get("filter", ""))
+    path = plot_report(df, output, reference_en=ref_en, title=title or default_title(meta))
     if not quiet:
         click.echo(f"wrote {path}", err=True)
+
+
+def default_title(meta: dict[str, str]) -> str:
+    """``aekf``, ``aekf + RTS`` for a smoothed track, from the track file's metadata."""
+    name = meta.get("filter", "")
+    return f"{name} + RTS" if name and meta.get("smoothed") == "true" else name
