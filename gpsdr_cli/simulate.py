@@ -778,13 +778,26 @@ MSGDEF_TWISTSTAMPED = (
 )
 
 
+MSGDEF_TWISTWITHCOVSTAMPED = (
+    "std_msgs/Header header\nTwistWithCovariance twist\n"
+    + _SEP + "MSG: std_msgs/Header\n" + _HEADER
+    + _SEP + "MSG: builtin_interfaces/Time\n" + _TIME
+    + _SEP + "MSG: geometry_msgs/TwistWithCovariance\nTwist twist\nfloat64[36] covariance\n"
+    + _SEP + "MSG: geometry_msgs/Twist\nVector3 linear\nVector3 angular\n"
+    + _SEP + "MSG: geometry_msgs/Vector3\n" + _VEC3
+)
+
+
 def _stamp(t_ns: int, frame_id: str) -> dict:
     return {"stamp": {"sec": int(t_ns // NS_PER_S), "nanosec": int(t_ns % NS_PER_S)},
             "frame_id": frame_id}
 
 
 def write_mcap(drive: Drive, path: str | Path) -> Path:
-    """ROS 2 CDR MCAP: /gnss/fix NavSatFix, /imu Imu, /vehicle/twist TwistStamped (zstd chunks)."""
+    """ROS 2 CDR MCAP (zstd chunks): /gnss/fix NavSatFix, /gnss/fix_velocity
+    TwistWithCovarianceStamped (the receiver's Doppler velocity in ENU, x east, y north, as
+    the u-blox driver publishes it; only where the fix has a speed and course), /imu Imu,
+    /vehicle/twist TwistStamped (the wheel speed, body frame)."""
     from mcap_ros2.writer import Writer
 
     path = Path(path)
@@ -801,6 +814,9 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
         s_fix = w.register_msgdef("sensor_msgs/msg/NavSatFix", MSGDEF_NAVSATFIX)
         s_imu = w.register_msgdef("sensor_msgs/msg/Imu", MSGDEF_IMU)
         s_tw = w.register_msgdef("geometry_msgs/msg/TwistStamped", MSGDEF_TWISTSTAMPED)
+        s_vel = w.register_msgdef("geometry_msgs/msg/TwistWithCovarianceStamped",
+                                  MSGDEF_TWISTWITHCOVSTAMPED)
+        vel_var = 0.1 ** 2  # (m/s)^2, a u-blox's typical speed accuracy
         for t, code, i in events:
             if code == 0:
                 ok = bool(g.fix_quality[i] > 0 and np.isfinite(g.lat_deg[i]))
@@ -814,6 +830,16 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
                        "position_covariance": [var_e, 0.0, 0.0, 0.0, var_n, 0.0, 0.0, 0.0, var_u],
                        "position_covariance_type": 2 if ok else 0}
                 w.write_message("/gnss/fix", s_fix, msg, log_time=t, publish_time=t)
+                spd, crs = float(g.speed_mps[i]), math.radians(float(g.course_deg[i]))
+                if ok and math.isfinite(spd) and math.isfinite(crs):
+                    cov = [0.0] * 36
+                    cov[0] = cov[7] = cov[14] = vel_var
+                    vel = {"header": _stamp(t, "gnss"),
+                           "twist": {"twist": {"linear": {"x": spd * math.sin(crs),
+                                                          "y": spd * math.cos(crs), "z": 0.0},
+                                               "angular": {"x": 0.0, "y": 0.0, "z": 0.0}},
+                                     "covariance": cov}}
+                    w.write_message("/gnss/fix_velocity", s_vel, vel, log_time=t, publish_time=t)
             elif code == 1:
                 msg = {"header": _stamp(t, "imu"),
                        "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},

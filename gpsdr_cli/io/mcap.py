@@ -33,9 +33,14 @@ length u64), decompresses chunks (zstd, lz4), checks their CRC, and on damage
 keeps everything before it, with a warning and a :class:`SkipReport` entry.
 
 Speed from ``twist.linear.x`` assumes a body-frame twist.  Some GNSS drivers
-(u-blox ``/fix_velocity``) publish the velocity in a navigation frame (ENU):
-when the lateral component is large while moving, the horizontal norm is used
-instead and a warning says so.  An Imu whose ``angular_velocity_covariance[0]``
+(u-blox ``/fix_velocity``) publish the velocity in a navigation frame (ENU),
+recognised by a large lateral component while moving.  Beside GNSS fixes that
+carry no speed (NavSatFix never does), such a channel is the receiver's Doppler
+velocity: it becomes the fixes' speed and course (nearest message within
+0.1 s), which the filters' receiver-velocity update uses, and it is not taken
+as the odometer (a warning says so when no other odometer channel exists).
+Without GNSS fixes, or when a topic override names it, it is read as an
+odometer speed = |linear.xy|, with a warning.  An Imu whose ``angular_velocity_covariance[0]``
 is -1 declares that it has no angular velocity (sensor_msgs convention); such
 messages are skipped and counted, not read as zero yaw rate (unless their z
 rates vary, which makes the flag sloppy metadata: then they are kept, with a
@@ -44,6 +49,7 @@ warning).
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import functools
 import hashlib
@@ -87,6 +93,8 @@ _LAYOUTS["foxglove_msgs/msg/LocationFix"] = "locationfix"
 _MOVING_MPS = 0.5
 #: ... with a median |linear.y| / |linear.xy| above this share.
 _LATERAL_SHARE = 0.3
+#: an ENU velocity message belongs to the fix stamped within this (u-blox: the same stamp)
+_VELOCITY_MATCH_NS = 100_000_000
 
 
 class _Damage(Exception):
@@ -789,17 +797,56 @@ def _build(kind: str, chan: _Channel, *, path: str, use_log_time: bool, date: dt
         return YawRates(t_ns=t_ns[keep], yaw_rate_radps=wz[keep])
     vx = _cat(chan, "vx", np.float64)
     vy = _cat(chan, "vy", np.float64)
-    norm = np.hypot(vx, vy)
-    moving = np.isfinite(norm) & (norm > _MOVING_MPS)
     speed = vx
-    if moving.sum() >= 10 and np.median(np.abs(vy[moving]) / norm[moving]) > _LATERAL_SHARE:
-        speed = norm
+    if _navigation_frame(chan):
+        speed = np.hypot(vx, vy)
         warnings.append(f"{where}: twist.linear has a large lateral (y) component while moving: "
                         "read as a navigation-frame (ENU) velocity, speed = |linear.xy|")
         meta.setdefault("twist_frame", {})[chan.topic] = "navigation (ENU): speed = hypot(x, y)"
     bad = ~np.isfinite(speed)
     skipped.add("non-finite speed", where, int(bad.sum()))
     return Odometry(t_ns=t_ns[~bad], speed_mps=speed[~bad])
+
+
+def _navigation_frame(chan: _Channel) -> bool:
+    """A twist channel whose linear velocity is in a navigation frame (ENU, as u-blox
+    ``/fix_velocity``) rather than the body frame: a large lateral (y) share while moving."""
+    if chan.layout is None or KIND_OF_LAYOUT[chan.layout] != "odo":
+        return False
+    vx = _cat(chan, "vx", np.float64)
+    vy = _cat(chan, "vy", np.float64)
+    norm = np.hypot(vx, vy)
+    moving = np.isfinite(norm) & (norm > _MOVING_MPS)
+    return bool(moving.sum() >= 10
+                and np.median(np.abs(vy[moving]) / norm[moving]) > _LATERAL_SHARE)
+
+
+def _attach_velocity(gnss: GnssFixes, chan: _Channel, use_log_time: bool) -> tuple[GnssFixes, int]:
+    """The fixes with speed (m/s) and course (deg clockwise from north) from an ENU twist
+    channel (x east, y north), matched to the nearest message within
+    :data:`_VELOCITY_MATCH_NS`; fixes that already carry a speed keep it.  Returns the
+    new fixes and how many were given a velocity."""
+    t_v, _ = _times(chan, use_log_time)
+    ve = _cat(chan, "vx", np.float64)
+    vn = _cat(chan, "vy", np.float64)
+    ok = np.isfinite(ve) & np.isfinite(vn)
+    t_v, ve, vn = t_v[ok], ve[ok], vn[ok]
+    if not len(t_v) or not len(gnss):
+        return gnss, 0
+    order = np.argsort(t_v, kind="stable")
+    t_v, ve, vn = t_v[order], ve[order], vn[order]
+    j = np.clip(np.searchsorted(t_v, gnss.t_ns), 1, len(t_v) - 1) if len(t_v) > 1 else \
+        np.zeros(len(gnss), np.int64)
+    if len(t_v) > 1:
+        j = np.where(np.abs(t_v[j - 1] - gnss.t_ns) <= np.abs(t_v[j] - gnss.t_ns), j - 1, j)
+    near = np.abs(t_v[j] - gnss.t_ns) <= _VELOCITY_MATCH_NS
+    take = near & ~np.isfinite(gnss.speed_mps)
+    speed = gnss.speed_mps.copy()
+    course = gnss.course_deg.copy()
+    speed[take] = np.hypot(ve[j[take]], vn[j[take]])
+    # heading clockwise from north (conventions charter): atan2(east, north)
+    course[take] = np.degrees(np.arctan2(ve[j[take]], vn[j[take]])) % 360.0
+    return dataclasses.replace(gnss, speed_mps=speed, course_deg=course), int(take.sum())
 
 
 def _imu_absent(chan: _Channel) -> np.ndarray:
@@ -878,6 +925,22 @@ def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log
         cands = [c for c in walker.channels.values()
                  if c.layout is not None and KIND_OF_LAYOUT[c.layout] == kind
                  and (wanted[kind] is None or c.topic == wanted[kind])]
+        if kind == "odo" and wanted["odo"] is None and drive.gnss is not None:
+            # A navigation-frame (ENU) twist beside GNSS fixes is the receiver's own Doppler
+            # velocity (u-blox /fix_velocity), not a wheel odometer: it becomes the fixes'
+            # speed and course, which every filter's receiver-velocity update uses.
+            nav = [c for c in cands if _navigation_frame(c)]
+            if nav and not np.isfinite(drive.gnss.speed_mps).any():
+                nav.sort(key=lambda c: c.n_msgs, reverse=True)
+                drive.gnss, n_vel = _attach_velocity(drive.gnss, nav[0], use_log_time)
+                if n_vel:
+                    cands = [c for c in cands if c not in nav]
+                    meta["gnss_velocity"] = {"topic": nav[0].topic, "fixes": n_vel}
+                    if not cands:  # it would have been the odometer: say why there is none
+                        warnings.append(f"{path_s}: {nav[0].topic}: navigation-frame (ENU) "
+                                        f"velocity read as the GNSS fixes' speed and course "
+                                        f"({n_vel} of {len(drive.gnss)} fixes), not as an "
+                                        "odometer")
         if not cands:
             continue
         cands.sort(key=lambda c: (_usable(kind, c), c.n_msgs), reverse=True)

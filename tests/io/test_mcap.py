@@ -97,7 +97,7 @@ def generated(tmp_path_factory):
 def test_real_ublox_recording_counts_and_ranges():
     d = read_mcap(REAL)
     g = d.gnss
-    assert len(g) == 3364 and len(d.odo) == 3364
+    assert len(g) == 3364
     assert d.meta["mcap"]["messages"] == 3 * 3364
     assert {c["topic"]: c["messages"] for c in d.meta["mcap"]["channels"]} == {
         "/gps/fix": 3364, "/gps/fix_velocity": 3364, "/gps/navheading": 3364}
@@ -116,10 +116,18 @@ def test_real_ublox_recording_counts_and_ranges():
     # The Imu is /gps/navheading: angular velocity covariance[0] = -1 (not provided).
     assert d.gyro is None
     assert d.skipped.counts["Imu without angular velocity (angular_velocity_covariance[0] = -1)"] == 3364
-    # ENU fix velocity: speed is the horizontal norm, a walking-pace antenna: < 2 m/s
-    assert np.all(d.odo.speed_mps >= 0) and np.max(d.odo.speed_mps) < 2.0
-    assert "/gps/fix_velocity" in d.meta["mcap"]["twist_frame"]
-    assert d.sources[0].streams == ("gnss", "odo")
+    # ENU fix velocity beside NavSatFix: the receiver's Doppler velocity, attached to the
+    # fixes (same stamps), not an odometer.  A walking-pace antenna: < 2 m/s.
+    assert d.odo is None
+    assert np.isfinite(g.speed_mps).all() and np.max(g.speed_mps) < 2.0
+    assert np.all((g.course_deg >= 0) & (g.course_deg < 360))
+    assert d.meta["mcap"]["gnss_velocity"] == {"topic": "/gps/fix_velocity", "fixes": 3364}
+    assert any("not as an odometer" in w for w in d.meta["warnings"])
+    assert d.sources[0].streams == ("gnss",)
+    # with the topic named as the odometer, it is read as one (speed = |linear.xy|)
+    d2 = read_mcap(REAL, topics={"odo": "/gps/fix_velocity"})
+    np.testing.assert_allclose(d2.odo.speed_mps, g.speed_mps, rtol=1e-12)
+    assert not np.isfinite(d2.gnss.speed_mps).any()
 
 
 def test_real_file_fast_path_matches_generic_decoder():
@@ -576,3 +584,29 @@ def test_index_lets_camera_only_chunks_be_skipped(tmp_path):
     np.testing.assert_array_equal(a.gyro.yaw_rate_radps, truth["wz"])
     counts = {c["topic"]: c["messages"] for c in a.meta["mcap"]["channels"]}
     assert counts == {"/fix": 20, "/imu": 100, "/vel": 100, "/camera": 60}
+
+
+def test_enu_velocity_becomes_the_fixes_speed_and_course(tmp_path):
+    """Beside NavSatFix, an ENU twist (x east, y north) gives each fix its speed and course
+    (clockwise from north); a body-frame twist stays the odometer."""
+    fixes, vel, odo = [], [], []
+    for i in range(30):
+        t = T0 + i * 2 * 10**8
+        fixes.append((t, t, ros2_fast.encode("navsatfix", t, "gps", lat=37.0 + 1e-6 * i,
+                                             lon=-122.0, alt=10.0, status=0, cov_type=2,
+                                             cov=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 4.0])))
+        # heading 150 deg (south-south-east) at 8 m/s; the message 20 ms after the fix
+        vel.append((t + 2 * 10**7, t + 2 * 10**7,
+                    ros2_fast.encode("twistcov", t + 2 * 10**7, "gps", vx=4.0, vy=-8.0 * np.cos(np.radians(30)))))
+        odo.append((t, t, ros2_fast.encode("twist", t, "base_link", vx=7.9, vy=0.0)))
+    p = tmp_path / "vel.mcap"
+    write_mcap(p, [("/fix", "navsatfix", fixes), ("/fix_velocity", "twistcov", vel),
+                   ("/wheel", "twist", odo)])
+    d = read_mcap(p)
+    np.testing.assert_allclose(d.gnss.speed_mps, np.hypot(4.0, 8.0 * np.cos(np.radians(30))), rtol=1e-12)
+    np.testing.assert_allclose(d.gnss.course_deg, np.degrees(np.arctan2(4.0, -8.0 * np.cos(np.radians(30)))) % 360,
+                               rtol=1e-12)
+    assert d.gnss.course_deg[0] == pytest.approx(150.0, abs=1e-9)  # clockwise from north
+    np.testing.assert_allclose(d.odo.speed_mps, 7.9)
+    assert d.meta["mcap"]["chosen"]["odo"] == "/wheel"
+    assert not any("not as an odometer" in w for w in d.meta.get("warnings", []))
