@@ -202,8 +202,16 @@ heading_sd_rad = 0.03    # sigma of the gyro-integrated heading measurement (0.0
                          #   track, fault gyro_saturation 6.3 m; 0.03: fafkf urban 7.2 -> 5.8 m, one_hour 5.8 -> 5.1 m)
 heading_err_rw_sd = 0.005  # random walk of q_w, rad per sqrt(s) (the course steering removes the gyro bias;
                          #   0.01 let the velocity direction wander in outages: tunnels fkf 27.5 -> 15.6 m, RTS 6.7 -> 3.4 m)
-dist_err_rw_sd = 0.002    # random walk of q_s, m per sqrt(s) (q_s is metres per odometer interval)
+dist_err_rw_sd = 0.01     # random walk of q_s, m per sqrt(s) (q_s is metres per distance row: 0.2 m/s per sqrt(s) at
+                         #   distance_interval_s = 0.05, as 0.002 was at the 100-Hz record rate)
 heading_interval_s = 0.1 # heading measurements from the integrated gyro at most this often
+distance_interval_s = 0.05  # odometer distance rows S on this grid and at every heading epoch, each the
+                         #   distance since the previous row (0: every record, seed 002: 1-mm rows at 100 Hz,
+                         #   and heading rows in outages moved the position metres each -- fkf.distance_rows).
+                         #   Seeds 1-3 forward fkf (fafkf): one_hour 3.77 (3.68) -> 1.62 (1.51) m, max 68.8 ->
+                         #   7.9 m, 60-s drift 5.8 -> 0.71 (0.65) %; urban 3.08 -> 2.69 m; open 0.49 -> 0.46;
+                         #   tunnels 7.13 -> 7.18 (max 45 -> 38); comma2k19 0.50 -> 0.48 m at the README offset,
+                         #   0.52 -> 0.59 m at the estimated 0.135 s
 heading_course_window_s = 10.0  # gyro heading steered to the GNSS course averaged over this window (30: a gyro
                          #   clipped at 0.05 rad/s gave 6.3 m with good GNSS; tunnels fkf 15.1 -> 10.8 m)
                          #   (removes the integrated gyro bias; 0: aligned once at the start, seed 002)

@@ -316,7 +316,10 @@ def test_gate_majority_rule_ends_a_lock_out() -> None:
     """From 40 s on all fixes but every 7th sit 15 m north (the majority moved): the
     remaining old ones keep passing the gate, so 'every fix rejected for gate_reset_s'
     never happens; the majority rule (most recent fixes gated) re-admits the majority.
-    Bound: within 3 m of the majority 25 s after the step (locked: 15 m)."""
+    Bound: within 3.5 m of the majority 25 s after the step (locked: 15 m; with 0.05-s
+    odometer distance rows the GNSS error states eps_e, eps_n take up to 3.3 m of the
+    unphysical 15-m step and release it with tau_eps = 60 s: 3.26 m; 1.13 m with the
+    1-mm rows at every 50-Hz record)."""
     drive, frame, truth = tiny_drive(120.0)
     t_s = (drive.gnss.t_ns - drive.gnss.t_ns[0]) / 1e9
     late = np.flatnonzero(t_s >= 40.0)
@@ -328,7 +331,7 @@ def test_gate_majority_rule_ends_a_lock_out() -> None:
     _assert_sane(result, len(epochs))
     err = _errors(result, epochs, truth)
     t = (epochs.t_ns - epochs.t_ns[0]) / 1e9
-    assert np.max(np.abs(err[t > 65.0] - 15.0)) < 3.0
+    assert np.max(np.abs(err[t > 65.0] - 15.0)) < 3.5
     assert result.info["gate_resets"] > 0
 
 
@@ -371,3 +374,52 @@ def test_odometer_scale_taken_from_the_gnss_speed() -> None:
     off = fkf.prepare(epochs, config.merge(params, {"fkf": {"odo_scale_window_s": 0.0}}))
     assert off.info["odo_scale"] == 1.0
     assert _rmse(_errors(get("fkf")(epochs, params), epochs, truth)) < 1.0
+
+
+def test_distance_rows_keep_the_distance_and_follow_the_heading_epochs() -> None:
+    """100-Hz odometer records, 0.05-s slots, heading epochs every 0.1 s and one off-grid:
+    the rows are the slots' first records plus every heading epoch, their distances sum to
+    the records' (tolerance 1e-9 m), each is the distance since the previous row, and 0 s
+    gives every record (seed 002)."""
+    t = np.arange(1001) * 0.01 + 0.003                     # 10 s, off the slot grid
+    speed = 10.0 + np.sin(t)
+    at_heading = np.zeros(len(t), bool)
+    at_heading[::10] = True                                # 0.1 s
+    at_heading[537] = True                                 # a heading epoch between slots
+    use, dist, t_m = fkf.distance_rows(t, speed, 0.05, at_heading)
+    slot_first = np.flatnonzero(np.diff(np.floor(t / 0.05)) != 0) + 1
+    expected = np.union1d(slot_first, np.flatnonzero(at_heading[1:]) + 1)
+    np.testing.assert_array_equal(use, expected)
+    cum = np.concatenate(([0.0], np.cumsum(speed[1:] * np.diff(t))))
+    assert abs(dist.sum() - cum[use[-1]]) < 1e-9
+    prev = np.concatenate(([0], use[:-1]))
+    np.testing.assert_allclose(dist, cum[use] - cum[prev], atol=1e-12)
+    np.testing.assert_allclose(t_m, t[use] - t[prev], atol=1e-12)
+    assert np.all(t_m < 0.05 + 1e-9)                       # no row spans more than a slot
+    use0, dist0, tm0 = fkf.distance_rows(t, speed, 0.0, at_heading)
+    np.testing.assert_allclose(tm0, np.diff(t), atol=1e-12)
+    np.testing.assert_array_equal(use0, np.arange(1, len(t)))
+    np.testing.assert_allclose(dist0, speed[1:] * np.diff(t), rtol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_sixty_second_outage_ends_within_two_percent(seed: int) -> None:
+    """Issue #4: the simulator's one-hour drive cut at 1700 s has one 60-s GNSS outage on
+    a road with turns.  With 1-mm distance rows at every 100-Hz odometer record and heading
+    rows at epochs without one, the rows moved the position metres each in the outage:
+    30.6 m (7.9 %) and 20.7 m (5.0 %) at its end for seeds 1 and 3; now 1.7 m (0.45 %) and
+    2.6 m (0.62 %).  Bound: the end error within 2 % of the distance driven in it (the
+    project's 60-s drift target)."""
+    from gpsdr_cli.evaluation import error_statistics, reference_en
+    from gpsdr_cli.pipeline import fuse
+    from gpsdr_cli.simulate import simulate_drive
+
+    sim = simulate_drive("one_hour", seed=seed, duration_s=1700.0)
+    params = config.defaults()
+    params["filter"]["name"] = "fkf"
+    res = fuse(sim.drive, params)
+    ref = reference_en(sim.truth[["t_ns", "lat", "lon"]], res.frame)
+    st = error_statistics(res.track, ref, "fkf", params)
+    rows = st[st["segment"].str.startswith("outage_") & (st["duration_s"] >= 50.0)]
+    assert len(rows) == 1
+    assert float(rows["end_error_pct_distance"].iloc[0]) < 2.0
