@@ -210,8 +210,8 @@ distance_interval_s = 0.05  # odometer distance rows S on this grid and at every
                          #   and heading rows in outages moved the position metres each -- fkf.distance_rows).
                          #   Seeds 1-3 forward fkf (fafkf): one_hour 3.77 (3.68) -> 1.62 (1.51) m, max 68.8 ->
                          #   7.9 m, 60-s drift 5.8 -> 0.71 (0.65) %; urban 3.08 -> 2.69 m; open 0.49 -> 0.46;
-                         #   tunnels 7.13 -> 7.18 (max 45 -> 38); comma2k19 0.50 -> 0.48 m at the README offset,
-                         #   0.52 -> 0.59 m at the estimated 0.135 s
+                         #   tunnels 7.13 -> 7.18 (max 45 -> 38); comma2k19 0.50 -> 0.49 m at the README offset,
+                         #   0.52 -> 0.55 m at the estimated 0.135 s, 1.90 -> 1.87 m as logged
 heading_course_window_s = 10.0  # gyro heading steered to the GNSS course averaged over this window (30: a gyro
                          #   clipped at 0.05 rad/s gave 6.3 m with good GNSS; tunnels fkf 15.1 -> 10.8 m)
                          #   (removes the integrated gyro bias; 0: aligned once at the start, seed 002)

@@ -230,49 +230,57 @@ def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np
     return np.interp(t_odo, tk, ratio), float(np.median(ratio))
 
 
-def distance_rows(t_odo: np.ndarray, speed: np.ndarray, interval_s: float,
-                  at_heading: np.ndarray | None = None
+def distance_rows(t_s: np.ndarray, o: np.ndarray, speed: np.ndarray, interval_s: float,
+                  heading: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(record indices, distance m, T_m s) of the odometer distance rows S.
+    """(epoch indices, distance m, T_m s) of the odometer distance rows S.
 
-    Each record ``k >= 1`` covers ``speed_k x (t_k - t_{k-1})``.  With
-    ``interval_s > 0`` (``[fkf] distance_interval_s``) the rows are the first
-    record of each ``interval_s`` slot and every record flagged ``at_heading``
-    (an epoch with a heading row), each ``S`` summing the distance since the
-    previous row (our choice, beyond the paper).  Why: at the record rate
-    (100 Hz in the simulator and comma2k19) each row had a 1-mm sigma
-    (``[odo] noise_sd_mps x T_m``) while successive wheel-tick speeds (a
-    moving average) share most of their ticks, so their errors are not white;
-    and in a GNSS outage the heading rows then moved the fused position by
-    1.5-3 m each (in turns the constant-acceleration prediction lags the
-    heading by ~0.03 rad, and the rows' gain to the position through P was
-    ~100 m/rad) and the distance rows by up to 15 m on mm of odometer noise:
-    the one-hour drive's 60-s outages ended up to 69 m (10 %) off, the fused
-    speed 0.6-2 m/s below the odometer's.  With 0.05-s rows *and* a distance
-    row at every heading epoch those gains fell ~100x (one_hour fkf 60-s drift
-    5.8 -> 0.7 %); coarser rows alone did not help where heading epochs had no
-    distance row (0.03 or 0.04-s slots: 5.8 %), nor did 1-mm rows at every
-    heading epoch (the old default).  ``q_s`` is metres per row, so
-    ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the speed-equivalent random
-    walk of 0.002 at 100 Hz (0.2 m/s per sqrt(s)).  ``interval_s <= 0``: every
-    record (seed 002).
+    ``o``: the epochs of the odometer records, ``speed`` theirs; record ``k >= 1``
+    covers ``speed_k x (t_k - t_{k-1})`` (the cumulative distance is linear in
+    between).  With ``interval_s > 0`` (``[fkf] distance_interval_s``) the rows
+    are the first record of each ``interval_s`` slot and every epoch flagged in
+    ``heading`` (an epoch with a heading row; when the gyro and the odometer
+    are stamped apart, the cumulative distance is interpolated to it) inside
+    the odometer's span with a record at most ``STALE_ODO_S`` before it; each
+    ``S`` is the distance since the previous row (our choice, beyond the
+    paper).  Why: at the record rate (100 Hz in the simulator and comma2k19)
+    each row had a 1-mm sigma (``[odo] noise_sd_mps x T_m``) while successive
+    wheel-tick speeds (a moving average) share most of their ticks, so their
+    errors are not white; and in a GNSS outage the heading rows then moved the
+    fused position by 1.5-3 m each (in turns the constant-acceleration
+    prediction lags the heading by ~0.03 rad, and the rows' gain to the
+    position through P was ~100 m/rad) and the distance rows by up to 15 m on
+    mm of odometer noise: the one-hour drive's 60-s outages ended up to 69 m
+    (10 %) off, the fused speed 0.6-2 m/s below the odometer's.  With 0.05-s
+    rows *and* a distance row at every heading epoch those gains fell ~100x
+    (one_hour fkf 60-s drift 5.8 -> 0.7 %); coarser rows alone did not help
+    where heading epochs had no distance row (0.03 or 0.04-s slots: 5.8 %), nor
+    did 1-mm rows at every heading epoch (the old default).  ``q_s`` is metres
+    per row, so ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the
+    speed-equivalent random walk of 0.002 at 100 Hz (0.2 m/s per sqrt(s)).
+    ``interval_s <= 0``: every record (seed 002).
     """
-    m = len(t_odo)
+    m = len(o)
     if m < 2:
         return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
-    dt = np.diff(t_odo)
-    cum = np.concatenate(([0.0], np.cumsum(speed[1:] * dt)))
-    if interval_s > 0:
-        slot = np.floor(t_odo / interval_s)          # t_odo in time order (epochs are)
-        first = np.concatenate(([False], slot[1:] != slot[:-1]))
-        if at_heading is not None:
-            first |= at_heading
-            first[0] = False
-        use = np.flatnonzero(first)
-    else:
-        use = np.arange(1, m)
-    prev = np.concatenate(([0], use[:-1])) if len(use) else use
-    return use, cum[use] - cum[prev], t_odo[use] - t_odo[prev]
+    t_odo = t_s[o]
+    cum = np.concatenate(([0.0], np.cumsum(speed[1:] * np.diff(t_odo))))
+    if interval_s <= 0:
+        use = o[1:]
+        return use, cum[1:] - cum[:-1], t_odo[1:] - t_odo[:-1]
+    slot = np.floor(t_odo / interval_s)              # t_odo in time order (epochs are)
+    rows = o[np.flatnonzero(slot[1:] != slot[:-1]) + 1]
+    if heading is not None:
+        h = np.flatnonzero(heading)
+        h = h[(t_s[h] > t_odo[0]) & (t_s[h] <= t_odo[-1])]
+        last = np.searchsorted(t_odo, t_s[h], side="right") - 1     # latest record <= t
+        h = h[t_s[h] - t_odo[last] <= STALE_ODO_S]
+        rows = np.union1d(rows, h)
+    t_row = t_s[rows]
+    c_row = np.interp(t_row, t_odo, cum)
+    dist = np.diff(np.concatenate(([0.0], c_row)))
+    t_m = np.diff(np.concatenate(([t_odo[0]], t_row)))
+    return rows, dist, t_m
 
 
 def prepare(epochs: Epochs, params: Params) -> Prepared:
@@ -334,10 +342,10 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         speed, odo_spikes = despike(np.abs(epochs.odo_speed_mps[o]), fp["odo_spike_mps"])
         scale, odo_scale = odometer_scale(epochs, t_s, t_s[o], speed, params)
         speed = speed * scale
-        use, d_use, tm_use = distance_rows(t_s[o], speed, fp["distance_interval_s"],
-                                           np.isfinite(theta[o]))
-        t_m[o[use]] = tm_use
-        dist[o[use]] = d_use
+        rows, d_rows, tm_rows = distance_rows(t_s, o, speed, fp["distance_interval_s"],
+                                              np.isfinite(theta))
+        t_m[rows] = tm_rows
+        dist[rows] = d_rows
         speed0 = float(speed[0])
         if sp["enabled"]:
             last = np.maximum.accumulate(np.where(epochs.has_odo, np.arange(n), -1))

@@ -377,29 +377,38 @@ def test_odometer_scale_taken_from_the_gnss_speed() -> None:
 
 
 def test_distance_rows_keep_the_distance_and_follow_the_heading_epochs() -> None:
-    """100-Hz odometer records, 0.05-s slots, heading epochs every 0.1 s and one off-grid:
-    the rows are the slots' first records plus every heading epoch, their distances sum to
-    the records' (tolerance 1e-9 m), each is the distance since the previous row, and 0 s
-    gives every record (seed 002)."""
-    t = np.arange(1001) * 0.01 + 0.003                     # 10 s, off the slot grid
-    speed = 10.0 + np.sin(t)
-    at_heading = np.zeros(len(t), bool)
-    at_heading[::10] = True                                # 0.1 s
-    at_heading[537] = True                                 # a heading epoch between slots
-    use, dist, t_m = fkf.distance_rows(t, speed, 0.05, at_heading)
-    slot_first = np.flatnonzero(np.diff(np.floor(t / 0.05)) != 0) + 1
-    expected = np.union1d(slot_first, np.flatnonzero(at_heading[1:]) + 1)
-    np.testing.assert_array_equal(use, expected)
-    cum = np.concatenate(([0.0], np.cumsum(speed[1:] * np.diff(t))))
-    assert abs(dist.sum() - cum[use[-1]]) < 1e-9
-    prev = np.concatenate(([0], use[:-1]))
-    np.testing.assert_allclose(dist, cum[use] - cum[prev], atol=1e-12)
-    np.testing.assert_allclose(t_m, t[use] - t[prev], atol=1e-12)
+    """100-Hz odometer records at the epochs 0, 2, 4, ... (gyro-only epochs in between),
+    0.05-s slots, heading epochs every 0.1 s on odometer epochs and one on a gyro-only
+    epoch: the rows are the slots' first odometer records plus every heading epoch after
+    the first record, each the distance since the previous row (the cumulative distance
+    interpolated to the gyro-only epoch; tolerance 1e-9 m), summing to the records' total;
+    0 s gives every record (seed 002)."""
+    t_s = np.arange(2001) * 0.005 + 0.003                  # epochs every 5 ms, off the grid
+    o = np.arange(0, 2001, 2)                               # odometer at every second epoch
+    t_odo = t_s[o]
+    speed = 10.0 + np.sin(t_odo)
+    heading = np.zeros(len(t_s), bool)
+    heading[::20] = True                                    # 0.1 s, on odometer epochs
+    heading[1075] = True                                    # a gyro-only epoch
+    rows, dist, t_m = fkf.distance_rows(t_s, o, speed, 0.05, heading)
+    slot_first = o[np.flatnonzero(np.diff(np.floor(t_odo / 0.05)) != 0) + 1]
+    expected = np.union1d(slot_first, np.flatnonzero(heading)[1:])
+    np.testing.assert_array_equal(rows, expected)
+    cum = np.concatenate(([0.0], np.cumsum(speed[1:] * np.diff(t_odo))))
+    c_rows = np.interp(t_s[rows], t_odo, cum)
+    assert abs(dist.sum() - c_rows[-1]) < 1e-9
+    k = int(np.searchsorted(rows, 1075))                   # the gyro-only epoch's row
+    j = int(np.searchsorted(t_odo, t_s[1075])) - 1         # the last record before it
+    jp = int(np.searchsorted(o, rows[k - 1]))              # the previous row's record
+    # whole records since the previous row, then the part of the next record's interval
+    part = speed[j + 1] * (t_s[1075] - t_odo[j])
+    assert abs(dist[k] - (cum[j] - cum[jp] + part)) < 1e-9
+    np.testing.assert_allclose(t_m, np.diff(np.concatenate(([t_odo[0]], t_s[rows]))), atol=1e-12)
     assert np.all(t_m < 0.05 + 1e-9)                       # no row spans more than a slot
-    use0, dist0, tm0 = fkf.distance_rows(t, speed, 0.0, at_heading)
-    np.testing.assert_allclose(tm0, np.diff(t), atol=1e-12)
-    np.testing.assert_array_equal(use0, np.arange(1, len(t)))
-    np.testing.assert_allclose(dist0, speed[1:] * np.diff(t), rtol=1e-12)
+    rows0, dist0, tm0 = fkf.distance_rows(t_s, o, speed, 0.0, heading)
+    np.testing.assert_array_equal(rows0, o[1:])
+    np.testing.assert_allclose(tm0, np.diff(t_odo), atol=1e-12)
+    np.testing.assert_allclose(dist0, speed[1:] * np.diff(t_odo), rtol=1e-12)
 
 
 @pytest.mark.parametrize("seed", [1, 3])
