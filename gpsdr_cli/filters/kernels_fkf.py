@@ -426,6 +426,24 @@ def phi_matrix(T: float, static: bool, par: np.ndarray, Phi: np.ndarray, x: np.n
     Phi[IEPS_N, IEPS_N] = f
 
 
+@njit(cache=True, inline="always")  # inlined: as a call it cost fkf 20 % of its speed
+def apply_gain(x: np.ndarray, P: np.ndarray, s: np.ndarray, k: np.ndarray, sig: float,
+               y: float) -> None:
+    """The shared tail of :func:`update_row` and :func:`unit_row`: K = s / sig into ``k``,
+    x += K y, and P - K s^T - s K^T + sig K K^T on the upper triangle, mirrored."""
+    inv = 1.0 / sig
+    for i in range(NX):
+        k[i] = s[i] * inv
+        x[i] += k[i] * y
+    for i in range(NX):
+        ki = k[i]
+        si = s[i]
+        for j in range(i, NX):
+            v = P[i, j] - ki * s[j] - si * k[j] + sig * ki * k[j]
+            P[i, j] = v
+            P[j, i] = v
+
+
 @njit(cache=True)
 def update_row(x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, r: float,
                s: np.ndarray, k: np.ndarray) -> float:
@@ -447,17 +465,7 @@ def update_row(x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, r: float,
     sig = r
     for j in range(NX):
         sig += h[j] * s[j]
-    inv = 1.0 / sig
-    for i in range(NX):
-        k[i] = s[i] * inv
-        x[i] += k[i] * y
-    for i in range(NX):
-        ki = k[i]
-        si = s[i]
-        for j in range(i, NX):
-            v = P[i, j] - ki * s[j] - si * k[j] + sig * ki * k[j]
-            P[i, j] = v
-            P[j, i] = v
+    apply_gain(x, P, s, k, sig, y)
     return sig
 
 
@@ -468,18 +476,7 @@ def unit_row(x: np.ndarray, P: np.ndarray, idx: int, y: float, r: float, s: np.n
     ``s`` is P's column, ``h P h^T`` its element (no scan of h)."""
     for i in range(NX):
         s[i] = P[i, idx]
-    sig = r + s[idx]
-    inv = 1.0 / sig
-    for i in range(NX):
-        k[i] = s[i] * inv
-        x[i] += k[i] * y
-    for i in range(NX):
-        ki = k[i]
-        si = s[i]
-        for j in range(i, NX):
-            v = P[i, j] - ki * s[j] - si * k[j] + sig * ki * k[j]
-            P[i, j] = v
-            P[j, i] = v
+    apply_gain(x, P, s, k, r + s[idx], y)
 
 
 @njit(cache=True)

@@ -835,10 +835,10 @@ def _attach_velocity(gnss: GnssFixes, chan: _Channel, use_log_time: bool) -> tup
         return gnss, 0
     order = np.argsort(t_v, kind="stable")
     t_v, ve, vn = t_v[order], ve[order], vn[order]
-    j = np.clip(np.searchsorted(t_v, gnss.t_ns), 1, len(t_v) - 1) if len(t_v) > 1 else \
-        np.zeros(len(gnss), np.int64)
-    if len(t_v) > 1:
-        j = np.where(np.abs(t_v[j - 1] - gnss.t_ns) <= np.abs(t_v[j] - gnss.t_ns), j - 1, j)
+    after = np.searchsorted(t_v, gnss.t_ns)  # the nearest message: the one before or after
+    lo = np.clip(after - 1, 0, len(t_v) - 1)
+    hi = np.minimum(after, len(t_v) - 1)
+    j = np.where(np.abs(t_v[lo] - gnss.t_ns) <= np.abs(t_v[hi] - gnss.t_ns), lo, hi)
     near = np.abs(t_v[j] - gnss.t_ns) <= _VELOCITY_MATCH_NS
     take = near & ~np.isfinite(gnss.speed_mps)
     speed = gnss.speed_mps.copy()
