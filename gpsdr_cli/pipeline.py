@@ -327,8 +327,9 @@ def drop_stray_records(drive: Drive) -> Drive:
 
 # --------------------------------------------------------------------------- fuse
 
-def _run_once(drive: Drive, params: Params, frame: LocalFrame,
-              progress: Progress | None) -> tuple[Epochs, FilterResult, pd.DataFrame, Any]:
+def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progress | None,
+              ready: Callable[[], object] | None = None,
+              ) -> tuple[Epochs, FilterResult, pd.DataFrame, Any]:
     from . import filters
     from .align import build_epochs
 
@@ -345,6 +346,8 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame,
     if progress:
         progress(f"running {params['filter']['name']}"
                  + (" + RTS smoother" if params["filter"]["smooth"] else ""))
+    if ready is not None:
+        ready()  # e.g. a background compile of the kernels (gpsdr_cli.warmup) has finished
     result = run(epochs, params)
     track = track_frame(epochs, result, frame)
     if work.gnss is not None and len(work.gnss):
@@ -366,9 +369,13 @@ def latest_gnss_pdop(epochs: Epochs, gnss_t_ns: np.ndarray) -> np.ndarray:
 
 
 def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
-         auto_gnss_offset: bool = False, progress: Progress | None = None) -> FuseResult:
+         auto_gnss_offset: bool = False, progress: Progress | None = None,
+         ready: Callable[[], object] | None = None) -> FuseResult:
     """Fuse one drive.  ``reference`` (optional) is projected into the same local frame
     and the statistics are taken against it; without one, only the health rows.
+
+    ``ready`` is called once the inputs are aligned, just before the first filter
+    pass (``gpsdr fuse`` joins its background kernel compile there).
 
     ``auto_gnss_offset``: run once, estimate the GNSS time offset from the along-track
     residuals (:func:`gpsdr_cli.latency.estimate_gnss_offset_s`), add it to
@@ -394,7 +401,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
         # would otherwise read as GNSS latency (ekf +0.19 s vs +0.12 s smoothed on comma2k19).
         probe = copy.deepcopy(params)
         probe["filter"]["smooth"] = True
-        _, _, probe_track, _ = _run_once(drive, probe, frame, progress)
+        _, _, probe_track, _ = _run_once(drive, probe, frame, progress, ready)
         est = estimate_gnss_offset(probe_track)
         offset_auto = float(params["time"]["gnss_offset_s"])
         if est.identified and math.isfinite(est.offset_s):
@@ -404,7 +411,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
                            if math.isfinite(est.stderr_s) else est.method)
         else:
             offset_note = f"not estimated ({est.reason}); kept {offset_auto:+.3f} s"
-    epochs, result, track, skipped = _run_once(drive, params, frame, progress)
+    epochs, result, track, skipped = _run_once(drive, params, frame, progress, ready)
 
     if progress:
         progress("statistics")

@@ -116,28 +116,37 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
         raise UsageError("refusing to write binary Parquet to a terminal; "
                          "redirect stdout, give -o FILE or --format csv")
 
-    show = _progress_wanted(quiet, [log, gps, gyro, odo])
-    with _Stages(show) as stages:
-        stages("reading inputs")
-        drive = _read(log, gps, gyro, odo, params, topics, date, log_time)
-        ref = None
-        if reference:
-            from ..io.reference import read_reference
+    # compile the filter kernels on the other core while this process reads (cold start only;
+    # before the status line starts its thread, since this forks)
+    from ..warmup import start_background
 
-            ref = read_reference(reference)
-        from ..pipeline import TRACK_UNITS, stats_units
-        from ..pipeline import fuse as run_fuse
+    ahead = start_background(params, auto_gnss_offset=gnss_offset == "auto")
+    try:
+        show = _progress_wanted(quiet, [log, gps, gyro, odo])
+        with _Stages(show) as stages:
+            stages("reading inputs")
+            drive = _read(log, gps, gyro, odo, params, topics, date, log_time)
+            ref = None
+            if reference:
+                from ..io.reference import read_reference
 
-        res = run_fuse(drive, params, ref, auto_gnss_offset=gnss_offset == "auto",
-                       progress=stages)
-        stages("writing outputs")
-        from ..io.parquet import write_table
+                ref = read_reference(reference)
+            from ..pipeline import TRACK_UNITS, stats_units
+            from ..pipeline import fuse as run_fuse
 
-        # the track first: if it cannot be written, an existing statistics file stays as is
-        write_table(res.track, track_path, metadata=res.metadata, units=TRACK_UNITS, fmt=fmt)
-        if stats_out is not None:
-            write_table(res.stats, stats_out, metadata=res.metadata,
-                        units=stats_units(res.stats), fmt=fmt)
+            res = run_fuse(drive, params, ref, auto_gnss_offset=gnss_offset == "auto",
+                           progress=stages, ready=ahead.wait if ahead else None)
+            stages("writing outputs")
+            from ..io.parquet import write_table
+
+            # the track first: if it cannot be written, an existing statistics file stays as is
+            write_table(res.track, track_path, metadata=res.metadata, units=TRACK_UNITS, fmt=fmt)
+            if stats_out is not None:
+                write_table(res.stats, stats_out, metadata=res.metadata,
+                            units=stats_units(res.stats), fmt=fmt)
+    finally:
+        if ahead is not None:
+            ahead.cancel()  # failed before the filter: no orphan compiler
 
     if not quiet:
         _report(res, track_path, stats_out, reference, gnss_offset == "auto")

@@ -1,0 +1,104 @@
+"""The kernel warm-up (gpsdr_cli.warmup): it compiles what a real run calls, and a
+background compile leaves a cache the run then loads instead of compiling.
+
+Each check runs in a fresh interpreter: in this process earlier tests have
+compiled the kernels already, so a missing specialisation could not show.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: Counts, in a fresh interpreter, the specialisations gpsdr's own compiled functions gain
+#: in a real fuse after warm_up: it must be none (the simulator's kernel aside).
+COVERAGE = textwrap.dedent("""
+    import copy, sys
+    from gpsdr_cli.config import defaults
+    from gpsdr_cli import warmup
+    name, smooth, auto = sys.argv[1], sys.argv[2] == "1", sys.argv[3] == "1"
+    p = defaults(); p["filter"]["name"] = name; p["filter"]["smooth"] = smooth
+    warmup.warm_up(p, auto_gnss_offset=auto)
+    from numba.core.registry import CPUDispatcher
+    def sigs():
+        return {f"{m}.{k}": len(v.signatures) for m, mod in list(sys.modules.items())
+                if m.startswith("gpsdr_cli") and m != "gpsdr_cli.simulate"
+                for k, v in vars(mod).items() if isinstance(v, CPUDispatcher)}
+    before = sigs()
+    from gpsdr_cli.simulate import simulate_drive
+    from gpsdr_cli.pipeline import fuse
+    for scenario in ("urban_canyon", "tunnels"):
+        sim = simulate_drive(scenario, seed=3, duration_s=150)
+        fuse(sim.drive, copy.deepcopy(p), None, auto_gnss_offset=auto)
+    after = sigs()
+    new = {k: v - before.get(k, 0) for k, v in after.items() if v != before.get(k, 0)}
+    print("NEW", new)
+""")
+
+
+@pytest.mark.parametrize(("name", "smooth", "auto"), [
+    ("aekf", True, True), ("ekf", False, False), ("fkf", True, False), ("fafkf", False, True)])
+def test_warm_up_compiles_every_kernel_a_real_fuse_calls(name: str, smooth: bool,
+                                                          auto: bool) -> None:
+    res = subprocess.run([sys.executable, "-c", COVERAGE, name, str(int(smooth)), str(int(auto))],
+                         capture_output=True, text=True, cwd=REPO, check=False, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "NEW {}" in res.stdout, res.stdout  # a kernel compiled after the warm-up: it missed it
+
+
+def test_tiny_epochs_exercise_every_input() -> None:
+    from gpsdr_cli.warmup import tiny_epochs
+
+    ep = tiny_epochs()
+    assert len(ep) == 4001
+    assert 150 < ep.n_gnss < 200  # 5 Hz for 40 s, minus the 6-s gap
+    assert ep.gnss_outage.any() and not ep.gnss_outage[ep.has_gnss].any()
+    assert (ep.odo_speed_mps == 0.0).sum() >= 500  # parked for 5 s: the standstill path
+    assert np.abs(ep.yaw_rate_radps).max() == pytest.approx(0.2)  # the turn
+    assert np.isfinite(ep.gnss_course_rad[ep.has_gnss & (ep.gnss_speed_mps > 0)]).all()
+
+
+@pytest.mark.skipif(not hasattr(os, "fork") or len(os.sched_getaffinity(0)) < 2,
+                    reason="the background compile needs fork and a second CPU")
+def test_cold_fuse_with_a_background_compile_gives_the_same_track(tmp_path: Path) -> None:
+    """An empty numba cache: `gpsdr fuse -o - --format csv` forks the compiler, which must
+    not write to the pipe, leaves a fresh cache, and the track equals a warm run's."""
+    from gpsdr_cli.simulate import simulate_drive, write_drive
+
+    write_drive(simulate_drive("urban_canyon", seed=5, duration_s=120), tmp_path / "d",
+                mcap=False)
+    d = tmp_path / "d"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("GPSDR_WARM_UP", None)
+    cmd = [sys.executable, "-c", "from gpsdr_cli.cli.main import main; main()", "fuse", "--gps", str(d / "gps.nmea"),
+           "--gyro", str(d / "gyro.csv"), "--odo", str(d / "odo.csv"), "-o", "-",
+           "--format", "csv", "-q"]
+    probe = textwrap.dedent("""
+        from gpsdr_cli.config import defaults
+        from gpsdr_cli.warmup import cache_is_fresh
+        print(cache_is_fresh(defaults()))
+    """)
+
+    def fresh() -> str:
+        return subprocess.run([sys.executable, "-c", probe], env=env, cwd=REPO, text=True,
+                              capture_output=True, check=True).stdout.strip()
+
+    assert fresh() == "False"
+    cold = subprocess.run(cmd, env=env, cwd=REPO, capture_output=True, timeout=600, check=False)
+    assert cold.returncode == 0, cold.stderr[-2000:]
+    assert fresh() == "True"  # the child (or the parent) filled the cache
+    warm = subprocess.run(cmd, env=env, cwd=REPO, capture_output=True, timeout=600, check=False)
+    assert warm.returncode == 0, warm.stderr[-2000:]
+    a = pd.read_csv(pd.io.common.BytesIO(cold.stdout))
+    b = pd.read_csv(pd.io.common.BytesIO(warm.stdout))
+    assert len(a) > 10_000
+    pd.testing.assert_frame_equal(a, b)
