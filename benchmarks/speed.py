@@ -1,6 +1,6 @@
 """Speed of gpsdr's filters: one command, one table.
 
-    python benchmarks/speed.py [--seconds 3600] [--filterpy-epochs 3000] [--no-cli]
+    python benchmarks/speed.py [--seconds 3600] [--filterpy-epochs 3000] [--no-cli] [--cli-only N]
 
 Simulates a one-hour drive (``simulate_drive("one_hour")``: 100 Hz gyro and
 odometer, 5 Hz GNSS: 360 k epochs), then prints:
@@ -16,14 +16,18 @@ odometer, 5 Hz GNSS: 360 k epochs), then prints:
   in a fresh subprocess so the peak RSS is its own; the longer logs repeat the
   drive with shifted times);
 - end-to-end ``gpsdr fuse`` wall time on the drive's files, warm and cold
-  (cold = numba's cache files ``*.nbi``/``*.nbc`` under ``gpsdr_cli`` removed
-  first), or "n/a" when the console script is not installed.
+  (cold = an empty numba cache: ``NUMBA_CACHE_DIR`` set to a new empty folder,
+  so your own cache stays), both as shipped (the kernels compile in a
+  background process while the logs are read, :mod:`gpsdr_cli.warmup`) and
+  with ``GPSDR_WARM_UP=0`` (compiled in the foreground), or "n/a" when the
+  console script is not installed.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import shutil
 import subprocess
@@ -181,18 +185,11 @@ def child(times: int, npz: str) -> None:
                       "rss_before_mb": rss_ready, "rss_inputs_mb": rss_loaded}))
 
 
-def clear_numba_cache() -> int:
-    n = 0
-    for f in list((ROOT / "gpsdr_cli").rglob("__pycache__/*.nb[ic]")):
-        f.unlink(missing_ok=True)
-        n += 1
-    return n
-
-
-def cli_times(sim) -> tuple[str, str]:
+def cli_times(sim) -> tuple[str, str, str]:
+    """``gpsdr fuse`` wall time: warm, cold, cold with the compile in the foreground."""
     exe = shutil.which("gpsdr") or str(ROOT / ".venv" / "bin" / "gpsdr")
     if not Path(exe).exists():
-        return "n/a", "n/a"
+        return "n/a", "n/a", "n/a"
     from gpsdr_cli.simulate import write_drive
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -201,18 +198,19 @@ def cli_times(sim) -> tuple[str, str]:
                "--odo", str(files["odo.csv"]), "-o", str(Path(tmp) / "track.parquet"),
                "--stats", str(Path(tmp) / "stats.parquet")]
 
-        def run() -> str:
+        def run(env: dict[str, str] | None = None) -> str:
             w0 = time.perf_counter()
-            res = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            res = subprocess.run(cmd, capture_output=True, text=True, check=False,
+                                 env=None if env is None else {**os.environ, **env})
             if res.returncode != 0:
                 return f"failed ({res.stderr.strip().splitlines()[-1] if res.stderr else res.returncode})"
             return f"{time.perf_counter() - w0:.2f} s"
 
         run()  # make sure the cache is populated
         warm = run()
-        clear_numba_cache()
-        cold = run()
-    return warm, cold
+        cold = run({"NUMBA_CACHE_DIR": str(Path(tmp) / "cold1"), "GPSDR_WARM_UP": "1"})
+        fg = run({"NUMBA_CACHE_DIR": str(Path(tmp) / "cold2"), "GPSDR_WARM_UP": "0"})
+    return warm, cold, fg
 
 
 def main() -> None:
@@ -220,6 +218,9 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=3600.0, help="drive length (s)")
     ap.add_argument("--filterpy-epochs", type=int, default=3000)
     ap.add_argument("--no-cli", action="store_true", help="skip the gpsdr fuse timing")
+    ap.add_argument("--cli-only", type=int, default=0, metavar="N",
+                    help="only the gpsdr fuse timings (warm, cold, cold without the background "
+                         "compile), N times")
     ap.add_argument("--child", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--npz", default="", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -230,6 +231,12 @@ def main() -> None:
     w0 = time.perf_counter()
     sim, ep = one_hour_epochs(args.seconds)
     n = len(ep)
+    if args.cli_only:
+        for _ in range(args.cli_only):
+            warm, cold, fg = cli_times(sim)
+            print(f"gpsdr fuse: warm {warm}, cold {cold}, cold with GPSDR_WARM_UP=0 {fg}",
+                  flush=True)
+        return
     print(f"drive: one_hour, {args.seconds:.0f} s, {n} epochs "
           f"({int(ep.has_gyro.sum())} gyro, {int(ep.has_odo.sum())} odometer, "
           f"{int(ep.has_gnss.sum())} GNSS); simulated + aligned in {time.perf_counter() - w0:.1f} s")
@@ -275,9 +282,10 @@ def main() -> None:
     if args.no_cli:
         print("gpsdr fuse: skipped (--no-cli)")
         return
-    warm, cold = cli_times(sim)
+    warm, cold, fg = cli_times(sim)
     print(f"gpsdr fuse (aekf, --gps/--gyro/--odo files of this drive): warm {warm}, "
-          f"cold (numba cache cleared) {cold}")
+          f"cold (empty numba cache) {cold}; cold with GPSDR_WARM_UP=0 (no background "
+          f"compile) {fg}")
 
 
 if __name__ == "__main__":
