@@ -39,6 +39,7 @@ REPORT_UNITS = {
     "status": "ok, failed, or up to date (skipped: outputs newer than inputs)",
     "error": "one-line error message of a failed drive",
     "duration_s": "s, wall-clock time to process the drive",
+    "cpu_s": "s, CPU time (user + system) of the worker process while it processed the drive",
     "epochs": "count of filter epochs",
     "rmse_m": "m, horizontal RMS error against the reference (null without one)",
     "cep95_m": "m, 95th percentile horizontal error against the reference",
@@ -248,10 +249,12 @@ def _up_to_date(spec: DriveSpec, track: Path, stats: Path, opts: BatchOptions) -
 
 
 def _row(spec: DriveSpec, status: str, error: str = "", duration_s: float = 0.0,
-         summary: dict[str, float] | None = None, track: str = "", stats: str = "") -> dict[str, Any]:
+         summary: dict[str, float] | None = None, track: str = "", stats: str = "",
+         cpu_s: float = 0.0) -> dict[str, Any]:
     s = summary or {}
     nan = float("nan")
     return {"drive": spec.name, "status": status, "error": error, "duration_s": duration_s,
+            "cpu_s": cpu_s,
             "epochs": int(s["epochs"]) if s.get("epochs", nan) == s.get("epochs", nan) else -1,
             "rmse_m": s.get("rmse_m", nan), "cep95_m": s.get("cep95_m", nan),
             "max_m": s.get("max_m", nan), "track": track, "stats": stats,
@@ -269,12 +272,13 @@ def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
     from .errors import GpsdrError
 
     t0 = time.perf_counter()
+    c0 = time.process_time()
     track_p, stats_p = output_paths(spec, opts.out_dir, opts.fmt)
     try:
         if not opts.force and _up_to_date(spec, track_p, stats_p, opts):
             summary = _existing_summary(stats_p, opts.fmt)
             return _row(spec, "up to date", "", time.perf_counter() - t0, summary,
-                        str(track_p), str(stats_p))
+                        str(track_p), str(stats_p), time.process_time() - c0)
         from .io.parquet import write_table
         from .io.readers import read_drive
         from .pipeline import TRACK_UNITS, fuse, stats_units
@@ -294,15 +298,16 @@ def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
         write_table(res.track, track_p, metadata=meta, units=TRACK_UNITS, fmt=opts.fmt)
         write_table(res.stats, stats_p, metadata=meta, units=stats_units(res.stats), fmt=opts.fmt)
         return _row(spec, "ok", "", time.perf_counter() - t0, res.summary(),
-                    str(track_p), str(stats_p))
+                    str(track_p), str(stats_p), time.process_time() - c0)
     except GpsdrError as err:
-        return _row(spec, "failed", str(err), time.perf_counter() - t0)
+        return _row(spec, "failed", str(err), time.perf_counter() - t0,
+                    cpu_s=time.process_time() - c0)
     except Exception as err:  # noqa: BLE001 - one bad drive never stops the batch: a report row
         tb = traceback.extract_tb(err.__traceback__)
         where = f" at {Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else ""
         msg = " ".join(str(err).split())
         return _row(spec, "failed", f"internal error: {type(err).__name__}: {msg}{where}",
-                    time.perf_counter() - t0)
+                    time.perf_counter() - t0, cpu_s=time.process_time() - c0)
 
 
 def _existing_summary(stats_p: Path, fmt: str) -> dict[str, float]:
@@ -339,23 +344,91 @@ def plan(specs: Iterable[DriveSpec], opts: BatchOptions,
 
 Worker = Callable[[DriveSpec, BatchOptions], dict[str, Any]]
 
+#: What a drive needs beyond this module: imported once in the parent before forking.
+DRIVE_MODULES = ("pyarrow.parquet", "gpsdr_cli.io.readers", "gpsdr_cli.io.nmea",
+                 "gpsdr_cli.io.csv", "gpsdr_cli.io.mcap", "gpsdr_cli.io.reference",
+                 "gpsdr_cli.io.parquet", "gpsdr_cli.pipeline", "gpsdr_cli.evaluation")
+
+
+def start_method() -> str:
+    """How the pool starts its workers: ``fork`` when it is safe, else forkserver / spawn.
+
+    ``fork`` lets every worker inherit the parent's imports and loaded kernels
+    (:func:`warm_parent`) instead of paying ~1 s of CPU each to import pandas /
+    pyarrow / numba and load the kernels again (4+ s each to compile them with a
+    cold numba cache).  It is safe only while this process runs no other thread:
+    fork copies the calling thread alone, so a lock another thread holds (rich's
+    refresh thread, a dask client) would stay locked in the child forever.
+    """
+    import multiprocessing as mp
+    import threading
+
+    methods = mp.get_all_start_methods()
+    if "fork" in methods and threading.active_count() == 1:
+        return "fork"
+    return "forkserver" if "forkserver" in methods else "spawn"
+
+
+def warm_parent(opts: BatchOptions) -> None:
+    """Import what a drive needs and load (or compile) its kernels, in this process.
+
+    Forked workers then start with all of it.  A failure here only costs time:
+    every drive meets the same error again and reports it in its row.
+    """
+    import importlib
+
+    from .warmup import warm_up
+
+    for name in DRIVE_MODULES:
+        importlib.import_module(name)
+    try:
+        warm_up(opts.params, auto_gnss_offset=opts.auto_gnss_offset)
+    except Exception:  # noqa: BLE001, S110 - an optimisation: each drive reports this error itself
+        pass
+
+
+def _flush_std_streams() -> None:
+    # a forked worker flushes its copy of the parent's buffers when it exits: empty them first
+    import sys
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+
 
 def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
-              on_done: OnDone | None = None, worker: Worker | None = None) -> list[dict[str, Any]]:
+              on_done: OnDone | None = None, worker: Worker | None = None,
+              on_ready: Callable[[], None] | None = None,
+              method: str | None = None) -> list[dict[str, Any]]:
     """Process drives in a process pool (``jobs`` workers; 1 = in this process).
 
     ``worker`` (default :func:`process_drive`) must be a module-level function.
+    ``on_ready`` is called once the workers exist and before the first
+    ``on_done``: a caller that starts threads (a progress display) starts them
+    there, so that forked workers do not inherit them.  ``method`` forces the
+    start method (default :func:`start_method`).
     """
     work = worker or process_drive
     rows: list[dict[str, Any]] = []
+    pending: list[dict[str, Any]] = []
 
     def done(row: dict[str, Any]) -> None:
         rows.append(row)
         if on_done:
             on_done(row)
 
-    specs = plan(specs, opts, done)
+    specs = plan(specs, opts, pending.append)
+
+    def ready() -> None:
+        if on_ready:
+            on_ready()
+        for row in pending:
+            done(row)
+
     if jobs <= 1 or len(specs) <= 1:
+        ready()
         for spec in specs:
             done(work(spec, opts))
         return rows
@@ -363,12 +436,16 @@ def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    # forkserver: workers do not inherit this process's threads (rich's refresh thread)
-    method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-    ctx = mp.get_context(method)
+    method = method or start_method()
+    if method == "fork":
+        warm_parent(opts)
+        _flush_std_streams()
     broken: list[DriveSpec] = []
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(specs)),
+                             mp_context=mp.get_context(method)) as pool:
+        # with fork, the first submit forks every worker (before the pool's own thread starts)
         futures = {pool.submit(work, s, opts): s for s in specs}
+        ready()
         for fut in as_completed(futures):
             try:
                 row = fut.result()
@@ -378,17 +455,21 @@ def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
             done(row)
     # A worker that dies (segfault, out-of-memory kill) takes the whole pool down and every
     # drive in flight with it: rerun each of those alone, so that only the culprit fails.
+    # (fork again only if no thread has started meanwhile, e.g. the caller's progress display)
     for spec in broken:
-        done(_run_alone(work, spec, opts, ctx))
+        done(_run_alone(work, spec, opts, start_method()))
     return rows
 
 
-def _run_alone(work: Worker, spec: DriveSpec, opts: BatchOptions, ctx: Any) -> dict[str, Any]:
+def _run_alone(work: Worker, spec: DriveSpec, opts: BatchOptions, method: str) -> dict[str, Any]:
+    import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+    if method == "fork":
+        _flush_std_streams()
+    with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context(method)) as pool:
         try:
             return pool.submit(work, spec, opts).result()
         except BrokenProcessPool:
@@ -442,7 +523,7 @@ def report_frame(rows: list[dict[str, Any]]) -> Any:
     if len(df):
         df = df.sort_values("drive", kind="stable").reset_index(drop=True)
     df["epochs"] = df["epochs"].astype("int64")
-    for c in ("duration_s", "rmse_m", "cep95_m", "max_m"):
+    for c in ("duration_s", "cpu_s", "rmse_m", "cep95_m", "max_m"):
         df[c] = df[c].astype("float64")
     return df
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import time
 from pathlib import Path
 
@@ -150,17 +151,71 @@ def crash_on_broken(spec, opts):  # a module-level worker the process pool can i
 
     time.sleep(0.5)  # the other drives are in flight when the crash takes the pool down
     if spec.name == "broken":
-        os._exit(3)  # a hard crash (as a segfault would): no exception, no row
+        os.kill(os.getpid(), signal.SIGKILL)  # killed mid-drive (as the OOM killer would)
     return _row(spec, "ok")
 
 
-def test_a_crashing_worker_fails_only_its_drive(logs: Path, tmp_path: Path) -> None:
+def available(*methods: str) -> list[str]:
+    import multiprocessing as mp
+
+    return [m for m in methods if m in mp.get_all_start_methods()]
+
+
+@pytest.mark.parametrize("method", available("fork", "forkserver"))
+def test_a_crashing_worker_fails_only_its_drive(logs: Path, tmp_path: Path, method: str) -> None:
     params = config.defaults()
     params["filter"]["name"] = "ekf"
+    order: list[str] = []
     rows = run_local(find_drives(str(logs)), BatchOptions(out_dir=str(tmp_path / "o"),
                                                           params=params),
-                     jobs=3, worker=crash_on_broken)
+                     jobs=3, worker=crash_on_broken, method=method,
+                     on_ready=lambda: order.append("ready"),
+                     on_done=lambda row: order.append(row["drive"]))
     by = {r["drive"]: r for r in rows}
     assert {k: v["status"] for k, v in by.items()} == {"2018__good": "ok", "broken": "failed",
                                                        "plain": "ok"}
     assert "worker process died" in by["broken"]["error"]
+    assert order[0] == "ready" and sorted(order[1:]) == ["2018__good", "broken", "plain"]
+
+
+def inherited_state(spec, opts):  # what a worker holds before it touches its drive
+    import sys
+
+    from gpsdr_cli.batch import _row
+
+    kernels = sys.modules.get("gpsdr_cli.filters.kernels_aekf")
+    loaded = kernels is not None and len(kernels.cs_filter_kernel.signatures) > 0
+    return _row(spec, "ok", f"pipeline={'gpsdr_cli.pipeline' in sys.modules} kernels={loaded}")
+
+
+@pytest.mark.parametrize("method", available("fork", "forkserver"))
+def test_forked_workers_start_warm(logs: Path, tmp_path: Path, method: str) -> None:
+    """fork: every worker inherits the parent's imports and loaded kernels; forkserver: none."""
+    params = config.defaults()
+    params["filter"]["name"] = "ekf"
+    rows = run_local(find_drives(str(logs)), BatchOptions(out_dir=str(tmp_path / "o"),
+                                                          params=params),
+                     jobs=2, worker=inherited_state, method=method)
+    want = "pipeline=True kernels=True" if method == "fork" else "pipeline=False kernels=False"
+    assert [r["error"] for r in rows] == [want] * 3
+
+
+def test_fork_only_while_no_other_thread_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    import multiprocessing as mp
+    import threading
+
+    from gpsdr_cli.batch import start_method
+
+    if "fork" not in mp.get_all_start_methods():
+        pytest.skip("no fork on this platform")
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait)  # as rich's refresh thread would be
+    t.start()
+    try:
+        assert start_method() in ("forkserver", "spawn")
+    finally:
+        stop.set()
+        t.join()
+    # (earlier tests may leave threads behind, e.g. dask's: pretend this one is alone)
+    monkeypatch.setattr(threading, "active_count", lambda: 1)
+    assert start_method() == "fork"

@@ -88,9 +88,10 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
 
     with _Bar(len(specs), quiet) as bar:
         if scheduler:
+            bar.start()
             rows = run_dask(specs, opts, scheduler, on_done=bar.advance)
-        else:
-            rows = run_local(specs, opts, n_jobs, on_done=bar.advance)
+        else:  # the bar's refresh thread starts once the workers are forked (run_local)
+            rows = run_local(specs, opts, n_jobs, on_done=bar.advance, on_ready=bar.start)
     report = report_frame(rows)
     write_table(report, Path(out_dir) / REPORT_NAME,
                 metadata={"target": target, "filter": str(params["filter"]["name"])},
@@ -104,7 +105,11 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
 
 
 class _Bar:
-    """A rich progress bar with ETA on stderr (only on a terminal and without -q)."""
+    """A rich progress bar with ETA on stderr (only on a terminal and without -q).
+
+    Shown from :meth:`start` on, not from ``__enter__``: rich refreshes it from a
+    thread, and the batch's workers must be forked before any thread exists.
+    """
 
     def __init__(self, total: int, quiet: bool) -> None:
         self.total = total
@@ -113,7 +118,10 @@ class _Bar:
         self._task: Any = None
 
     def __enter__(self) -> Self:
-        if not self.quiet:
+        return self
+
+    def start(self) -> None:
+        if not self.quiet and self._progress is None:
             from rich.console import Console
             from rich.progress import (
                 BarColumn,
@@ -129,10 +137,10 @@ class _Bar:
                 self._progress = Progress(
                     TextColumn("[bold]batch"), BarColumn(), MofNCompleteColumn(),
                     TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-                    TextColumn("{task.description}"), console=console)
+                    TextColumn("{task.description}"), console=console,
+                    refresh_per_second=2)  # seconds-resolution ETA; the parent shares the CPUs
                 self._progress.__enter__()
                 self._task = self._progress.add_task("", total=self.total)
-        return self
 
     def advance(self, row: dict[str, Any]) -> None:
         if self._progress is not None:
