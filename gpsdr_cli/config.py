@@ -172,6 +172,14 @@ heading_floor = true     # our choice: a consider heading variance (gyro noise +
                          #   fixes while moving) floors P's cross-track velocity variance at speed^2 x it: the
                          #   model has no heading state, and a stop (ZUPT) or the speed/lateral rows erased the
                          #   heading uncertainty (10 min outage: end error 6.4 / 4.4 sigma for ekf / aekf)
+gnss_err_states = true   # ekf/aekf (issue #4): the fix error is white noise + a first-order Gauss-Markov bias
+                         #   per axis (multipath), estimated as two more states (kernels_aekf GE_*): a white-noise
+                         #   model fed time-correlated errors converged in seconds to a 1 m sigma with a 5-6 m error
+                         #   and then, with whitening's large R, kept that offset for minutes
+gnss_err_sd_m = 2.0      # stationary sigma of the bias per axis (m)
+gnss_err_tau_s = 60.0    # its correlation time when parked (s)
+gnss_err_dist_m = 50.0   # ... and its decorrelation distance: 1/tau = 1/gnss_err_tau_s + speed/gnss_err_dist_m
+                         #   (the reflection geometry changes as the antenna moves; 0: time only)
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)
@@ -230,6 +238,9 @@ init_acc_sd_mps2 = 1.0
 init_heading_err_sd_rad = 0.1  # initial sigma of q_w (alignment of the gyro heading)
 init_dist_err_sd_m = 0.05      # initial sigma of q_s
 check_spd = false        # fkf and fafkf: Cholesky of every P at every epoch, failures in info["spd_failures"] (tests)
+smooth_segment_epochs = 4096  # fkf/fafkf RTS: the forward pass keeps a checkpoint every this many epochs and
+                         #   the smoother re-runs each segment from it (same floats), so it stores 65 floats
+                         #   x this many epochs instead of x every epoch (0: store every epoch, 187 MB/hour)
 
 [fafkf]
 window = 20              # M residuals in the covariance-matching window

@@ -1,8 +1,10 @@
 """Compiled kernels of the federated filters ``fkf`` and ``fafkf`` (seed 002, Tang et al.).
 
 One forward kernel per filter (:func:`fkf_kernel`, :func:`fafkf_kernel`, thin
-wrappers over one shared loop) and one backward RTS kernel
-(:func:`smooth_fused`), all over plain arrays: no Python object per epoch.
+wrappers over one shared loop, :func:`_epochs`) and the backward RTS kernels
+(:func:`smooth_checkpointed`: O(segment) memory, re-running the forward loop
+per segment from a checkpoint of its state; :func:`smooth_fused`: every
+epoch's x and P stored), all over plain arrays: no Python object per epoch.
 
 Conventions (:mod:`gpsdr_cli.conventions`): metres in the local ENU frame,
 seconds, radians; heading ``psi = atan2(v_e, v_n)`` clockwise from north.
@@ -125,7 +127,7 @@ import numpy as np
 from numba import njit
 
 from .adaptive import nis_2d
-from .linalg import cholesky, is_spd, rts_step
+from .linalg import cholesky, is_spd, symmetrize
 
 NX = 10
 IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS = range(NX)
@@ -206,6 +208,21 @@ O_E, O_N, O_VE, O_VN, O_VAR_E, O_VAR_N, O_COV_EN = range(7)
 N_OUT = 7
 
 NPACK = NX * (NX + 1) // 2
+
+# ---- the filter state (init_state): rows of vec, mats, aux; scalars of sc --------------
+V_X1, V_X2, V_XG, V_D1, V_D2 = range(5)         # local states, fused state, reset scalings
+M_P1, M_P2, M_PG = range(3)                      # local and fused covariances
+A_RFAC, A_RSUM, A_ULAST = range(3)               # R factors, window sums, last u per component
+S_T_NOW = 0        # s since the first epoch (the sum of dt, as the pass accumulates it)
+S_T_LAST_ACC = 1   # s, last accepted GNSS fix
+S_T_LAST_DR = 2    # s, last DR update of any kind
+S_T_LAST_DIST = 3  # s, last odometer distance or ZUPT update
+S_T_HEAD_ACC = 4   # s, last accepted heading
+S_PSI_HINT = 5     # rad, latest heading measurement minus q_w (distance-row linearisation)
+S_N_ACC = 6        # GNSS fixes accepted so far
+S_REJ_SHARE = 7    # recent share of gated fixes (EWMA)
+S_T_LAST_FIX = 8   # s, last fix seen
+N_SCALARS = 9
 
 #: Ceiling on each state's sigma after a prediction (m, m/s, m/s^2, m, m/s, m/s^2, m, m,
 #: rad, m): a logger pause of 50 min grows the white-jerk position variance to ~1e16 m^2,
@@ -832,29 +849,134 @@ def fuse_convex(x1: np.ndarray, P1: np.ndarray, x2: np.ndarray, P2: np.ndarray,
 
 
 @njit(cache=True)
+def init_state(x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray,
+               flags: np.ndarray):
+    """The filter state before the first epoch: ``(vec, mats, aux, ring, pc, sc)``.
+
+    ``vec`` (5, 10): x1, x2, x_g, d1, d2; ``mats`` (3, 10, 10): P1, P2, P_g;
+    ``aux`` (3, 4): R factors, residual-window sums, last normalised
+    discrepancies; ``ring`` (4, M): the residual windows; ``pc`` (2, 4) int:
+    window positions and counts; ``sc``: the scalars ``S_*``.  Everything that
+    carries from one epoch to the next lives here, so a run can stop after any
+    epoch and resume bit-identically (:func:`save_state`, :func:`load_state`).
+    """
+    mode_fr = flags[F_MODE_FR] != 0
+    fusion = flags[F_FUSION]
+    both = flags[F_GNSS_ON] != 0 and flags[F_DR_ON] != 0
+    m_window = max(flags[F_WINDOW], 1)
+    vec = np.zeros((5, NX))
+    mats = np.zeros((3, NX, NX))
+    # local filters; per-state shares c_i, d_i = 1/sqrt(c_i): FR keeps
+    # P_i = D_i P_g D_i and predicts with Q_i = D_i Q D_i (c_1 + c_2 = 1 per state)
+    c0 = 1.0
+    if mode_fr and both:
+        c0 = min(max(par[K_BETA_GNSS], 0.05), 0.95) if fusion == FUSE_COV else 0.5
+    for i in range(NX):
+        vec[V_X1, i] = x0[i]
+        vec[V_X2, i] = x0[i]
+        vec[V_XG, i] = x0[i]
+        if mode_fr and both:
+            vec[V_D1, i] = 1.0 / math.sqrt(c0)
+            vec[V_D2, i] = 1.0 / math.sqrt(1.0 - c0)
+        else:
+            vec[V_D1, i] = 1.0
+            vec[V_D2, i] = 1.0
+    for i in range(NX):
+        for j in range(NX):
+            mats[M_P1, i, j] = P0[i, j] * (vec[V_D1, i] * vec[V_D1, j])
+            mats[M_P2, i, j] = P0[i, j] * (vec[V_D2, i] * vec[V_D2, j])
+            mats[M_PG, i, j] = P0[i, j]
+    aux = np.zeros((3, 4))
+    aux[A_RFAC, :] = 1.0
+    ring = np.zeros((4, m_window))
+    pc = np.zeros((2, 4), np.int64)
+    sc = np.zeros(N_SCALARS)
+    sc[S_PSI_HINT] = psi0
+    return vec, mats, aux, ring, pc, sc
+
+
+@njit(cache=True)
+def checkpoint_length(m_window: int) -> int:
+    """Floats in one checkpoint row (:func:`save_state`) for a residual window of M."""
+    return 5 * NX + 3 * NX * NX + 12 + 8 + N_SCALARS + 4 * m_window
+
+
+@njit(cache=True)
+def save_state(row: np.ndarray, vec: np.ndarray, mats: np.ndarray, aux: np.ndarray,
+               ring: np.ndarray, pc: np.ndarray, sc: np.ndarray) -> None:
+    """The state into one float row (the integers of ``pc`` are exact as floats)."""
+    m = 0
+    for a in range(vec.shape[0]):
+        for i in range(NX):
+            row[m] = vec[a, i]
+            m += 1
+    for a in range(mats.shape[0]):
+        for i in range(NX):
+            for j in range(NX):
+                row[m] = mats[a, i, j]
+                m += 1
+    for a in range(aux.shape[0]):
+        for i in range(aux.shape[1]):
+            row[m] = aux[a, i]
+            m += 1
+    for a in range(pc.shape[0]):
+        for i in range(pc.shape[1]):
+            row[m] = pc[a, i]
+            m += 1
+    for i in range(sc.shape[0]):
+        row[m] = sc[i]
+        m += 1
+    for a in range(ring.shape[0]):
+        for i in range(ring.shape[1]):
+            row[m] = ring[a, i]
+            m += 1
+
+
+@njit(cache=True)
+def load_state(row: np.ndarray, vec: np.ndarray, mats: np.ndarray, aux: np.ndarray,
+               ring: np.ndarray, pc: np.ndarray, sc: np.ndarray) -> None:
+    """Inverse of :func:`save_state`."""
+    m = 0
+    for a in range(vec.shape[0]):
+        for i in range(NX):
+            vec[a, i] = row[m]
+            m += 1
+    for a in range(mats.shape[0]):
+        for i in range(NX):
+            for j in range(NX):
+                mats[a, i, j] = row[m]
+                m += 1
+    for a in range(aux.shape[0]):
+        for i in range(aux.shape[1]):
+            aux[a, i] = row[m]
+            m += 1
+    for a in range(pc.shape[0]):
+        for i in range(pc.shape[1]):
+            pc[a, i] = np.int64(row[m])
+            m += 1
+    for i in range(sc.shape[0]):
+        sc[i] = row[m]
+        m += 1
+    for a in range(ring.shape[0]):
+        for i in range(ring.shape[1]):
+            ring[a, i] = row[m]
+            m += 1
+
+
+@njit(cache=True)
 def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n: np.ndarray,
                gnss_var_e: np.ndarray, gnss_var_n: np.ndarray, gnss_ve: np.ndarray,
                gnss_vn: np.ndarray, theta: np.ndarray,
                dist: np.ndarray, t_m: np.ndarray, static: np.ndarray, x0: np.ndarray,
                P0: np.ndarray, psi0: float, par: np.ndarray, flags: np.ndarray,
-               r_table: np.ndarray, w_table: np.ndarray):
+               r_table: np.ndarray, w_table: np.ndarray, segment: int):
+    """The forward pass over all epochs; with ``flags[F_STORE]`` it also returns what the
+    smoother needs: a checkpoint of the whole state every ``segment`` epochs (``ck``, one
+    row per segment, for :func:`smooth_checkpointed`), or with ``segment <= 0`` the fused
+    x and packed P_g of every epoch (``xs``, ``Ps``, for :func:`smooth_fused`)."""
     n = dt.shape[0]
-    mode_fr = flags[F_MODE_FR] != 0
-    adaptive = flags[F_ADAPT_R] != 0
-    fusion = flags[F_FUSION]
-    log_scale = flags[F_NORM] != 0
-    m_window = max(flags[F_WINDOW], 1)
-    gnss_on = flags[F_GNSS_ON] != 0
-    dr_on = flags[F_DR_ON] != 0
     store = flags[F_STORE] != 0
-    check = flags[F_CHECK_SPD] != 0
-    both = gnss_on and dr_on
-    # FR with one share per filter (all of w equal): see the prediction in the loop
-    shared = mode_fr and both and fusion != FUSE_BLOCK
-    cov_fusion = shared and (fusion == FUSE_COV or fusion == FUSE_SHARES)
-    central = False
-    ones = np.ones(NX)
-
+    m_window = max(flags[F_WINDOW], 1)
     out = np.zeros((n, N_OUT))
     gnss_used = np.zeros(n, np.bool_)
     gnss_rej = np.zeros(n, np.bool_)
@@ -862,24 +984,72 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
     beta_out = np.full((n, 2), np.nan)              # GNSS weight: position, velocity
     rfac_out = np.ones((n, 4))                      # R factors: gnss e, gnss n, heading, distance
     counters = np.zeros(N_COUNTERS, np.int64)
-    ns = n if store else 1
+    full = store and segment <= 0
+    ns = n if full else 1
     xs = np.zeros((ns, NX))
     Ps = np.zeros((ns, NPACK))
+    n_ck = (n + segment - 1) // segment if store and not full else 0
+    ck = np.zeros((n_ck, checkpoint_length(m_window)))
+    vec, mats, aux, ring, pc, sc = init_state(x0, P0, psi0, par, flags)
+    if n_ck == 0:
+        _epochs(0, n, dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn,
+                theta, dist, t_m, static, par, flags, r_table, w_table,
+                vec, mats, aux, ring, pc, sc,
+                out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, 0,
+                full, xs, Ps)
+    else:
+        for c in range(n_ck):
+            k0 = c * segment
+            save_state(ck[c], vec, mats, aux, ring, pc, sc)
+            _epochs(k0, min(k0 + segment, n), dt, has_gnss, gnss_e, gnss_n, gnss_var_e,
+                    gnss_var_n, gnss_ve, gnss_vn, theta, dist, t_m, static, par, flags,
+                    r_table, w_table, vec, mats, aux, ring, pc, sc,
+                    out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, 0,
+                    False, xs, Ps)
+    return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps, ck
 
-    # local filters; per-state shares c_i, d_i = 1/sqrt(c_i): FR keeps
-    # P_i = D_i P_g D_i and predicts with Q_i = D_i Q D_i (c_1 + c_2 = 1 per state)
-    d1 = np.ones(NX)
-    d2 = np.ones(NX)
-    if mode_fr and both:
-        c0 = min(max(par[K_BETA_GNSS], 0.05), 0.95) if fusion == FUSE_COV else 0.5
-        d1[:] = 1.0 / math.sqrt(c0)
-        d2[:] = 1.0 / math.sqrt(1.0 - c0)
-    x1 = x0.copy()
-    x2 = x0.copy()
-    P1 = P0 * np.outer(d1, d1)
-    P2 = P0 * np.outer(d2, d2)
-    xg = x0.copy()
-    Pg = P0.copy()
+
+@njit(cache=True)
+def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
+            gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
+            gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray, dist: np.ndarray,
+            t_m: np.ndarray, static: np.ndarray, par: np.ndarray, flags: np.ndarray,
+            r_table: np.ndarray, w_table: np.ndarray,
+            vec: np.ndarray, mats: np.ndarray, aux: np.ndarray, ring: np.ndarray,
+            pc: np.ndarray, sc: np.ndarray,
+            out: np.ndarray, gnss_used: np.ndarray, gnss_rej: np.ndarray, nis_out: np.ndarray,
+            beta_out: np.ndarray, rfac_out: np.ndarray, counters: np.ndarray, off: int,
+            store: bool, xs: np.ndarray, Ps: np.ndarray) -> None:
+    """Epochs k0 .. k1 - 1 from the state (``vec`` .. ``sc``, see :func:`init_state`),
+    which they advance in place.  Outputs go to row ``k - off`` of ``out`` ..
+    ``rfac_out``; with ``store``, x_g and packed P_g to row ``k - k0`` of ``xs``, ``Ps``."""
+    mode_fr = flags[F_MODE_FR] != 0
+    adaptive = flags[F_ADAPT_R] != 0
+    fusion = flags[F_FUSION]
+    log_scale = flags[F_NORM] != 0
+    gnss_on = flags[F_GNSS_ON] != 0
+    dr_on = flags[F_DR_ON] != 0
+    check = flags[F_CHECK_SPD] != 0
+    both = gnss_on and dr_on
+    # FR with one share per filter (all of w equal): see the prediction in the loop
+    shared = mode_fr and both and fusion != FUSE_BLOCK
+    cov_fusion = shared and (fusion == FUSE_COV or fusion == FUSE_SHARES)
+    central = False                                 # set at each epoch before its use
+    ones = np.ones(NX)
+
+    x1 = vec[V_X1]
+    x2 = vec[V_X2]
+    xg = vec[V_XG]
+    d1 = vec[V_D1]
+    d2 = vec[V_D2]
+    P1 = mats[M_P1]
+    P2 = mats[M_P2]
+    Pg = mats[M_PG]
+    rfac = aux[A_RFAC]
+    rsum = aux[A_RSUM]                              # window sums (adapt_r)
+    u_last = aux[A_ULAST]
+    pos = pc[0]
+    cnt = pc[1]
 
     # states each filter contributes to the NR fusion (see the module docstring)
     if mode_fr:
@@ -888,14 +1058,14 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
     else:
         idx1 = np.array([IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N])
         idx2 = np.array([IE, IVE, IAE, IN, IVN, IAN, IQW, IQS])
-    k1 = idx1.shape[0]
-    k2 = idx2.shape[0]
-    A1 = np.empty((k1, k1))
-    L1 = np.empty((k1, k1))
-    B1 = np.empty((k1, k1))
-    A2 = np.empty((k2, k2))
-    L2 = np.empty((k2, k2))
-    B2 = np.empty((k2, k2))
+    k1_ = idx1.shape[0]
+    k2_ = idx2.shape[0]
+    A1 = np.empty((k1_, k1_))
+    L1 = np.empty((k1_, k1_))
+    B1 = np.empty((k1_, k1_))
+    A2 = np.empty((k2_, k2_))
+    L2 = np.empty((k2_, k2_))
+    B2 = np.empty((k2_, k2_))
     Y = np.empty((NX, NX))
     yv = np.empty(NX)
     L = np.empty((NX, NX))
@@ -905,31 +1075,25 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
     s = np.zeros(NX)
     kk = np.zeros(NX)
     w = np.zeros(NX)
-
-    ring = np.zeros((4, m_window))
-    pos = np.zeros(4, np.int64)
-    cnt = np.zeros(4, np.int64)
-    rfac = np.ones(4)
-    rsum = np.zeros(4)                              # window sums (adapt_r)
     y_dist = 0.0
     hph_dist = 0.0
-    u_last = np.zeros(4)
 
-    t_now = 0.0
-    t_last_acc = 0.0                                # last accepted GNSS fix
-    t_last_dr = 0.0                                 # last DR update of any kind
-    t_last_dist = 0.0                               # last odometer distance or ZUPT update
-    t_head_acc = 0.0                                # last accepted heading
-    psi_hint = psi0
+    t_now = sc[S_T_NOW]
+    t_last_acc = sc[S_T_LAST_ACC]                   # last accepted GNSS fix
+    t_last_dr = sc[S_T_LAST_DR]                     # last DR update of any kind
+    t_last_dist = sc[S_T_LAST_DIST]                 # last odometer distance or ZUPT update
+    t_head_acc = sc[S_T_HEAD_ACC]                   # last accepted heading
+    psi_hint = sc[S_PSI_HINT]
+    n_acc = np.int64(sc[S_N_ACC])                   # GNSS fixes accepted so far
+    rej_share = sc[S_REJ_SHARE]                     # recent share of gated fixes (EWMA)
+    t_last_fix = sc[S_T_LAST_FIX]
     zupt_sd = par[K_ZUPT_SD]
     omin2 = par[K_OMEGA_MIN] ** 2
     chi2 = par[K_GATE_CHI2]
-    n_acc = 0                                       # GNSS fixes accepted so far
-    rej_share = 0.0                                 # recent share of gated fixes (EWMA)
-    t_last_fix = 0.0
     tau_rej = par[K_GATE_RESET_S] / math.log(2.0)   # all gated for gate_reset_s: share 1/2
 
-    for kx in range(n):
+    for kx in range(k0, k1):
+        ko = kx - off
         T = dt[kx] if kx > 0 else 0.0
         t_now += T
         st = static[kx]
@@ -982,7 +1146,7 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                 re = rfac[0] * gnss_var_e[kx]
                 rn = rfac[1] * gnss_var_n[kx]
                 nis = nis_2d(ye, yn, s00 + re, s01, s11 + rn)
-                nis_out[kx] = nis
+                nis_out[ko] = nis
                 accept = True
                 a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
                 t_last_fix = t_now
@@ -1014,12 +1178,12 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                         local_and_central_unit(x1, P1, xg, Pg, central, IVN,
                                                gnss_vn[kx] - x1[IVN], par[K_GVEL_VAR], s, kk)
                         counters[C_GVEL] += 1
-                    gnss_used[kx] = True
+                    gnss_used[ko] = True
                     counters[C_GNSS_USED] += 1
                     n_acc += 1
                     t_last_acc = t_now
                 else:
-                    gnss_rej[kx] = True
+                    gnss_rej[ko] = True
                     counters[C_GNSS_REJECTED] += 1
         else:
             t_last_acc = t_now
@@ -1111,13 +1275,13 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
             if g_fresh:
                 xg[:] = x1
                 Pg[:, :] = P1
-                beta_out[kx, 0] = 1.0
-                beta_out[kx, 1] = 1.0
+                beta_out[ko, 0] = 1.0
+                beta_out[ko, 1] = 1.0
             else:
                 xg[:] = x2
                 Pg[:, :] = P2
-                beta_out[kx, 0] = 0.0
-                beta_out[kx, 1] = 0.0
+                beta_out[ko, 0] = 0.0
+                beta_out[ko, 1] = 0.0
         elif both:
             if fusion == FUSE_COV or fusion == FUSE_SHARES:
                 if fusion == FUSE_SHARES:           # fuzzy reliability -> information share
@@ -1135,12 +1299,12 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                     fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
                                      A1, L1, B1, A2, L2, B2, L, Wk)
                 if fusion == FUSE_SHARES:
-                    beta_out[kx, 0] = bp
-                    beta_out[kx, 1] = bp
+                    beta_out[ko, 0] = bp
+                    beta_out[ko, 1] = bp
                 else:
-                    beta_out[kx, 0] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
+                    beta_out[ko, 0] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
                                              + Pg[IN, IN] / max(P1[IN, IN], 1e-300))
-                    beta_out[kx, 1] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
+                    beta_out[ko, 1] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
                                              + Pg[IVN, IVN] / max(P1[IVN, IVN], 1e-300))
                 for i in range(NX):
                     w[i] = bp
@@ -1173,8 +1337,8 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
                     w[IQW] = 0.0
                     w[IQS] = 0.0
                 fuse_convex(x1, P1, x2, P2, w, xg, Pg)
-                beta_out[kx, 0] = bp
-                beta_out[kx, 1] = bv
+                beta_out[ko, 0] = bp
+                beta_out[ko, 1] = bv
             if shared:                              # Carlson 1990 fusion-reset, one share:
                 ci = min(max(w[0], 0.05), 0.95)     # x_i, P_i made at the next prediction
                 d1[:] = 1.0 / math.sqrt(ci)
@@ -1193,95 +1357,184 @@ def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n:
         elif gnss_on:
             xg[:] = x1
             Pg[:, :] = P1
-            beta_out[kx, 0] = 1.0
-            beta_out[kx, 1] = 1.0
+            beta_out[ko, 0] = 1.0
+            beta_out[ko, 1] = 1.0
         elif dr_on:
             xg[:] = x2
             Pg[:, :] = P2
-            beta_out[kx, 0] = 0.0
-            beta_out[kx, 1] = 0.0
+            beta_out[ko, 0] = 0.0
+            beta_out[ko, 1] = 0.0
 
         if check and ((gnss_on and not is_spd(P1)) or (dr_on and not is_spd(P2))
                       or not is_spd(Pg)):
             counters[C_NOT_SPD] += 1
-        out[kx, O_E] = xg[IE]
-        out[kx, O_N] = xg[IN]
-        out[kx, O_VE] = xg[IVE]
-        out[kx, O_VN] = xg[IVN]
-        out[kx, O_VAR_E] = Pg[IE, IE]
-        out[kx, O_VAR_N] = Pg[IN, IN]
-        out[kx, O_COV_EN] = Pg[IE, IN]
-        rfac_out[kx, :] = rfac
+        out[ko, O_E] = xg[IE]
+        out[ko, O_N] = xg[IN]
+        out[ko, O_VE] = xg[IVE]
+        out[ko, O_VN] = xg[IVN]
+        out[ko, O_VAR_E] = Pg[IE, IE]
+        out[ko, O_VAR_N] = Pg[IN, IN]
+        out[ko, O_COV_EN] = Pg[IE, IN]
+        rfac_out[ko, :] = rfac
         if store:
-            xs[kx, :] = xg
-            pack(Pg, Ps[kx])
-    return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps
+            xs[kx - k0, :] = xg
+            pack(Pg, Ps[kx - k0])
+    sc[S_T_NOW] = t_now
+    sc[S_T_LAST_ACC] = t_last_acc
+    sc[S_T_LAST_DR] = t_last_dr
+    sc[S_T_LAST_DIST] = t_last_dist
+    sc[S_T_HEAD_ACC] = t_head_acc
+    sc[S_PSI_HINT] = psi_hint
+    sc[S_N_ACC] = n_acc
+    sc[S_REJ_SHARE] = rej_share
+    sc[S_T_LAST_FIX] = t_last_fix
+
+
+@njit(cache=True)
+def kernel_flags(fafkf: bool, flags: np.ndarray) -> np.ndarray:
+    """The flags the pass runs with: fkf fuses by covariance with fixed R; fafkf adapts R
+    and, unless ``flags[F_FUSION]`` names another fusion, weights by fuzzy blocks."""
+    flags = flags.copy()
+    if fafkf:
+        if flags[F_FUSION] == FUSE_COV:
+            flags[F_FUSION] = FUSE_BLOCK
+        flags[F_ADAPT_R] = 1
+    else:
+        flags[F_FUSION] = FUSE_COV
+        flags[F_ADAPT_R] = 0
+    return flags
 
 
 @njit(cache=True)
 def fkf_kernel(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn, theta,
-               dist, t_m,
-               static, x0, P0, psi0, par, flags, r_table, w_table):
+               dist, t_m, static, x0, P0, psi0, par, flags, r_table, w_table, segment):
     """Federated Kalman filter, covariance-weighted master fusion (flags[F_FUSION] = 0)."""
-    flags = flags.copy()
-    flags[F_FUSION] = FUSE_COV
-    flags[F_ADAPT_R] = 0
     return _federated(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn,
-                      theta, dist, t_m,
-                      static, x0, P0, psi0, par, flags, r_table, w_table)
+                      theta, dist, t_m, static, x0, P0, psi0, par, kernel_flags(False, flags),
+                      r_table, w_table, segment)
 
 
 @njit(cache=True)
 def fafkf_kernel(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn, theta,
-                 dist, t_m,
-                 static, x0, P0, psi0, par, flags, r_table, w_table):
+                 dist, t_m, static, x0, P0, psi0, par, flags, r_table, w_table, segment):
     """Fuzzy adaptive federated Kalman filter (fuzzy R, fuzzy fusion weights)."""
-    flags = flags.copy()
-    if flags[F_FUSION] == FUSE_COV:
-        flags[F_FUSION] = FUSE_BLOCK
-    flags[F_ADAPT_R] = 1
     return _federated(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn,
-                      theta, dist, t_m,
-                      static, x0, P0, psi0, par, flags, r_table, w_table)
+                      theta, dist, t_m, static, x0, P0, psi0, par, kernel_flags(True, flags),
+                      r_table, w_table, segment)
 
 
 @njit(cache=True)
 def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndarray,
                  par: np.ndarray) -> tuple[np.ndarray, int, int]:
-    """Fixed-interval RTS smoother over the fused sequence with the master's prediction.
+    """Fixed-interval RTS smoother over the fused sequence with the master's prediction,
+    from the fused x and packed P_g of every epoch (``segment <= 0``: O(n) storage).
 
     The prior of epoch k+1 is recomputed from the fused posterior of k
     (``Phi(dt[k+1]) x_g``, ``Phi P_g Phi^T + Q``, Q unscaled): nothing but the
     fused x and packed P are stored per epoch.  Returns the smoothed outputs
     (columns as the forward ``out``), the count of epochs whose smoothed P
-    failed the SPD test and the count of restarts (see the guard below).
+    failed the SPD test and the count of restarts (see :func:`smooth_range`).
     """
     n = xs.shape[0]
     out = np.zeros((n, N_OUT))
+    x_sn = np.zeros(NX)
+    P_sn = np.zeros((NX, NX))
+    stats = np.zeros(2, np.int64)
+    smooth_range(xs, Ps, 0, n - 1, 0, n, dt, static, par, x_sn, P_sn, out, stats)
+    return out, stats[0], stats[1]
+
+
+@njit(cache=True)
+def smooth_checkpointed(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
+                        gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
+                        gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray,
+                        dist: np.ndarray, t_m: np.ndarray, static: np.ndarray,
+                        par: np.ndarray, flags: np.ndarray, r_table: np.ndarray,
+                        w_table: np.ndarray, ck: np.ndarray, segment: int,
+                        out: np.ndarray) -> tuple[int, int]:
+    """:func:`smooth_fused` in O(segment) memory, writing the smoothed track into ``out``.
+
+    ``ck``: the forward pass's checkpoints (:func:`_federated` with
+    ``flags[F_STORE]`` and this ``segment``; ``flags`` as the pass ran,
+    :func:`kernel_flags`).  From the last segment to the first, the forward
+    pass is re-run over the segment from its checkpoint -- the same code on the
+    same state, so the same floats -- storing the fused x and packed P_g of its
+    epochs only, and the backward recursion walks them (:func:`smooth_range`),
+    its smoothed state carried from segment to segment.  Cost: one more
+    forward pass; memory: ``segment x 65`` floats instead of ``n x 65`` (a
+    one-hour drive at 100 Hz: 187 MB -> 2 MB at 4096).  As the ekf/aekf
+    smoother (:func:`gpsdr_cli.smoothing.rts_checkpointed`) does.
+    Returns (epochs whose smoothed P failed the SPD test, restarts).
+    """
+    n = dt.shape[0]
+    m_window = max(flags[F_WINDOW], 1)
+    vec = np.zeros((5, NX))
+    mats = np.zeros((3, NX, NX))
+    aux = np.zeros((3, 4))
+    ring = np.zeros((4, m_window))
+    pc = np.zeros((2, 4), np.int64)
+    sc = np.zeros(N_SCALARS)
+    seg = max(min(segment, n), 1)
+    o_out = np.zeros((seg, N_OUT))                  # the re-run's outputs: scratch
+    o_used = np.zeros(seg, np.bool_)
+    o_rej = np.zeros(seg, np.bool_)
+    o_nis = np.zeros(seg)
+    o_beta = np.zeros((seg, 2))
+    o_rfac = np.zeros((seg, 4))
+    o_counters = np.zeros(N_COUNTERS, np.int64)
+    xs = np.zeros((seg, NX))
+    Ps = np.zeros((seg, NPACK))
+    x_sn = np.zeros(NX)
+    P_sn = np.zeros((NX, NX))
+    stats = np.zeros(2, np.int64)
+    for c in range(ck.shape[0] - 1, -1, -1):
+        k0 = c * segment
+        k1 = min(k0 + segment, n)
+        load_state(ck[c], vec, mats, aux, ring, pc, sc)
+        _epochs(k0, k1, dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve,
+                gnss_vn, theta, dist, t_m, static, par, flags, r_table, w_table,
+                vec, mats, aux, ring, pc, sc,
+                o_out, o_used, o_rej, o_nis, o_beta, o_rfac, o_counters, k0, True, xs, Ps)
+        smooth_range(xs, Ps, k0, k1 - 1, k0, n, dt, static, par, x_sn, P_sn, out, stats)
+    return stats[0], stats[1]
+
+
+@njit(cache=True)
+def smooth_range(xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int, k_lo: int, n: int,
+                 dt: np.ndarray, static: np.ndarray, par: np.ndarray, x_sn: np.ndarray,
+                 P_sn: np.ndarray, out: np.ndarray, stats: np.ndarray) -> None:
+    """Backward RTS steps k = k_hi, k_hi - 1, .., k_lo over the fused posteriors
+    ``xs[k - off]``, ``Ps[k - off]`` (packed) of an n-epoch pass.
+
+    ``x_sn, P_sn`` enter as the smoothed estimate at k_hi + 1 (ignored when
+    k_hi = n - 1: the smoothed estimate there is the filtered one) and leave as
+    the one at k_lo; ``out[k]`` receives it (columns as the forward ``out``);
+    ``stats[0]`` counts epochs whose smoothed position block is not SPD,
+    ``stats[1]`` the restarts of the guard below.
+    """
     x_post = np.zeros(NX)
     P_post = np.zeros((NX, NX))
     x_prior = np.zeros(NX)
     P_prior = np.zeros((NX, NX))
-    Phi = np.zeros((NX, NX))
     ones = np.ones(NX)
-    x_sn = xs[n - 1].copy()
-    P_sn = np.zeros((NX, NX))
-    unpack(Ps[n - 1], P_sn)
     x_s = np.zeros(NX)
     P_s = np.zeros((NX, NX))
     wL = np.zeros((NX, NX))
     wB = np.zeros((NX, NX))
-    not_spd = 0
-    restarts = 0
-    for k in range(n - 1, -1, -1):
-        if k < n - 1:
-            x_post[:] = xs[k]
-            unpack(Ps[k], P_post)
+    dx = np.zeros(NX)
+    for k in range(k_hi, k_lo - 1, -1):
+        if k == n - 1:
+            x_sn[:] = xs[k - off]
+            unpack(Ps[k - off], P_sn)
+        else:
+            x_post[:] = xs[k - off]
+            unpack(Ps[k - off], P_post)
             x_prior[:] = x_post
             P_prior[:, :] = P_post
             predict(x_prior, P_prior, dt[k + 1], static[k + 1], par, ones)
-            phi_matrix(dt[k + 1], static[k + 1], par, Phi, x_post)
-            rts_step(x_post, P_post, x_prior, P_prior, Phi, x_sn, P_sn, x_s, P_s, wL, wB)
+            rts_step_fused(x_post, P_post, x_prior, P_prior, dt[k + 1], static[k + 1],
+                           eps_decay(x_post, dt[k + 1], par), x_sn, P_sn, x_s, P_s, wL, wB,
+                           dx)
             # guard: the fused sequence is not always a Kalman posterior (stale-filter
             # switches, heading re-alignments, an unmodelled gyro bias); where the
             # smoothed position leaves the forward one by more than the chi-square(2)
@@ -1295,7 +1548,7 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
             if nees > SMOOTH_RESTART_NEES or not math.isfinite(nees):
                 x_sn[:] = x_post
                 P_sn[:, :] = P_post
-                restarts += 1
+                stats[1] += 1
             else:
                 x_sn[:] = x_s
                 P_sn[:, :] = P_s
@@ -1308,5 +1561,75 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
         out[k, O_COV_EN] = P_sn[IE, IN]
         if not (P_sn[IE, IE] > 0.0 and P_sn[IN, IN] > 0.0
                 and P_sn[IE, IN] ** 2 < P_sn[IE, IE] * P_sn[IN, IN]):
-            not_spd += 1
-    return out, not_spd, restarts
+            stats[0] += 1
+
+
+@njit(cache=True)
+def rts_step_fused(x_post: np.ndarray, P_post: np.ndarray, x_prior: np.ndarray,
+                   P_prior: np.ndarray, T: float, static: bool, f: float, x_sn: np.ndarray,
+                   P_sn: np.ndarray, x_s: np.ndarray, P_s: np.ndarray, L: np.ndarray,
+                   B: np.ndarray, dx: np.ndarray) -> None:
+    """:func:`~.linalg.rts_step` for this model's Phi, with the same floats, in half the time.
+
+    ``C = P_post Phi^T P_prior^-1``, ``x_s = x_post + C (x_sn - x_prior)``,
+    ``P_s = P_post + C (P_sn - P_prior) C^T`` (Rauch, Tung & Striebel 1965).
+    Written here because the generic step multiplies by the dense Phi and
+    forms ``P_sn - P_prior`` inside a triple loop: ``B = Phi P_post`` is taken
+    by Phi's rows (:func:`phi_matrix`: ``1, T, T^2/2`` per axis, ``f`` for
+    eps; the dense sum's other terms are exact zeros, so each element is the
+    same float), and every sum runs over the same index in the same order,
+    with the independent index innermost (the compiler vectorises it): the
+    one-hour drive's backward pass took 1.25 s, now 0.60 s (CPU).  ``f``:
+    the eps factor of the step (:func:`eps_decay` at ``x_post``); ``L``, ``B``
+    (10, 10) and ``dx`` (10,) are scratch.
+    """
+    for i in range(NX):
+        for j in range(NX):
+            B[i, j] = P_post[i, j]
+    if not static:
+        h2 = 0.5 * T * T                            # phi_matrix's corner
+        for b in range(0, 6, 3):
+            for j in range(NX):
+                B[b, j] = (P_post[b, j] + T * P_post[b + 1, j]) + h2 * P_post[b + 2, j]
+                B[b + 1, j] = P_post[b + 1, j] + T * P_post[b + 2, j]
+    for j in range(NX):
+        B[IEPS_E, j] = f * P_post[IEPS_E, j]
+        B[IEPS_N, j] = f * P_post[IEPS_N, j]
+    cholesky(P_prior, L)
+    for i in range(NX):                             # B <- P_prior^-1 B = C^T: L y = b ...
+        for j in range(i):
+            lij = L[i, j]
+            for c in range(NX):
+                B[i, c] -= lij * B[j, c]
+        for c in range(NX):
+            B[i, c] = B[i, c] / L[i, i]
+    for i in range(NX - 1, -1, -1):                 # ... then L^T x = y
+        for j in range(i + 1, NX):
+            lji = L[j, i]
+            for c in range(NX):
+                B[i, c] -= lji * B[j, c]
+        for c in range(NX):
+            B[i, c] = B[i, c] / L[i, i]
+    for m in range(NX):
+        dx[m] = x_sn[m] - x_prior[m]
+    for i in range(NX):
+        x_s[i] = x_post[i]
+    for m in range(NX):
+        for i in range(NX):
+            x_s[i] += B[m, i] * dx[m]
+    D = L                                           # D = (P_sn - P_prior) C^T (L is spent)
+    for i in range(NX):
+        for j in range(NX):
+            D[i, j] = 0.0
+        for m in range(NX):
+            dif = P_sn[i, m] - P_prior[i, m]
+            for j in range(NX):
+                D[i, j] += dif * B[m, j]
+    for i in range(NX):                             # P_s = P_post + C D
+        for j in range(NX):
+            P_s[i, j] = P_post[i, j]
+        for m in range(NX):
+            bmi = B[m, i]
+            for j in range(NX):
+                P_s[i, j] += bmi * D[m, j]
+    symmetrize(P_s)
