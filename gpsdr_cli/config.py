@@ -172,14 +172,6 @@ heading_floor = true     # our choice: a consider heading variance (gyro noise +
                          #   fixes while moving) floors P's cross-track velocity variance at speed^2 x it: the
                          #   model has no heading state, and a stop (ZUPT) or the speed/lateral rows erased the
                          #   heading uncertainty (10 min outage: end error 6.4 / 4.4 sigma for ekf / aekf)
-gnss_err_states = true   # ekf/aekf (issue #4): the fix error is white noise + a first-order Gauss-Markov bias
-                         #   per axis (multipath), estimated as two more states (kernels_aekf GE_*): a white-noise
-                         #   model fed time-correlated errors converged in seconds to a 1 m sigma with a 5-6 m error
-                         #   and then, with whitening's large R, kept that offset for minutes
-gnss_err_sd_m = 2.0      # stationary sigma of the bias per axis (m)
-gnss_err_tau_s = 60.0    # its correlation time when parked (s)
-gnss_err_dist_m = 50.0   # ... and its decorrelation distance: 1/tau = 1/gnss_err_tau_s + speed/gnss_err_dist_m
-                         #   (the reflection geometry changes as the antenna moves; 0: time only)
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)
