@@ -1,18 +1,33 @@
 """Batch throughput on this machine: ``gpsdr batch`` with 1 and N workers, one table.
 
-    python benchmarks/batch.py [--drives 12] [--jobs 2] [--seconds 3600] [--keep DIR]
+    python benchmarks/batch.py [--drives 12] [--jobs 2] [--seconds 3600] [--repeat 3] [--keep DIR]
 
 Simulates one drive (``one_hour`` scenario, NMEA + CSV + truth), links it into
-``--drives`` folders, then times, each on an idle machine:
+``--drives`` folders (``--keep DIR`` reuses ``DIR/fleet``), runs the batch once
+to warm numba's and the page cache, then ``--repeat`` times, each repeat
+running the two sides of a row one right after the other (so that a change of
+the host's load hits both):
 
-- ``gpsdr batch DIR -o OUT --jobs 1 --force`` and ``--jobs N``: wall time,
-  drives per minute and the speed-up;
-- the machine's own ceiling for N processes: N independent ``gpsdr fuse``
-  runs of the same drive started together, against N run one after the other;
-- a pure-CPU Python loop run the same two ways, which no memory traffic limits.
+- ``gpsdr batch DIR -o OUT --jobs 1 --force -q`` against ``--jobs N``: wall
+  time of the whole command (interpreter start, imports, kernel loading, pool
+  start, every drive, the report), and from the batch report the mean per-drive
+  wall time and CPU time (user + system) of the process that ran the drive, so
+  that contention between the workers is visible (CPU per drive grows when the
+  two cores stall on shared cache and memory; wall grows beyond CPU when a
+  worker waits for a core, e.g. for another program);
+- the machine's ceiling for N processes: N independent ``gpsdr fuse`` runs of
+  the same drive started together, against N run one after the other;
+- a pure-CPU Python loop, and a memory-bound numpy loop (streaming arrays
+  far larger than the L3 cache), run the same two ways.
 
-The last two rows tell whether a speed-up short of N is the pool's fault or
-the hardware's (shared memory bandwidth, vCPUs that are hyperthreads).
+Below the table: the time outside the drives (start-up, imports, kernels,
+pool, report: a fixed cost that bounds the whole command's speed-up, Amdahl),
+and the steady-state throughput ratio (N x median drive time at --jobs 1 over
+the median at --jobs N), which is what the workers achieve once running.
+Before each pair of runs it waits (``--quiet-wait``) for the CPUs to be idle.
+
+Every figure is printed as the range over the repeats, with the 1-minute load
+average seen before each repeat (other programs on the host make the ranges).
 """
 
 from __future__ import annotations
@@ -24,12 +39,16 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 LOOP = "s = 0\nfor i in range(12_000_000):\n    s += i * i % 7\n"
+# 64 MB arrays (the L3 cache is 32 MB here): every pass streams 192 MB through memory
+STREAM = ("import numpy as np\na = np.ones(8_000_000); b = np.empty_like(a)\n"
+          "for _ in range(60):\n    np.multiply(a, 1.000001, out=b); a, b = b, a\n")
 
 
 def gpsdr_exe() -> str:
@@ -71,43 +90,132 @@ def timed(cmds: list[list[str]], parallel: bool) -> float:
     return time.perf_counter() - w0
 
 
+def per_drive(out: Path) -> tuple[float, float, float]:
+    """Mean per-drive wall and CPU seconds, and median wall, from the batch report in ``out``."""
+    import pandas as pd
+
+    rep = pd.read_parquet(out / "batch_report.parquet")
+    rep = rep[rep["status"] == "ok"]
+    cpu = rep["cpu_s"].mean() if "cpu_s" in rep else float("nan")  # (older reports: no cpu_s)
+    return float(rep["duration_s"].mean()), float(cpu), float(rep["duration_s"].median())
+
+
+def cpu_idle_fraction(window_s: float = 1.0) -> float:
+    """Share of the machine's CPU time that was idle over the next ``window_s`` (Linux)."""
+    def sample() -> tuple[int, int]:
+        with open("/proc/stat") as fh:
+            vals = [int(v) for v in fh.readline().split()[1:]]
+        return vals[3] + vals[4], sum(vals)  # idle + iowait, total
+
+    try:
+        i0, t0 = sample()
+        time.sleep(window_s)
+        i1, t1 = sample()
+    except OSError:
+        return 1.0
+    return (i1 - i0) / max(t1 - t0, 1)
+
+
+def wait_quiet(max_wait_s: float, idle: float = 0.9) -> float:
+    """Wait (at most ``max_wait_s``) until other programs leave the CPUs idle; the idle share."""
+    deadline = time.monotonic() + max_wait_s
+    share = cpu_idle_fraction()
+    while share < idle and time.monotonic() < deadline:
+        share = cpu_idle_fraction()
+    return share
+
+
+def span(values: list[float], fmt: str = ".2f") -> str:
+    lo, hi = min(values), max(values)
+    return f"{lo:{fmt}}" if f"{lo:{fmt}}" == f"{hi:{fmt}}" else f"{lo:{fmt}}-{hi:{fmt}}"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--drives", type=int, default=12)
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     ap.add_argument("--seconds", type=float, default=3600.0, help="length of each drive (s)")
+    ap.add_argument("--repeat", type=int, default=3, help="repeats of every measurement")
     ap.add_argument("--keep", help="use (or create) the fleet in this folder instead of a temp one")
+    ap.add_argument("--quiet-wait", type=float, default=60.0,
+                    help="wait up to this long (s) before each measurement for the CPUs to be "
+                         "at least 90 %% idle (other programs on a shared host)")
     args = ap.parse_args()
     exe = gpsdr_exe()
     n = args.jobs
+    loads: list[float] = []
+    res: dict[str, list[float]] = {}
+
+    def rec(key: str, value: float) -> None:
+        res.setdefault(key, []).append(value)
+
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(args.keep) if args.keep else Path(tmp)
         fleet = root / "fleet"
         if not fleet.is_dir():
             print(f"simulating {args.seconds:.0f} s drive, {args.drives} copies ...", flush=True)
             make_fleet(root, args.drives, args.seconds)
-        out = Path(tmp) / "out"
-        batch = [exe, "batch", str(fleet), "-o", str(out), "--force", "-q"]
-        timed([batch + ["--jobs", "1"]], False)  # warm the numba cache and the page cache
-        t1 = timed([batch + ["--jobs", "1"]], False)
-        tn = timed([batch + ["--jobs", str(n)]], False)
+        out1, outn = Path(tmp) / "out1", Path(tmp) / "outn"
+        batch = [exe, "batch", str(fleet), "--force", "-q"]
+        timed([batch + ["-o", str(out1), "--jobs", "1"]], False)  # numba cache + page cache
         drive = fleet / "d01"
         fuse = [exe, "fuse", "--gps", str(drive / "gps.nmea"), "--gyro", str(drive / "gyro.csv"),
                 "--odo", str(drive / "odo.csv"), "-q"]
         fuses = [fuse + ["-o", str(Path(tmp) / f"f{i}.parquet")] for i in range(n)]
-        f1 = timed(fuses, False)
-        fn = timed(fuses, True)
-        loops = [[sys.executable, "-c", LOOP]] * n
-        l1 = timed(loops, False)
-        ln = timed(loops, True)
+        pairs: list[tuple[str, Callable[[bool], float]]] = [
+            ("batch", lambda par: timed([batch + ["-o", str(outn if par else out1),
+                                                  "--jobs", str(n if par else 1)]], False)),
+            ("fuse", lambda par: timed(fuses, par)),
+            ("loop", lambda par: timed([[sys.executable, "-c", LOOP]] * n, par)),
+            ("stream", lambda par: timed([[sys.executable, "-c", STREAM]] * n, par)),
+        ]
+        for r in range(args.repeat):
+            for key, run in pairs:
+                rec("idle", wait_quiet(args.quiet_wait))
+                loads.append(os.getloadavg()[0])
+                print(f"repeat {r + 1}/{args.repeat} {key} (load {loads[-1]:.2f}, "
+                      f"idle {res['idle'][-1]:.0%}) ...", flush=True)
+                one, par = run(False), run(True)
+                rec(f"{key}1", one)
+                rec(f"{key}n", par)
+                rec(f"{key}x", one / par)
+                if key == "batch":
+                    for tag, out in (("1", out1), ("n", outn)):
+                        wall, cpu, med = per_drive(out)
+                        rec(f"drive_wall{tag}", wall)
+                        rec(f"drive_cpu{tag}", cpu)
+                        rec(f"drive_med{tag}", med)
+                    # outside the drives: interpreter, imports, kernels, pool start, report
+                    rec("over1", one - args.drives * res["drive_med1"][-1])
+                    rec("overn", par - args.drives * res["drive_medn"][-1] / n)
     rate = 60.0 * args.drives
-    print(f"\n{args.drives} drives of {args.seconds:.0f} s, {n} workers, {os.cpu_count()} CPUs\n")
-    print(f"| run | 1 at a time, s | {n} at once, s | speed-up |")
+    print(f"\n{args.drives} drives of {args.seconds:.0f} s, {n} workers, {os.cpu_count()} CPUs, "
+          f"{args.repeat} repeats (ranges), before each pair: 1-min load average {span(loads)}, "
+          f"CPUs idle {span([100 * v for v in res['idle']], '.0f')} %\n")
+    print(f"| run (wall time of the whole command) | 1 at a time, s | {n} at once, s | speed-up |")
     print("|---|---|---|---|")
-    print(f"| gpsdr batch --jobs 1 vs --jobs {n} ({rate / t1:.1f} vs {rate / tn:.1f} drives/min) "
-          f"| {t1:.2f} | {tn:.2f} | {t1 / tn:.2f}x |")
-    print(f"| {n} x gpsdr fuse, independent processes | {f1:.2f} | {fn:.2f} | {f1 / fn:.2f}x |")
-    print(f"| {n} x pure-CPU Python loop (machine ceiling) | {l1:.2f} | {ln:.2f} | {l1 / ln:.2f}x |")
+    print(f"| gpsdr batch --jobs 1 vs --jobs {n} ({span([rate / t for t in res['batch1']], '.0f')} "
+          f"vs {span([rate / t for t in res['batchn']], '.0f')} drives/min) "
+          f"| {span(res['batch1'])} | {span(res['batchn'])} | {span(res['batchx'])}x |")
+    print(f"| {n} x gpsdr fuse, independent processes | {span(res['fuse1'])} | "
+          f"{span(res['fusen'])} | {span(res['fusex'])}x |")
+    print(f"| {n} x pure-CPU Python loop (machine ceiling) | {span(res['loop1'])} | "
+          f"{span(res['loopn'])} | {span(res['loopx'])}x |")
+    print(f"| {n} x numpy streaming 64-MB arrays (memory-bound ceiling) | {span(res['stream1'])} | "
+          f"{span(res['streamn'])} | {span(res['streamx'])}x |")
+    print(f"\nPer drive, from the batch reports (mean over the {args.drives} drives): "
+          f"--jobs 1 wall {span(res['drive_wall1'], '.3f')} s, CPU {span(res['drive_cpu1'], '.3f')} s; "
+          f"--jobs {n} wall {span(res['drive_walln'], '.3f')} s, "
+          f"CPU {span(res['drive_cpun'], '.3f')} s.")
+    best = min(range(args.repeat), key=lambda i: res["batchn"][i] + res["batch1"][i])
+    m1, o1, on = res["drive_med1"][best], res["over1"][best], res["overn"][best]
+    print(f"Outside the drives (whole command minus drives x median drive time, / {n} for "
+          f"--jobs {n}): --jobs 1 {span(res['over1'])} s, --jobs {n} {span(res['overn'])} s. "
+          f"With those, drives that did not slow each other down would give "
+          f"{(o1 + args.drives * m1) / (on + args.drives * m1 / n):.2f}x (best repeat).")
+    steady = [n * a / b for a, b in zip(res["drive_med1"], res["drive_medn"], strict=True)]
+    print(f"Steady-state throughput (drives per second once the workers run: {n} x median drive "
+          f"time at --jobs 1 / median at --jobs {n}): {span(steady)}x.")
 
 
 if __name__ == "__main__":
