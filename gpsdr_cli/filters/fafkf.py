@@ -2,7 +2,7 @@
 
 The local filters, model, inputs, modes and smoothing of :mod:`.fkf`, plus
 the paper's two fuzzy controllers (:mod:`.fuzzy`, interpolated inside the
-kernel :func:`~gpsdr_cli.filters.kernels_fkf.fafkf_kernel`):
+kernel :func:`~gpsdr_cli.filters.kernels_fkf.federated_pass`):
 
 1. adaptive R by covariance matching, per measurement component
    (GNSS e, GNSS n, heading, distance): the window of the last ``[fafkf]

@@ -49,7 +49,7 @@ Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
   ``dt``.  It needs the fused x and P_g of every epoch; the forward pass keeps
   instead a checkpoint of its whole state every ``[fkf] smooth_segment_epochs``
   (4096) epochs, and the smoother re-runs each segment from its checkpoint
-  (the same floats) and smooths it (:func:`~.kernels_fkf.smooth_checkpointed`):
+  (the same floats) and smooths it (:func:`~.kernels_fkf.federated_pass`):
   65 floats x 4096 epochs in memory instead of x every epoch (a one-hour drive
   at 100 Hz: 187 MB, which took ``gpsdr fuse --smooth`` to 630 MB peak RSS),
   for one more forward pass.  In FR mode the covariance-weighted fused sequence is the
@@ -471,7 +471,7 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
 
 
 def combine_two_filter(fwd: np.ndarray, bwd: np.ndarray) -> np.ndarray:
-    """Forward and backward tracks (kernel ``out`` layout) fused by their position covariances.
+    """Forward and backward tracks (kernel ``out`` layout: rows ``O_*``) fused by their position covariances.
 
     Position: ``P_s = (P_f^-1 + P_b^-1)^-1``, ``x_s = P_s (P_f^-1 x_f + P_b^-1 x_b)``
     with the 2x2 blocks (closed-form inverses); velocity: the same weights
@@ -481,7 +481,7 @@ def combine_two_filter(fwd: np.ndarray, bwd: np.ndarray) -> np.ndarray:
     exclude it from one pass).
     """
     def info(o: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        a, b, c = o[:, kf.O_VAR_E], o[:, kf.O_COV_EN], o[:, kf.O_VAR_N]
+        a, b, c = o[kf.O_VAR_E], o[kf.O_COV_EN], o[kf.O_VAR_N]
         det = a * c - b * b
         return c / det, -b / det, a / det               # inverse [[a, b], [b, c]]
 
@@ -490,55 +490,37 @@ def combine_two_filter(fwd: np.ndarray, bwd: np.ndarray) -> np.ndarray:
     ia, ib, ic = fa + ba, fb + bb, fc + bc
     det = ia * ic - ib * ib
     pa, pb, pc = ic / det, -ib / det, ia / det
-    ye = fa * fwd[:, kf.O_E] + fb * fwd[:, kf.O_N] + ba * bwd[:, kf.O_E] + bb * bwd[:, kf.O_N]
-    yn = fb * fwd[:, kf.O_E] + fc * fwd[:, kf.O_N] + bb * bwd[:, kf.O_E] + bc * bwd[:, kf.O_N]
+    ye = fa * fwd[kf.O_E] + fb * fwd[kf.O_N] + ba * bwd[kf.O_E] + bb * bwd[kf.O_N]
+    yn = fb * fwd[kf.O_E] + fc * fwd[kf.O_N] + bb * bwd[kf.O_E] + bc * bwd[kf.O_N]
     out = np.empty_like(fwd)
-    out[:, kf.O_E] = pa * ye + pb * yn
-    out[:, kf.O_N] = pb * ye + pc * yn
-    tf = fwd[:, kf.O_VAR_E] + fwd[:, kf.O_VAR_N]
-    tb = bwd[:, kf.O_VAR_E] + bwd[:, kf.O_VAR_N]
+    out[kf.O_E] = pa * ye + pb * yn
+    out[kf.O_N] = pb * ye + pc * yn
+    tf = fwd[kf.O_VAR_E] + fwd[kf.O_VAR_N]
+    tb = bwd[kf.O_VAR_E] + bwd[kf.O_VAR_N]
     wf = tb / (tf + tb)
-    out[:, kf.O_VE] = wf * fwd[:, kf.O_VE] + (1.0 - wf) * bwd[:, kf.O_VE]
-    out[:, kf.O_VN] = wf * fwd[:, kf.O_VN] + (1.0 - wf) * bwd[:, kf.O_VN]
-    out[:, kf.O_VAR_E] = pa
-    out[:, kf.O_COV_EN] = pb
-    out[:, kf.O_VAR_N] = pc
+    out[kf.O_VE] = wf * fwd[kf.O_VE] + (1.0 - wf) * bwd[kf.O_VE]
+    out[kf.O_VN] = wf * fwd[kf.O_VN] + (1.0 - wf) * bwd[kf.O_VN]
+    out[kf.O_VAR_E] = pa
+    out[kf.O_COV_EN] = pb
+    out[kf.O_VAR_N] = pc
     return out
 
 
 def forward(kind: str, prep: Prepared, store: bool, segment: int = 0) -> tuple:
-    """The compiled forward pass of ``kind`` over prepared inputs.
+    """The compiled pass of ``kind`` over prepared inputs (:func:`~.kernels_fkf.federated_pass`).
 
-    With ``store`` it also keeps what the fused RTS smoother needs: a checkpoint
-    every ``segment`` epochs (for :func:`~.kernels_fkf.smooth_checkpointed`), or
-    with ``segment <= 0`` the fused x and P of every epoch (for
-    :func:`~.kernels_fkf.smooth_fused`).  Returns the kernel's tuple ``(out, used,
-    rejected, nis, beta, rfac, counters, xs, Ps, checkpoints)``.
+    With ``store`` and ``segment > 0`` the pass is smoothed in O(segment) memory
+    (its ``out`` the smoothed track); with ``store`` and ``segment <= 0`` it
+    returns every epoch's fused x and P for :func:`~.kernels_fkf.smooth_fused`.
+    Returns ``(out, used, rejected, nis, beta, rfac, counters, xs, Ps, smooth_stats)``.
     """
-    kernel = kf.fkf_kernel if kind == "fkf" else kf.fafkf_kernel
     flags = prep.flags.copy()
     flags[kf.F_STORE] = store
-    return kernel(prep.dt, prep.has_gnss, prep.gnss_e, prep.gnss_n, prep.gnss_var_e,
-                  prep.gnss_var_n, prep.gnss_ve, prep.gnss_vn, prep.theta, prep.dist, prep.t_m,
-                  prep.static, prep.x0, prep.P0, prep.psi0, prep.par, flags, fuzzy.R_TABLE,
-                  fuzzy.W_TABLE, int(segment))
-
-
-def smooth_rts(kind: str, prep: Prepared, fwd: tuple, segment: int) -> tuple[np.ndarray, int, int]:
-    """The fused RTS smoother over a forward pass ``fwd`` (:func:`forward` with ``store``
-    and the same ``segment``).  Returns (smoothed out, SPD failures, restarts); with
-    checkpoints the smoothed track overwrites the forward ``out`` in place."""
-    out, xs, Ps, ck = fwd[0], fwd[7], fwd[8], fwd[9]
-    if segment <= 0:
-        return kf.smooth_fused(xs, Ps, prep.dt, prep.static, prep.par)
-    flags = prep.flags.copy()
-    flags[kf.F_STORE] = True
-    not_spd, restarts = kf.smooth_checkpointed(
-        prep.dt, prep.has_gnss, prep.gnss_e, prep.gnss_n, prep.gnss_var_e, prep.gnss_var_n,
-        prep.gnss_ve, prep.gnss_vn, prep.theta, prep.dist, prep.t_m, prep.static, prep.par,
-        kf.kernel_flags(kind == "fafkf", flags), fuzzy.R_TABLE, fuzzy.W_TABLE, ck,
-        int(segment), out)
-    return out, not_spd, restarts
+    return kf.federated_pass(prep.dt, prep.has_gnss, prep.gnss_e, prep.gnss_n, prep.gnss_var_e,
+                             prep.gnss_var_n, prep.gnss_ve, prep.gnss_vn, prep.theta, prep.dist,
+                             prep.t_m, prep.static, prep.x0, prep.P0, prep.psi0, prep.par,
+                             kf.kernel_flags(kind == "fafkf", flags), fuzzy.R_TABLE,
+                             fuzzy.W_TABLE, int(segment))
 
 
 def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
@@ -551,20 +533,22 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
     # RTS needs a Kalman posterior: covariance-weighted fusion (fkf, fafkf "shares")
     rts = kind == "fkf" or params["fafkf"]["weights"] == "shares"
     segment = int(params["fkf"]["smooth_segment_epochs"])
-    fwd = forward(kind, prep, smoothed and rts, segment)
-    out, used, rej, nis, beta, rfac, counters = fwd[:7]
-    smooth_not_spd = 0
+    out, used, rej, nis, beta, rfac, counters, xs, Ps, stats = forward(
+        kind, prep, smoothed and rts, segment)
+    smooth_not_spd, restarts = int(stats[0]), int(stats[1])
     smoothing = "none"
     if smoothed and rts:
-        out, smooth_not_spd, restarts = smooth_rts(kind, prep, fwd, segment)
+        if segment <= 0:                            # every epoch's x and P were stored
+            out, smooth_not_spd, restarts = kf.smooth_fused(xs, Ps, prep.dt, prep.static,
+                                                            prep.par)
         smoothing = "rts_fused"
     elif smoothed and prep.flags[kf.F_GNSS_ON] and n > 1:
-        out_b = forward(kind, prepare(reverse_epochs(epochs), params), False)[0][::-1].copy()
-        out_b[:, kf.O_VE] *= -1.0
-        out_b[:, kf.O_VN] *= -1.0
+        out_b = forward(kind, prepare(reverse_epochs(epochs), params), False)[0][:, ::-1].copy()
+        out_b[kf.O_VE] *= -1.0
+        out_b[kf.O_VN] *= -1.0
         out = combine_two_filter(out, out_b)
         smoothing = "forward_backward"
-    del fwd                                         # checkpoints (or the full-storage arrays)
+    del xs, Ps
     info = dict(prep.info)
     if smoothing == "rts_fused":
         info["smoother_restarts"] = int(restarts)
@@ -589,16 +573,16 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
     if kind == "fafkf":
         info["weights"] = params["fafkf"]["weights"]
         info["normalisation"] = params["fafkf"]["normalisation"]
-    extras = {"beta_gnss": beta[:, 0], "beta_gnss_vel": beta[:, 1]}
+    # rows of the kernels' (k, n) outputs: contiguous views, no copies
+    extras = {"beta_gnss": beta[0], "beta_gnss_vel": beta[1]}
     if kind == "fafkf":
-        extras.update({"r_factor_gnss_e": rfac[:, 0], "r_factor_gnss_n": rfac[:, 1],
-                       "r_factor_heading": rfac[:, 2], "r_factor_distance": rfac[:, 3]})
+        extras.update({"r_factor_gnss_e": rfac[0], "r_factor_gnss_n": rfac[1],
+                       "r_factor_heading": rfac[2], "r_factor_distance": rfac[3]})
     return FilterResult(
-        t_ns=epochs.t_ns, e=out[:, kf.O_E].copy(), n=out[:, kf.O_N].copy(),
-        v_e=out[:, kf.O_VE].copy(), v_n=out[:, kf.O_VN].copy(),
-        var_e=out[:, kf.O_VAR_E].copy(), var_n=out[:, kf.O_VAR_N].copy(),
-        cov_en=out[:, kf.O_COV_EN].copy(), gnss_used=used, gnss_rejected=rej, nis=nis,
-        static=prep.static.copy(), extras=extras, info=info)
+        t_ns=epochs.t_ns, e=out[kf.O_E], n=out[kf.O_N], v_e=out[kf.O_VE], v_n=out[kf.O_VN],
+        var_e=out[kf.O_VAR_E], var_n=out[kf.O_VAR_N], cov_en=out[kf.O_COV_EN],
+        gnss_used=used, gnss_rejected=rej, nis=nis, static=prep.static, extras=extras,
+        info=info)
 
 
 @register("fkf")

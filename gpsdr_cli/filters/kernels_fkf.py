@@ -1,10 +1,11 @@
 """Compiled kernels of the federated filters ``fkf`` and ``fafkf`` (seed 002, Tang et al.).
 
-One forward kernel per filter (:func:`fkf_kernel`, :func:`fafkf_kernel`, thin
-wrappers over one shared loop, :func:`_epochs`) and the backward RTS kernels
-(:func:`smooth_checkpointed`: O(segment) memory, re-running the forward loop
-per segment from a checkpoint of its state; :func:`smooth_fused`: every
-epoch's x and P stored), all over plain arrays: no Python object per epoch.
+One forward pass for both filters (:func:`federated_pass` over the epoch loop
+:func:`_epochs`, the filter chosen by :func:`kernel_flags`), which with
+smoothing also runs the backward RTS pass in O(segment) memory by re-running
+the loop per segment from a checkpoint of its state; :func:`smooth_fused` is
+the same smoother over every epoch's stored x and P.  All over plain arrays:
+no Python object per epoch.
 
 Conventions (:mod:`gpsdr_cli.conventions`): metres in the local ENU frame,
 seconds, radians; heading ``psi = atan2(v_e, v_n)`` clockwise from north.
@@ -964,49 +965,95 @@ def load_state(row: np.ndarray, vec: np.ndarray, mats: np.ndarray, aux: np.ndarr
 
 
 @njit(cache=True)
-def _federated(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray, gnss_n: np.ndarray,
-               gnss_var_e: np.ndarray, gnss_var_n: np.ndarray, gnss_ve: np.ndarray,
-               gnss_vn: np.ndarray, theta: np.ndarray,
-               dist: np.ndarray, t_m: np.ndarray, static: np.ndarray, x0: np.ndarray,
-               P0: np.ndarray, psi0: float, par: np.ndarray, flags: np.ndarray,
-               r_table: np.ndarray, w_table: np.ndarray, segment: int):
-    """The forward pass over all epochs; with ``flags[F_STORE]`` it also returns what the
-    smoother needs: a checkpoint of the whole state every ``segment`` epochs (``ck``, one
-    row per segment, for :func:`smooth_checkpointed`), or with ``segment <= 0`` the fused
-    x and packed P_g of every epoch (``xs``, ``Ps``, for :func:`smooth_fused`)."""
+def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
+                   gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
+                   gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray,
+                   dist: np.ndarray, t_m: np.ndarray, static: np.ndarray, x0: np.ndarray,
+                   P0: np.ndarray, psi0: float, par: np.ndarray, flags: np.ndarray,
+                   r_table: np.ndarray, w_table: np.ndarray, segment: int):
+    """The forward pass of fkf or fafkf (``flags`` from :func:`kernel_flags`) over all epochs.
+
+    Returns ``(out, gnss_used, gnss_rej, nis, beta, rfac, counters, xs, Ps,
+    smooth_stats)``; ``out`` (N_OUT, n) holds the track by rows ``O_*``,
+    ``beta`` (2, n) the GNSS filter's position and velocity weights, ``rfac``
+    (4, n) the R factors (fafkf; (4, 0) without adaptive R).
+
+    With ``flags[F_STORE]`` the pass is smoothed:
+
+    * ``segment > 0``: the forward pass keeps a checkpoint of its whole state
+      (:func:`save_state`) before every ``segment`` epochs; then, from the last
+      segment to the first, it re-runs the segment from its checkpoint -- the
+      same code on the same state, so the same floats -- storing the fused x
+      and packed P_g of those epochs only, and the backward RTS recursion walks
+      them (:func:`smooth_range`), its smoothed state carried from segment to
+      segment.  ``out`` then holds the smoothed track and ``smooth_stats`` =
+      (epochs whose smoothed P failed the SPD test, restarts).  Cost: one more
+      forward pass; memory: ``segment x 65`` floats instead of ``n x 65`` (a
+      one-hour drive at 100 Hz: 187 MB -> 2 MB at 4096), as the ekf/aekf
+      smoother does (:func:`gpsdr_cli.smoothing.rts_checkpointed`).
+    * ``segment <= 0``: ``xs`` (n, 10), ``Ps`` (n, 55) hold the fused x and
+      packed P_g of every epoch, for :func:`smooth_fused`; ``out`` is forward.
+
+    Why one function: numba compiles each jitted caller of :func:`_epochs`
+    with the whole loop inlined, so every extra caller is another compile of it
+    at a cold start; the two calls here pass the same argument types (no
+    literal constants) so that :func:`_epochs` itself compiles once.
+    """
     n = dt.shape[0]
     store = flags[F_STORE] != 0
+    adaptive = flags[F_ADAPT_R] != 0
     m_window = max(flags[F_WINDOW], 1)
-    out = np.zeros((n, N_OUT))
+    out = np.zeros((N_OUT, n))
     gnss_used = np.zeros(n, np.bool_)
     gnss_rej = np.zeros(n, np.bool_)
     nis_out = np.full(n, np.nan)
-    beta_out = np.full((n, 2), np.nan)              # GNSS weight: position, velocity
-    rfac_out = np.ones((n, 4))                      # R factors: gnss e, gnss n, heading, distance
+    beta_out = np.full((2, n), np.nan)              # GNSS weight: position, velocity
+    rfac_out = np.ones((4, n if adaptive else 0))   # R factors: gnss e, gnss n, heading, distance
     counters = np.zeros(N_COUNTERS, np.int64)
+    stats = np.zeros(2, np.int64)
     full = store and segment <= 0
     ns = n if full else 1
     xs = np.zeros((ns, NX))
     Ps = np.zeros((ns, NPACK))
-    n_ck = (n + segment - 1) // segment if store and not full else 0
+    checkpoints = store and segment > 0
+    seg = segment if checkpoints else max(n, 1)
+    n_ck = (n + seg - 1) // seg if checkpoints else 0
     ck = np.zeros((n_ck, checkpoint_length(m_window)))
     vec, mats, aux, ring, pc, sc = init_state(x0, P0, psi0, par, flags)
-    if n_ck == 0:
-        _epochs(0, n, dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn,
-                theta, dist, t_m, static, par, flags, r_table, w_table,
+    no_offset = np.int64(0)                         # typed int64, not a literal (see above)
+    for k0 in range(0, n, seg):
+        if checkpoints:
+            save_state(ck[k0 // seg], vec, mats, aux, ring, pc, sc)
+        _epochs(k0, min(k0 + seg, n), dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n,
+                gnss_ve, gnss_vn, theta, dist, t_m, static, par, flags, r_table, w_table,
                 vec, mats, aux, ring, pc, sc,
-                out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, 0,
+                out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, no_offset,
                 full, xs, Ps)
-    else:
-        for c in range(n_ck):
-            k0 = c * segment
-            save_state(ck[c], vec, mats, aux, ring, pc, sc)
-            _epochs(k0, min(k0 + segment, n), dt, has_gnss, gnss_e, gnss_n, gnss_var_e,
-                    gnss_var_n, gnss_ve, gnss_vn, theta, dist, t_m, static, par, flags,
-                    r_table, w_table, vec, mats, aux, ring, pc, sc,
-                    out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, 0,
-                    False, xs, Ps)
-    return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps, ck
+    if checkpoints:                                 # the backward pass, segment by segment
+        keep = np.bool_(True)
+        o_out = np.zeros((N_OUT, seg))              # the re-run's outputs: scratch
+        o_used = np.zeros(seg, np.bool_)
+        o_rej = np.zeros(seg, np.bool_)
+        o_nis = np.zeros(seg)
+        o_beta = np.zeros((2, seg))
+        o_rfac = np.ones((4, seg if adaptive else 0))
+        o_counters = np.zeros(N_COUNTERS, np.int64)
+        xs_seg = np.zeros((seg, NX))
+        Ps_seg = np.zeros((seg, NPACK))
+        x_sn = np.zeros(NX)
+        P_sn = np.zeros((NX, NX))
+        for c in range(n_ck - 1, -1, -1):
+            k0 = c * seg
+            k1 = min(k0 + seg, n)
+            load_state(ck[c], vec, mats, aux, ring, pc, sc)
+            _epochs(k0, k1, dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve,
+                    gnss_vn, theta, dist, t_m, static, par, flags, r_table, w_table,
+                    vec, mats, aux, ring, pc, sc,
+                    o_out, o_used, o_rej, o_nis, o_beta, o_rfac, o_counters, k0,
+                    keep, xs_seg, Ps_seg)
+            smooth_range(xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, par, x_sn, P_sn, out,
+                         stats)
+    return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps, stats
 
 
 @njit(cache=True)
@@ -1021,8 +1068,9 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
             beta_out: np.ndarray, rfac_out: np.ndarray, counters: np.ndarray, off: int,
             store: bool, xs: np.ndarray, Ps: np.ndarray) -> None:
     """Epochs k0 .. k1 - 1 from the state (``vec`` .. ``sc``, see :func:`init_state`),
-    which they advance in place.  Outputs go to row ``k - off`` of ``out`` ..
-    ``rfac_out``; with ``store``, x_g and packed P_g to row ``k - k0`` of ``xs``, ``Ps``."""
+    which they advance in place.  Outputs go to column ``k - off`` of ``out`` ..
+    ``rfac_out`` (the latter only with adaptive R); with ``store``, x_g and packed P_g to
+    row ``k - k0`` of ``xs``, ``Ps``."""
     mode_fr = flags[F_MODE_FR] != 0
     adaptive = flags[F_ADAPT_R] != 0
     fusion = flags[F_FUSION]
@@ -1275,13 +1323,13 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
             if g_fresh:
                 xg[:] = x1
                 Pg[:, :] = P1
-                beta_out[ko, 0] = 1.0
-                beta_out[ko, 1] = 1.0
+                beta_out[0, ko] = 1.0
+                beta_out[1, ko] = 1.0
             else:
                 xg[:] = x2
                 Pg[:, :] = P2
-                beta_out[ko, 0] = 0.0
-                beta_out[ko, 1] = 0.0
+                beta_out[0, ko] = 0.0
+                beta_out[1, ko] = 0.0
         elif both:
             if fusion == FUSE_COV or fusion == FUSE_SHARES:
                 if fusion == FUSE_SHARES:           # fuzzy reliability -> information share
@@ -1299,12 +1347,12 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                     fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
                                      A1, L1, B1, A2, L2, B2, L, Wk)
                 if fusion == FUSE_SHARES:
-                    beta_out[ko, 0] = bp
-                    beta_out[ko, 1] = bp
+                    beta_out[0, ko] = bp
+                    beta_out[1, ko] = bp
                 else:
-                    beta_out[ko, 0] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
+                    beta_out[0, ko] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
                                              + Pg[IN, IN] / max(P1[IN, IN], 1e-300))
-                    beta_out[ko, 1] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
+                    beta_out[1, ko] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
                                              + Pg[IVN, IVN] / max(P1[IVN, IVN], 1e-300))
                 for i in range(NX):
                     w[i] = bp
@@ -1337,8 +1385,8 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                     w[IQW] = 0.0
                     w[IQS] = 0.0
                 fuse_convex(x1, P1, x2, P2, w, xg, Pg)
-                beta_out[ko, 0] = bp
-                beta_out[ko, 1] = bv
+                beta_out[0, ko] = bp
+                beta_out[1, ko] = bv
             if shared:                              # Carlson 1990 fusion-reset, one share:
                 ci = min(max(w[0], 0.05), 0.95)     # x_i, P_i made at the next prediction
                 d1[:] = 1.0 / math.sqrt(ci)
@@ -1357,25 +1405,26 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
         elif gnss_on:
             xg[:] = x1
             Pg[:, :] = P1
-            beta_out[ko, 0] = 1.0
-            beta_out[ko, 1] = 1.0
+            beta_out[0, ko] = 1.0
+            beta_out[1, ko] = 1.0
         elif dr_on:
             xg[:] = x2
             Pg[:, :] = P2
-            beta_out[ko, 0] = 0.0
-            beta_out[ko, 1] = 0.0
+            beta_out[0, ko] = 0.0
+            beta_out[1, ko] = 0.0
 
         if check and ((gnss_on and not is_spd(P1)) or (dr_on and not is_spd(P2))
                       or not is_spd(Pg)):
             counters[C_NOT_SPD] += 1
-        out[ko, O_E] = xg[IE]
-        out[ko, O_N] = xg[IN]
-        out[ko, O_VE] = xg[IVE]
-        out[ko, O_VN] = xg[IVN]
-        out[ko, O_VAR_E] = Pg[IE, IE]
-        out[ko, O_VAR_N] = Pg[IN, IN]
-        out[ko, O_COV_EN] = Pg[IE, IN]
-        rfac_out[ko, :] = rfac
+        out[O_E, ko] = xg[IE]
+        out[O_N, ko] = xg[IN]
+        out[O_VE, ko] = xg[IVE]
+        out[O_VN, ko] = xg[IVN]
+        out[O_VAR_E, ko] = Pg[IE, IE]
+        out[O_VAR_N, ko] = Pg[IN, IN]
+        out[O_COV_EN, ko] = Pg[IE, IN]
+        if adaptive:
+            rfac_out[:, ko] = rfac
         if store:
             xs[kx - k0, :] = xg
             pack(Pg, Ps[kx - k0])
@@ -1406,24 +1455,6 @@ def kernel_flags(fafkf: bool, flags: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def fkf_kernel(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn, theta,
-               dist, t_m, static, x0, P0, psi0, par, flags, r_table, w_table, segment):
-    """Federated Kalman filter, covariance-weighted master fusion (flags[F_FUSION] = 0)."""
-    return _federated(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn,
-                      theta, dist, t_m, static, x0, P0, psi0, par, kernel_flags(False, flags),
-                      r_table, w_table, segment)
-
-
-@njit(cache=True)
-def fafkf_kernel(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn, theta,
-                 dist, t_m, static, x0, P0, psi0, par, flags, r_table, w_table, segment):
-    """Fuzzy adaptive federated Kalman filter (fuzzy R, fuzzy fusion weights)."""
-    return _federated(dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn,
-                      theta, dist, t_m, static, x0, P0, psi0, par, kernel_flags(True, flags),
-                      r_table, w_table, segment)
-
-
-@njit(cache=True)
 def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndarray,
                  par: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Fixed-interval RTS smoother over the fused sequence with the master's prediction,
@@ -1432,71 +1463,16 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
     The prior of epoch k+1 is recomputed from the fused posterior of k
     (``Phi(dt[k+1]) x_g``, ``Phi P_g Phi^T + Q``, Q unscaled): nothing but the
     fused x and packed P are stored per epoch.  Returns the smoothed outputs
-    (columns as the forward ``out``), the count of epochs whose smoothed P
+    (rows as the forward ``out``), the count of epochs whose smoothed P
     failed the SPD test and the count of restarts (see :func:`smooth_range`).
     """
     n = xs.shape[0]
-    out = np.zeros((n, N_OUT))
+    out = np.zeros((N_OUT, n))
     x_sn = np.zeros(NX)
     P_sn = np.zeros((NX, NX))
     stats = np.zeros(2, np.int64)
     smooth_range(xs, Ps, 0, n - 1, 0, n, dt, static, par, x_sn, P_sn, out, stats)
     return out, stats[0], stats[1]
-
-
-@njit(cache=True)
-def smooth_checkpointed(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
-                        gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
-                        gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray,
-                        dist: np.ndarray, t_m: np.ndarray, static: np.ndarray,
-                        par: np.ndarray, flags: np.ndarray, r_table: np.ndarray,
-                        w_table: np.ndarray, ck: np.ndarray, segment: int,
-                        out: np.ndarray) -> tuple[int, int]:
-    """:func:`smooth_fused` in O(segment) memory, writing the smoothed track into ``out``.
-
-    ``ck``: the forward pass's checkpoints (:func:`_federated` with
-    ``flags[F_STORE]`` and this ``segment``; ``flags`` as the pass ran,
-    :func:`kernel_flags`).  From the last segment to the first, the forward
-    pass is re-run over the segment from its checkpoint -- the same code on the
-    same state, so the same floats -- storing the fused x and packed P_g of its
-    epochs only, and the backward recursion walks them (:func:`smooth_range`),
-    its smoothed state carried from segment to segment.  Cost: one more
-    forward pass; memory: ``segment x 65`` floats instead of ``n x 65`` (a
-    one-hour drive at 100 Hz: 187 MB -> 2 MB at 4096).  As the ekf/aekf
-    smoother (:func:`gpsdr_cli.smoothing.rts_checkpointed`) does.
-    Returns (epochs whose smoothed P failed the SPD test, restarts).
-    """
-    n = dt.shape[0]
-    m_window = max(flags[F_WINDOW], 1)
-    vec = np.zeros((5, NX))
-    mats = np.zeros((3, NX, NX))
-    aux = np.zeros((3, 4))
-    ring = np.zeros((4, m_window))
-    pc = np.zeros((2, 4), np.int64)
-    sc = np.zeros(N_SCALARS)
-    seg = max(min(segment, n), 1)
-    o_out = np.zeros((seg, N_OUT))                  # the re-run's outputs: scratch
-    o_used = np.zeros(seg, np.bool_)
-    o_rej = np.zeros(seg, np.bool_)
-    o_nis = np.zeros(seg)
-    o_beta = np.zeros((seg, 2))
-    o_rfac = np.zeros((seg, 4))
-    o_counters = np.zeros(N_COUNTERS, np.int64)
-    xs = np.zeros((seg, NX))
-    Ps = np.zeros((seg, NPACK))
-    x_sn = np.zeros(NX)
-    P_sn = np.zeros((NX, NX))
-    stats = np.zeros(2, np.int64)
-    for c in range(ck.shape[0] - 1, -1, -1):
-        k0 = c * segment
-        k1 = min(k0 + segment, n)
-        load_state(ck[c], vec, mats, aux, ring, pc, sc)
-        _epochs(k0, k1, dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve,
-                gnss_vn, theta, dist, t_m, static, par, flags, r_table, w_table,
-                vec, mats, aux, ring, pc, sc,
-                o_out, o_used, o_rej, o_nis, o_beta, o_rfac, o_counters, k0, True, xs, Ps)
-        smooth_range(xs, Ps, k0, k1 - 1, k0, n, dt, static, par, x_sn, P_sn, out, stats)
-    return stats[0], stats[1]
 
 
 @njit(cache=True)
@@ -1508,7 +1484,7 @@ def smooth_range(xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int, k_lo: int,
 
     ``x_sn, P_sn`` enter as the smoothed estimate at k_hi + 1 (ignored when
     k_hi = n - 1: the smoothed estimate there is the filtered one) and leave as
-    the one at k_lo; ``out[k]`` receives it (columns as the forward ``out``);
+    the one at k_lo; ``out[:, k]`` receives it (rows as the forward ``out``);
     ``stats[0]`` counts epochs whose smoothed position block is not SPD,
     ``stats[1]`` the restarts of the guard below.
     """
@@ -1552,13 +1528,13 @@ def smooth_range(xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int, k_lo: int,
             else:
                 x_sn[:] = x_s
                 P_sn[:, :] = P_s
-        out[k, O_E] = x_sn[IE]
-        out[k, O_N] = x_sn[IN]
-        out[k, O_VE] = x_sn[IVE]
-        out[k, O_VN] = x_sn[IVN]
-        out[k, O_VAR_E] = P_sn[IE, IE]
-        out[k, O_VAR_N] = P_sn[IN, IN]
-        out[k, O_COV_EN] = P_sn[IE, IN]
+        out[O_E, k] = x_sn[IE]
+        out[O_N, k] = x_sn[IN]
+        out[O_VE, k] = x_sn[IVE]
+        out[O_VN, k] = x_sn[IVN]
+        out[O_VAR_E, k] = P_sn[IE, IE]
+        out[O_VAR_N, k] = P_sn[IN, IN]
+        out[O_COV_EN, k] = P_sn[IE, IN]
         if not (P_sn[IE, IE] > 0.0 and P_sn[IN, IN] > 0.0
                 and P_sn[IE, IN] ** 2 < P_sn[IE, IE] * P_sn[IN, IN]):
             stats[0] += 1

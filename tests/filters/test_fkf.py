@@ -143,7 +143,7 @@ def test_two_filter_combination_matches_reference(busy_drive) -> None:
          if k in TRACK_KEYS}
     ref = two_filter(f, b)
     def pack(d: dict) -> np.ndarray:
-        return np.column_stack([d[k] for k in TRACK_KEYS])
+        return np.vstack([d[k] for k in TRACK_KEYS])       # the kernels' layout: rows O_*
     got = fkf.combine_two_filter(pack(f), pack(b))
     assert np.allclose(got, pack(ref), rtol=1e-12, atol=1e-12)
 

@@ -59,22 +59,22 @@ def test_checkpointed_smoother_equals_full_storage(urban, name: str, sections: d
     assert float(np.max(np.hypot(full.e - fwd.e, full.n - fwd.n))) > 0.1
 
 
-def test_forward_pass_keeps_checkpoints_not_covariances(urban) -> None:
-    """With checkpoints the pass stores one state row per segment and no per-epoch x or P;
-    its forward track is the one of a pass that stores nothing."""
+def test_smoothed_pass_stores_no_per_epoch_covariance(urban) -> None:
+    """With checkpoints the pass returns no per-epoch x or P (they live one segment at a
+    time inside it), and its gnss_used/nis/weights are those of a pass that stores nothing."""
     params = _params(ODD_SEGMENT)
     prep = fkf.prepare(urban, params)
     n = len(urban)
-    stored = fkf.forward("fkf", prep, True, ODD_SEGMENT)
+    smoothed = fkf.forward("fkf", prep, True, ODD_SEGMENT)
     plain = fkf.forward("fkf", prep, False, ODD_SEGMENT)
-    xs, Ps, ck = stored[7], stored[8], stored[9]
-    assert xs.shape[0] == 1 and Ps.shape[0] == 1
-    assert ck.shape == (-(-n // ODD_SEGMENT), kf.checkpoint_length(int(prep.flags[kf.F_WINDOW])))
-    assert plain[9].shape[0] == 0
-    for a, b in zip(stored[:6], plain[:6], strict=True):
+    assert smoothed[7].shape[0] == 1 and smoothed[8].shape[0] == 1
+    assert smoothed[0].shape == plain[0].shape == (kf.N_OUT, n)
+    assert not np.array_equal(smoothed[0], plain[0])
+    for a, b in zip(smoothed[1:7], plain[1:7], strict=True):
         np.testing.assert_array_equal(a, b)
     full = fkf.forward("fkf", prep, True, 0)
     assert full[7].shape == (n, kf.NX) and full[8].shape == (n, kf.NPACK)
+    np.testing.assert_array_equal(full[0], plain[0])
 
 
 def _random_spd(rng: np.random.Generator, scale: np.ndarray) -> np.ndarray:
