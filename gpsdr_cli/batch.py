@@ -387,6 +387,26 @@ def warm_parent(opts: BatchOptions) -> None:
         pass
 
 
+def input_bytes(spec: DriveSpec) -> int:
+    """Total size of a drive's input files (bytes; 0 for one that cannot be read)."""
+    total = 0
+    for p in spec.inputs:
+        try:
+            total += os.stat(p).st_size
+        except OSError:
+            pass  # the worker reports the missing file
+    return total
+
+
+def largest_first(specs: list[DriveSpec]) -> list[DriveSpec]:
+    """The drives in the order a pool should start them: the longest (largest inputs) first.
+
+    Longest-processing-time-first scheduling: a long drive started last would
+    keep one worker busy while the others idle at the end of the batch.
+    """
+    return sorted(specs, key=input_bytes, reverse=True)
+
+
 def _flush_std_streams() -> None:
     # a forked worker flushes its copy of the parent's buffers when it exits: empty them first
     import sys
@@ -444,7 +464,7 @@ def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
     with ProcessPoolExecutor(max_workers=min(jobs, len(specs)),
                              mp_context=mp.get_context(method)) as pool:
         # with fork, the first submit forks every worker (before the pool's own thread starts)
-        futures = {pool.submit(work, s, opts): s for s in specs}
+        futures = {pool.submit(work, s, opts): s for s in largest_first(specs)}
         ready()
         for fut in as_completed(futures):
             try:

@@ -219,3 +219,17 @@ def test_fork_only_while_no_other_thread_runs(monkeypatch: pytest.MonkeyPatch) -
     # (earlier tests may leave threads behind, e.g. dask's: pretend this one is alone)
     monkeypatch.setattr(threading, "active_count", lambda: 1)
     assert start_method() == "fork"
+
+
+def test_pool_starts_the_largest_drives_first(tmp_path: Path) -> None:
+    from gpsdr_cli.batch import DriveSpec, largest_first
+
+    sizes = {"small": 10, "big": 3000, "middle": 500}
+    specs = []
+    for name, size in sizes.items():
+        (tmp_path / f"{name}.nmea").write_bytes(b"x" * size)
+        (tmp_path / f"{name}.csv").write_bytes(b"y" * size)
+        specs.append(DriveSpec(name=name, gps=str(tmp_path / f"{name}.nmea"),
+                               gyro=str(tmp_path / f"{name}.csv")))
+    specs.append(DriveSpec(name="missing", gps=str(tmp_path / "nope.nmea")))
+    assert [s.name for s in largest_first(specs)] == ["big", "middle", "small", "missing"]
