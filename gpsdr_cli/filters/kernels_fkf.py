@@ -274,6 +274,17 @@ def despike5(values: np.ndarray, threshold: float, out: np.ndarray) -> int:
 
 
 @njit(cache=True)
+def copy_state(x: np.ndarray, P: np.ndarray, x_to: np.ndarray, P_to: np.ndarray) -> None:
+    """x_to, P_to <- x, P element by element.  Not ``x_to[:] = x``: numba compiles a slice
+    assignment with its shape-mismatch error path (string formatting), which took ~5 s of
+    the kernels' cold compile."""
+    for i in range(NX):
+        x_to[i] = x[i]
+        for j in range(NX):
+            P_to[i, j] = P[i, j]
+
+
+@njit(cache=True)
 def pack(P: np.ndarray, out: np.ndarray) -> None:
     """Upper triangle of P, row by row, into ``out`` (length n(n+1)/2)."""
     m = 0
@@ -1321,13 +1332,11 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
             # its share of the common prior.
             counters[C_STALE] += 1
             if g_fresh:
-                xg[:] = x1
-                Pg[:, :] = P1
+                copy_state(x1, P1, xg, Pg)
                 beta_out[0, ko] = 1.0
                 beta_out[1, ko] = 1.0
             else:
-                xg[:] = x2
-                Pg[:, :] = P2
+                copy_state(x2, P2, xg, Pg)
                 beta_out[0, ko] = 0.0
                 beta_out[1, ko] = 0.0
         elif both:
@@ -1389,8 +1398,9 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                 beta_out[1, ko] = bv
             if shared:                              # Carlson 1990 fusion-reset, one share:
                 ci = min(max(w[0], 0.05), 0.95)     # x_i, P_i made at the next prediction
-                d1[:] = 1.0 / math.sqrt(ci)
-                d2[:] = 1.0 / math.sqrt(1.0 - ci)
+                for i in range(NX):
+                    d1[i] = 1.0 / math.sqrt(ci)
+                    d2[i] = 1.0 / math.sqrt(1.0 - ci)
             elif mode_fr:                           # Carlson 1990 fusion-reset
                 for i in range(NX):
                     ci = min(max(w[i], 0.05), 0.95)
@@ -1403,13 +1413,11 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                         P1[i, j] = Pg[i, j] * d1[i] * d1[j]
                         P2[i, j] = Pg[i, j] * d2[i] * d2[j]
         elif gnss_on:
-            xg[:] = x1
-            Pg[:, :] = P1
+            copy_state(x1, P1, xg, Pg)
             beta_out[0, ko] = 1.0
             beta_out[1, ko] = 1.0
         elif dr_on:
-            xg[:] = x2
-            Pg[:, :] = P2
+            copy_state(x2, P2, xg, Pg)
             beta_out[0, ko] = 0.0
             beta_out[1, ko] = 0.0
 
@@ -1424,9 +1432,11 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
         out[O_VAR_N, ko] = Pg[IN, IN]
         out[O_COV_EN, ko] = Pg[IE, IN]
         if adaptive:
-            rfac_out[:, ko] = rfac
+            for j in range(4):
+                rfac_out[j, ko] = rfac[j]
         if store:
-            xs[kx - k0, :] = xg
+            for i in range(NX):
+                xs[kx - k0, i] = xg[i]
             pack(Pg, Ps[kx - k0])
     sc[S_T_NOW] = t_now
     sc[S_T_LAST_ACC] = t_last_acc
@@ -1500,13 +1510,14 @@ def smooth_range(xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int, k_lo: int,
     dx = np.zeros(NX)
     for k in range(k_hi, k_lo - 1, -1):
         if k == n - 1:
-            x_sn[:] = xs[k - off]
+            for i in range(NX):
+                x_sn[i] = xs[k - off, i]
             unpack(Ps[k - off], P_sn)
         else:
-            x_post[:] = xs[k - off]
+            for i in range(NX):
+                x_post[i] = xs[k - off, i]
             unpack(Ps[k - off], P_post)
-            x_prior[:] = x_post
-            P_prior[:, :] = P_post
+            copy_state(x_post, P_post, x_prior, P_prior)
             predict(x_prior, P_prior, dt[k + 1], static[k + 1], par, ones)
             rts_step_fused(x_post, P_post, x_prior, P_prior, dt[k + 1], static[k + 1],
                            eps_decay(x_post, dt[k + 1], par), x_sn, P_sn, x_s, P_s, wL, wB,
@@ -1522,12 +1533,10 @@ def smooth_range(xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int, k_lo: int,
             dn = x_s[IN] - x_post[IN]
             nees = (c * de * de - 2.0 * b * de * dn + a * dn * dn) / (a * c - b * b)
             if nees > SMOOTH_RESTART_NEES or not math.isfinite(nees):
-                x_sn[:] = x_post
-                P_sn[:, :] = P_post
+                copy_state(x_post, P_post, x_sn, P_sn)
                 stats[1] += 1
             else:
-                x_sn[:] = x_s
-                P_sn[:, :] = P_s
+                copy_state(x_s, P_s, x_sn, P_sn)
         out[O_E, k] = x_sn[IE]
         out[O_N, k] = x_sn[IN]
         out[O_VE, k] = x_sn[IVE]
