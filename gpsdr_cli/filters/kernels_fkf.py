@@ -1094,6 +1094,9 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
     shared = mode_fr and both and fusion != FUSE_BLOCK
     cov_fusion = shared and (fusion == FUSE_COV or fusion == FUSE_SHARES)
     central = False                                 # set at each epoch before its use
+    # integer arguments of callees (components, blocks, state indices) as np.int64(...),
+    # not literals: numba compiles a jitted callee once per literal value it is passed
+    # (adapt_r four times, block_pe three ...), ~0.5 s each at a cold start
     ones = np.ones(NX)
 
     x1 = vec[V_X1]
@@ -1196,10 +1199,10 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                 s11 = P1[IN, IN] + 2.0 * P1[IN, IEPS_N] + P1[IEPS_N, IEPS_N]
                 s01 = P1[IE, IN] + P1[IE, IEPS_N] + P1[IEPS_E, IN] + P1[IEPS_E, IEPS_N]
                 if adaptive:
-                    if adapt_r(0, ye * ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
+                    if adapt_r(np.int64(0), ye * ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
                                par, r_table, rfac, u_last, rsum):
                         counters[C_R_ADAPT] += 1
-                    if adapt_r(1, yn * yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
+                    if adapt_r(np.int64(1), yn * yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
                                par, r_table, rfac, u_last, rsum):
                         counters[C_R_ADAPT] += 1
                 re = rfac[0] * gnss_var_e[kx]
@@ -1232,9 +1235,9 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                     if par[K_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
                                                       or math.isnan(gnss_vn[kx])):
                         # receiver (Doppler) velocity with the accepted fix (our choice)
-                        local_and_central_unit(x1, P1, xg, Pg, central, IVE,
+                        local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVE),
                                                gnss_ve[kx] - x1[IVE], par[K_GVEL_VAR], s, kk)
-                        local_and_central_unit(x1, P1, xg, Pg, central, IVN,
+                        local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVN),
                                                gnss_vn[kx] - x1[IVN], par[K_GVEL_VAR], s, kk)
                         counters[C_GVEL] += 1
                     gnss_used[ko] = True
@@ -1274,7 +1277,7 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                     if do_head:
                         pred = heading_row(x2, h)
                         y = wrap_pi(theta[kx] - pred)
-                        if adapt_r(2, y * y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
+                        if adapt_r(np.int64(2), y * y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
                                    par, r_table, rfac, u_last, rsum):
                             counters[C_R_ADAPT] += 1
                     if do_dist:
@@ -1282,7 +1285,7 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                         y_dist = dist[kx] - pred
                         hph_dist = hph(P2, h)
                         y = y_dist
-                        if adapt_r(3, y * y, hph_dist + rfac[3] * r_dist, ring, pos, cnt,
+                        if adapt_r(np.int64(3), y * y, hph_dist + rfac[3] * r_dist, ring, pos, cnt,
                                    par, r_table, rfac, u_last, rsum):
                             counters[C_R_ADAPT] += 1
                 if do_head:
@@ -1369,12 +1372,12 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
                 de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
                                             u_last[2] ** 2 + u_last[3] ** 2, log_scale)
                 if fusion == FUSE_BLOCK:
-                    bp = fuzzy_beta(block_pe(P1, d1, 1), block_pe(P2, d2, 1),
+                    bp = fuzzy_beta(block_pe(P1, d1, np.int64(1)), block_pe(P2, d2, np.int64(1)),
                                     de1n, de2n, log_scale, w_table)
-                    bv = fuzzy_beta(block_pe(P1, d1, 2), block_pe(P2, d2, 2),
+                    bv = fuzzy_beta(block_pe(P1, d1, np.int64(2)), block_pe(P2, d2, np.int64(2)),
                                     de1n, de2n, log_scale, w_table)
                 else:
-                    bp = fuzzy_beta(block_pe(P1, d1, 0), block_pe(P2, d2, 0),
+                    bp = fuzzy_beta(block_pe(P1, d1, np.int64(0)), block_pe(P2, d2, np.int64(0)),
                                     de1n, de2n, log_scale, w_table)
                     bv = bp
                 w[IE] = bp
