@@ -452,33 +452,62 @@ def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
         for spec in specs:
             done(work(spec, opts))
         return rows
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
-
     method = method or start_method()
     if method == "fork":
         warm_parent(opts)
-        _flush_std_streams()
-    broken: list[DriveSpec] = []
-    with ProcessPoolExecutor(max_workers=min(jobs, len(specs)),
-                             mp_context=mp.get_context(method)) as pool:
-        # with fork, the first submit forks every worker (before the pool's own thread starts)
-        futures = {pool.submit(work, s, opts): s for s in largest_first(specs)}
-        ready()
-        for fut in as_completed(futures):
-            try:
-                row = fut.result()
-            except BrokenProcessPool:
-                broken.append(futures[fut])
-                continue
-            done(row)
-    # A worker that dies (segfault, out-of-memory kill) takes the whole pool down and every
-    # drive in flight with it: rerun each of those alone, so that only the culprit fails.
-    # (fork again only if no thread has started meanwhile, e.g. the caller's progress display)
-    for spec in broken:
-        done(_run_alone(work, spec, opts, start_method()))
+    queue = largest_first(specs)
+    first = True
+    while queue:
+        suspects = _run_pool(work, queue, opts, jobs, method, ready if first else None, done)
+        first = False
+        # A worker that dies (segfault, out-of-memory kill) takes the whole pool down with
+        # every drive in flight: rerun each of those alone, so that only the culprit fails,
+        # then go on with a new pool.  (fork again only if no thread has started meanwhile,
+        # e.g. the caller's progress display; else a cold forkserver pool)
+        for spec in suspects:
+            done(_run_alone(work, spec, opts, start_method()))
+        method = start_method()
     return rows
+
+
+def _run_pool(work: Worker, queue: list[DriveSpec], opts: BatchOptions, jobs: int, method: str,
+              ready: Callable[[], None] | None, done: OnDone) -> list[DriveSpec]:
+    """Run drives from the front of ``queue`` in one pool until it is empty or the pool breaks.
+
+    At most ``jobs + 1`` drives are handed to the pool at a time (one waiting, so that
+    no worker idles between two drives): when a worker dies, only those are lost.
+    Returns the drives that were in the pool when it broke (none if it did not).
+    """
+    import multiprocessing as mp
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    if method == "fork":
+        _flush_std_streams()
+    lost: list[DriveSpec] = []
+    with ProcessPoolExecutor(max_workers=min(jobs, len(queue)),
+                             mp_context=mp.get_context(method)) as pool:
+        running: dict[Any, DriveSpec] = {}
+
+        def fill() -> None:
+            while queue and len(running) <= jobs:
+                spec = queue.pop(0)
+                running[pool.submit(work, spec, opts)] = spec
+
+        fill()  # with fork, the first submit forks every worker (before the pool's thread starts)
+        if ready:
+            ready()
+        while running:
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                spec = running.pop(fut)
+                try:
+                    done(fut.result())
+                except BrokenProcessPool:
+                    lost.append(spec)
+            if not lost:
+                fill()
+    return lost
 
 
 def _run_alone(work: Worker, spec: DriveSpec, opts: BatchOptions, method: str) -> dict[str, Any]:

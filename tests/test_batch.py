@@ -92,7 +92,8 @@ def test_batch_cli_report_resume_and_force(gpsdr, logs: Path, tmp_path: Path) ->
     # a newer input, other parameters, or --force: processed again
     future = time.time() + 5
     os.utime(logs / "plain" / "yaw.csv", (future, future))
-    third = gpsdr(["batch", logs, "-o", out, "--jobs", "1", "--filter", "ekf"])
+    # (two drives to redo: a pool, forked after this process read the up-to-date drive's schema)
+    third = gpsdr(["batch", logs, "-o", out, "--jobs", "2", "--filter", "ekf"])
     report = pd.read_parquet(out / "batch_report.parquet").set_index("drive")
     assert report.loc["plain", "status"] == "ok"
     assert report.loc["2018__good", "status"] == "up to date"
@@ -176,6 +177,39 @@ def test_a_crashing_worker_fails_only_its_drive(logs: Path, tmp_path: Path, meth
                                                        "plain": "ok"}
     assert "worker process died" in by["broken"]["error"]
     assert order[0] == "ready" and sorted(order[1:]) == ["2018__good", "broken", "plain"]
+
+
+def crash_on_first(spec, opts):  # module-level: the pool imports it
+    from gpsdr_cli.batch import _row
+
+    time.sleep(0.3)
+    if spec.name == "d0":
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _row(spec, "ok", f"pid={os.getpid()}")
+
+
+@pytest.mark.parametrize("method", available("fork", "forkserver"))
+def test_after_a_crash_the_rest_of_the_batch_runs_in_a_new_pool(tmp_path: Path,
+                                                                method: str) -> None:
+    """Only the drives in flight are rerun alone; the others go on sharing worker processes."""
+    from gpsdr_cli.batch import DriveSpec
+
+    specs = []
+    for i in range(10):  # d0 is the largest: the pool starts it first
+        (tmp_path / f"d{i}.nmea").write_bytes(b"x" * (1000 - 10 * i))
+        specs.append(DriveSpec(name=f"d{i}", gps=str(tmp_path / f"d{i}.nmea")))
+    rows = run_local(specs, BatchOptions(out_dir=str(tmp_path / "o"), params=config.defaults()),
+                     jobs=2, worker=crash_on_first, method=method)
+    by = {r["drive"]: r for r in rows}
+    assert sorted(by) == [f"d{i}" for i in range(10)]
+    assert by["d0"]["status"] == "failed" and "worker process died" in by["d0"]["error"]
+    ok = [r for r in rows if r["status"] == "ok"]
+    assert len(ok) == 9
+    # the broken pool held at most jobs + 1 = 3 drives besides those it finished (one worker
+    # survived until the crash): those are rerun alone, one process each; the others share
+    # the 2 workers of the next pool.  Rerunning every unfinished drive alone would give 9.
+    pids = {r["error"] for r in ok}
+    assert len(pids) <= 1 + 2 + 2, [(r["drive"], r["error"][:9]) for r in rows]
 
 
 def inherited_state(spec, opts):  # what a worker holds before it touches its drive
