@@ -15,6 +15,15 @@ every worker needs gpsdr installed and the input and output paths visible
 (a shared filesystem).  One failing drive never stops the batch: its row in
 the report says why.
 
+The local pool forks its workers from a warmed parent (imports done, filter
+kernels loaded or compiled once: :func:`warm_parent`) while the parent runs no
+other thread, so a worker starts on its first drive at once instead of paying
+~1 s of CPU (4+ s with a cold numba cache) to import and load the same things;
+with another thread alive (a progress bar already shown, a dask client) it
+falls back to forkserver.  Drives go in largest first, at most ``jobs + 1`` at
+a time, so a worker that dies loses only those: they are rerun alone (only the
+culprit fails) and the rest continues in a new pool.
+
 Resumable: a drive whose outputs exist, are newer than all its inputs and were
 made with the same parameters is skipped unless ``force``.
 """
