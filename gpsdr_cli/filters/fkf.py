@@ -44,7 +44,8 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
 Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
 
 * ``fkf``: the *fused* sequence is smoothed by a fixed-interval RTS pass
-  (:func:`~gpsdr_cli.filters.linalg.rts_step`) with the master's own
+  (:func:`~gpsdr_cli.filters.linalg.rts_step`, written out for this Phi in
+  :func:`~.kernels_fkf.rts_step_fused`: the same floats) with the master's own
   prediction ``Phi x_g``, ``Phi P_g Phi^T + Q``, Phi and Q recomputed from
   ``dt``.  It needs the fused x and P_g of every epoch; the forward pass keeps
   instead a checkpoint of its whole state every ``[fkf] smooth_segment_epochs``
@@ -52,8 +53,8 @@ Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
   (the same floats) and smooths it (:func:`~.kernels_fkf.federated_pass`):
   65 floats x 4096 epochs in memory instead of x every epoch (a one-hour drive
   at 100 Hz: 187 MB, which took ``gpsdr fuse --smooth`` to 630 MB peak RSS),
-  for one more forward pass.  In FR mode the covariance-weighted fused sequence is the
-  centralised filter's (up to the EKF linearisation), so this is the usual RTS
+  for one more forward pass.  In FR mode the covariance-weighted fused
+  sequence is the centralised filter's (up to the EKF linearisation), so this is the usual RTS
   smoother; in NR mode it is an approximation.  Where the fused sequence is
   not a Kalman posterior (a stale local filter dropped, a heading re-aligned,
   an unmodelled gyro bias) RTS can run away; a guard restarts the backward
@@ -471,7 +472,8 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
 
 
 def combine_two_filter(fwd: np.ndarray, bwd: np.ndarray) -> np.ndarray:
-    """Forward and backward tracks (kernel ``out`` layout: rows ``O_*``) fused by their position covariances.
+    """Forward and backward tracks (kernel ``out`` layout: rows ``O_*``) fused by their
+    position covariances.
 
     Position: ``P_s = (P_f^-1 + P_b^-1)^-1``, ``x_s = P_s (P_f^-1 x_f + P_b^-1 x_b)``
     with the 2x2 blocks (closed-form inverses); velocity: the same weights
