@@ -30,9 +30,13 @@ Every figure is printed as the range over ``--repeat`` pairs.  The host is
 shared: before each pair the script waits (``--quiet-wait``) for idle CPUs,
 and it measures how much CPU other programs took during each run (the
 machine's busy time from /proc/stat minus this process tree's own CPU time).
-A pair during which others took more than ``--disturbed`` of the capacity is
-rejected and run again (at most ``--tries`` pairs); the table says how many
-were rejected and how disturbed the kept ones were.
+A pair from which others took more than ``--disturbed`` of the capacity (their
+CPU time beyond what the runs left idle) is rejected and run again (at most ``--tries`` pairs); the table says how many
+were rejected and how disturbed the kept ones were.  On a host that stays
+busy, giving the benchmark its own autogroup with a higher CPU weight keeps
+the others mostly off its cores (Linux, as root):
+
+    setsid sh -c 'echo -15 > /proc/$$/autogroup; exec python benchmarks/batch.py'
 """
 
 from __future__ import annotations
@@ -98,10 +102,11 @@ def reap_orphans() -> None:
 
 def timed(cmds: list[list[str]], parallel: bool) -> tuple[float, float]:
     """Wall seconds to run ``cmds`` one after the other, or all started together, and the share
-    of the machine's CPU capacity that other programs used meanwhile (0 = undisturbed).
+    of the machine's CPU capacity that other programs took from them (0 = undisturbed).
 
     Others' CPU = the machine's busy time minus this process tree's CPU time (every
-    descendant is reaped here: this process is their subreaper).
+    descendant is reaped here: this process is their subreaper); taken from the runs = the
+    part of it beyond the capacity the runs left idle.
     """
     tick = os.sysconf("SC_CLK_TCK")
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -123,8 +128,11 @@ def timed(cmds: list[list[str]], parallel: bool) -> tuple[float, float]:
     b1, _ = cpu_jiffies()
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     own = (ru1.ru_utime + ru1.ru_stime) - (ru0.ru_utime + ru0.ru_stime)
+    capacity = wall * (os.cpu_count() or 1)
     others = max((b1 - b0) / tick - own, 0.0)
-    return wall, others / (wall * (os.cpu_count() or 1))
+    # what others took beyond the CPU time this run left idle (a run of one process leaves
+    # a core to the rest of the machine: others using it there take nothing from this run)
+    return wall, max(others - max(capacity - own, 0.0), 0.0) / capacity
 
 
 def per_drive(out: Path) -> tuple[float, float, float]:
@@ -234,7 +242,8 @@ def main() -> None:
                     fig["overn"] = par - args.drives * fig["medn"] / n
                 got.append((max(d1, dn), fig))
                 print(f"{key} try {t + 1}: {one:.2f} s vs {par:.2f} s = {one / par:.2f}x, others "
-                      f"used {100 * max(d1, dn):.0f} % of the CPUs (load {load:.2f})", flush=True)
+                      f"took {100 * d1:.0f} % / {100 * dn:.0f} % of the CPUs (load {load:.2f})",
+                      flush=True)
             clean = sorted(got, key=lambda g: g[0])[:args.repeat]
             rejected[key] = (len(got) - len(clean), max(d for d, _ in clean))
             for _, fig in clean:
