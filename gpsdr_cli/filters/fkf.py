@@ -471,6 +471,10 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
                   gap_s=epochs.gap_s)
 
 
+#: epochs per block of :func:`combine_two_filter` (bounds its ~20 temporaries to ~10 MB)
+COMBINE_BLOCK = 65536
+
+
 def combine_two_filter(fwd: np.ndarray, bwd: np.ndarray) -> np.ndarray:
     """Forward and backward tracks (kernel ``out`` layout: rows ``O_*``) fused by their
     position covariances.
@@ -480,8 +484,18 @@ def combine_two_filter(fwd: np.ndarray, bwd: np.ndarray) -> np.ndarray:
     reduced to a scalar, ``w_f = tr P_b / (tr P_f + tr P_b)``.  Both passes
     use the measurement of the epoch itself, so P_s is optimistic by up to a
     factor 2 where the passes are equally good (the Fraser-Potter form would
-    exclude it from one pass).
+    exclude it from one pass).  Elementwise, in blocks of ``COMBINE_BLOCK``
+    epochs: the whole-drive form's temporaries took ~50 MB on a one-hour drive.
     """
+    out = np.empty(fwd.shape)
+    for lo in range(0, fwd.shape[1], COMBINE_BLOCK):
+        sl = slice(lo, lo + COMBINE_BLOCK)
+        _combine_block(fwd[:, sl], bwd[:, sl], out[:, sl])
+    return out
+
+
+def _combine_block(fwd: np.ndarray, bwd: np.ndarray, out: np.ndarray) -> None:
+    """:func:`combine_two_filter` over one block of epochs, into ``out``."""
     def info(o: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         a, b, c = o[kf.O_VAR_E], o[kf.O_COV_EN], o[kf.O_VAR_N]
         det = a * c - b * b
@@ -494,7 +508,6 @@ def combine_two_filter(fwd: np.ndarray, bwd: np.ndarray) -> np.ndarray:
     pa, pb, pc = ic / det, -ib / det, ia / det
     ye = fa * fwd[kf.O_E] + fb * fwd[kf.O_N] + ba * bwd[kf.O_E] + bb * bwd[kf.O_N]
     yn = fb * fwd[kf.O_E] + fc * fwd[kf.O_N] + bb * bwd[kf.O_E] + bc * bwd[kf.O_N]
-    out = np.empty_like(fwd)
     out[kf.O_E] = pa * ye + pb * yn
     out[kf.O_N] = pb * ye + pc * yn
     tf = fwd[kf.O_VAR_E] + fwd[kf.O_VAR_N]
@@ -505,7 +518,6 @@ def combine_two_filter(fwd: np.ndarray, bwd: np.ndarray) -> np.ndarray:
     out[kf.O_VAR_E] = pa
     out[kf.O_COV_EN] = pb
     out[kf.O_VAR_N] = pc
-    return out
 
 
 def forward(kind: str, prep: Prepared, store: bool, segment: int = 0) -> tuple:
@@ -544,14 +556,16 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
             out, smooth_not_spd, restarts = kf.smooth_fused(xs, Ps, prep.dt, prep.static,
                                                             prep.par)
         smoothing = "rts_fused"
-    elif smoothed and prep.flags[kf.F_GNSS_ON] and n > 1:
-        out_b = forward(kind, prepare(reverse_epochs(epochs), params), False)[0][:, ::-1].copy()
-        out_b[kf.O_VE] *= -1.0
+    del xs, Ps
+    static, info, gnss_on = prep.static, dict(prep.info), bool(prep.flags[kf.F_GNSS_ON])
+    del prep                                        # the inputs: not needed from here on
+    if smoothed and not rts and gnss_on and n > 1:
+        out_b = forward(kind, prepare(reverse_epochs(epochs), params), False)[0][:, ::-1]
+        out_b[kf.O_VE] *= -1.0                      # a reversed view: flipped back, no copy
         out_b[kf.O_VN] *= -1.0
         out = combine_two_filter(out, out_b)
+        del out_b
         smoothing = "forward_backward"
-    del xs, Ps
-    info = dict(prep.info)
     if smoothing == "rts_fused":
         info["smoother_restarts"] = int(restarts)
     info.update({
@@ -583,7 +597,7 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
     return FilterResult(
         t_ns=epochs.t_ns, e=out[kf.O_E], n=out[kf.O_N], v_e=out[kf.O_VE], v_n=out[kf.O_VN],
         var_e=out[kf.O_VAR_E], var_n=out[kf.O_VAR_N], cov_en=out[kf.O_COV_EN],
-        gnss_used=used, gnss_rejected=rej, nis=nis, static=prep.static, extras=extras,
+        gnss_used=used, gnss_rejected=rej, nis=nis, static=static, extras=extras,
         info=info)
 
 
