@@ -112,3 +112,22 @@ def test_fused_rts_step_is_the_generic_step_bit_for_bit(T: float, static: bool) 
         # and it is the RTS step: C = P Phi^T P_prior^-1 (to rounding, 1e-9 relative)
         C = np.linalg.solve(P_prior, Phi @ P_post).T
         np.testing.assert_allclose(x_f, x_post + C @ (x_sn - x_prior), rtol=1e-9, atol=1e-9)
+
+
+def test_two_filter_combination_is_blockwise_exact(monkeypatch) -> None:
+    """combine_two_filter in blocks (bounded temporaries) = in one piece, float for float,
+    with a block length that does not divide the drive."""
+    rng = np.random.default_rng(3)
+    n = 1000
+
+    def track() -> np.ndarray:
+        t = rng.normal(size=(kf.N_OUT, n))
+        t[kf.O_VAR_E] = 1.0 + rng.random(n)
+        t[kf.O_VAR_N] = 1.0 + rng.random(n)
+        t[kf.O_COV_EN] = 0.5 * rng.uniform(-1.0, 1.0, n)
+        return t
+
+    fwd, bwd = track(), track()[:, ::-1]             # the backward pass arrives reversed
+    whole = fkf.combine_two_filter(fwd, np.ascontiguousarray(bwd))
+    monkeypatch.setattr(fkf, "COMBINE_BLOCK", 37)
+    np.testing.assert_array_equal(fkf.combine_two_filter(fwd, bwd), whole)
