@@ -30,6 +30,18 @@ mode, accepts a fix above the gate with R scaled by NIS/gate (separate count
 ``info["gnss_inflated"]``; ``gnss_rejected`` counts hard rejections only);
 a drive without any GNSS fix starts the drift at ``gyro.bias_init_sd_dr_radps``.
 
+GNSS error states (``aekf.gnss_err_states``, issue #4, ekf and aekf alike): the fix
+error is white noise (the receiver's sigma, R) plus a first-order Gauss-Markov bias per
+axis (multipath: ``gnss_err_sd_m``, correlation time ``1/tau = 1/gnss_err_tau_s +
+speed/gnss_err_dist_m``), estimated as two more states (kernels_aekf GE_*; exact
+10-state Kalman filter and smoother).  Measured on the urban simulator (seeds 1-3): a
+white-noise model fed that error converged within seconds to a 1 m sigma with a 5-6 m
+error (mean e^2/sigma^2 = 12-45) and then held the offset for minutes; with the states
+aekf 3.35 -> 2.20 m forward, 2.07 -> 1.10 m smoothed, NEES 3.  The bias is estimated only
+while the velocity is known apart from the fixes (receiver velocity, or a standstill),
+else it is a consider state; an estimate outside its stationary gate for
+``gnss.gate_reset_s`` while moving goes into the position (the bias gate).
+
 Initialisation (our choice, documented in :func:`initial_state`): first usable
 GNSS fix; velocity from the receiver's speed/course, else from the next fix,
 else unknown (zero with a large variance, odometer row deferred until the
@@ -300,6 +312,9 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.P_SCALE_VAR] = gy["scale_sd"] ** 2
     prm[kn.P_GVEL_VAR] = a["gnss_velocity_sd_mps"] ** 2 if a["gnss_velocity"] else 0.0
     prm[kn.P_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
+    prm[kn.P_GE_VAR] = a["gnss_err_sd_m"] ** 2
+    prm[kn.P_GE_RATE] = 1.0 / a["gnss_err_tau_s"]
+    prm[kn.P_GE_DIST_RATE] = 1.0 / a["gnss_err_dist_m"] if a["gnss_err_dist_m"] > 0.0 else 0.0
     flg = np.zeros(kn.N_FLG, np.int64)
     flg[kn.F_ADAPT_Q] = int(adaptive)
     flg[kn.F_STANDSTILL] = int(st["enabled"])
@@ -309,6 +324,7 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     flg[kn.F_SAGE_HUSA] = int(ad["sage_husa"])
     flg[kn.F_CHECK_SPD] = int(a["check_spd"])
     flg[kn.F_STORE] = int(store)
+    flg[kn.F_GE] = int(a["gnss_err_states"])
     modes = {"never": 0, "outage": 1, "always": 2}
     if a["drift_consider"] not in modes:
         raise ConfigError(f"aekf.drift_consider = {a['drift_consider']!r}: expected one of "
@@ -360,6 +376,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     st[kn.S_VPSI] = initial_heading_var(x0, P0, heading_known, params)
     st[kn.S_WH_T] = -math.inf  # no previous innovation yet
     st[kn.S_WH_T2] = -math.inf
+    st[kn.S_B_SINCE] = -1.0  # the bias gate's timer: not running
     f64 = np.float64
     x_out = np.empty((N_STATES, n))  # rows: contiguous track columns, no copies
     pcov = np.empty((3, n))
@@ -370,7 +387,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     static = np.zeros(n, bool)
     hold = np.zeros(n, bool)
     seg = min(SEGMENT_EPOCHS, max(n, 1))
-    P_seg = np.empty((seg if smooth else 0, kn.N_PACKED))
+    P_seg = np.empty((seg if smooth else 0, kn.N_PACKED + kn.N_GE_PACKED))
     prior_store = np.empty((n if smooth else 0, kn.N_PRIOR))
     info_v = np.zeros(kn.N_INFO)
     info_v[kn.I_MIN_DIAG] = math.inf
@@ -386,22 +403,26 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
 
     opts = kn.kernel_options(flg)
     wk = np.zeros((5, N_STATES))
+    b_out = np.zeros((2, n))  # GNSS error states (aekf.gnss_err_states), zero when off
+    ge = initial_gnss_err(params)
+    gw = np.zeros((kn.GW_ROWS, N_STATES))  # its work rows
 
     def run_segment(k0: int, k1: int, x: np.ndarray, P: np.ndarray, s: np.ndarray,
-                    P_buf: np.ndarray, counters: np.ndarray | None = None) -> None:
+                    g: np.ndarray, P_buf: np.ndarray, counters: np.ndarray | None = None) -> None:
         kn.cs_filter_kernel(*inputs, x, P, s, k0, k1, k0, prm, flg, x_out, pcov, gnss_used,
                             gnss_rej, nis, static, hold, sd, P_buf, prior_store,
-                            np.zeros(kn.N_INFO) if counters is None else counters, wk, **opts)
+                            np.zeros(kn.N_INFO) if counters is None else counters, wk, g, gw, b_out,
+                            **opts)
 
     x, P = x0.copy(), P0.copy()
-    checkpoints: list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray]] = []
+    checkpoints: list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
     if n and not smooth:
-        run_segment(0, n, x, P, st, P_seg, info_v)
+        run_segment(0, n, x, P, st, ge, P_seg, info_v)
     elif n:
         for k0 in range(0, n, seg):
             k1 = min(k0 + seg, n)
-            checkpoints.append((k0, k1, x.copy(), P.copy(), st.copy()))
-            run_segment(k0, k1, x, P, st, P_seg, info_v)
+            checkpoints.append((k0, k1, x.copy(), P.copy(), st.copy(), ge.copy()))
+            run_segment(k0, k1, x, P, st, ge, P_seg, info_v)
     info = {
         "filter": name,
         "gnss_rejected": int(gnss_rej.sum()),
@@ -420,16 +441,30 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     }
     if smooth and n:
         rts_checkpointed(run_segment, checkpoints, epochs.dt_s, hold, prm, x_out, prior_store,
-                         pcov, sd, P_seg)
+                         pcov, sd, P_seg, b_out, bool(flg[kn.F_GE]))
     del P_seg, checkpoints
-    return _result(epochs, x_out, pcov, sd, gnss_used, gnss_rej, nis, static, info)
+    return _result(epochs, x_out, pcov, sd, gnss_used, gnss_rej, nis, static, info, b_out)
+
+
+def initial_gnss_err(params: Params) -> np.ndarray:
+    """The GNSS error block at epoch 0 (kernels_aekf GE_*): b = 0 with its stationary variance.
+
+    ``aekf.gnss_err_states`` off: an empty array (the kernel does not touch it).
+    """
+    a = params["aekf"]
+    if not a["gnss_err_states"]:
+        return np.zeros(0)
+    ge = np.zeros(kn.N_GE)
+    ge[kn.GE_PEE] = ge[kn.GE_PNN] = a["gnss_err_sd_m"] ** 2
+    return ge
 
 
 def _result(epochs: Epochs, x: np.ndarray, pcov: np.ndarray, sd: np.ndarray,
             gnss_used: np.ndarray, gnss_rej: np.ndarray, nis: np.ndarray, static: np.ndarray,
-            info: dict) -> FilterResult:
-    """FilterResult over row views of x (8, n), pcov (3, n), sd (2, n): no copies."""
+            info: dict, b: np.ndarray) -> FilterResult:
+    """FilterResult over row views of x (8, n), pcov (3, n), sd (2, n), b (2, n): no copies."""
     extras = {
+        "gnss_err_e": b[0], "gnss_err_n": b[1],
         "a_e": x[2], "a_n": x[5],
         # the drift state eps is in d(psi)/dt = -yaw_rate; report the bias of the gyro reading
         "gyro_bias_radps": -x[6], "odo_scale": x[7],

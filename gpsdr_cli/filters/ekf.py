@@ -5,8 +5,10 @@ with FIXED noise: Q from the constant ``aekf.sigma_a_mps2`` (no current
 statistical adaptation, no K_a regimes) and R from ONE constant GNSS sigma for
 the whole drive: the median over the fixes of the base sigma
 ``sqrt((sd_e^2 + sd_n^2)/2)`` (reported as ``info["ekf_gnss_sigma_m"]``), no
-PDOP regimes.  The ``[adaptive]`` options, the gate and the standstill logic
-apply as for every filter, so the benchmark can compare like with like.
+PDOP regimes.  The ``[adaptive]`` options, the gate, the standstill logic and the
+GNSS error states (``aekf.gnss_err_states``: the multipath as two Gauss-Markov states
+with fixed sigma and correlation time) apply as for every filter, so the benchmark
+can compare like with like.
 """
 
 from __future__ import annotations

@@ -63,12 +63,13 @@ P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = ran
 P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_MIN = range(20, 25)
 P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP, P_GVEL_VAR, P_WH_NIS, P_SCALE_VAR = range(25, 33)
-N_PRM = 33
+P_GE_VAR, P_GE_RATE, P_GE_DIST_RATE = range(33, 36)
+N_PRM = 36
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
-F_HEADING_FLOOR, F_LATERAL_ACC, F_WHITEN, F_ZUPT_POS = 14, 15, 16, 17
-N_FLG = 18
+F_HEADING_FLOOR, F_LATERAL_ACC, F_WHITEN, F_ZUPT_POS, F_GE = 14, 15, 16, 17, 18
+N_FLG = 19
 #: values of flg[F_TURN_OMEGA] (the seed 000 yaw-rate row when aekf.turn_propagation is on)
 OMEGA_SKIP, OMEGA_LATERAL = 0, 1
 #: values of flg[F_GATE_MODE] (gnss.gate_mode)
@@ -77,17 +78,31 @@ GATE_REJECT, GATE_INFLATE = 0, 1
 S_PSI, S_STATIC, S_T, S_REJ_SINCE, S_SH_R, S_SH_M, S_HEADING_KNOWN = range(7)
 S_W, S_W_T, S_N_FIX, S_VPSI, S_CPE = 7, 8, 9, 10, 11
 S_WH_C0, S_WH_C1, S_WH_UE, S_WH_UN, S_WH_T, S_WH_M, S_WH_STATIC = range(12, 19)
-S_WH_C2, S_WH_UE2, S_WH_UN2, S_WH_T2 = range(19, 23)
-N_ST = 23
+S_WH_C2, S_WH_UE2, S_WH_UN2, S_WH_T2, S_B_SINCE = range(19, 24)
+N_ST = 24
 #: largest heading variance (rad^2) of the heading floor: a heading uniform on (-pi, pi]
 VPSI_MAX = math.pi ** 2 / 3.0
 # stored prior scalars per epoch (columns of ``prior_prm``)
-Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N, Q_W, Q_FL_EE, Q_FL_NN, Q_FL_EN = range(10)
-N_PRIOR = 10
+Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N, Q_W, Q_FL_EE, Q_FL_NN, Q_FL_EN, Q_FB = range(11)
+N_PRIOR = 11
 # counters (``info`` vector)
 I_SPD_FAIL, I_MIN_DIAG, I_SKIPPED, I_GATE_RESETS, I_NONFINITE, I_INFLATED = range(6)
 N_INFO = 6
 N_PACKED = N_STATES * (N_STATES + 1) // 2
+#: the GNSS-error block ``ge`` (aekf.gnss_err_states), one flat float64 array: P(x, b) (8 x 2)
+#: row-major at [2 i + j], then P(b, b) (ee, en, nn) and the mean b (e, n)
+GE_PEE, GE_PEN, GE_PNN, GE_BE, GE_BN = range(2 * N_STATES, 2 * N_STATES + 5)
+N_GE = 2 * N_STATES + 5
+#: floats per epoch the smoother stores for the block: its first N_GE_PACKED (the covariances)
+N_GE_PACKED = 2 * N_STATES + 3
+#: the block's work rows ``gw`` (GW_ROWS x 8): P H^T of up to GW_MAX pending DR rows, their
+#: H, their (state index or GW_ODO / GW_OMEGA, R, y), and the prediction of the epoch
+GW_MAX = 8
+GW_H = GW_MAX
+GW_IDX, GW_R, GW_Y = 2 * GW_MAX, 2 * GW_MAX + 1, 2 * GW_MAX + 2
+GW_PRED = 2 * GW_MAX + 3
+GW_ROWS = 2 * GW_MAX + 5
+GW_ODO, GW_OMEGA = -1.0, -2.0
 #: nonzero columns of the odometer row (v_e, v_n, k_s) and the heading-rate row
 NZ_ODO = np.array([1, 4, 7], np.int64)
 NZ_OMEGA = np.array([1, 2, 4, 5, 6], np.int64)
@@ -110,7 +125,7 @@ def kernel_options(flg: np.ndarray) -> dict[str, int]:
                      ("store_on", flg[F_STORE]), ("inflate_on", flg[F_GATE_MODE] == GATE_INFLATE),
                      ("whiten_off", not flg[F_WHITEN]), ("floor_off", not flg[F_HEADING_FLOOR]),
                      ("turn_off", not flg[F_TURN]), ("omega_skip_on", flg[F_TURN_OMEGA] == OMEGA_SKIP),
-                     ("along_off", not flg[F_ODO_ALONG]),
+                     ("along_off", not flg[F_ODO_ALONG]), ("ge_off", not flg[F_GE]),
                      ("heading_consider_on", flg[F_HEADING_CONSIDER])):
         if on:
             opts[name] = 1
@@ -405,6 +420,161 @@ def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
         F[5, j] = -s * p2 + c * p5 - T * g5 * p6
 
 
+# ---------------------------------------------------------------- GNSS error states
+# aekf.gnss_err_states (our choice, after the fkf's seed 002 error states; issue #4): the fix
+# error is white noise plus a first-order Gauss-Markov bias b = (b_e, b_n) per axis
+# (multipath), z = (e, n) + b + v.  The 10-state covariance is kept in two parts: the 8x8 P
+# of the kinematic model, whose code is the same with and without b, and the block ``ge`` =
+# [P(x, b) (8 x 2), P(b, b), b] (flat, GE_*).  The DR rows have no b column (H_b = 0), so
+# their S and their x gains are the 8-state ones and the block needs only O(8 x 2)
+# corrections.  Speed: those are not applied row by row (a call per row at 100 Hz cost
+# 25 % of the filter's speed) but once per epoch by :func:`ge_epoch`, from the rows' P H^T,
+# H, R and y that the update helpers left in the work rows ``gw`` (GW_*), in order.
+
+
+@njit(cache=True, error_model="numpy")
+def ge_epoch(G: np.ndarray, gw: np.ndarray, n_rows: int, predict: bool, alpha: float,
+             var_b: float) -> None:
+    """Bring the GNSS error block up to date: the epoch's prediction, then its pending DR rows.
+
+    ``predict``: ``gw[GW_PRED]`` = (T, f_eps, lam, hold, f_b, turned, c, s) and
+    ``gw[GW_PRED + 1]`` = (g1, g4, g2, g5) of the turn: P(x, b) <- J lam Phi P(x, b) f_b
+    (Phi the Singer transition, axes held when ``hold``; J the gyro turn of
+    :func:`turn_predict` when ``turned``), P(b, b) <- lam f_b^2 P(b, b) + var_b (1 - f_b^2)
+    (stationary Gauss-Markov), b <- f_b b.  Then for each of the ``n_rows`` rows r in order
+    (``gw[r]`` = P H^T of its prior, ``gw[GW_H + r]`` = H, ``gw[GW_IDX, r]`` = the state of a
+    unit row or GW_ODO / GW_OMEGA for the sparse rows): with ``hc = H P(x, b)``,
+    ``S = H P H^T + R`` and the optimal bias gain ``k_b = hc / S`` the 10-state Joseph form
+    reduces, for any gain of x (consider states, along-track projection), to
+    ``P(x, b) <- P(x, b) - P H^T k_b``, ``P(b, b) <- P(b, b) - S k_b k_b^T``, ``b += k_b y``.
+    """
+    if predict:
+        T = gw[GW_PRED, 0]
+        f_eps = gw[GW_PRED, 1]
+        lam = gw[GW_PRED, 2]
+        f_b = gw[GW_PRED, 4]
+        sc = lam * f_b
+        if gw[GW_PRED, 3] == 0.0:  # not held: Singer rows
+            p13, p23, p33 = singer_phi(T, alpha)
+            for m in range(0, 12, 6):
+                for j in range(2):
+                    r0 = G[m + j]
+                    r1 = G[m + 2 + j]
+                    r2 = G[m + 4 + j]
+                    G[m + j] = sc * (r0 + T * r1 + p13 * r2)
+                    G[m + 2 + j] = sc * (r1 + p23 * r2)
+                    G[m + 4 + j] = sc * p33 * r2
+        else:
+            for m in range(12):
+                G[m] *= sc
+        G[12] *= sc * f_eps  # the drift's row
+        G[13] *= sc * f_eps
+        G[14] *= sc
+        G[15] *= sc
+        sb = sc * f_b
+        q = var_b * (1.0 - f_b * f_b)
+        G[GE_PEE] = sb * G[GE_PEE] + q
+        G[GE_PEN] *= sb
+        G[GE_PNN] = sb * G[GE_PNN] + q
+        G[GE_BE] *= f_b
+        G[GE_BN] *= f_b
+        if gw[GW_PRED, 5] != 0.0:  # rows: J P(x, b), as turn_predict does for P
+            c = gw[GW_PRED, 6]
+            s = gw[GW_PRED, 7]
+            g1 = gw[GW_PRED + 1, 0]
+            g4 = gw[GW_PRED + 1, 1]
+            g2 = gw[GW_PRED + 1, 2]
+            g5 = gw[GW_PRED + 1, 3]
+            for j in range(2):
+                p1 = G[2 + j]
+                p4 = G[8 + j]
+                p2 = G[4 + j]
+                p5 = G[10 + j]
+                p6 = G[12 + j]
+                G[2 + j] = c * p1 + s * p4 - T * g1 * p6
+                G[8 + j] = -s * p1 + c * p4 - T * g4 * p6
+                G[4 + j] = c * p2 + s * p5 - T * g2 * p6
+                G[10 + j] = -s * p2 + c * p5 - T * g5 * p6
+    for r in range(n_rows):
+        code = gw[GW_IDX, r]
+        if code >= 0.0:
+            idx = int(code)
+            hc0 = G[2 * idx]
+            hc1 = G[2 * idx + 1]
+            hpht = gw[r, idx]
+        else:
+            nz = NZ_ODO if code == GW_ODO else NZ_OMEGA
+            hc0 = 0.0
+            hc1 = 0.0
+            hpht = 0.0
+            for q in range(nz.shape[0]):
+                j = nz[q]
+                h = gw[GW_H + r, j]
+                hc0 += h * G[2 * j]
+                hc1 += h * G[2 * j + 1]
+                hpht += h * gw[r, j]
+        S = hpht + gw[GW_R, r]
+        if not (S > 0.0):
+            continue
+        kb0 = hc0 / S
+        kb1 = hc1 / S
+        for i in range(N_STATES):
+            G[2 * i] -= gw[r, i] * kb0
+            G[2 * i + 1] -= gw[r, i] * kb1
+        G[GE_PEE] -= hc0 * kb0
+        G[GE_PEN] -= hc0 * kb1
+        G[GE_PNN] -= hc1 * kb1
+        G[GE_BE] += kb0 * gw[GW_Y, r]
+        G[GE_BN] += kb1 * gw[GW_Y, r]
+
+
+@njit(cache=True, error_model="numpy")
+def ge_fix_update(x: np.ndarray, P: np.ndarray, G: np.ndarray, z_e: float, z_n: float,
+                  r_e: float, r_n: float, u: np.ndarray, est_b: bool) -> bool:
+    """A GNSS fix z = (e, n) + b + v, var(v) = diag(r_e, r_n): two scalar 10-state updates.
+
+    Per coordinate (state idx, bias column jb): ``u_x = P H^T = P[:, idx] + P(x, b)[:, jb]``,
+    ``u_b = P(b, x)[:, idx] + P(b, b)[:, jb]``, S = H P H^T + R; x += u_x y / S,
+    b += u_b y / S, P -= u u^T / S in each block (the optimal gain, for which Joseph's
+    form reduces to this), mirrored.  ``est_b`` False: b is a Schmidt consider state
+    (gain zero; Joseph then leaves b and P(b, b) as they are, and P, P(x, b) as above):
+    the bias still widens S (a correlated error the fix carries) but is not estimated.
+    ``u`` (8) scratch.  False if a coordinate was skipped (S not positive, y not
+    finite); the east update then stays applied.
+    """
+    ok = True
+    for jb in range(2):
+        idx = 3 * jb
+        y = (z_e if jb == 0 else z_n) - x[idx] - G[GE_BE + jb]
+        R = r_e if jb == 0 else r_n
+        for i in range(N_STATES):
+            u[i] = P[i, idx] + G[2 * i + jb]
+        ub0 = G[2 * idx] + (G[GE_PEE] if jb == 0 else G[GE_PEN])
+        ub1 = G[2 * idx + 1] + (G[GE_PEN] if jb == 0 else G[GE_PNN])
+        S = u[idx] + (ub0 if jb == 0 else ub1) + R
+        if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
+            ok = False
+            continue
+        for i in range(N_STATES):
+            x[i] += u[i] * y / S
+        if est_b:
+            G[GE_BE] += ub0 * y / S
+            G[GE_BN] += ub1 * y / S
+        for i in range(N_STATES):
+            ui = u[i] / S
+            for j in range(i, N_STATES):
+                v = P[i, j] - ui * u[j]
+                P[i, j] = v
+                P[j, i] = v
+            G[2 * i] -= ui * ub0
+            G[2 * i + 1] -= ui * ub1
+        if est_b:
+            G[GE_PEE] -= ub0 * ub0 / S
+            G[GE_PEN] -= ub0 * ub1 / S
+            G[GE_PNN] -= ub1 * ub1 / S
+    return ok
+
+
 @njit(cache=True, error_model="numpy")
 def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps: float,
                   q_eps: float, q_ks: float, r_w: float, pr: np.ndarray, hold: bool,
@@ -441,12 +611,14 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                      gnss_used: np.ndarray, gnss_rej: np.ndarray, nis_out: np.ndarray,
                      static_out: np.ndarray, hold_out: np.ndarray, sd_out: np.ndarray,
                      P_store: np.ndarray, prior_store: np.ndarray, info: np.ndarray,
-                     wk: np.ndarray, fading_on: int | None = None, innov_on: int | None = None,
+                     wk: np.ndarray, ge: np.ndarray, gw: np.ndarray, b_out: np.ndarray,
+                     fading_on: int | None = None, innov_on: int | None = None,
                      sage_on: int | None = None, check_on: int | None = None,
                      store_on: int | None = None, inflate_on: int | None = None,
                      whiten_off: int | None = None, floor_off: int | None = None,
                      turn_off: int | None = None, omega_skip_on: int | None = None,
-                     along_off: int | None = None, heading_consider_on: int | None = None) -> None:
+                     along_off: int | None = None, heading_consider_on: int | None = None,
+                     ge_off: int | None = None) -> None:
     """Forward pass of the ekf/aekf over n epochs; writes the ``*_out`` arrays in place.
 
     Inputs per epoch: ``dt`` s; GNSS ``z_e, z_n`` m with variances ``r_e, r_n`` m^2
@@ -465,6 +637,11 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     ``P_store[k - p_off]`` the packed P(k|k) and ``prior_store[k]`` the prior
     scalars; ``info`` counters (I_*), accumulated (the caller initialises them);
     ``wk`` (5, 8) scratch rows (H, K, P H^T, B H^T, the Singer q).
+    ``ge`` (N_GE,): the GNSS error block (aekf.gnss_err_states; GE_* layout: P(x, b),
+    P(b, b), b), read and updated in place like x, P (empty when off); ``gw``
+    (GW_ROWS, 8) its work rows; ``b_out`` (2, n) the posterior b per epoch; with
+    ``flg[F_STORE]`` the block's covariances follow the packed P in ``P_store`` and the
+    bias transition f_b is ``prior_store[k, Q_FB]``.
     The options that are off by default come as keyword arguments that are None
     when off (``*_on``; ``*_off`` for those on by default): numba prunes the branches of a None argument before type
     inference, so a default run compiles none of their code and helpers (cold
@@ -510,8 +687,6 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     i_e = np.int64(0)
     i_n = np.int64(3)
     i_eps = np.int64(6)
-    i_ve = np.int64(1)
-    i_vn = np.int64(4)
     no_cons = np.int64(0)
     wh_c0 = st[S_WH_C0]
     wh_c1 = st[S_WH_C1]
@@ -524,6 +699,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     wh_t = st[S_WH_T]
     wh_m = st[S_WH_M]
     wh_static = st[S_WH_STATIC]
+    b_since = st[S_B_SINCE]
     for k in range(k_start, k_end):
         T = dt[k]
         qa_e = 0.0
@@ -537,6 +713,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         fl_ee = 0.0
         fl_nn = 0.0
         fl_en = 0.0
+        f_b = 1.0
+        n_rows = 0  # DR rows waiting for the GNSS error block (ge_epoch)
+        ge_pred = False
         # a step longer than aekf.max_gap_s (a logger pause, a far-future stamp) is not
         # propagated: held like a standstill, the position variance grown by (speed bound x T)^2
         gap = T > prm[P_MAX_GAP]
@@ -557,6 +736,17 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             p66 = P[6, 6]
             predict_mean(x, T, f_eps if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
             predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[P_Q_EPS], prm[P_Q_KS], lam, hold, qbuf)
+            if ge_off is None:  # GNSS error states: 1/tau_b = 1/tau + speed/distance (multipath
+                # decorrelates with the antenna's displacement; parked, only with time)
+                sp_b = 0.0 if hold else math.sqrt(x[1] * x[1] + x[4] * x[4])
+                f_b = math.exp(-T * (prm[P_GE_RATE] + sp_b * prm[P_GE_DIST_RATE]))
+                gw[GW_PRED, 0] = T
+                gw[GW_PRED, 1] = f_eps
+                gw[GW_PRED, 2] = lam
+                gw[GW_PRED, 3] = 1.0 if hold else 0.0
+                gw[GW_PRED, 4] = f_b
+                gw[GW_PRED, 5] = 0.0
+                ge_pred = True
             t += T
             if gap:
                 add_e = (prm[P_GAP_SPEED] * T) ** 2
@@ -574,6 +764,15 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     # scale_sd^2 |w T| (a 90 deg turn: 0.36 deg for 0.5 %, exact 0.45 deg)
                     r_turn = r_w + prm[P_SCALE_VAR] * abs(w_use) / T
                     turn_predict(x, P, T, w_use, r_turn)
+                    if ge_off is None:  # the turn's Jacobian, for P(x, b) in ge_epoch
+                        dpsi = (w_use - x[6]) * T
+                        gw[GW_PRED, 5] = 1.0
+                        gw[GW_PRED, 6] = math.cos(dpsi)
+                        gw[GW_PRED, 7] = math.sin(dpsi)
+                        gw[GW_PRED + 1, 0] = x[4]
+                        gw[GW_PRED + 1, 1] = -x[1]
+                        gw[GW_PRED + 1, 2] = x[5]
+                        gw[GW_PRED + 1, 3] = -x[2]
             if floor_off is None:
                 # ---- heading floor (aekf.heading_floor, our choice): the model has no heading
                 # state, so the heading error lives in the cross-track velocity variance, which
@@ -611,6 +810,36 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         if has_gnss[k]:
             ye = z_e[k] - x[0]
             yn = z_n[k] - x[3]
+            if ge_off is None:  # z = position + b + v: the predicted fix includes the bias
+                if ge_pred:
+                    ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[P_GE_VAR])  # no rows yet
+                    ge_pred = False
+                if gate and n_fix >= prm[P_GATE_WARMUP]:
+                    # bias gate (our choice): multipath decorrelates as the car moves; an
+                    # estimated b outside the gate of its stationary distribution for
+                    # gate_reset_s while moving is not multipath but fixes that moved (a datum
+                    # change) or a DR error: b goes into the position, whose variance grows by
+                    # it (no lock-out, like the gate reset; a 30 m step otherwise stayed half
+                    # in b, the track 16 m off)
+                    if (ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN] > prm[P_GATE_THR] * prm[P_GE_VAR]
+                            and not is_static):
+                        if b_since < 0.0:
+                            b_since = t
+                        if t - b_since >= prm[P_GATE_RESET]:
+                            x[0] += ge[GE_BE]
+                            x[3] += ge[GE_BN]
+                            add_e += ge[GE_BE] * ge[GE_BE]
+                            add_n += ge[GE_BN] * ge[GE_BN]
+                            P[0, 0] += ge[GE_BE] * ge[GE_BE]
+                            P[3, 3] += ge[GE_BN] * ge[GE_BN]
+                            ge[GE_BE] = 0.0
+                            ge[GE_BN] = 0.0
+                            b_since = -1.0
+                            info[I_GATE_RESETS] += 1.0
+                    elif not is_static:
+                        b_since = -1.0
+                ye = z_e[k] - x[0] - ge[GE_BE]
+                yn = z_n[k] - x[3] - ge[GE_BN]
             # innovation whitening (aekf.innovation_whitening, Mehra 1970): an optimal filter's
             # innovations are white; a lag-one correlation rho of the normalised innovations
             # says the fixes' errors are time-correlated (multipath) and carry less independent
@@ -639,6 +868,10 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             s00 = P[0, 0] + r_e[k] * sh_r
             s11 = P[3, 3] + r_n[k] * sh_r
             s01 = P[0, 3]
+            if ge_off is None:  # H = [I_pos, I_b]: S gains 2 P(pos, b) + P(b, b)
+                s00 += 2.0 * ge[0] + ge[GE_PEE]
+                s11 += 2.0 * ge[7] + ge[GE_PNN]
+                s01 += ge[1] + ge[6] + ge[GE_PEN]
             nis = nis_2d(ye, yn, s00, s01, s11)
             nis_out[k] = nis
             accept = True
@@ -649,17 +882,22 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 if nis > thr:
                     if rej_since < 0.0:
                         rej_since = t
-                    if (inflate_on is not None and nis <= thr * prm[P_GATE_INFLATE_MAX]
+                    if t - rej_since >= prm[P_GATE_RESET]:
+                        # no lock-out: accept and inflate P by the innovation.  First, also in
+                        # inflate mode: fixes that have disagreed for gate_reset_s are a new
+                        # truth (a datum change), not an error to down-weight forever (with the
+                        # GNSS error states, down-weighted fixes of a 30 m step went into b and
+                        # the track stayed 16 m off)
+                        reset = True
+                        rej_since = -1.0
+                        info[I_GATE_RESETS] += 1.0
+                    elif (inflate_on is not None and nis <= thr * prm[P_GATE_INFLATE_MAX]
                             and t - rej_since >= prm[P_GATE_INFLATE_AFTER]):
                         # robust "opposite lever" (ALGORITHMS.md 3) once the fixes have
                         # disagreed for gate_inflate_after_s (a short multipath burst is still
                         # rejected): accept with R scaled so that the NIS equals the gate
                         r_fac = nis / thr
                         info[I_INFLATED] += 1.0
-                    elif t - rej_since >= prm[P_GATE_RESET]:
-                        reset = True  # no lock-out: accept and inflate P by the innovation
-                        rej_since = -1.0
-                        info[I_GATE_RESETS] += 1.0
                     else:
                         accept = False
                         gnss_rej[k] = True
@@ -672,6 +910,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     if af < 1.0:
                         g = 1.0 / af
                         inflate_kinematic(P, g)
+                        if ge_off is None:  # the same congruence on P(x, b)'s kinematic rows
+                            for i in range(12):
+                                ge[i] *= math.sqrt(g)
                 if reset:
                     add_e += ye * ye
                     add_n += yn * yn
@@ -709,15 +950,33 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     wh_m += 1.0
                 re *= r_fac
                 rn *= r_fac
-                ok1 = unit_update(x, P, i_e, ye, re, K, PHt, Bh, no_cons)
-                ok2 = unit_update(x, P, i_n, z_n[k] - x[3], rn, K, PHt, Bh, no_cons)
+                if ge_off is None:
+                    # the bias is estimated only when the velocity is known independently of the
+                    # fixes, from the receiver (Doppler) or by a standstill (ZUPT): otherwise a
+                    # slow drift of the fixes cannot be told from a DR heading error, and the
+                    # states absorbed a drive-off's wrong heading (15 m); then b is a consider
+                    # state (it widens S only)
+                    est_b = is_static or (math.isfinite(gv_e[k]) and math.isfinite(gv_n[k])
+                                          and prm[P_GVEL_VAR] > 0.0)
+                    ok1 = ge_fix_update(x, P, ge, z_e[k], z_n[k], re, rn, K, est_b)
+                    ok2 = ok1
+                else:
+                    ok1 = unit_update(x, P, i_e, ye, re, K, PHt, Bh, no_cons)
+                    ok2 = unit_update(x, P, i_n, z_n[k] - x[3], rn, K, PHt, Bh, no_cons)
                 if ok1 and ok2:
                     gnss_used[k] = True
                     n_fix += 1.0
                     if math.isfinite(gv_e[k]) and math.isfinite(gv_n[k]) and prm[P_GVEL_VAR] > 0.0:
                         # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
-                        unit_update(x, P, i_ve, gv_e[k] - x[1], prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
-                        unit_update(x, P, i_vn, gv_n[k] - x[4], prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
+                        for idx in (1, 4):
+                            y = (gv_e[k] if idx == 1 else gv_n[k]) - x[idx]
+                            if unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons) and ge_off is None:
+                                for i in range(n):
+                                    gw[n_rows, i] = PHt[i]
+                                gw[GW_IDX, n_rows] = idx
+                                gw[GW_R, n_rows] = prm[P_GVEL_VAR]
+                                gw[GW_Y, n_rows] = y
+                                n_rows += 1
                 else:
                     info[I_SKIPPED] += 1.0
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
@@ -729,8 +988,16 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             if is_static:
                 zupt_cons = CONS_POS if (zupt_pos == 2 or (zupt_pos == 1 and outage[k])) else 0
                 for idx in (1, 4, 2, 5):
-                    if not unit_update(x, P, idx, -x[idx], prm[P_R_ZUPT], K, PHt, Bh, zupt_cons):
+                    y = -x[idx]
+                    if not unit_update(x, P, idx, y, prm[P_R_ZUPT], K, PHt, Bh, zupt_cons):
                         info[I_SKIPPED] += 1.0
+                    elif ge_off is None:
+                        for i in range(n):
+                            gw[n_rows, i] = PHt[i]
+                        gw[GW_IDX, n_rows] = idx
+                        gw[GW_R, n_rows] = prm[P_R_ZUPT]
+                        gw[GW_Y, n_rows] = y
+                        n_rows += 1
             else:
                 sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
                 use = True
@@ -748,13 +1015,30 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     pn = un if along_off is None else 0.0
                     if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons, pe, pn):
                         info[I_SKIPPED] += 1.0
+                    elif ge_off is None:
+                        for i in range(n):
+                            gw[GW_H + n_rows, i] = H[i]
+                        for i in range(n):
+                            gw[n_rows, i] = PHt[i]
+                        gw[GW_IDX, n_rows] = GW_ODO
+                        gw[GW_R, n_rows] = prm[P_R_ODO]
+                        gw[GW_Y, n_rows] = u - h
+                        n_rows += 1
         static_out[k] = is_static
         hold_out[k] = hold
         # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
         if has_gyro[k]:
             if is_static:
-                if not unit_update(x, P, i_eps, -yaw[k] - x[6], prm[P_R_OMEGA], K, PHt, Bh, no_cons):
+                y = -yaw[k] - x[6]
+                if not unit_update(x, P, i_eps, y, prm[P_R_OMEGA], K, PHt, Bh, no_cons):
                     info[I_SKIPPED] += 1.0
+                elif ge_off is None:
+                    for i in range(n):
+                        gw[n_rows, i] = PHt[i]
+                    gw[GW_IDX, n_rows] = 6.0
+                    gw[GW_R, n_rows] = prm[P_R_OMEGA]
+                    gw[GW_Y, n_rows] = y
+                    n_rows += 1
             elif turn_off is None and omega_skip_on is not None:
                 pass  # the gyro already turned the velocity in the prediction
             elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
@@ -777,6 +1061,17 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     cons |= CONS_NOT_ACC
                 if not row_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], K, PHt, Bh, cons, 0.0, 0.0):
                     info[I_SKIPPED] += 1.0
+                elif ge_off is None:
+                    for i in range(n):
+                        gw[GW_H + n_rows, i] = H[i]
+                    for i in range(n):
+                        gw[n_rows, i] = PHt[i]
+                    gw[GW_IDX, n_rows] = GW_OMEGA
+                    gw[GW_R, n_rows] = prm[P_R_OMEGA]
+                    gw[GW_Y, n_rows] = z - h
+                    n_rows += 1
+        if ge_off is None and (ge_pred or n_rows > 0):  # the block: prediction and DR rows
+            ge_epoch(ge, gw, n_rows, ge_pred, alpha, prm[P_GE_VAR])
         sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
         if floor_off is None and gnss_used[k] and sp >= heading_min:  # the heading floor restarts from P
             ce = x[4] / sp
@@ -801,6 +1096,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         pcov_out[0, k] = P[0, 0]
         pcov_out[1, k] = P[3, 3]
         pcov_out[2, k] = P[0, 3]
+        if ge_off is None:
+            b_out[0, k] = ge[GE_BE]
+            b_out[1, k] = ge[GE_BN]
         sd_out[0, k] = math.sqrt(max(P[6, 6], 0.0))
         sd_out[1, k] = math.sqrt(max(P[7, 7], 0.0))
         for i in range(n):
@@ -810,6 +1108,10 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             info[I_SPD_FAIL] += 1.0
         if store_on is not None:
             pack(P, P_store[k - p_off])
+            if ge_off is None:
+                for i in range(N_GE_PACKED):
+                    P_store[k - p_off, N_PACKED + i] = ge[i]
+            prior_store[k, Q_FB] = f_b
             prior_store[k, Q_QA_E] = qa_e
             prior_store[k, Q_QA_N] = qa_n
             prior_store[k, Q_LAM] = lam
@@ -843,3 +1145,4 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     st[S_WH_T] = wh_t
     st[S_WH_M] = wh_m
     st[S_WH_STATIC] = wh_static
+    st[S_B_SINCE] = b_since

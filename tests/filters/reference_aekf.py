@@ -9,6 +9,10 @@ the model's dense matrices (``cs_model.phi_matrix``, ``newton_matrix``,
 Joseph updates, gating, adaptive options and RTS are written out again here, so
 that the tests comparing it with the compiled kernel check the kernel's block
 arithmetic, packing and bookkeeping.
+
+With ``aekf.gnss_err_states`` the state is 10-long, ``[x (8), b_e, b_n]``: the GNSS
+error states of a first-order Gauss-Markov bias, ``z = (e, n) + b + v``, carried in
+the same dense x, P, F, Q (the kernel keeps them as a separate block).
 """
 
 from __future__ import annotations
@@ -47,17 +51,18 @@ def joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
 
 def turn(x: np.ndarray, T: float, w: float, r_w: float) -> tuple[np.ndarray, np.ndarray,
                                                                  np.ndarray]:
-    """aekf.turn_propagation: (x', J, Q_w) of turning v and a clockwise by (w - eps) T."""
+    """aekf.turn_propagation: (x', J, Q_w) of turning v and a clockwise by (w - eps) T (any length >= 8)."""
     dpsi = (w - x[6]) * T
     c, s = math.cos(dpsi), math.sin(dpsi)
     Rm = np.array([[c, s], [-s, c]])  # acts on (east, north), clockwise by dpsi
     xr = x.copy()
     xr[[1, 4]] = Rm @ x[[1, 4]]
     xr[[2, 5]] = Rm @ x[[2, 5]]
-    g = np.zeros(8)  # d x'/d dpsi
+    m = len(x)
+    g = np.zeros(m)  # d x'/d dpsi
     g[1], g[4] = xr[4], -xr[1]
     g[2], g[5] = xr[5], -xr[2]
-    J = np.eye(8)
+    J = np.eye(m)
     J[np.ix_([1, 4], [1, 4])] = Rm
     J[np.ix_([2, 5], [2, 5])] = Rm
     J[:, 6] += -T * g  # d dpsi / d eps = -T
@@ -80,10 +85,19 @@ def along_joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float
     return x, 0.5 * (P + P.T)
 
 
-def unit(i: int) -> np.ndarray:
-    H = np.zeros(8)
+def unit(i: int, m: int = 8) -> np.ndarray:
+    H = np.zeros(m)
     H[i] = 1.0
     return H
+
+
+def embed(A: np.ndarray, m: int, b_diag: float = 0.0) -> np.ndarray:
+    """The 8x8 matrix A as the kinematic block of an m x m one, b_diag on the rest of the diagonal."""
+    out = np.zeros((m, m))
+    out[:8, :8] = A
+    for i in range(8, m):
+        out[i, i] = b_diag
+    return out
 
 
 def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
@@ -94,6 +108,13 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     has_gyro, has_odo = sensor_masks(epochs, params)  # plausible readings only
     gv_e, gv_n = gnss_velocity(epochs, params)  # receiver speed/course as (v_e, v_n), or NaN
     x, P, psi_mem, heading_known = initial_state(epochs, params)
+    a_p = params["aekf"]
+    ge = bool(a_p["gnss_err_states"])  # GNSS error states b_e, b_n: x and P 10-long
+    m = 10 if ge else 8
+    var_b = a_p["gnss_err_sd_m"] ** 2
+    if ge:
+        x = np.concatenate([x, [0.0, 0.0]])
+        P = embed(P, m, var_b)
     prm, _ = kernel_params(params, adaptive, smooth)
     alpha, tau_eps = prm[kn.P_ALPHA], prm[kn.P_TAU_EPS]
     sigma_a = prm[kn.P_SIGMA_A]
@@ -112,21 +133,21 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     vpsi, cpe = initial_heading_var(x, P, heading_known, params), 0.0  # heading floor (kernels_aekf)
     heading_min = max(st["heading_min_speed_mps"], omega_min)
     lat_mode = params["aekf"]["lateral_acc_only"]
-    a_p = params["aekf"]
     whiten = adaptive and bool(a_p["innovation_whitening"])  # Mehra: correlated innovations
     wh_c0 = wh_c1 = wh_c2 = 0.0
     wh_prev, wh_t, wh_m = np.zeros(2), -math.inf, 0
     wh_prev2, wh_t2, wh_static = np.zeros(2), -math.inf, 0
+    b_since = -1.0  # bias gate timer
     n_fix = 0
     is_static = False
     t = 0.0
     rej_since = -1.0
     sh_r, sh_m = 1.0, 0
-    xs = np.zeros((n, 8))
-    Ps = np.zeros((n, 8, 8))
-    Ps_prior = np.zeros((n, 8, 8))
-    xs_prior = np.zeros((n, 8))
-    Fs = np.zeros((n, 8, 8))
+    xs = np.zeros((n, m))
+    Ps = np.zeros((n, m, m))
+    Ps_prior = np.zeros((n, m, m))
+    xs_prior = np.zeros((n, m))
+    Fs = np.zeros((n, m, m))
     nis = np.full(n, np.nan)
     used = np.zeros(n, bool)
     rejected = np.zeros(n, bool)
@@ -135,7 +156,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         T = epochs.dt_s[k]
         gap = T > params["aekf"]["max_gap_s"]
         hold = (standstill and is_static) or gap
-        F = np.eye(8)
+        F = np.eye(m)
         if k > 0 and T > 0:
             if adaptive:  # seed 000 eqs. (14)-(15)
                 s2e = sa_py(x[2], prm[kn.P_AMAX], prm[kn.P_AMIN], ka[k], sigma_a)
@@ -148,12 +169,19 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             F = phi_matrix(T, alpha, tau_eps, hold)
             Q = q_matrix(T, alpha, 2 * alpha * s2e, 2 * alpha * s2n, prm[kn.P_Q_EPS],
                          prm[kn.P_Q_KS], hold)
-            x = newton_matrix(T, tau_eps, hold, params["aekf"]["drift_mean_decay"]) @ x
+            Fm = newton_matrix(T, tau_eps, hold, params["aekf"]["drift_mean_decay"])
+            if ge:  # b: Gauss-Markov, 1/tau_b = 1/tau + speed/distance (speed after the prediction)
+                v_pred = 0.0 if hold else math.hypot(*(Fm @ x[:8])[[1, 4]])
+                dist = a_p["gnss_err_dist_m"]
+                f_b = math.exp(-T * (1.0 / a_p["gnss_err_tau_s"]
+                                     + (v_pred / dist if dist > 0 else 0.0)))
+                F, Q, Fm = embed(F, m, f_b), embed(Q, m, var_b * (1 - f_b ** 2)), embed(Fm, m, f_b)
+            x = Fm @ x
             P = lam * F @ P @ F.T + Q
             P = 0.5 * (P + P.T)
             t += T
             if gap:  # not propagated; position variance grown by (60 m/s x T)^2
-                P = P + np.diag([(60.0 * T) ** 2, 0, 0, (60.0 * T) ** 2, 0, 0, 0, 0])
+                P = P + np.diag([(60.0 * T) ** 2, 0, 0, (60.0 * T) ** 2] + [0] * (m - 4))
             if turn_on and not hold:
                 if has_gyro[k] and math.isfinite(epochs.yaw_rate_radps[k]):
                     w = -epochs.yaw_rate_radps[k]
@@ -182,8 +210,25 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         xs_prior[k], Ps_prior[k], Fs[k] = x, P, F  # the smoother's prior (P updated below)
         if epochs.has_gnss[k]:
             z = np.array([epochs.gnss_e[k], epochs.gnss_n[k]])
-            Hg = np.zeros((2, 8))
+            if ge and params["gnss"]["gate"] and n_fix >= params["gnss"]["gate_warmup_fixes"]:
+                # bias gate: b outside its stationary gate for gate_reset_s while moving -> position
+                if x[8] ** 2 + x[9] ** 2 > prm[kn.P_GATE_THR] * var_b and not is_static:
+                    if b_since < 0:
+                        b_since = t
+                    if t - b_since >= prm[kn.P_GATE_RESET]:
+                        x = x.copy()
+                        x[0] += x[8]
+                        x[3] += x[9]
+                        P = P + np.diag([x[8] ** 2, 0, 0, x[9] ** 2] + [0] * (m - 4))
+                        x[8] = x[9] = 0.0
+                        b_since = -1.0
+                        Ps_prior[k] = P  # part of P(k|k-1), as the gate reset
+                elif not is_static:
+                    b_since = -1.0
+            Hg = np.zeros((2, m))
             Hg[0, 0] = Hg[1, 3] = 1.0
+            if ge:  # z = position + b + v
+                Hg[0, 8] = Hg[1, 9] = 1.0
             y = z - Hg @ x
             f_wh = 1.0
             if whiten and wh_c0 > 0.0 and wh_c1 > 0.0:  # white + Gauss-Markov innovations:
@@ -204,11 +249,11 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 if nis[k] > thr:
                     if rej_since < 0:
                         rej_since = t
-                    if (gn["gate_mode"] == "inflate" and nis[k] <= thr * gn["gate_inflate_max"]
+                    if t - rej_since >= prm[kn.P_GATE_RESET]:  # no lock-out, first
+                        reset, rej_since = True, -1.0
+                    elif (gn["gate_mode"] == "inflate" and nis[k] <= thr * gn["gate_inflate_max"]
                             and t - rej_since >= gn["gate_inflate_after_s"]):
                         r_fac = nis[k] / thr
-                    elif t - rej_since >= prm[kn.P_GATE_RESET]:
-                        reset, rej_since = True, -1.0
                     else:
                         accept = False
                         rejected[k] = True
@@ -219,10 +264,10 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     beta = math.sqrt(float(y @ y) / np.trace(S))
                     a_f = 1.0 if beta <= ad["innovation_c"] else ad["innovation_c"] / beta
                     if a_f < 1.0:  # on the kinematic block only (see kernels_aekf)
-                        D = np.diag([math.sqrt(1.0 / a_f)] * 6 + [1.0, 1.0])
+                        D = np.diag([math.sqrt(1.0 / a_f)] * 6 + [1.0] * (m - 6))
                         P = D @ P @ D
                 if reset:  # no lock-out: accept and inflate the position variance
-                    P = P + np.diag([y[0] ** 2, 0, 0, y[1] ** 2, 0, 0, 0, 0])
+                    P = P + np.diag([y[0] ** 2, 0, 0, y[1] ** 2] + [0] * (m - 4))
                 Ps_prior[k] = P  # seed 001 factor and reset inflation are part of P(k|k-1)
                 if ad["sage_husa"]:
                     b = ad["sage_husa_b"]
@@ -245,14 +290,19 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                         wh_c2 = (1 - d) * wh_c2 + d * 0.5 * float(u @ wh_prev2)
                     wh_prev2, wh_t2 = wh_prev, wh_t
                     wh_prev, wh_t, wh_m = u, t, wh_m + 1
-                x, P = joseph(x, P, unit(0), z[0] - x[0], re * r_fac)
-                x, P = joseph(x, P, unit(3), z[1] - x[3], rn * r_fac)
+                # b is estimated only with a receiver velocity or at a standstill, else a
+                # consider state
+                has_v = is_static or (a_p["gnss_velocity"] and np.isfinite(gv_e[k])
+                                      and np.isfinite(gv_n[k]))
+                cons_b = (8, 9) if ge and not has_v else ()
+                x, P = joseph(x, P, Hg[0], z[0] - Hg[0] @ x, re * r_fac, cons_b)
+                x, P = joseph(x, P, Hg[1], z[1] - Hg[1] @ x, rn * r_fac, cons_b)
                 used[k] = True
                 n_fix += 1
                 if a_p["gnss_velocity"] and np.isfinite(gv_e[k]) and np.isfinite(gv_n[k]):
                     r_v = a_p["gnss_velocity_sd_mps"] ** 2
-                    x, P = joseph(x, P, unit(1), gv_e[k] - x[1], r_v)
-                    x, P = joseph(x, P, unit(4), gv_n[k] - x[4], r_v)
+                    x, P = joseph(x, P, unit(1, m), gv_e[k] - x[1], r_v)
+                    x, P = joseph(x, P, unit(4, m), gv_n[k] - x[4], r_v)
         cons = (6,) if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else ()
         cons_w = cons + ((1, 4) if params["aekf"]["heading_consider"] and epochs.gnss_outage[k]
                          else ())
@@ -267,7 +317,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 zk = st["zupt_keeps_position"]  # position as consider states
                 keep = (0, 3) if zk == "always" or (zk == "outage" and epochs.gnss_outage[k]) else ()
                 for i in (1, 4, 2, 5):
-                    x, P = joseph(x, P, unit(i), -x[i], st["zupt_sd_mps"] ** 2, keep)
+                    x, P = joseph(x, P, unit(i, m), -x[i], st["zupt_sd_mps"] ** 2, keep)
             else:
                 v = math.hypot(x[1], x[4])
                 if v >= omega_min:
@@ -275,7 +325,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 else:
                     d_e, d_n, use = math.sin(psi_mem), math.cos(psi_mem), heading_known
                 if use:  # u = k_s * |v| (seed 000's s = k_s T v divided by T)
-                    H = np.zeros(8)
+                    H = np.zeros(m)
                     H[1], H[4], H[7] = x[7] * d_e, x[7] * d_n, x[1] * d_e + x[4] * d_n
                     h = x[7] * (x[1] * d_e + x[4] * d_n)
                     if params["aekf"]["odo_along_track"]:
@@ -288,14 +338,14 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             w = -epochs.yaw_rate_radps[k]  # d(psi)/dt = -yaw_rate
             r_w = params["gyro"]["noise_sd_radps"] ** 2
             if is_static:
-                x, P = joseph(x, P, unit(6), w - x[6], r_w)
+                x, P = joseph(x, P, unit(6, m), w - x[6], r_w)
             elif turn_on and turn_row == "skip":
                 pass
             elif math.hypot(x[1], x[4]) >= omega_min:
                 ve, ae, vn, an = x[1], x[2], x[4], x[5]
                 v2 = ve ** 2 + vn ** 2
                 c = vn * ae - ve * an
-                H = np.zeros(8)  # seed 000 Jacobian of omega
+                H = np.zeros(m)  # seed 000 Jacobian of omega
                 H[1] = (-an * v2 - 2 * ve * c) / v2 ** 2
                 H[4] = (ae * v2 - 2 * vn * c) / v2 ** 2
                 H[2], H[5], H[6] = vn / v2, -ve / v2, 1.0

@@ -91,7 +91,8 @@ def test_gate_rejects_outliers_and_counts_them(name):
     p["gnss"]["gate"] = False
     ungated = get(name)(ep, p)
     assert ungated.gnss_rejected.sum() == 0
-    assert horizontal_error(ungated, tr)[window].max() > 5.0
+    # without the gate the jump shows (the GNSS error states take part of it: ekf 4.5 m measured)
+    assert horizontal_error(ungated, tr)[window].max() > 4.0
 
 
 @pytest.mark.parametrize("name", ["ekf", "aekf"])
@@ -109,10 +110,11 @@ def test_gate_never_locks_out(name):
     err_shifted = np.hypot(res.e[late] - (tr.e[late] + 30.0), res.n[late] - tr.n[late])
     assert err_shifted.max() < 3.0
     # inflate: fixes within gate_inflate_max x the gate are accepted down-weighted, the rest
-    # rejected until the reset; with the receiver velocity (aekf.gnss_velocity) P is small, so
-    # most of the 30 m step is rejected and the reset takes it (measured: ekf 2 inflated and
-    # 1 reset, aekf 28 and 1); from 30 s after the jump it follows within 1.5 m (measured
-    # 0.7 m; without the receiver velocity 3.7-5.2 m, the step leaking into the drift)
+    # rejected until the reset; with the GNSS error states (aekf.gnss_err_states) the first
+    # down-weighted fixes put half of the step into b, and the bias gate (b outside its
+    # stationary gate for gate_reset_s) moves it into the position (measured: 13 inflated,
+    # 1 reset, both filters); from 30 s after the jump it follows within 1.5 m (measured
+    # 0.8 m; 16 m without the bias gate)
     inf = get(name)(ep, _gate("inflate"))
     assert inf.info["gnss_inflated"] >= 1 and inf.info["gate_resets"] >= 1
     later = tr.t_s > 80.0
@@ -137,10 +139,11 @@ def test_options_keep_p_spd_under_multipath_bursts(option):
     assert np.isfinite(res.e).all() and np.isfinite(res.var_e).all()
     err = horizontal_error(res, tr)
     ok = (tr.t_s > 10.0) & ((tr.t_s < 120.0) | (tr.t_s > 150.0))
-    # 6 m with the seed 001 factor: gate_mode "inflate" down-weights the 25 m burst instead of
-    # rejecting it (pulled 3 m), and the factor then inflates P on the fixes after it (measured
-    # 5.4 m; 3.3 m with gate_mode "reject"); < 3 m with the other options
-    assert err[ok].max() < (6.0 if option.get("innovation_factor") else 4.0)
+    # 8 m with the seed 001 factor: gate_mode "inflate" down-weights the 25 m burst instead of
+    # rejecting it, and the factor then inflates P on the fixes after it (measured 7.1 m with
+    # the GNSS error states, 5.4 m without; 3.3 m with gate_mode "reject"); < 3 m with the
+    # other options
+    assert err[ok].max() < (8.0 if option.get("innovation_factor") else 4.0)
 
 
 @pytest.mark.parametrize("name", ["ekf", "aekf"])
@@ -166,6 +169,7 @@ def test_innovation_whitening_on_correlated_fixes(name):
     for whiten in (False, True):
         p = defaults()
         p["aekf"]["innovation_whitening"] = whiten
+        p["aekf"]["gnss_err_states"] = False  # the white-noise model whitening was made for
         res = get(name)(ep, p)
         late = tr.t_s > 30.0
         err2 = horizontal_error(res, tr)[late] ** 2
@@ -175,3 +179,11 @@ def test_innovation_whitening_on_correlated_fixes(name):
     else:
         assert out[True][0] < 0.9 * out[False][0]
         assert out[True][1] < 0.4 * out[False][1]
+    # the default since issue #4, the error as Gauss-Markov states (aekf.gnss_err_states):
+    # better than the whitening and about honest (RMSE and NEES measured in the assert message)
+    res = get(name)(ep, defaults())
+    err2 = horizontal_error(res, tr)[late] ** 2
+    rmse_ge = math.sqrt(err2.mean())
+    nees_ge = float(np.mean(err2 / (res.var_e + res.var_n)[late]))
+    assert rmse_ge < min(out[True][0], out[False][0]), (rmse_ge, out)
+    assert nees_ge < 0.5 * min(out[True][1], out[False][1]), (nees_ge, out)

@@ -73,7 +73,8 @@ def rmse(x: np.ndarray) -> float:
 def test_open_sky_every_option(name, option):
     """Open sky, 5 Hz GNSS with ~1.5 m RMSE: every filter/option beats the raw fixes.
 
-    Measured RMSE 0.75-0.89 m (GNSS alone 1.51 m); bound 1.2 m RMSE, 5 m max.
+    Measured RMSE 0.75-0.89 m (GNSS alone 1.51 m); bound 1.2 m RMSE, 5 m max (6 m with the
+    seed 001 factor: it inflates P at every large innovation, measured 5.1 m).
     """
     _, ep, te, tn = sim_case("open_sky")
     res = run(name, ep, params_with(OPTIONS[option]))
@@ -81,7 +82,7 @@ def test_open_sky_every_option(name, option):
     gnss_err = np.hypot(ep.gnss_e - te, ep.gnss_n - tn)[ep.has_gnss]
     assert rmse(err) < 1.2
     assert rmse(err) < 0.8 * rmse(gnss_err)
-    assert err.max() < 5.0
+    assert err.max() < (6.0 if option == "innovation_factor" else 5.0)
 
 
 @pytest.mark.parametrize("name", FILTERS)
@@ -173,8 +174,8 @@ def test_gyro_bias_and_odo_scale_estimated(name):
     Default drift model (Gauss-Markov, 0.29 deg/s, 300 s): final bias within
     0.15 deg/s (measured 0.09); a gyro declared steady (tau 10 h, 0.1 deg/s)
     within 0.03 deg/s; scale within 0.003; outage exit error < 25 m (measured
-    ekf 12 m, aekf 17 m), then
-    back under 2 m.
+    ekf 12 m, aekf 17 m), then back under 4 m (measured 3.3 m: the fixture's fixes are
+    white, the filter's 2 m GNSS error states average them less than a white model, 1.9 m).
     """
     ep, tr = tiny_drive(300.0, seed=2, dr_hz=50.0, gyro_bias_radps=math.radians(4.0),
                         odo_scale=1.05, outages=((100.0, 160.0),), stops=((200.0, 240.0),))
@@ -188,7 +189,7 @@ def test_gyro_bias_and_odo_scale_estimated(name):
     err = horizontal_error(res, tr)
     k = np.searchsorted(tr.t_s, 159.9)
     assert err[k] < 25.0
-    assert np.all(err[tr.t_s > 175.0] < 2.0)
+    assert np.all(err[tr.t_s > 175.0] < 4.0)
 
 
 @pytest.mark.parametrize("name", FILTERS)
@@ -224,7 +225,9 @@ def test_standstill_for_minutes(name):
     assert np.hypot(res.v_e[during], res.v_n[during]).max() < 0.02
     err = horizontal_error(res, tr)
     assert err[during].max() < 2.0  # measured 1.46-1.53 m (the fix noise at the stop)
-    assert rmse(err[tr.t_s > 380.0]) < 1.5
+    # measured 1.53 m (white 2 m fixes; the GNSS error states average them less than a white
+    # model would, 1.4 m)
+    assert rmse(err[tr.t_s > 380.0]) < 1.8
 
 
 @pytest.mark.parametrize("name", FILTERS)
@@ -319,7 +322,7 @@ def test_tiny_inputs(name, smooth, k):
 @pytest.mark.parametrize("name", FILTERS)
 def test_start_at_standstill_without_gnss_course(name):
     """Vehicle parked at the first fix (no course): v = 0 with ZUPTs, then drives off; the
-    remembered heading waits for the fixes, the track converges (< 2 m after 20 s of driving)."""
+    remembered heading waits for the fixes, the track converges (< 3 m after 40 s of driving)."""
     ep, tr = tiny_drive(90.0, seed=41, dr_hz=20.0, stops=((0.0, 20.0),), gnss_vel=False)
     p = params_with()
     # the start logic alone: aekf.innovation_whitening takes the drive-off transient's
@@ -328,12 +331,15 @@ def test_start_at_standstill_without_gnss_course(name):
     res = run(name, ep, p)
     assert res.static[(tr.t_s > 1.0) & (tr.t_s < 19.0)].all()
     err = horizontal_error(res, tr)
-    # 2.5 m: gate_mode "inflate" pulls the 52 m drive-off transient of "reject" down to 4 m, but
-    # what is left of it settles slower in the ekf (measured 2.05 m after 45 s, reject 1.1 m)
-    assert err[tr.t_s > 45.0].max() < 2.5
-    # with the whitening (aekf default; measured 4.7 m after 45 s, 0.7 m after 80 s)
-    err_w = horizontal_error(run(name, ep, params_with()), tr)
-    assert err_w[tr.t_s > 75.0].max() < 2.5
+    # 3 m after 60 s: gate_mode "inflate" pulls the 52 m drive-off transient of "reject" down to
+    # 4 m; without a receiver velocity the GNSS error states are consider states (not
+    # estimated: they absorbed the drive-off's heading error, 15 m) that widen S, so it settles
+    # slower (measured 4.7-4.9 m after 45 s, 2.3 m after 60 s; white model 1.1-2.1 m after 45 s)
+    assert err[tr.t_s > 60.0].max() < 3.0
+    # with the whitening as well (not the default; measured 10.7 m after 45 s, 3.7 m after 75 s)
+    p["aekf"]["innovation_whitening"] = True
+    err_w = horizontal_error(run(name, ep, p), tr)
+    assert err_w[tr.t_s > 80.0].max() < 5.0
 
 
 @pytest.mark.parametrize("name", FILTERS)
@@ -406,6 +412,9 @@ def test_receiver_velocity_sharpens_dr(name):
     figs = {}
     for use in (False, True):
         p = params_with()
+        # the white-noise model: with the GNSS error states (default) the fixes without a
+        # receiver velocity do not estimate the bias, so the two runs differ in more than this
+        p["aekf"]["gnss_err_states"] = False
         p["aekf"]["gnss_velocity"] = use
         res = run(name, ep, p)
         err = horizontal_error(res, tr)
@@ -414,3 +423,33 @@ def test_receiver_velocity_sharpens_dr(name):
         figs[use] = np.array([np.sqrt(np.mean(err[late] ** 2)), err[out].max(),
                               np.sqrt(np.mean(dv[late] ** 2))])
     assert np.all(figs[True] < 0.75 * figs[False])
+
+
+@pytest.mark.parametrize("name", FILTERS)
+@pytest.mark.parametrize("smooth", [False, True])
+def test_urban_multipath_as_error_states(name, smooth):
+    """Issue #4: the urban fixes' time-correlated multipath (4 m per axis, tau ~5 s moving,
+    60 s parked) as Gauss-Markov GNSS error states (``aekf.gnss_err_states``).
+
+    Seed 0, 300 s.  Measured RMSE (m) forward / RTS: ekf 1.71 / 1.60, aekf 1.59 / 1.44;
+    without the states the ekf had 3.70 / 3.02 and mean NEES (e^2 / sigma^2, 2 dof) 131,
+    the aekf (whitening on) 1.71 / 1.41 with NEES 4.7.  Now NEES 3.1 / 5.4 (ekf),
+    2.1 / 3.6 (aekf).  The estimated bias follows the simulator's multipath: correlation
+    0.81-0.89 over the fixes.  Bounds: RMSE 2.3 m, NEES 4 forward and 8 smoothed
+    (dimensionless), correlation 0.7 (dimensionless).
+    """
+    sim, ep, te, tn = sim_case("urban_canyon")
+    res = run(name, ep, params_with({"filter": {"smooth": smooth}}))
+    e2 = (res.e - te) ** 2 + (res.n - tn) ** 2
+    assert math.sqrt(float(np.mean(e2))) < 2.3
+    assert float(np.mean(e2 / (res.var_e + res.var_n))) < (8.0 if smooth else 4.0)
+    fix = ep.has_gnss
+    ge = sim.gnss_errors
+    mp = np.concatenate([np.interp(ep.t_ns, ge["t_ns"], ge["multipath_e"])[fix],
+                         np.interp(ep.t_ns, ge["t_ns"], ge["multipath_n"])[fix]])
+    b = np.concatenate([res.extras["gnss_err_e"][fix], res.extras["gnss_err_n"][fix]])
+    assert float(np.corrcoef(b, mp)[0, 1]) > 0.7
+    # the white-noise model (the states off) is the failure this guards against
+    if name == "ekf" and not smooth:
+        old = run(name, ep, params_with({"aekf": {"gnss_err_states": False}}))
+        assert math.sqrt(float(np.mean((old.e - te) ** 2 + (old.n - tn) ** 2))) > 3.0

@@ -47,6 +47,10 @@ OPTIONS = {
     "whitening_fast": {"aekf": {"whitening_b": 0.9, "whitening_max": 4.0}},
     "whitening_sage_husa": {"aekf": {"innovation_whitening": True},
                             "adaptive": {"sage_husa": True}},
+    "whitening_on": {"aekf": {"innovation_whitening": True}},
+    "no_gnss_err_states": {"aekf": {"gnss_err_states": False}},
+    "no_gnss_err_states_whitening": {"aekf": {"gnss_err_states": False, "innovation_whitening": True}},
+    "gnss_err_time_only": {"aekf": {"gnss_err_dist_m": 0.0, "gnss_err_tau_s": 5.0}},
 }
 
 
