@@ -125,7 +125,7 @@ def kernel_options(flg: np.ndarray) -> dict[str, int]:
                      ("store_on", flg[F_STORE]), ("inflate_on", flg[F_GATE_MODE] == GATE_INFLATE),
                      ("whiten_off", not flg[F_WHITEN]), ("floor_off", not flg[F_HEADING_FLOOR]),
                      ("turn_off", not flg[F_TURN]), ("omega_skip_on", flg[F_TURN_OMEGA] == OMEGA_SKIP),
-                     ("along_off", not flg[F_ODO_ALONG]), ("ge_off", not flg[F_GE]),
+                     ("along_off", not flg[F_ODO_ALONG]), ("ge_on", flg[F_GE]),
                      ("heading_consider_on", flg[F_HEADING_CONSIDER])):
         if on:
             opts[name] = 1
@@ -618,7 +618,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                      whiten_off: int | None = None, floor_off: int | None = None,
                      turn_off: int | None = None, omega_skip_on: int | None = None,
                      along_off: int | None = None, heading_consider_on: int | None = None,
-                     ge_off: int | None = None) -> None:
+                     ge_on: int | None = None) -> None:
     """Forward pass of the ekf/aekf over n epochs; writes the ``*_out`` arrays in place.
 
     Inputs per epoch: ``dt`` s; GNSS ``z_e, z_n`` m with variances ``r_e, r_n`` m^2
@@ -736,7 +736,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             p66 = P[6, 6]
             predict_mean(x, T, f_eps if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
             predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[P_Q_EPS], prm[P_Q_KS], lam, hold, qbuf)
-            if ge_off is None:  # GNSS error states: 1/tau_b = 1/tau + speed/distance (multipath
+            if ge_on is not None:  # GNSS error states: 1/tau_b = 1/tau + speed/distance (multipath
                 # decorrelates with the antenna's displacement; parked, only with time)
                 sp_b = 0.0 if hold else math.sqrt(x[1] * x[1] + x[4] * x[4])
                 f_b = math.exp(-T * (prm[P_GE_RATE] + sp_b * prm[P_GE_DIST_RATE]))
@@ -764,7 +764,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     # scale_sd^2 |w T| (a 90 deg turn: 0.36 deg for 0.5 %, exact 0.45 deg)
                     r_turn = r_w + prm[P_SCALE_VAR] * abs(w_use) / T
                     turn_predict(x, P, T, w_use, r_turn)
-                    if ge_off is None:  # the turn's Jacobian, for P(x, b) in ge_epoch
+                    if ge_on is not None:  # the turn's Jacobian, for P(x, b) in ge_epoch
                         dpsi = (w_use - x[6]) * T
                         gw[GW_PRED, 5] = 1.0
                         gw[GW_PRED, 6] = math.cos(dpsi)
@@ -810,7 +810,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         if has_gnss[k]:
             ye = z_e[k] - x[0]
             yn = z_n[k] - x[3]
-            if ge_off is None:  # z = position + b + v: the predicted fix includes the bias
+            if ge_on is not None:  # z = position + b + v: the predicted fix includes the bias
                 if ge_pred:
                     ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[P_GE_VAR])  # no rows yet
                     ge_pred = False
@@ -868,7 +868,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             s00 = P[0, 0] + r_e[k] * sh_r
             s11 = P[3, 3] + r_n[k] * sh_r
             s01 = P[0, 3]
-            if ge_off is None:  # H = [I_pos, I_b]: S gains 2 P(pos, b) + P(b, b)
+            if ge_on is not None:  # H = [I_pos, I_b]: S gains 2 P(pos, b) + P(b, b)
                 s00 += 2.0 * ge[0] + ge[GE_PEE]
                 s11 += 2.0 * ge[7] + ge[GE_PNN]
                 s01 += ge[1] + ge[6] + ge[GE_PEN]
@@ -910,7 +910,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     if af < 1.0:
                         g = 1.0 / af
                         inflate_kinematic(P, g)
-                        if ge_off is None:  # the same congruence on P(x, b)'s kinematic rows
+                        if ge_on is not None:  # the same congruence on P(x, b)'s kinematic rows
                             for i in range(12):
                                 ge[i] *= math.sqrt(g)
                 if reset:
@@ -950,7 +950,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     wh_m += 1.0
                 re *= r_fac
                 rn *= r_fac
-                if ge_off is None:
+                if ge_on is not None:
                     # the bias is estimated only when the velocity is known independently of the
                     # fixes, from the receiver (Doppler) or by a standstill (ZUPT): otherwise a
                     # slow drift of the fixes cannot be told from a DR heading error, and the
@@ -970,13 +970,15 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                         # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
                         for idx in (1, 4):
                             y = (gv_e[k] if idx == 1 else gv_n[k]) - x[idx]
-                            if unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons) and ge_off is None:
-                                for i in range(n):
-                                    gw[n_rows, i] = PHt[i]
-                                gw[GW_IDX, n_rows] = idx
-                                gw[GW_R, n_rows] = prm[P_GVEL_VAR]
-                                gw[GW_Y, n_rows] = y
-                                n_rows += 1
+                            ok_v = unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
+                            if ge_on is not None:  # noqa: SIM102 (a plain test: numba prunes it when off)
+                                if ok_v:
+                                    for i in range(n):
+                                        gw[n_rows, i] = PHt[i]
+                                    gw[GW_IDX, n_rows] = idx
+                                    gw[GW_R, n_rows] = prm[P_GVEL_VAR]
+                                    gw[GW_Y, n_rows] = y
+                                    n_rows += 1
                 else:
                     info[I_SKIPPED] += 1.0
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
@@ -991,7 +993,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     y = -x[idx]
                     if not unit_update(x, P, idx, y, prm[P_R_ZUPT], K, PHt, Bh, zupt_cons):
                         info[I_SKIPPED] += 1.0
-                    elif ge_off is None:
+                    elif ge_on is not None:
                         for i in range(n):
                             gw[n_rows, i] = PHt[i]
                         gw[GW_IDX, n_rows] = idx
@@ -1015,7 +1017,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     pn = un if along_off is None else 0.0
                     if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons, pe, pn):
                         info[I_SKIPPED] += 1.0
-                    elif ge_off is None:
+                    elif ge_on is not None:
                         for i in range(n):
                             gw[GW_H + n_rows, i] = H[i]
                         for i in range(n):
@@ -1032,7 +1034,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 y = -yaw[k] - x[6]
                 if not unit_update(x, P, i_eps, y, prm[P_R_OMEGA], K, PHt, Bh, no_cons):
                     info[I_SKIPPED] += 1.0
-                elif ge_off is None:
+                elif ge_on is not None:
                     for i in range(n):
                         gw[n_rows, i] = PHt[i]
                     gw[GW_IDX, n_rows] = 6.0
@@ -1061,7 +1063,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     cons |= CONS_NOT_ACC
                 if not row_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], K, PHt, Bh, cons, 0.0, 0.0):
                     info[I_SKIPPED] += 1.0
-                elif ge_off is None:
+                elif ge_on is not None:
                     for i in range(n):
                         gw[GW_H + n_rows, i] = H[i]
                     for i in range(n):
@@ -1070,8 +1072,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     gw[GW_R, n_rows] = prm[P_R_OMEGA]
                     gw[GW_Y, n_rows] = z - h
                     n_rows += 1
-        if ge_off is None and (ge_pred or n_rows > 0):  # the block: prediction and DR rows
-            ge_epoch(ge, gw, n_rows, ge_pred, alpha, prm[P_GE_VAR])
+        if ge_on is not None:  # noqa: SIM102 (the block: prediction and DR rows; numba prunes a plain test)
+            if ge_pred or n_rows > 0:
+                ge_epoch(ge, gw, n_rows, ge_pred, alpha, prm[P_GE_VAR])
         sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
         if floor_off is None and gnss_used[k] and sp >= heading_min:  # the heading floor restarts from P
             ce = x[4] / sp
@@ -1096,7 +1099,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         pcov_out[0, k] = P[0, 0]
         pcov_out[1, k] = P[3, 3]
         pcov_out[2, k] = P[0, 3]
-        if ge_off is None:
+        if ge_on is not None:
             b_out[0, k] = ge[GE_BE]
             b_out[1, k] = ge[GE_BN]
         sd_out[0, k] = math.sqrt(max(P[6, 6], 0.0))
@@ -1108,7 +1111,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             info[I_SPD_FAIL] += 1.0
         if store_on is not None:
             pack(P, P_store[k - p_off])
-            if ge_off is None:
+            if ge_on is not None:
                 for i in range(N_GE_PACKED):
                     P_store[k - p_off, N_PACKED + i] = ge[i]
             prior_store[k, Q_FB] = f_b
