@@ -47,6 +47,7 @@ REPORT_UNITS = {
     "drive": "drive name (output file stem)",
     "status": "ok, failed, or up to date (skipped: outputs newer than inputs)",
     "error": "one-line error message of a failed drive",
+    "started": "UTC time the worker started the drive (the pool's timeline)",
     "duration_s": "s, wall-clock time to process the drive",
     "cpu_s": "s, CPU time (user + system) of the worker process while it processed the drive",
     "epochs": "count of filter epochs",
@@ -262,7 +263,9 @@ def _row(spec: DriveSpec, status: str, error: str = "", duration_s: float = 0.0,
          cpu_s: float = 0.0) -> dict[str, Any]:
     s = summary or {}
     nan = float("nan")
-    return {"drive": spec.name, "status": status, "error": error, "duration_s": duration_s,
+    started_ns = time.time_ns() - round(duration_s * 1e9)  # the row is made when the drive ends
+    return {"drive": spec.name, "status": status, "error": error, "started": started_ns,
+            "duration_s": duration_s,
             "cpu_s": cpu_s,
             "epochs": int(s["epochs"]) if s.get("epochs", nan) == s.get("epochs", nan) else -1,
             "rmse_m": s.get("rmse_m", nan), "cep95_m": s.get("cep95_m", nan),
@@ -581,6 +584,7 @@ def report_frame(rows: list[dict[str, Any]]) -> Any:
     if len(df):
         df = df.sort_values("drive", kind="stable").reset_index(drop=True)
     df["epochs"] = df["epochs"].astype("int64")
+    df["started"] = pd.to_datetime(df["started"].astype("int64"), unit="ns", utc=True)
     for c in ("duration_s", "cpu_s", "rmse_m", "cep95_m", "max_m"):
         df[c] = df[c].astype("float64")
     return df

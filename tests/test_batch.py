@@ -93,11 +93,20 @@ def test_batch_cli_report_resume_and_force(gpsdr, logs: Path, tmp_path: Path) ->
     future = time.time() + 5
     os.utime(logs / "plain" / "yaw.csv", (future, future))
     # (two drives to redo: a pool, forked after this process read the up-to-date drive's schema)
+    t_before = pd.Timestamp.now(tz="UTC")
     third = gpsdr(["batch", logs, "-o", out, "--jobs", "2", "--filter", "ekf"])
+    t_after = pd.Timestamp.now(tz="UTC")
     report = pd.read_parquet(out / "batch_report.parquet").set_index("drive")
     assert report.loc["plain", "status"] == "ok"
     assert report.loc["2018__good", "status"] == "up to date"
     assert third.exit_code == 1
+    # the pool's timeline: each drive redone ran within the command's own time span
+    report = pd.read_parquet(out / "batch_report.parquet")
+    assert str(report["started"].dtype) == "datetime64[ns, UTC]"
+    ran = report[report["status"] != "up to date"]
+    assert sorted(ran["drive"]) == ["broken", "plain"]
+    ends = ran["started"] + pd.to_timedelta(ran["duration_s"], unit="s")
+    assert (ran["started"] >= t_before).all() and (ends <= t_after).all()
     other = gpsdr(["batch", logs / "2018", "-o", out, "--filter", "aekf", "-q"])
     assert other.exit_code == 0, other.output
     assert pd.read_parquet(out / "batch_report.parquet")["status"].tolist() == ["ok"]
