@@ -145,6 +145,25 @@ def per_drive(out: Path) -> tuple[float, float, float]:
     return float(rep["duration_s"].mean()), float(cpu), float(rep["duration_s"].median())
 
 
+def timeline(out: Path, t0: float, t1: float, workers: int) -> tuple[float, float, float]:
+    """From the report's ``started`` column, for a command that ran from ``t0`` to ``t1``
+    (UNIX s): seconds before the first drive started, how much longer than the median the
+    first drive of each worker took, and seconds after the last drive ended (NaN without
+    the column: reports older than it).
+    """
+    import pandas as pd
+
+    rep = pd.read_parquet(out / "batch_report.parquet")
+    rep = rep[rep["status"] == "ok"]
+    if "started" not in rep:
+        return float("nan"), float("nan"), float("nan")
+    start = rep["started"].astype("int64").to_numpy() / 1e9
+    dur = rep["duration_s"].to_numpy()
+    order = start.argsort()
+    first = dur[order[:workers]].mean() - float(pd.Series(dur).median())
+    return float(start.min() - t0), float(first), float(t1 - (start + dur).max())
+
+
 def cpu_idle_fraction(window_s: float = 1.0) -> float:
     """Share of the machine's CPU time that was idle over the next ``window_s`` (Linux)."""
     def sample() -> tuple[int, int]:
@@ -217,9 +236,17 @@ def main() -> None:
         fuse = [exe, "fuse", "--gps", str(drive / "gps.nmea"), "--gyro", str(drive / "gyro.csv"),
                 "--odo", str(drive / "odo.csv"), "-q"]
         fuses = [fuse + ["-o", str(Path(tmp) / f"f{i}.parquet")] for i in range(n)]
+        spans: dict[str, tuple[float, float]] = {}
+
+        def run_batch(par: bool) -> tuple[float, float]:
+            t0 = time.time()
+            res = timed([batch + ["-o", str(outn if par else out1), "--jobs", str(n if par else 1)]],
+                        False)
+            spans["n" if par else "1"] = (t0, time.time())
+            return res
+
         pairs: list[tuple[str, Callable[[bool], tuple[float, float]]]] = [
-            ("batch", lambda par: timed([batch + ["-o", str(outn if par else out1),
-                                                  "--jobs", str(n if par else 1)]], False)),
+            ("batch", run_batch),
             ("fuse", lambda par: timed(fuses, par)),
             ("loop", lambda par: timed([[sys.executable, "-c", LOOP]] * n, par)),
             ("stream", lambda par: timed([[sys.executable, "-c", STREAM]] * n, par)),
@@ -237,6 +264,8 @@ def main() -> None:
                 if key == "batch":
                     for tag, out in (("1", out1), ("n", outn)):
                         fig["wall" + tag], fig["cpu" + tag], fig["med" + tag] = per_drive(out)
+                        fig["start" + tag], fig["first" + tag], fig["tail" + tag] = timeline(
+                            out, *spans[tag], n if tag == "n" else 1)
                     # outside the drives: interpreter, imports, kernels, pool start, report
                     fig["over1"] = one - args.drives * fig["med1"]
                     fig["overn"] = par - args.drives * fig["medn"] / n
@@ -278,6 +307,11 @@ def main() -> None:
           f"--jobs {n}): --jobs 1 {span(res['batch_over1'])} s, --jobs {n} "
           f"{span(res['batch_overn'])} s. With those, drives that did not slow each other down "
           f"would give {(o1 + args.drives * m1) / (on + args.drives * m1 / n):.2f}x (best pair).")
+    print(f"Timeline, from the reports' started column (--jobs 1 / --jobs {n}): "
+          f"{span(res['batch_start1'])} / {span(res['batch_startn'])} s before the first drive "
+          f"started; the first drive of each worker took {span(res['batch_first1'])} / "
+          f"{span(res['batch_firstn'])} s longer than the median; {span(res['batch_tail1'])} / "
+          f"{span(res['batch_tailn'])} s after the last drive ended.")
     steady = [n * a / b for a, b in zip(res["batch_med1"], res["batch_medn"], strict=True)]
     print(f"Steady-state throughput (drives per second once the workers run: {n} x median drive "
           f"time at --jobs 1 / median at --jobs {n}): {span(steady)}x.")
