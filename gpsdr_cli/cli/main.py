@@ -113,7 +113,18 @@ _register()
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry point (``gpsdr``)."""
+    """Console-script entry point (``gpsdr``).
+
+    At exit the objects are left to the OS instead of the interpreter's final
+    garbage collection, which walks everything numba, pandas and a drive's
+    arrays left behind: 0.33-0.57 s after fusing a one-hour drive, 0.08-0.10 s
+    frozen.  Outputs do not depend on it (every file is written, fsync'ed,
+    closed and renamed before); in-process callers (tests) are unaffected.
+    """
+    import atexit
+    import gc
+
+    atexit.register(gc.freeze)  # atexit handlers run before the final collection
     cli.main(args=argv, prog_name="gpsdr")
 
 

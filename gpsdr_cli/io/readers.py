@@ -16,8 +16,10 @@ from ..config import Params
 from ..errors import InputError, NoDataError, UsageError
 from .csv import _parse_header, read_gyro_csv, read_odo_csv, text_problem
 from .drive import Drive
-from .mcap import MAGIC as MCAP_MAGIC
-from .mcap import read_mcap
+
+#: The MCAP file magic (mcap.py's MAGIC; that module imports numba and the mcap library,
+#: 0.15-0.3 s, so it is imported only when a file is MCAP)
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 PARQUET_MAGIC = b"PAR1"
 _HEAD_BYTES = 65536
@@ -86,6 +88,8 @@ def _read_log(path: str | Path, *, role: str, topics: dict[str, str] | None,
               date: dt.date | None, use_log_time: bool) -> Drive:
     kind = sniff(path)
     if kind == "mcap":
+        from .mcap import read_mcap
+
         return read_mcap(path, topics=topics, use_log_time=use_log_time, date=date)
     if kind == "nmea":
         from .nmea import read_nmea
@@ -167,6 +171,8 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
         if path is None:
             continue
         if sniff(path) == "mcap":
+            from .mcap import read_mcap
+
             part = _only(read_mcap(path, topics=topics, use_log_time=use_log_time, date=date), stream)
             if getattr(part, stream) is None:
                 raise NoDataError(str(path), f"no {stream} messages in the MCAP")
