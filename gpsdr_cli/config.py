@@ -179,11 +179,12 @@ gnss_err_states = true   # ekf/aekf (issue #4): the fix error is white noise + a
                          #   per axis (multipath), estimated as two more states (kernels_aekf GE_*): a white-noise
                          #   model fed time-correlated errors converged in seconds to a 1 m sigma with a 5-6 m error
                          #   and then, with whitening's large R, kept that offset for minutes.  Benchmark (seeds
-                         #   1-3, forward / RTS, aekf; ekf): urban 3.35/2.07 -> 2.21/1.09 m; 3.27/2.29 -> 2.13/1.13,
-                         #   one_hour 1.48/0.98 -> 1.32/0.87; 2.40/1.82 -> 1.32/0.86, open sky, tunnels, stop_and_go
-                         #   better too; cost ~15 % of the forward speed
+                         #   1-3, forward / RTS, aekf; ekf): urban 3.35/2.07 -> 2.20/1.08 m; 3.27/2.29 -> 2.11/1.11,
+                         #   one_hour 1.48/0.98 -> 1.31/0.86; 2.40/1.82 -> 1.31/0.86, open sky, tunnels, stop_and_go
+                         #   better too; cost ~12 % of the forward speed and ~1.5-2 s of cold compile (off: none)
 gnss_err_sd_m = 2.0      # stationary sigma of the bias per axis (m; 3: urban -1 %, open sky and stop_and_go +7 %)
-gnss_err_tau_s = 60.0    # its correlation time when parked (s)
+gnss_err_tau_s = 180.0   # its correlation time when parked (s): the antenna does not move, the multipath changes
+                         #   with the satellites only (60 s: a 30-min stop with GNSS drifted 1.2 m, tests/test_faults)
 gnss_err_dist_m = 50.0   # ... and its decorrelation distance: 1/tau = 1/gnss_err_tau_s + speed/gnss_err_dist_m
                          #   (the reflection geometry changes as the antenna moves; 0: time only)
 
