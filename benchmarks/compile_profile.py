@@ -2,6 +2,7 @@
 
     find gpsdr_cli -name '*.nb[ic]' -delete      # clear numba's cache first (a cold start)
     python benchmarks/compile_profile.py DRIVE_DIR [--filter NAME]
+    # or, leaving your cache alone:  NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/compile_profile.py DRIVE_DIR
 
 DRIVE_DIR holds gps.nmea, gyro.csv and odo.csv (``gpsdr simulate -o DIR --scenario
 one_hour``).  Times are inclusive: a caller's time includes the callees compiled
@@ -10,6 +11,7 @@ inside it.  With a warm cache the table is empty.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -35,6 +37,9 @@ def main() -> None:
     if len(sys.argv) < 2:
         sys.exit(__doc__)
     drive = Path(sys.argv[1])
+    # compile here, in this process, where the listener sees it (not in gpsdr fuse's
+    # background warm-up process, gpsdr_cli.warmup)
+    os.environ["GPSDR_WARM_UP"] = "0"
     listener = _CompileTimes()
     event.register("numba:compile", listener)
     from click.testing import CliRunner
