@@ -526,6 +526,8 @@ def forward(kind: str, prep: Prepared, store: bool, segment: int = 0) -> tuple:
     With ``store`` and ``segment > 0`` the pass is smoothed in O(segment) memory
     (its ``out`` the smoothed track); with ``store`` and ``segment <= 0`` it
     returns every epoch's fused x and P for :func:`~.kernels_fkf.smooth_fused`.
+    The kernel is given ``segment`` only in the first case, else None: a run
+    without the checkpointed smoother then compiles none of it (cold start).
     Returns ``(out, used, rejected, nis, beta, rfac, counters, xs, Ps, smooth_stats)``.
     """
     flags = prep.flags.copy()
@@ -534,7 +536,7 @@ def forward(kind: str, prep: Prepared, store: bool, segment: int = 0) -> tuple:
                              prep.gnss_var_n, prep.gnss_ve, prep.gnss_vn, prep.theta, prep.dist,
                              prep.t_m, prep.static, prep.x0, prep.P0, prep.psi0, prep.par,
                              kf.kernel_flags(kind == "fafkf", flags), fuzzy.R_TABLE,
-                             fuzzy.W_TABLE, int(segment))
+                             fuzzy.W_TABLE, int(segment) if store and segment > 0 else None)
 
 
 def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:

@@ -1,11 +1,10 @@
 """Compiled kernels of the federated filters ``fkf`` and ``fafkf`` (seed 002, Tang et al.).
 
-One forward pass for both filters (:func:`federated_pass` over the epoch loop
-:func:`_epochs`, the filter chosen by :func:`kernel_flags`), which with
-smoothing also runs the backward RTS pass in O(segment) memory by re-running
-the loop per segment from a checkpoint of its state; :func:`smooth_fused` is
-the same smoother over every epoch's stored x and P.  All over plain arrays:
-no Python object per epoch.
+One forward pass for both filters (:func:`federated_pass`, the filter chosen
+by :func:`kernel_flags`), which with smoothing also runs the backward RTS
+pass in O(segment) memory by re-running the loop per segment from a
+checkpoint of its state; :func:`smooth_fused` is the same smoother over every
+epoch's stored x and P.  All over plain arrays: no Python object per epoch.
 
 Conventions (:mod:`gpsdr_cli.conventions`): metres in the local ENU frame,
 seconds, radians; heading ``psi = atan2(v_e, v_n)`` clockwise from north.
@@ -125,7 +124,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from .adaptive import nis_2d
 from .linalg import cholesky, is_spd, symmetrize
@@ -430,7 +430,7 @@ def cap_variance(P: np.ndarray) -> bool:
             scaled = True
     if not scaled:
         return False
-    dsc = np.empty(NX)
+    dsc = np.zeros(NX)
     for i in range(NX):
         dsc[i] = min(1.0, SD_CEILING[i] / math.sqrt(P[i, i])) if P[i, i] > 0.0 else 1.0
     for i in range(NX):
@@ -806,7 +806,7 @@ def block_pe(P: np.ndarray, d: np.ndarray, block: int) -> float:
     P is symmetric: the upper triangle counted twice (half the products, and
     one reciprocal per state instead of a division per element).
     """
-    inv = np.empty(NX)
+    inv = np.zeros(NX)
     for i in range(NX):
         inv[i] = 1.0 / d[i] if in_block(i, block) else 0.0
     diag = 0.0
@@ -913,10 +913,11 @@ def checkpoint_length(m_window: int) -> int:
     return 5 * NX + 3 * NX * NX + 12 + 8 + N_SCALARS + 4 * m_window
 
 
-@njit(cache=True)
-def save_state(row: np.ndarray, vec: np.ndarray, mats: np.ndarray, aux: np.ndarray,
-               ring: np.ndarray, pc: np.ndarray, sc: np.ndarray) -> None:
-    """The state into one float row (the integers of ``pc`` are exact as floats)."""
+def save_state(segment, row, vec, mats, aux, ring, pc, sc):  # hints: _save_checkpoint
+    """The state into one float row (the integers of ``pc`` are exact as floats).
+
+    Compiled inside :func:`federated_pass` only, through :func:`_save_checkpoint` (not
+    jitted on its own: ``segment``, unused here, selects it at compile time)."""
     m = 0
     for a in range(vec.shape[0]):
         for i in range(NX):
@@ -944,10 +945,8 @@ def save_state(row: np.ndarray, vec: np.ndarray, mats: np.ndarray, aux: np.ndarr
             m += 1
 
 
-@njit(cache=True)
-def load_state(row: np.ndarray, vec: np.ndarray, mats: np.ndarray, aux: np.ndarray,
-               ring: np.ndarray, pc: np.ndarray, sc: np.ndarray) -> None:
-    """Inverse of :func:`save_state`."""
+def load_state(segment, row, vec, mats, aux, ring, pc, sc):  # hints: _load_checkpoint
+    """Inverse of :func:`save_state` (compiled the same way, through :func:`_load_checkpoint`)."""
     m = 0
     for a in range(vec.shape[0]):
         for i in range(NX):
@@ -975,13 +974,76 @@ def load_state(row: np.ndarray, vec: np.ndarray, mats: np.ndarray, aux: np.ndarr
             m += 1
 
 
+# ---- the checkpointed smoother's calls in the pass, typed away without it ----------------
+# federated_pass's ``segment`` is an int (checkpointed smoothing) or None (forward only, or
+# full storage for smooth_fused).  With None these calls compile to nothing, so a run
+# without --smooth does not compile the smoother (smooth_range, rts_step_fused,
+# save_state, load_state): numba compiles every call in a function, taken or not.  The
+# overloads return the bodies themselves (no wrapper compiled around them); numba matches
+# an overload's implementation by its bare argument names, hence no hints on the bodies.
+
+
+def _segment_length(segment: int | None) -> int:  # pragma: no cover - compiled: the overload
+    """Epochs per checkpointed segment; 0 for None."""
+    return 0 if segment is None else segment
+
+
+def _save_checkpoint(segment: int | None, row: np.ndarray, vec: np.ndarray, mats: np.ndarray,
+                     aux: np.ndarray, ring: np.ndarray, pc: np.ndarray,
+                     sc: np.ndarray) -> None:  # pragma: no cover
+    """:func:`save_state`, or nothing when ``segment`` is None."""
+
+
+def _load_checkpoint(segment: int | None, row: np.ndarray, vec: np.ndarray, mats: np.ndarray,
+                     aux: np.ndarray, ring: np.ndarray, pc: np.ndarray,
+                     sc: np.ndarray) -> None:  # pragma: no cover
+    """:func:`load_state`, or nothing when ``segment`` is None."""
+
+
+def _smooth_segment(segment: int | None, xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int,
+                    k_lo: int, n: int, dt: np.ndarray, static: np.ndarray, par: np.ndarray,
+                    x_sn: np.ndarray, P_sn: np.ndarray, out: np.ndarray,
+                    stats: np.ndarray) -> None:  # pragma: no cover
+    """:func:`smooth_range`, or nothing when ``segment`` is None."""
+
+
+@overload(_segment_length)
+def _ol_segment_length(segment):
+    if isinstance(segment, types.NoneType):
+        return lambda segment: 0
+    return lambda segment: segment
+
+
+@overload(_save_checkpoint)
+def _ol_save_checkpoint(segment, row, vec, mats, aux, ring, pc, sc):
+    if isinstance(segment, types.NoneType):
+        return lambda segment, row, vec, mats, aux, ring, pc, sc: None
+    return save_state
+
+
+@overload(_load_checkpoint)
+def _ol_load_checkpoint(segment, row, vec, mats, aux, ring, pc, sc):
+    if isinstance(segment, types.NoneType):
+        return lambda segment, row, vec, mats, aux, ring, pc, sc: None
+    return load_state
+
+
+@overload(_smooth_segment)
+def _ol_smooth_segment(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_sn,
+                       out, stats):
+    if isinstance(segment, types.NoneType):
+        return (lambda segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_sn, out,
+                stats: None)
+    return smooth_range
+
+
 @njit(cache=True)
 def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                    gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
                    gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray,
                    dist: np.ndarray, t_m: np.ndarray, static: np.ndarray, x0: np.ndarray,
                    P0: np.ndarray, psi0: float, par: np.ndarray, flags: np.ndarray,
-                   r_table: np.ndarray, w_table: np.ndarray, segment: int):
+                   r_table: np.ndarray, w_table: np.ndarray, segment: int | None):
     """The forward pass of fkf or fafkf (``flags`` from :func:`kernel_flags`) over all epochs.
 
     Returns ``(out, gnss_used, gnss_rej, nis, beta, rfac, counters, xs, Ps,
@@ -991,8 +1053,8 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
 
     With ``flags[F_STORE]`` the pass is smoothed:
 
-    * ``segment > 0``: the forward pass keeps a checkpoint of its whole state
-      (:func:`save_state`) before every ``segment`` epochs; then, from the last
+    * ``segment`` an int > 0: the forward pass keeps a checkpoint of its whole
+      state (:func:`save_state`) before every ``segment`` epochs; then, from the last
       segment to the first, it re-runs the segment from its checkpoint -- the
       same code on the same state, so the same floats -- storing the fused x
       and packed P_g of those epochs only, and the backward RTS recursion walks
@@ -1002,13 +1064,27 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
       forward pass; memory: ``segment x 65`` floats instead of ``n x 65`` (a
       one-hour drive at 100 Hz: 187 MB -> 2 MB at 4096), as the ekf/aekf
       smoother does (:func:`gpsdr_cli.smoothing.rts_checkpointed`).
-    * ``segment <= 0``: ``xs`` (n, 10), ``Ps`` (n, 55) hold the fused x and
+    * ``segment`` None: ``xs`` (n, 10), ``Ps`` (n, 55) hold the fused x and
       packed P_g of every epoch, for :func:`smooth_fused`; ``out`` is forward.
 
-    Why one function: numba compiles each jitted caller of :func:`_epochs`
-    with the whole loop inlined, so every extra caller is another compile of it
-    at a cold start; the two calls here pass the same argument types (no
-    literal constants) so that :func:`_epochs` itself compiles once.
+    Without ``flags[F_STORE]`` pass ``segment = None``: the checkpointed
+    smoother's calls then compile to nothing (:func:`_save_checkpoint` ..), so
+    a forward-only cold start does not compile the smoother; numba compiles
+    one specialisation per type of ``segment`` (None, int64).
+
+    Cold-start compile time, the reasons for the shape of this function:
+
+    * one epoch loop, here: numba links every jitted callee's compiled module
+      into each caller and optimises and emits the whole again, so the loop
+      in a function of its own (called for the forward segments and again
+      for the re-runs) was compiled on its own and once more inside this one.
+      The loop runs over jobs instead (the forward segments, then the
+      re-runs), each choosing its output arrays.
+    * integer arguments of callees as ``np.int64(...)``, not literals (numba
+      specialises a callee per literal value); allocations as ``np.zeros``
+      with few distinct argument types (each np.full/ones/empty/zeros
+      signature is compiled on its own); no slice assignment between arrays
+      (:func:`copy_state`).
     """
     n = dt.shape[0]
     store = flags[F_STORE] != 0
@@ -1017,73 +1093,45 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
     out = np.zeros((N_OUT, n))
     gnss_used = np.zeros(n, np.bool_)
     gnss_rej = np.zeros(n, np.bool_)
-    nis_out = np.full(n, np.nan)
-    beta_out = np.full((2, n), np.nan)              # GNSS weight: position, velocity
-    rfac_out = np.ones((4, n if adaptive else 0))   # R factors: gnss e, gnss n, heading, distance
+    # allocations as np.zeros with few distinct argument types, then filled: numba compiles
+    # each np.full/ones/empty/zeros signature on its own (~0.1 s each at a cold start)
+    nis_out = np.zeros(n)
+    beta_out = np.zeros((2, n))                     # GNSS weight: position, velocity
+    rfac_out = np.zeros((4, n if adaptive else 0))  # R factors: gnss e, gnss n, heading, distance
+    for k in range(n):
+        nis_out[k] = np.nan
+        beta_out[0, k] = np.nan
+        beta_out[1, k] = np.nan
+    for j in range(rfac_out.shape[0]):
+        for k in range(rfac_out.shape[1]):
+            rfac_out[j, k] = 1.0
     counters = np.zeros(N_COUNTERS, np.int64)
     stats = np.zeros(2, np.int64)
-    full = store and segment <= 0
+    seg_len = _segment_length(segment)
+    full = store and seg_len <= 0
     ns = n if full else 1
     xs = np.zeros((ns, NX))
     Ps = np.zeros((ns, NPACK))
-    checkpoints = store and segment > 0
-    seg = segment if checkpoints else max(n, 1)
+    checkpoints = store and seg_len > 0
+    seg = seg_len if checkpoints else max(n, 1)
     n_ck = (n + seg - 1) // seg if checkpoints else 0
     ck = np.zeros((n_ck, checkpoint_length(m_window)))
     vec, mats, aux, ring, pc, sc = init_state(x0, P0, psi0, par, flags)
-    no_offset = np.int64(0)                         # typed int64, not a literal (see above)
-    for k0 in range(0, n, seg):
-        if checkpoints:
-            save_state(ck[k0 // seg], vec, mats, aux, ring, pc, sc)
-        _epochs(k0, min(k0 + seg, n), dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n,
-                gnss_ve, gnss_vn, theta, dist, t_m, static, par, flags, r_table, w_table,
-                vec, mats, aux, ring, pc, sc,
-                out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, no_offset,
-                full, xs, Ps)
-    if checkpoints:                                 # the backward pass, segment by segment
-        keep = np.bool_(True)
-        o_out = np.zeros((N_OUT, seg))              # the re-run's outputs: scratch
-        o_used = np.zeros(seg, np.bool_)
-        o_rej = np.zeros(seg, np.bool_)
-        o_nis = np.zeros(seg)
-        o_beta = np.zeros((2, seg))
-        o_rfac = np.ones((4, seg if adaptive else 0))
-        o_counters = np.zeros(N_COUNTERS, np.int64)
-        xs_seg = np.zeros((seg, NX))
-        Ps_seg = np.zeros((seg, NPACK))
-        x_sn = np.zeros(NX)
-        P_sn = np.zeros((NX, NX))
-        for c in range(n_ck - 1, -1, -1):
-            k0 = c * seg
-            k1 = min(k0 + seg, n)
-            load_state(ck[c], vec, mats, aux, ring, pc, sc)
-            _epochs(k0, k1, dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve,
-                    gnss_vn, theta, dist, t_m, static, par, flags, r_table, w_table,
-                    vec, mats, aux, ring, pc, sc,
-                    o_out, o_used, o_rej, o_nis, o_beta, o_rfac, o_counters, k0,
-                    keep, xs_seg, Ps_seg)
-            smooth_range(xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, par, x_sn, P_sn, out,
-                         stats)
-    return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps, stats
+    # the scratch of the backward re-runs (empty without checkpoints)
+    sg = seg if checkpoints else 0
+    o_out = np.zeros((N_OUT, sg))
+    o_used = np.zeros(sg, np.bool_)
+    o_rej = np.zeros(sg, np.bool_)
+    o_nis = np.zeros(sg)
+    o_beta = np.zeros((2, sg))
+    o_rfac = np.zeros((4, sg if adaptive else 0))   # scratch: the re-runs write it first
+    o_counters = np.zeros(N_COUNTERS, np.int64)
+    xs_seg = np.zeros((sg, NX))
+    Ps_seg = np.zeros((sg, NPACK))
+    x_sn = np.zeros(NX)
+    P_sn = np.zeros((NX, NX))
 
-
-@njit(cache=True)
-def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
-            gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
-            gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray, dist: np.ndarray,
-            t_m: np.ndarray, static: np.ndarray, par: np.ndarray, flags: np.ndarray,
-            r_table: np.ndarray, w_table: np.ndarray,
-            vec: np.ndarray, mats: np.ndarray, aux: np.ndarray, ring: np.ndarray,
-            pc: np.ndarray, sc: np.ndarray,
-            out: np.ndarray, gnss_used: np.ndarray, gnss_rej: np.ndarray, nis_out: np.ndarray,
-            beta_out: np.ndarray, rfac_out: np.ndarray, counters: np.ndarray, off: int,
-            store: bool, xs: np.ndarray, Ps: np.ndarray) -> None:
-    """Epochs k0 .. k1 - 1 from the state (``vec`` .. ``sc``, see :func:`init_state`),
-    which they advance in place.  Outputs go to column ``k - off`` of ``out`` ..
-    ``rfac_out`` (the latter only with adaptive R); with ``store``, x_g and packed P_g to
-    row ``k - k0`` of ``xs``, ``Ps``."""
     mode_fr = flags[F_MODE_FR] != 0
-    adaptive = flags[F_ADAPT_R] != 0
     fusion = flags[F_FUSION]
     log_scale = flags[F_NORM] != 0
     gnss_on = flags[F_GNSS_ON] != 0
@@ -1097,7 +1145,9 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
     # integer arguments of callees (components, blocks, state indices) as np.int64(...),
     # not literals: numba compiles a jitted callee once per literal value it is passed
     # (adapt_r four times, block_pe three ...), ~0.5 s each at a cold start
-    ones = np.ones(NX)
+    ones = np.zeros(NX)
+    for i in range(NX):
+        ones[i] = 1.0
 
     x1 = vec[V_X1]
     x2 = vec[V_X2]
@@ -1115,23 +1165,23 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
 
     # states each filter contributes to the NR fusion (see the module docstring)
     if mode_fr:
-        idx1 = np.arange(NX)
-        idx2 = np.arange(NX)
+        idx1 = np.array([IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS])
+        idx2 = np.array([IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS])
     else:
         idx1 = np.array([IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N])
         idx2 = np.array([IE, IVE, IAE, IN, IVN, IAN, IQW, IQS])
     k1_ = idx1.shape[0]
     k2_ = idx2.shape[0]
-    A1 = np.empty((k1_, k1_))
-    L1 = np.empty((k1_, k1_))
-    B1 = np.empty((k1_, k1_))
-    A2 = np.empty((k2_, k2_))
-    L2 = np.empty((k2_, k2_))
-    B2 = np.empty((k2_, k2_))
-    Y = np.empty((NX, NX))
-    yv = np.empty(NX)
-    L = np.empty((NX, NX))
-    Wk = np.empty((NX, NX))
+    A1 = np.zeros((k1_, k1_))
+    L1 = np.zeros((k1_, k1_))
+    B1 = np.zeros((k1_, k1_))
+    A2 = np.zeros((k2_, k2_))
+    L2 = np.zeros((k2_, k2_))
+    B2 = np.zeros((k2_, k2_))
+    Y = np.zeros((NX, NX))
+    yv = np.zeros(NX)
+    L = np.zeros((NX, NX))
+    Wk = np.zeros((NX, NX))
 
     h = np.zeros(NX)
     s = np.zeros(NX)
@@ -1140,316 +1190,342 @@ def _epochs(k0: int, k1: int, dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.n
     y_dist = 0.0
     hph_dist = 0.0
 
-    t_now = sc[S_T_NOW]
-    t_last_acc = sc[S_T_LAST_ACC]                   # last accepted GNSS fix
-    t_last_dr = sc[S_T_LAST_DR]                     # last DR update of any kind
-    t_last_dist = sc[S_T_LAST_DIST]                 # last odometer distance or ZUPT update
-    t_head_acc = sc[S_T_HEAD_ACC]                   # last accepted heading
-    psi_hint = sc[S_PSI_HINT]
-    n_acc = np.int64(sc[S_N_ACC])                   # GNSS fixes accepted so far
-    rej_share = sc[S_REJ_SHARE]                     # recent share of gated fixes (EWMA)
-    t_last_fix = sc[S_T_LAST_FIX]
-    zupt_sd = par[K_ZUPT_SD]
-    omin2 = par[K_OMEGA_MIN] ** 2
-    chi2 = par[K_GATE_CHI2]
-    tau_rej = par[K_GATE_RESET_S] / math.log(2.0)   # all gated for gate_reset_s: share 1/2
-
-    for kx in range(k0, k1):
-        ko = kx - off
-        T = dt[kx] if kx > 0 else 0.0
-        t_now += T
-        st = static[kx]
-        if shared:
-            # FR with one share per filter (fkf, fafkf scalar weights): the local
-            # filters are x_g, P_g/c_i after the last reset and D_i = I/sqrt(c_i)
-            # commutes with Phi, so Phi (P_g/c_i) Phi^T + Q/c_i = (Phi P_g Phi^T + Q)/c_i:
-            # one prediction of the fused state serves both (then each capped)
-            if T > 0.0:
-                predict_uncapped(xg, Pg, T, st, par, ones)
-            s1 = d1[0] * d1[0]
-            s2 = d2[0] * d2[0]
-            for i in range(NX):
-                x1[i] = xg[i]
-                x2[i] = xg[i]
-                for j in range(NX):
-                    P1[i, j] = Pg[i, j] * s1
-                    P2[i, j] = Pg[i, j] * s2
-            capped1 = cap_variance(P1)
-            capped2 = cap_variance(P2)
-            # covariance fusion of the two (FR, one share) = the rows of both applied to the
-            # predicted fused state: exact in the information form as long as P_i = P_g/c_i
-            # held at the prediction (no cap) and every local change was a Kalman row
-            central = cov_fusion and not (capped1 or capped2)
+    n_fwd = (n + seg - 1) // seg
+    for job in range(n_fwd + n_ck):
+        # jobs 0 .. n_fwd - 1: the forward pass, segment by segment; then the
+        # backward re-runs, from the last segment to the first
+        if job < n_fwd:
+            k0 = job * seg
+            if checkpoints:
+                _save_checkpoint(segment, ck[job], vec, mats, aux, ring, pc, sc)
+            p_out, p_used, p_rej, p_nis = out, gnss_used, gnss_rej, nis_out
+            p_beta, p_rfac, p_counters = beta_out, rfac_out, counters
+            p_off = 0
+            p_store = full
+            p_xs, p_Ps = xs, Ps
         else:
-            if gnss_on:
-                predict(x1, P1, T, st, par, d1)
-            if dr_on:
-                predict(x2, P2, T, st, par, d2)
-        if st:
-            counters[C_ZUPT] += 1
+            k0 = (n_ck - 1 - (job - n_fwd)) * seg
+            _load_checkpoint(segment, ck[k0 // seg], vec, mats, aux, ring, pc, sc)
+            p_out, p_used, p_rej, p_nis = o_out, o_used, o_rej, o_nis
+            p_beta, p_rfac, p_counters = o_beta, o_rfac, o_counters
+            p_off = k0
+            p_store = True
+            p_xs, p_Ps = xs_seg, Ps_seg
+        k1 = min(k0 + seg, n)
+        t_now = sc[S_T_NOW]
+        t_last_acc = sc[S_T_LAST_ACC]                   # last accepted GNSS fix
+        t_last_dr = sc[S_T_LAST_DR]                     # last DR update of any kind
+        t_last_dist = sc[S_T_LAST_DIST]                 # last odometer distance or ZUPT update
+        t_head_acc = sc[S_T_HEAD_ACC]                   # last accepted heading
+        psi_hint = sc[S_PSI_HINT]
+        n_acc = np.int64(sc[S_N_ACC])                   # GNSS fixes accepted so far
+        rej_share = sc[S_REJ_SHARE]                     # recent share of gated fixes (EWMA)
+        t_last_fix = sc[S_T_LAST_FIX]
+        zupt_sd = par[K_ZUPT_SD]
+        omin2 = par[K_OMEGA_MIN] ** 2
+        chi2 = par[K_GATE_CHI2]
+        tau_rej = par[K_GATE_RESET_S] / math.log(2.0)   # all gated for gate_reset_s: share 1/2
 
-        # ---- GNSS local filter -------------------------------------------------------
-        if gnss_on:
-            if st:
-                zupt_central(x1, P1, xg, Pg, central, zupt_sd, h, s, kk)
-            if has_gnss[kx]:
-                ye = gnss_e[kx] - (x1[IE] + x1[IEPS_E])
-                yn = gnss_n[kx] - (x1[IN] + x1[IEPS_N])
-                s00 = P1[IE, IE] + 2.0 * P1[IE, IEPS_E] + P1[IEPS_E, IEPS_E]
-                s11 = P1[IN, IN] + 2.0 * P1[IN, IEPS_N] + P1[IEPS_N, IEPS_N]
-                s01 = P1[IE, IN] + P1[IE, IEPS_N] + P1[IEPS_E, IN] + P1[IEPS_E, IEPS_N]
-                if adaptive:
-                    if adapt_r(np.int64(0), ye * ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
-                               par, r_table, rfac, u_last, rsum):
-                        counters[C_R_ADAPT] += 1
-                    if adapt_r(np.int64(1), yn * yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
-                               par, r_table, rfac, u_last, rsum):
-                        counters[C_R_ADAPT] += 1
-                re = rfac[0] * gnss_var_e[kx]
-                rn = rfac[1] * gnss_var_n[kx]
-                nis = nis_2d(ye, yn, s00 + re, s01, s11 + rn)
-                nis_out[ko] = nis
-                accept = True
-                a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
-                t_last_fix = t_now
-                if chi2 > 0.0 and nis > chi2 and n_acc >= par[K_GATE_WARMUP]:
-                    if (t_now - t_last_acc > par[K_GATE_RESET_S]
-                            or a_rej * rej_share + (1.0 - a_rej) > 0.5):
-                        # no lock-out: every fix rejected for gate_reset_s, or most of
-                        # the recent ones -- the state, not the fixes, is then the outlier
-                        counters[C_GATE_RESETS] += 1
-                    else:
-                        accept = False
-                rej_share = a_rej * rej_share + (0.0 if accept else 1.0 - a_rej)
-                if accept:
-                    h[:] = 0.0
-                    h[IE] = 1.0
-                    h[IEPS_E] = 1.0
-                    local_and_central_row(x1, P1, xg, Pg, central, h,
-                                          gnss_e[kx] - (x1[IE] + x1[IEPS_E]), re, s, kk)
-                    h[:] = 0.0
-                    h[IN] = 1.0
-                    h[IEPS_N] = 1.0
-                    local_and_central_row(x1, P1, xg, Pg, central, h,
-                                          gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk)
-                    if par[K_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
-                                                      or math.isnan(gnss_vn[kx])):
-                        # receiver (Doppler) velocity with the accepted fix (our choice)
-                        local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVE),
-                                               gnss_ve[kx] - x1[IVE], par[K_GVEL_VAR], s, kk)
-                        local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVN),
-                                               gnss_vn[kx] - x1[IVN], par[K_GVEL_VAR], s, kk)
-                        counters[C_GVEL] += 1
-                    gnss_used[ko] = True
-                    counters[C_GNSS_USED] += 1
-                    n_acc += 1
-                    t_last_acc = t_now
-                else:
-                    gnss_rej[ko] = True
-                    counters[C_GNSS_REJECTED] += 1
-        else:
-            t_last_acc = t_now
-
-        # ---- DR local filter ---------------------------------------------------------
-        if dr_on:
-            if st:
-                zupt_central(x2, P2, xg, Pg, central, zupt_sd, h, s, kk)
-                t_last_dr = t_now
-                t_last_dist = t_now
-            else:
-                do_head = False
-                do_dist = False
-                if not math.isnan(theta[kx]):
-                    psi_hint = theta[kx] - x2[IQW]
-                    v2 = x2[IVE] ** 2 + x2[IVN] ** 2
-                    var_v2 = (x2[IVE] ** 2 * P2[IVE, IVE] + 2.0 * x2[IVE] * x2[IVN] * P2[IVE, IVN]
-                              + x2[IVN] ** 2 * P2[IVN, IVN])      # v^2 x var(speed)
-                    speed_known = t_now - t_last_dist <= par[K_DR_STALE_S]
-                    if v2 >= omin2 and (speed_known or v2 * v2 >= HEAD_SPEED_SNR2 * var_v2):
-                        do_head = True
-                    else:
-                        counters[C_HEADING_SLOW] += 1
-                if not math.isnan(dist[kx]) and t_m[kx] > 0.0:
-                    do_dist = True
-                r_head = par[K_HEAD_SD] ** 2
-                r_dist = (par[K_ODO_SD] * t_m[kx]) ** 2
-                if adaptive:                        # prior residuals, seed 002 eq. (15)
-                    if do_head:
-                        pred = heading_row(x2, h)
-                        y = wrap_pi(theta[kx] - pred)
-                        if adapt_r(np.int64(2), y * y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
-                                   par, r_table, rfac, u_last, rsum):
-                            counters[C_R_ADAPT] += 1
-                    if do_dist:
-                        pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
-                        y_dist = dist[kx] - pred
-                        hph_dist = hph(P2, h)
-                        y = y_dist
-                        if adapt_r(np.int64(3), y * y, hph_dist + rfac[3] * r_dist, ring, pos, cnt,
-                                   par, r_table, rfac, u_last, rsum):
-                            counters[C_R_ADAPT] += 1
-                if do_head:
-                    pred = heading_row(x2, h)
-                    y = wrap_pi(theta[kx] - pred)
-                    rh = rfac[2] * r_head
-                    if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph(P2, h) + rh):
-                        if t_now - t_head_acc > par[K_GATE_RESET_S]:
-                            # every heading rejected for gate_reset_s (e.g. a large gyro
-                            # bias outran q_w): re-align, q_w absorbs the discrepancy
-                            x2[IQW] += y
-                            central = False         # not a Kalman row: fuse the two
-                            P2[IQW, IQW] += y * y
-                            t_head_acc = t_now
-                            counters[C_HEAD_REALIGN] += 1
-                        else:
-                            counters[C_HEAD_REJECTED] += 1
-                    else:
-                        local_and_central_row(x2, P2, xg, Pg, central, h, y, rh, s, kk)
-                        t_head_acc = t_now
-                        t_last_dr = t_now
-                        counters[C_HEADING] += 1
-                if do_dist:
-                    if not (adaptive and not do_head):  # else h, y, hPh of the window's row
-                        pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
-                        y_dist = dist[kx] - pred
-                        hph_dist = hph(P2, h)
-                    y = y_dist
-                    rd = rfac[3] * r_dist
-                    if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph_dist + rd):
-                        counters[C_DIST_REJECTED] += 1      # odometer glitch: gated
-                    else:
-                        local_and_central_row(x2, P2, xg, Pg, central, h, y, rd, s, kk)
-                        t_last_dr = t_now
-                        t_last_dist = t_now
-                        counters[C_DIST] += 1
-
-        # ---- master fusion -----------------------------------------------------------
-        g_fresh = t_now - t_last_acc <= par[K_GNSS_STALE_S]
-        d_fresh = t_now - t_last_dr <= par[K_DR_STALE_S]
-        if both and not mode_fr and g_fresh != d_fresh:
-            # NR: a local filter that has had no measurement for a while (GNSS
-            # outage, DR stream gap) contributes nothing -- the GNSS filter's lone
-            # extrapolation would otherwise drag the fused track with the weight the
-            # fuzzy controller never lets reach 0 (a 10-min gap: 19 km).  FR needs no
-            # such rule: a stale filter is reset to x_g every epoch and carries only
-            # its share of the common prior.
-            counters[C_STALE] += 1
-            if g_fresh:
-                copy_state(x1, P1, xg, Pg)
-                beta_out[0, ko] = 1.0
-                beta_out[1, ko] = 1.0
-            else:
-                copy_state(x2, P2, xg, Pg)
-                beta_out[0, ko] = 0.0
-                beta_out[1, ko] = 0.0
-        elif both:
-            if fusion == FUSE_COV or fusion == FUSE_SHARES:
-                if fusion == FUSE_SHARES:           # fuzzy reliability -> information share
-                    de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
-                                                u_last[2] ** 2 + u_last[3] ** 2, log_scale)
-                    bp = fuzzy_beta(pe_scalar(P1, d1[0]), pe_scalar(P2, d2[0]),
-                                    de1n, de2n, log_scale, w_table)
-                else:
-                    bp = par[K_BETA_GNSS]
-                if central:
-                    pass                            # xg, Pg: the rows applied centrally
-                elif mode_fr:
-                    fuse_two(x1, P1, x2, P2, xg, Pg, Y, L, Wk, yv)
-                else:
-                    fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
-                                     A1, L1, B1, A2, L2, B2, L, Wk)
-                if fusion == FUSE_SHARES:
-                    beta_out[0, ko] = bp
-                    beta_out[1, ko] = bp
-                else:
-                    beta_out[0, ko] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
-                                             + Pg[IN, IN] / max(P1[IN, IN], 1e-300))
-                    beta_out[1, ko] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
-                                             + Pg[IVN, IVN] / max(P1[IVN, IVN], 1e-300))
-                for i in range(NX):
-                    w[i] = bp
-            else:
-                de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
-                                            u_last[2] ** 2 + u_last[3] ** 2, log_scale)
-                if fusion == FUSE_BLOCK:
-                    bp = fuzzy_beta(block_pe(P1, d1, np.int64(1)), block_pe(P2, d2, np.int64(1)),
-                                    de1n, de2n, log_scale, w_table)
-                    bv = fuzzy_beta(block_pe(P1, d1, np.int64(2)), block_pe(P2, d2, np.int64(2)),
-                                    de1n, de2n, log_scale, w_table)
-                else:
-                    bp = fuzzy_beta(block_pe(P1, d1, np.int64(0)), block_pe(P2, d2, np.int64(0)),
-                                    de1n, de2n, log_scale, w_table)
-                    bv = bp
-                w[IE] = bp
-                w[IN] = bp
-                w[IVE] = bv
-                w[IAE] = bv
-                w[IVN] = bv
-                w[IAN] = bv
-                if mode_fr:                         # sensor-error states: the block's weight
-                    w[IEPS_E] = bp
-                    w[IEPS_N] = bp
-                    w[IQW] = bv
-                    w[IQS] = bv
-                else:                               # NR: from the filter that observes them
-                    w[IEPS_E] = 1.0
-                    w[IEPS_N] = 1.0
-                    w[IQW] = 0.0
-                    w[IQS] = 0.0
-                fuse_convex(x1, P1, x2, P2, w, xg, Pg)
-                beta_out[0, ko] = bp
-                beta_out[1, ko] = bv
-            if shared:                              # Carlson 1990 fusion-reset, one share:
-                ci = min(max(w[0], 0.05), 0.95)     # x_i, P_i made at the next prediction
-                for i in range(NX):
-                    d1[i] = 1.0 / math.sqrt(ci)
-                    d2[i] = 1.0 / math.sqrt(1.0 - ci)
-            elif mode_fr:                           # Carlson 1990 fusion-reset
-                for i in range(NX):
-                    ci = min(max(w[i], 0.05), 0.95)
-                    d1[i] = 1.0 / math.sqrt(ci)
-                    d2[i] = 1.0 / math.sqrt(1.0 - ci)
+        for kx in range(k0, k1):
+            ko = kx - p_off
+            T = dt[kx] if kx > 0 else 0.0
+            t_now += T
+            st = static[kx]
+            if shared:
+                # FR with one share per filter (fkf, fafkf scalar weights): the local
+                # filters are x_g, P_g/c_i after the last reset and D_i = I/sqrt(c_i)
+                # commutes with Phi, so Phi (P_g/c_i) Phi^T + Q/c_i = (Phi P_g Phi^T + Q)/c_i:
+                # one prediction of the fused state serves both (then each capped)
+                if T > 0.0:
+                    predict_uncapped(xg, Pg, T, st, par, ones)
+                s1 = d1[0] * d1[0]
+                s2 = d2[0] * d2[0]
                 for i in range(NX):
                     x1[i] = xg[i]
                     x2[i] = xg[i]
                     for j in range(NX):
-                        P1[i, j] = Pg[i, j] * d1[i] * d1[j]
-                        P2[i, j] = Pg[i, j] * d2[i] * d2[j]
-        elif gnss_on:
-            copy_state(x1, P1, xg, Pg)
-            beta_out[0, ko] = 1.0
-            beta_out[1, ko] = 1.0
-        elif dr_on:
-            copy_state(x2, P2, xg, Pg)
-            beta_out[0, ko] = 0.0
-            beta_out[1, ko] = 0.0
+                        P1[i, j] = Pg[i, j] * s1
+                        P2[i, j] = Pg[i, j] * s2
+                capped1 = cap_variance(P1)
+                capped2 = cap_variance(P2)
+                # covariance fusion of the two (FR, one share) = the rows of both applied to the
+                # predicted fused state: exact in the information form as long as P_i = P_g/c_i
+                # held at the prediction (no cap) and every local change was a Kalman row
+                central = cov_fusion and not (capped1 or capped2)
+            else:
+                if gnss_on:
+                    predict(x1, P1, T, st, par, d1)
+                if dr_on:
+                    predict(x2, P2, T, st, par, d2)
+            if st:
+                p_counters[C_ZUPT] += 1
 
-        if check and ((gnss_on and not is_spd(P1)) or (dr_on and not is_spd(P2))
-                      or not is_spd(Pg)):
-            counters[C_NOT_SPD] += 1
-        out[O_E, ko] = xg[IE]
-        out[O_N, ko] = xg[IN]
-        out[O_VE, ko] = xg[IVE]
-        out[O_VN, ko] = xg[IVN]
-        out[O_VAR_E, ko] = Pg[IE, IE]
-        out[O_VAR_N, ko] = Pg[IN, IN]
-        out[O_COV_EN, ko] = Pg[IE, IN]
-        if adaptive:
-            for j in range(4):
-                rfac_out[j, ko] = rfac[j]
-        if store:
-            for i in range(NX):
-                xs[kx - k0, i] = xg[i]
-            pack(Pg, Ps[kx - k0])
-    sc[S_T_NOW] = t_now
-    sc[S_T_LAST_ACC] = t_last_acc
-    sc[S_T_LAST_DR] = t_last_dr
-    sc[S_T_LAST_DIST] = t_last_dist
-    sc[S_T_HEAD_ACC] = t_head_acc
-    sc[S_PSI_HINT] = psi_hint
-    sc[S_N_ACC] = n_acc
-    sc[S_REJ_SHARE] = rej_share
-    sc[S_T_LAST_FIX] = t_last_fix
+            # ---- GNSS local filter -------------------------------------------------------
+            if gnss_on:
+                if st:
+                    zupt_central(x1, P1, xg, Pg, central, zupt_sd, h, s, kk)
+                if has_gnss[kx]:
+                    ye = gnss_e[kx] - (x1[IE] + x1[IEPS_E])
+                    yn = gnss_n[kx] - (x1[IN] + x1[IEPS_N])
+                    s00 = P1[IE, IE] + 2.0 * P1[IE, IEPS_E] + P1[IEPS_E, IEPS_E]
+                    s11 = P1[IN, IN] + 2.0 * P1[IN, IEPS_N] + P1[IEPS_N, IEPS_N]
+                    s01 = P1[IE, IN] + P1[IE, IEPS_N] + P1[IEPS_E, IN] + P1[IEPS_E, IEPS_N]
+                    if adaptive:
+                        if adapt_r(np.int64(0), ye * ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
+                                   par, r_table, rfac, u_last, rsum):
+                            p_counters[C_R_ADAPT] += 1
+                        if adapt_r(np.int64(1), yn * yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
+                                   par, r_table, rfac, u_last, rsum):
+                            p_counters[C_R_ADAPT] += 1
+                    re = rfac[0] * gnss_var_e[kx]
+                    rn = rfac[1] * gnss_var_n[kx]
+                    nis = nis_2d(ye, yn, s00 + re, s01, s11 + rn)
+                    p_nis[ko] = nis
+                    accept = True
+                    a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
+                    t_last_fix = t_now
+                    if chi2 > 0.0 and nis > chi2 and n_acc >= par[K_GATE_WARMUP]:
+                        if (t_now - t_last_acc > par[K_GATE_RESET_S]
+                                or a_rej * rej_share + (1.0 - a_rej) > 0.5):
+                            # no lock-p_out: every fix rejected for gate_reset_s, or most of
+                            # the recent ones -- the state, not the fixes, is then the outlier
+                            p_counters[C_GATE_RESETS] += 1
+                        else:
+                            accept = False
+                    rej_share = a_rej * rej_share + (0.0 if accept else 1.0 - a_rej)
+                    if accept:
+                        h[:] = 0.0
+                        h[IE] = 1.0
+                        h[IEPS_E] = 1.0
+                        local_and_central_row(x1, P1, xg, Pg, central, h,
+                                              gnss_e[kx] - (x1[IE] + x1[IEPS_E]), re, s, kk)
+                        h[:] = 0.0
+                        h[IN] = 1.0
+                        h[IEPS_N] = 1.0
+                        local_and_central_row(x1, P1, xg, Pg, central, h,
+                                              gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk)
+                        if par[K_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
+                                                          or math.isnan(gnss_vn[kx])):
+                            # receiver (Doppler) velocity with the accepted fix (our choice)
+                            local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVE),
+                                                   gnss_ve[kx] - x1[IVE], par[K_GVEL_VAR], s, kk)
+                            local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVN),
+                                                   gnss_vn[kx] - x1[IVN], par[K_GVEL_VAR], s, kk)
+                            p_counters[C_GVEL] += 1
+                        p_used[ko] = True
+                        p_counters[C_GNSS_USED] += 1
+                        n_acc += 1
+                        t_last_acc = t_now
+                    else:
+                        p_rej[ko] = True
+                        p_counters[C_GNSS_REJECTED] += 1
+            else:
+                t_last_acc = t_now
+
+            # ---- DR local filter ---------------------------------------------------------
+            if dr_on:
+                if st:
+                    zupt_central(x2, P2, xg, Pg, central, zupt_sd, h, s, kk)
+                    t_last_dr = t_now
+                    t_last_dist = t_now
+                else:
+                    do_head = False
+                    do_dist = False
+                    if not math.isnan(theta[kx]):
+                        psi_hint = theta[kx] - x2[IQW]
+                        v2 = x2[IVE] ** 2 + x2[IVN] ** 2
+                        var_v2 = (x2[IVE] ** 2 * P2[IVE, IVE] + 2.0 * x2[IVE] * x2[IVN] * P2[IVE, IVN]
+                                  + x2[IVN] ** 2 * P2[IVN, IVN])      # v^2 x var(speed)
+                        speed_known = t_now - t_last_dist <= par[K_DR_STALE_S]
+                        if v2 >= omin2 and (speed_known or v2 * v2 >= HEAD_SPEED_SNR2 * var_v2):
+                            do_head = True
+                        else:
+                            p_counters[C_HEADING_SLOW] += 1
+                    if not math.isnan(dist[kx]) and t_m[kx] > 0.0:
+                        do_dist = True
+                    r_head = par[K_HEAD_SD] ** 2
+                    r_dist = (par[K_ODO_SD] * t_m[kx]) ** 2
+                    if adaptive:                        # prior residuals, seed 002 eq. (15)
+                        if do_head:
+                            pred = heading_row(x2, h)
+                            y = wrap_pi(theta[kx] - pred)
+                            if adapt_r(np.int64(2), y * y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
+                                       par, r_table, rfac, u_last, rsum):
+                                p_counters[C_R_ADAPT] += 1
+                        if do_dist:
+                            pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
+                            y_dist = dist[kx] - pred
+                            hph_dist = hph(P2, h)
+                            y = y_dist
+                            if adapt_r(np.int64(3), y * y, hph_dist + rfac[3] * r_dist, ring, pos, cnt,
+                                       par, r_table, rfac, u_last, rsum):
+                                p_counters[C_R_ADAPT] += 1
+                    if do_head:
+                        pred = heading_row(x2, h)
+                        y = wrap_pi(theta[kx] - pred)
+                        rh = rfac[2] * r_head
+                        if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph(P2, h) + rh):
+                            if t_now - t_head_acc > par[K_GATE_RESET_S]:
+                                # every heading rejected for gate_reset_s (e.g. a large gyro
+                                # bias outran q_w): re-align, q_w absorbs the discrepancy
+                                x2[IQW] += y
+                                central = False         # not a Kalman row: fuse the two
+                                P2[IQW, IQW] += y * y
+                                t_head_acc = t_now
+                                p_counters[C_HEAD_REALIGN] += 1
+                            else:
+                                p_counters[C_HEAD_REJECTED] += 1
+                        else:
+                            local_and_central_row(x2, P2, xg, Pg, central, h, y, rh, s, kk)
+                            t_head_acc = t_now
+                            t_last_dr = t_now
+                            p_counters[C_HEADING] += 1
+                    if do_dist:
+                        if not (adaptive and not do_head):  # else h, y, hPh of the window's row
+                            pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
+                            y_dist = dist[kx] - pred
+                            hph_dist = hph(P2, h)
+                        y = y_dist
+                        rd = rfac[3] * r_dist
+                        if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph_dist + rd):
+                            p_counters[C_DIST_REJECTED] += 1      # odometer glitch: gated
+                        else:
+                            local_and_central_row(x2, P2, xg, Pg, central, h, y, rd, s, kk)
+                            t_last_dr = t_now
+                            t_last_dist = t_now
+                            p_counters[C_DIST] += 1
+
+            # ---- master fusion -----------------------------------------------------------
+            g_fresh = t_now - t_last_acc <= par[K_GNSS_STALE_S]
+            d_fresh = t_now - t_last_dr <= par[K_DR_STALE_S]
+            if both and not mode_fr and g_fresh != d_fresh:
+                # NR: a local filter that has had no measurement for a while (GNSS
+                # outage, DR stream gap) contributes nothing -- the GNSS filter's lone
+                # extrapolation would otherwise drag the fused track with the weight the
+                # fuzzy controller never lets reach 0 (a 10-min gap: 19 km).  FR needs no
+                # such rule: a stale filter is reset to x_g every epoch and carries only
+                # its share of the common prior.
+                p_counters[C_STALE] += 1
+                if g_fresh:
+                    copy_state(x1, P1, xg, Pg)
+                    p_beta[0, ko] = 1.0
+                    p_beta[1, ko] = 1.0
+                else:
+                    copy_state(x2, P2, xg, Pg)
+                    p_beta[0, ko] = 0.0
+                    p_beta[1, ko] = 0.0
+            elif both:
+                if fusion == FUSE_COV or fusion == FUSE_SHARES:
+                    if fusion == FUSE_SHARES:           # fuzzy reliability -> information share
+                        de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
+                                                    u_last[2] ** 2 + u_last[3] ** 2, log_scale)
+                        bp = fuzzy_beta(pe_scalar(P1, d1[0]), pe_scalar(P2, d2[0]),
+                                        de1n, de2n, log_scale, w_table)
+                    else:
+                        bp = par[K_BETA_GNSS]
+                    if central:
+                        pass                            # xg, Pg: the rows applied centrally
+                    elif mode_fr:
+                        fuse_two(x1, P1, x2, P2, xg, Pg, Y, L, Wk, yv)
+                    else:
+                        fuse_information(x1, P1, idx1, x2, P2, idx2, xg, Pg, Y, yv,
+                                         A1, L1, B1, A2, L2, B2, L, Wk)
+                    if fusion == FUSE_SHARES:
+                        p_beta[0, ko] = bp
+                        p_beta[1, ko] = bp
+                    else:
+                        p_beta[0, ko] = 0.5 * (Pg[IE, IE] / max(P1[IE, IE], 1e-300)
+                                                 + Pg[IN, IN] / max(P1[IN, IN], 1e-300))
+                        p_beta[1, ko] = 0.5 * (Pg[IVE, IVE] / max(P1[IVE, IVE], 1e-300)
+                                                 + Pg[IVN, IVN] / max(P1[IVN, IVN], 1e-300))
+                    for i in range(NX):
+                        w[i] = bp
+                else:
+                    de1n, de2n = normalise_pair(u_last[0] ** 2 + u_last[1] ** 2,
+                                                u_last[2] ** 2 + u_last[3] ** 2, log_scale)
+                    if fusion == FUSE_BLOCK:
+                        bp = fuzzy_beta(block_pe(P1, d1, np.int64(1)), block_pe(P2, d2, np.int64(1)),
+                                        de1n, de2n, log_scale, w_table)
+                        bv = fuzzy_beta(block_pe(P1, d1, np.int64(2)), block_pe(P2, d2, np.int64(2)),
+                                        de1n, de2n, log_scale, w_table)
+                    else:
+                        bp = fuzzy_beta(block_pe(P1, d1, np.int64(0)), block_pe(P2, d2, np.int64(0)),
+                                        de1n, de2n, log_scale, w_table)
+                        bv = bp
+                    w[IE] = bp
+                    w[IN] = bp
+                    w[IVE] = bv
+                    w[IAE] = bv
+                    w[IVN] = bv
+                    w[IAN] = bv
+                    if mode_fr:                         # sensor-error states: the block's weight
+                        w[IEPS_E] = bp
+                        w[IEPS_N] = bp
+                        w[IQW] = bv
+                        w[IQS] = bv
+                    else:                               # NR: from the filter that observes them
+                        w[IEPS_E] = 1.0
+                        w[IEPS_N] = 1.0
+                        w[IQW] = 0.0
+                        w[IQS] = 0.0
+                    fuse_convex(x1, P1, x2, P2, w, xg, Pg)
+                    p_beta[0, ko] = bp
+                    p_beta[1, ko] = bv
+                if shared:                              # Carlson 1990 fusion-reset, one share:
+                    ci = min(max(w[0], 0.05), 0.95)     # x_i, P_i made at the next prediction
+                    for i in range(NX):
+                        d1[i] = 1.0 / math.sqrt(ci)
+                        d2[i] = 1.0 / math.sqrt(1.0 - ci)
+                elif mode_fr:                           # Carlson 1990 fusion-reset
+                    for i in range(NX):
+                        ci = min(max(w[i], 0.05), 0.95)
+                        d1[i] = 1.0 / math.sqrt(ci)
+                        d2[i] = 1.0 / math.sqrt(1.0 - ci)
+                    for i in range(NX):
+                        x1[i] = xg[i]
+                        x2[i] = xg[i]
+                        for j in range(NX):
+                            P1[i, j] = Pg[i, j] * d1[i] * d1[j]
+                            P2[i, j] = Pg[i, j] * d2[i] * d2[j]
+            elif gnss_on:
+                copy_state(x1, P1, xg, Pg)
+                p_beta[0, ko] = 1.0
+                p_beta[1, ko] = 1.0
+            elif dr_on:
+                copy_state(x2, P2, xg, Pg)
+                p_beta[0, ko] = 0.0
+                p_beta[1, ko] = 0.0
+
+            if check and ((gnss_on and not is_spd(P1)) or (dr_on and not is_spd(P2))
+                          or not is_spd(Pg)):
+                p_counters[C_NOT_SPD] += 1
+            p_out[O_E, ko] = xg[IE]
+            p_out[O_N, ko] = xg[IN]
+            p_out[O_VE, ko] = xg[IVE]
+            p_out[O_VN, ko] = xg[IVN]
+            p_out[O_VAR_E, ko] = Pg[IE, IE]
+            p_out[O_VAR_N, ko] = Pg[IN, IN]
+            p_out[O_COV_EN, ko] = Pg[IE, IN]
+            if adaptive:
+                for j in range(4):
+                    p_rfac[j, ko] = rfac[j]
+            if p_store:
+                for i in range(NX):
+                    p_xs[kx - k0, i] = xg[i]
+                pack(Pg, p_Ps[kx - k0])
+        sc[S_T_NOW] = t_now
+        sc[S_T_LAST_ACC] = t_last_acc
+        sc[S_T_LAST_DR] = t_last_dr
+        sc[S_T_LAST_DIST] = t_last_dist
+        sc[S_T_HEAD_ACC] = t_head_acc
+        sc[S_PSI_HINT] = psi_hint
+        sc[S_N_ACC] = n_acc
+        sc[S_REJ_SHARE] = rej_share
+        sc[S_T_LAST_FIX] = t_last_fix
+        if job >= n_fwd:                            # RTS backward over the segment
+            _smooth_segment(segment, xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, par, x_sn,
+                            P_sn, out, stats)
+    return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps, stats
 
 
 @njit(cache=True)
@@ -1484,14 +1560,12 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
     x_sn = np.zeros(NX)
     P_sn = np.zeros((NX, NX))
     stats = np.zeros(2, np.int64)
-    smooth_range(xs, Ps, 0, n - 1, 0, n, dt, static, par, x_sn, P_sn, out, stats)
+    _smooth_segment(n, xs, Ps, 0, n - 1, 0, n, dt, static, par, x_sn, P_sn, out, stats)
     return out, stats[0], stats[1]
 
 
-@njit(cache=True)
-def smooth_range(xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int, k_lo: int, n: int,
-                 dt: np.ndarray, static: np.ndarray, par: np.ndarray, x_sn: np.ndarray,
-                 P_sn: np.ndarray, out: np.ndarray, stats: np.ndarray) -> None:
+def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_sn, out,
+                 stats):  # hints: _smooth_segment
     """Backward RTS steps k = k_hi, k_hi - 1, .., k_lo over the fused posteriors
     ``xs[k - off]``, ``Ps[k - off]`` (packed) of an n-epoch pass.
 
@@ -1499,13 +1573,16 @@ def smooth_range(xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int, k_lo: int,
     k_hi = n - 1: the smoothed estimate there is the filtered one) and leave as
     the one at k_lo; ``out[:, k]`` receives it (rows as the forward ``out``);
     ``stats[0]`` counts epochs whose smoothed position block is not SPD,
-    ``stats[1]`` the restarts of the guard below.
+    ``stats[1]`` the restarts of the guard below.  Compiled through
+    :func:`_smooth_segment` (``segment``, unused here, selects it at compile time).
     """
     x_post = np.zeros(NX)
     P_post = np.zeros((NX, NX))
     x_prior = np.zeros(NX)
     P_prior = np.zeros((NX, NX))
-    ones = np.ones(NX)
+    ones = np.zeros(NX)
+    for i in range(NX):
+        ones[i] = 1.0
     x_s = np.zeros(NX)
     P_s = np.zeros((NX, NX))
     wL = np.zeros((NX, NX))
