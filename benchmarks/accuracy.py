@@ -126,7 +126,7 @@ def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_
     rows: list[Row] = []
     truth_ll = sim.truth[["t_ns", "lat", "lon"]]
     odrive = oracle_drive(sim)
-    odrive_gm = oracle_drive(sim, multipath_in_sigma=False)  # fkf/fafkf model multipath as states
+    odrive_gm = oracle_drive(sim, multipath_in_sigma=False)  # filters with multipath states
     ref = None
     for name in names:
         for smooth in smooth_modes:
@@ -149,7 +149,8 @@ def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_
                 row.mse_m2, row.drift60_pct, row.seconds = f["mse_m2"], f["drift60_pct"], secs
                 if oracle:
                     po = oracle_params(sim.noise, p)
-                    otrack, _, _ = run_filter(odrive_gm if name in ("fkf", "fafkf") else odrive, po)
+                    states = name in ("fkf", "fafkf") or bool(p["aekf"]["gnss_err_states"])
+                    otrack, _, _ = run_filter(odrive_gm if states else odrive, po)
                     fo = figures(otrack, ref, method + " oracle", po)
                     row.oracle_rmse_m, row.oracle_drift60_pct = fo["rmse_m"], fo["drift60_pct"]
             except Exception as err:  # a broken filter must not stop the table  # noqa: BLE001

@@ -645,13 +645,18 @@ def oracle_params(noise: dict, params: Params) -> Params:
 
     Gyro: white noise, Gauss-Markov drift (the simulator's drift *is* the model's);
     odometer: effective speed sigma and scale-factor prior; FKF: the GNSS error
-    states get the multipath sigma and correlation time; the PDOP regime factors
-    become 1 (feed :func:`oracle_drive`'s fixes, whose sigmas are the true ones).
-    Only keys that exist in the defaults are set.
+    states get the multipath sigma and correlation time; ekf/aekf's multipath
+    states (``[aekf] gnss_err_*``) get the drive's RMS multipath sigma and the
+    time constant and decorrelation distance of its environment with the largest
+    multipath (the simulator's 1/tau = 1/tau_s + speed/distance is the model's);
+    the PDOP regime factors become 1 (feed :func:`oracle_drive`'s fixes, whose
+    sigmas are the true ones).  Only keys that exist in the defaults are set.
     """
     import copy
 
     out = copy.deepcopy(params)
+    envs = list((noise.get("gnss_environments") or {}).values())
+    worst = max(envs, key=lambda e: e["multipath_sd_m"]) if envs else {}
     want = {
         "gyro": {"noise_sd_radps": noise.get("gyro_noise_sd_radps"),
                  "bias_tau_s": noise.get("gyro_bias_tau_s"),
@@ -663,6 +668,9 @@ def oracle_params(noise: dict, params: Params) -> Params:
         "gnss": {"k_good": 1.0, "k_medium": 1.0, "k_poor": 1.0},
         "fkf": {"gnss_err_tau_s": noise.get("multipath_tau_s"),
                 "gnss_err_sd_m": noise.get("multipath_sd_m")},
+        "aekf": {"gnss_err_sd_m": noise.get("multipath_sd_m"),
+                 "gnss_err_tau_s": worst.get("multipath_tau_s"),
+                 "gnss_err_dist_m": worst.get("multipath_decorrelation_m")},
         "time": {"gnss_offset_s": noise.get("gnss_stamp_offset_s", 0.0)},
     }
     for section, values in want.items():
@@ -678,9 +686,10 @@ def oracle_drive(sim: SimDrive, *, multipath_in_sigma: bool = True) -> Drive:
     """The drive with every fix's sigma replaced by its true sigma.
 
     ``multipath_in_sigma``: white noise and the multipath's stationary sigma (for
-    filters whose GNSS errors are white: ekf, aekf); False: white noise only, for
-    filters that carry the multipath as Gauss-Markov states (fkf, fafkf, told its
-    sigma and correlation time by :func:`oracle_params`).
+    filters whose GNSS errors are white: ekf, aekf with ``gnss_err_states`` off);
+    False: white noise only, for filters that carry the multipath as Gauss-Markov
+    states (fkf, fafkf, and ekf/aekf by default; told its sigma and correlation
+    time by :func:`oracle_params`).
     """
     g = sim.drive.gnss
     if g is None:

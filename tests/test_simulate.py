@@ -220,6 +220,11 @@ def test_oracle_params_only_known_keys(urban):
     assert p["gyro"]["noise_sd_radps"] == pytest.approx(urban.noise["gyro_noise_sd_radps"])
     assert p["gyro"]["bias_tau_s"] == pytest.approx(urban.noise["gyro_bias_tau_s"])
     assert p["fkf"]["gnss_err_sd_m"] == pytest.approx(urban.noise["multipath_sd_m"])
+    # ekf/aekf multipath states: the urban environment's time constant and distance
+    env = urban.noise["gnss_environments"]["urban"]
+    assert p["aekf"]["gnss_err_sd_m"] == pytest.approx(urban.noise["multipath_sd_m"])
+    assert p["aekf"]["gnss_err_tau_s"] == pytest.approx(env["multipath_tau_s"])
+    assert p["aekf"]["gnss_err_dist_m"] == pytest.approx(env["multipath_decorrelation_m"])
     od = oracle_drive(urban)
     ok = od.gnss.valid
     np.testing.assert_allclose(od.gnss.sigma_e_m[ok], urban.gnss_errors["true_sd_m"][ok])
