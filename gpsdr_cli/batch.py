@@ -373,12 +373,12 @@ def start_method() -> str:
     refresh thread, a dask client) would stay locked in the child forever.
     """
     import multiprocessing as mp
-    import threading
 
-    methods = mp.get_all_start_methods()
-    if "fork" in methods and threading.active_count() == 1:
+    from .warmup import fork_is_safe
+
+    if fork_is_safe():
         return "fork"
-    return "forkserver" if "forkserver" in methods else "spawn"
+    return "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
 
 
 def warm_parent(opts: BatchOptions) -> None:
@@ -417,17 +417,6 @@ def largest_first(specs: list[DriveSpec]) -> list[DriveSpec]:
     keep one worker busy while the others idle at the end of the batch.
     """
     return sorted(specs, key=input_bytes, reverse=True)
-
-
-def _flush_std_streams() -> None:
-    # a forked worker flushes its copy of the parent's buffers when it exits: empty them first
-    import sys
-
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
 
 
 def run_local(specs: Iterable[DriveSpec], opts: BatchOptions, jobs: int,
@@ -495,7 +484,9 @@ def _run_pool(work: Worker, queue: list[DriveSpec], opts: BatchOptions, jobs: in
     from concurrent.futures.process import BrokenProcessPool
 
     if method == "fork":
-        _flush_std_streams()
+        from .warmup import flush_std_streams
+
+        flush_std_streams()
     lost: list[DriveSpec] = []
     with ProcessPoolExecutor(max_workers=min(jobs, len(queue)),
                              mp_context=mp.get_context(method)) as pool:
@@ -529,7 +520,9 @@ def _run_alone(work: Worker, spec: DriveSpec, opts: BatchOptions, method: str) -
 
     t0 = time.perf_counter()
     if method == "fork":
-        _flush_std_streams()
+        from .warmup import flush_std_streams
+
+        flush_std_streams()
     with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context(method)) as pool:
         try:
             return pool.submit(work, spec, opts).result()

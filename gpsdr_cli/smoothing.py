@@ -62,6 +62,7 @@ from .filters.kernels_aekf import (
     Q_LAM,
     Q_W,
     ge_epoch,
+    ge_turn,
     predict_mean,
     rebuild_prior,
     turn_jacobian,
@@ -102,14 +103,7 @@ def ge_prior(G: np.ndarray, gw: np.ndarray, x: np.ndarray, T: float, alpha: floa
     gw[GW_PRED, 4] = pr[Q_FB]
     gw[GW_PRED, 5] = 0.0
     if math.isfinite(pr[Q_W]):
-        dpsi = (pr[Q_W] - x[6]) * T
-        gw[GW_PRED, 5] = 1.0
-        gw[GW_PRED, 6] = math.cos(dpsi)
-        gw[GW_PRED, 7] = math.sin(dpsi)
-        gw[GW_PRED + 1, 0] = x[4]
-        gw[GW_PRED + 1, 1] = -x[1]
-        gw[GW_PRED + 1, 2] = x[5]
-        gw[GW_PRED + 1, 3] = -x[2]
+        ge_turn(gw, x, T, pr[Q_W])
     ge_epoch(G, gw, np.int64(0), T > 0.0, alpha, var_b)  # int64 and bool: the kernel's types
     if pr[Q_GAIN] != 1.0:  # seed 001 factor: the kinematic rows of P(x, b) too
         for i in range(12):

@@ -70,7 +70,7 @@ def tiny_epochs(duration_s: float = 40.0, rate_hz: float = 100.0, gnss_hz: float
     """
     import numpy as np
 
-    from .align import Epochs
+    from .align import Epochs, outage_mask
 
     n = int(duration_s * rate_hz) + 1
     t_s = np.arange(n) / rate_hz
@@ -88,19 +88,15 @@ def tiny_epochs(duration_s: float = 40.0, rate_hz: float = 100.0, gnss_hz: float
         return np.where(has_gnss, values, np.nan)
 
     gap_s = 1.5
-    fix_t = t_s[has_gnss]
-    nxt = np.searchsorted(fix_t, t_s, side="left")
-    prev_t = fix_t[np.clip(nxt - 1, 0, len(fix_t) - 1)]
-    next_t = fix_t[np.clip(nxt, 0, len(fix_t) - 1)]
-    outage = (next_t - prev_t > gap_s) & ~has_gnss
+    t_ns = (1_700_000_000.0 * 1e9 + t_s * 1e9).astype(np.int64)
     return Epochs(
-        t_ns=(1_700_000_000.0 * 1e9 + t_s * 1e9).astype(np.int64), dt_s=dt,
+        t_ns=t_ns, dt_s=dt,
         has_gnss=has_gnss, gnss_e=at_fixes(e), gnss_n=at_fixes(nn),
         gnss_sd_e=at_fixes(np.full(n, 1.5)), gnss_sd_n=at_fixes(np.full(n, 1.5)),
         pdop=at_fixes(np.where(t_s < 15.0, 1.8, 4.5)), gnss_speed_mps=at_fixes(speed),
         gnss_course_rad=at_fixes(np.where(speed > 0.0, heading, nan)),
         has_gyro=np.ones(n, bool), yaw_rate_radps=yaw, has_odo=np.ones(n, bool),
-        odo_speed_mps=speed, gnss_outage=outage, gap_s=gap_s)
+        odo_speed_mps=speed, gnss_outage=outage_mask(t_ns, t_ns[has_gnss], gap_s), gap_s=gap_s)
 
 
 def warm_up(params: Params, *, auto_gnss_offset: bool = False) -> None:
@@ -155,6 +151,27 @@ def cache_is_fresh(params: Params, *, auto_gnss_offset: bool = False) -> bool:
     return True
 
 
+def fork_is_safe() -> bool:
+    """Whether this process may ``fork``: the start method exists and no other thread runs.
+
+    fork copies only the calling thread: with other threads alive (a progress bar,
+    a dask client) a lock one of them holds would stay locked in the child forever.
+    """
+    import multiprocessing as mp
+    import threading
+
+    return "fork" in mp.get_all_start_methods() and threading.active_count() == 1
+
+
+def flush_std_streams() -> None:
+    """Empty stdout/stderr before a fork: a child flushes its copy of the buffers at exit."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+
+
 class BackgroundWarmUp:
     """A forked process running :func:`warm_up`; :meth:`wait` joins it."""
 
@@ -198,13 +215,8 @@ def start_background(params: Params, *, auto_gnss_offset: bool = False) -> Backg
     and re-parse the command line).
     """
     import multiprocessing as mp
-    import threading
 
-    # fork copies only the calling thread: with other threads alive (a progress bar, a dask
-    # client) a lock one of them holds would stay locked in the child forever
-    if threading.active_count() > 1:
-        return None
-    if os.environ.get("GPSDR_WARM_UP", "1") == "0" or "fork" not in mp.get_all_start_methods():
+    if os.environ.get("GPSDR_WARM_UP", "1") == "0" or not fork_is_safe():
         return None
     try:
         cpus = len(os.sched_getaffinity(0))
@@ -212,11 +224,7 @@ def start_background(params: Params, *, auto_gnss_offset: bool = False) -> Backg
         cpus = os.cpu_count() or 1
     if cpus < 2 or cache_is_fresh(params, auto_gnss_offset=auto_gnss_offset):
         return None
-    for stream in (sys.stdout, sys.stderr):  # the child must not re-flush the parent's buffers
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
+    flush_std_streams()
     proc = mp.get_context("fork").Process(target=_child, args=(params, auto_gnss_offset),
                                           name="gpsdr-warm-up", daemon=True)
     proc.start()

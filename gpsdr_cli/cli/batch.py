@@ -71,7 +71,6 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
     )
     from ..io.parquet import write_table
 
-    _skip_final_collection()
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
                          gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
                          gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m)
@@ -103,28 +102,6 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
         click.echo(f"gpsdr: {failed} of {len(report)} drives failed "
                    f"(see {Path(out_dir) / REPORT_NAME})", err=True)
         sys.exit(1)
-
-
-def _skip_final_collection() -> None:
-    """At exit, leave every object to the OS instead of a last garbage collection.
-
-    The interpreter's final collection walks every object numba, pandas and the
-    drives left behind: measured 0.5-0.6 s of a batch's tail (one process that
-    fused a one-hour drive: exit 0.57-0.68 s, 0.06-0.11 s frozen), serial time in
-    both --jobs 1 and --jobs N.  Outputs do not depend on it: every file is
-    written, fsync'ed and closed before.  Registered with atexit, so an in-process
-    caller (tests) keeps its collector until its own exit.
-    """
-    global _FINAL_COLLECTION_SKIPPED
-    if not _FINAL_COLLECTION_SKIPPED:
-        import atexit
-        import gc
-
-        atexit.register(gc.freeze)  # atexit runs before the interpreter's final collection
-        _FINAL_COLLECTION_SKIPPED = True
-
-
-_FINAL_COLLECTION_SKIPPED = False
 
 
 class _Bar:

@@ -529,6 +529,35 @@ def ge_epoch(G: np.ndarray, gw: np.ndarray, n_rows: int, predict: bool, alpha: f
 
 
 @njit(cache=True, error_model="numpy")
+def ge_turn(gw: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
+    """Record the gyro turn of this epoch's prediction for :func:`ge_epoch`: the angle
+    (w - eps) T of :func:`turn_predict` and the rows (g1, g4, g2, g5) of its Jacobian."""
+    dpsi = (w - x[6]) * T
+    gw[GW_PRED, 5] = 1.0
+    gw[GW_PRED, 6] = math.cos(dpsi)
+    gw[GW_PRED, 7] = math.sin(dpsi)
+    gw[GW_PRED + 1, 0] = x[4]
+    gw[GW_PRED + 1, 1] = -x[1]
+    gw[GW_PRED + 1, 2] = x[5]
+    gw[GW_PRED + 1, 3] = -x[2]
+
+
+@njit(cache=True, error_model="numpy")
+def ge_push(gw: np.ndarray, r: int, code: float, H: np.ndarray, PHt: np.ndarray, R: float,
+            y: float) -> int:
+    """Queue an applied DR row for :func:`ge_epoch` in work row ``r``: its P H^T, its H (read
+    only for the sparse rows, ``code`` GW_ODO / GW_OMEGA; a state index for a unit row),
+    R and innovation; returns the next free row."""
+    for i in range(N_STATES):
+        gw[r, i] = PHt[i]
+        gw[GW_H + r, i] = H[i]
+    gw[GW_IDX, r] = code
+    gw[GW_R, r] = R
+    gw[GW_Y, r] = y
+    return r + 1
+
+
+@njit(cache=True, error_model="numpy")
 def ge_fix_update(x: np.ndarray, P: np.ndarray, G: np.ndarray, z_e: float, z_n: float,
                   r_e: float, r_n: float, u: np.ndarray, est_b: bool) -> bool:
     """A GNSS fix z = (e, n) + b + v, var(v) = diag(r_e, r_n): two scalar 10-state updates.
@@ -765,14 +794,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     r_turn = r_w + prm[P_SCALE_VAR] * abs(w_use) / T
                     turn_predict(x, P, T, w_use, r_turn)
                     if ge_on is not None:  # the turn's Jacobian, for P(x, b) in ge_epoch
-                        dpsi = (w_use - x[6]) * T
-                        gw[GW_PRED, 5] = 1.0
-                        gw[GW_PRED, 6] = math.cos(dpsi)
-                        gw[GW_PRED, 7] = math.sin(dpsi)
-                        gw[GW_PRED + 1, 0] = x[4]
-                        gw[GW_PRED + 1, 1] = -x[1]
-                        gw[GW_PRED + 1, 2] = x[5]
-                        gw[GW_PRED + 1, 3] = -x[2]
+                        ge_turn(gw, x, T, w_use)
             if floor_off is None:
                 # ---- heading floor (aekf.heading_floor, our choice): the model has no heading
                 # state, so the heading error lives in the cross-track velocity variance, which
@@ -973,12 +995,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                             ok_v = unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
                             if ge_on is not None:  # noqa: SIM102 (a plain test: numba prunes it when off)
                                 if ok_v:
-                                    for i in range(n):
-                                        gw[n_rows, i] = PHt[i]
-                                    gw[GW_IDX, n_rows] = idx
-                                    gw[GW_R, n_rows] = prm[P_GVEL_VAR]
-                                    gw[GW_Y, n_rows] = y
-                                    n_rows += 1
+                                    n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[P_GVEL_VAR], y)
                 else:
                     info[I_SKIPPED] += 1.0
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
@@ -994,12 +1011,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     if not unit_update(x, P, idx, y, prm[P_R_ZUPT], K, PHt, Bh, zupt_cons):
                         info[I_SKIPPED] += 1.0
                     elif ge_on is not None:
-                        for i in range(n):
-                            gw[n_rows, i] = PHt[i]
-                        gw[GW_IDX, n_rows] = idx
-                        gw[GW_R, n_rows] = prm[P_R_ZUPT]
-                        gw[GW_Y, n_rows] = y
-                        n_rows += 1
+                        n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[P_R_ZUPT], y)
             else:
                 sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
                 use = True
@@ -1020,12 +1032,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     elif ge_on is not None:
                         for i in range(n):
                             gw[GW_H + n_rows, i] = H[i]
-                        for i in range(n):
-                            gw[n_rows, i] = PHt[i]
-                        gw[GW_IDX, n_rows] = GW_ODO
-                        gw[GW_R, n_rows] = prm[P_R_ODO]
-                        gw[GW_Y, n_rows] = u - h
-                        n_rows += 1
+                        n_rows = ge_push(gw, n_rows, GW_ODO, H, PHt, prm[P_R_ODO], u - h)
         static_out[k] = is_static
         hold_out[k] = hold
         # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
@@ -1035,12 +1042,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 if not unit_update(x, P, i_eps, y, prm[P_R_OMEGA], K, PHt, Bh, no_cons):
                     info[I_SKIPPED] += 1.0
                 elif ge_on is not None:
-                    for i in range(n):
-                        gw[n_rows, i] = PHt[i]
-                    gw[GW_IDX, n_rows] = 6.0
-                    gw[GW_R, n_rows] = prm[P_R_OMEGA]
-                    gw[GW_Y, n_rows] = y
-                    n_rows += 1
+                    n_rows = ge_push(gw, n_rows, 6.0, H, PHt, prm[P_R_OMEGA], y)
             elif turn_off is None and omega_skip_on is not None:
                 pass  # the gyro already turned the velocity in the prediction
             elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
@@ -1066,12 +1068,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 elif ge_on is not None:
                     for i in range(n):
                         gw[GW_H + n_rows, i] = H[i]
-                    for i in range(n):
-                        gw[n_rows, i] = PHt[i]
-                    gw[GW_IDX, n_rows] = GW_OMEGA
-                    gw[GW_R, n_rows] = prm[P_R_OMEGA]
-                    gw[GW_Y, n_rows] = z - h
-                    n_rows += 1
+                    n_rows = ge_push(gw, n_rows, GW_OMEGA, H, PHt, prm[P_R_OMEGA], z - h)
         if ge_on is not None:  # noqa: SIM102 (the block: prediction and DR rows; numba prunes a plain test)
             if ge_pred or n_rows > 0:
                 ge_epoch(ge, gw, n_rows, ge_pred, alpha, prm[P_GE_VAR])

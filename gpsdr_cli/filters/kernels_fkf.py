@@ -1038,6 +1038,18 @@ def _ol_smooth_segment(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_s
 
 
 @njit(cache=True)
+def store_track(out: np.ndarray, k: int, x: np.ndarray, P: np.ndarray) -> None:
+    """Epoch ``k``'s track columns (O_* rows of ``out``) from a state and its covariance."""
+    out[O_E, k] = x[IE]
+    out[O_N, k] = x[IN]
+    out[O_VE, k] = x[IVE]
+    out[O_VN, k] = x[IVN]
+    out[O_VAR_E, k] = P[IE, IE]
+    out[O_VAR_N, k] = P[IN, IN]
+    out[O_COV_EN, k] = P[IE, IN]
+
+
+@njit(cache=True)
 def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                    gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
                    gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray,
@@ -1499,13 +1511,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
             if check and ((gnss_on and not is_spd(P1)) or (dr_on and not is_spd(P2))
                           or not is_spd(Pg)):
                 p_counters[C_NOT_SPD] += 1
-            p_out[O_E, ko] = xg[IE]
-            p_out[O_N, ko] = xg[IN]
-            p_out[O_VE, ko] = xg[IVE]
-            p_out[O_VN, ko] = xg[IVN]
-            p_out[O_VAR_E, ko] = Pg[IE, IE]
-            p_out[O_VAR_N, ko] = Pg[IN, IN]
-            p_out[O_COV_EN, ko] = Pg[IE, IN]
+            store_track(p_out, ko, xg, Pg)
             if adaptive:
                 for j in range(4):
                     p_rfac[j, ko] = rfac[j]
@@ -1617,13 +1623,7 @@ def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_s
                 stats[1] += 1
             else:
                 copy_state(x_s, P_s, x_sn, P_sn)
-        out[O_E, k] = x_sn[IE]
-        out[O_N, k] = x_sn[IN]
-        out[O_VE, k] = x_sn[IVE]
-        out[O_VN, k] = x_sn[IVN]
-        out[O_VAR_E, k] = P_sn[IE, IE]
-        out[O_VAR_N, k] = P_sn[IN, IN]
-        out[O_COV_EN, k] = P_sn[IE, IN]
+        store_track(out, k, x_sn, P_sn)
         if not (P_sn[IE, IE] > 0.0 and P_sn[IN, IN] > 0.0
                 and P_sn[IE, IN] ** 2 < P_sn[IE, IE] * P_sn[IN, IN]):
             stats[0] += 1

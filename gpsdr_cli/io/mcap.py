@@ -70,8 +70,8 @@ from ..conventions import FIX_DGPS, FIX_GPS, FIX_NONE, NS_PER_S
 from ..errors import InputError, NoDataError, UsageError
 from . import ros2_fast
 from .drive import Drive, GnssFixes, Odometry, SkipReport, Source, YawRates
+from .readers import MCAP_MAGIC as MAGIC  # there: sniffing must not import this module
 
-MAGIC = b"\x89MCAP0\r\n"
 #: Larger declared chunks are taken as damage (writers use ~1-4 MB chunks).
 _MAX_CHUNK_BYTES = 1 << 31
 
