@@ -629,6 +629,246 @@ def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps:
     P[3, 3] += pr[Q_ADD_N]
 
 
+
+@njit(cache=True, error_model="numpy")
+def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.ndarray,
+             gv_e: np.ndarray, gv_n: np.ndarray, x: np.ndarray, P: np.ndarray, st: np.ndarray,
+             prm: np.ndarray, ge: np.ndarray, gw: np.ndarray, wk: np.ndarray, info: np.ndarray,
+             nis_out: np.ndarray, gnss_used: np.ndarray, gnss_rej: np.ndarray, t: float,
+             is_static: bool, gap: bool, gate: bool, ge_pred: bool, add_e: float, add_n: float,
+             innov_on: int | None = None, sage_on: int | None = None,
+             whiten_off: int | None = None, inflate_on: int | None = None,
+             ge_on: int | None = None) -> tuple[float, float, float, int, bool]:
+    """Section 2 of :func:`cs_filter_kernel`: the GNSS position fix of epoch k (5 Hz).
+
+    Its own function for the cold start: numba's type inference and SSA
+    reconstruction grow faster than linearly with a function's size, and this
+    block was half of the kernel's body (cold compile of the kernel 7.4 s).  Its
+    memory (gate timers, Sage-Husa, whitening, fix count: the S_* entries) lives
+    in ``st`` only, so the 100-Hz path between fixes carries none of it.  ``t``
+    (s since the start), ``is_static``, ``gap`` (a step not propagated), ``gate``
+    and ``ge_pred`` (the GNSS error block's prediction still pending) come from the
+    kernel; ``add_e, add_n`` the position variance added to P(k|k-1) so far
+    (m^2).  The options are the kernel's None-or-int keyword arguments (numba
+    prunes a None one before type inference).  Returns the updated ``add_e,
+    add_n``, the seed 001 factor g applied to P(k|k-1), the number of DR rows
+    queued in ``gw`` for the block and ``ge_pred``.
+    """
+    H = wk[0]
+    K = wk[1]
+    PHt = wk[2]
+    Bh = wk[3]
+    alpha = prm[P_ALPHA]
+    # state indices and the empty consider mask as int64 values (see cs_filter_kernel)
+    i_e = np.int64(0)
+    i_n = np.int64(3)
+    no_cons = np.int64(0)
+    g = 1.0
+    n_rows = np.int64(0)  # not the literal 0: one ge_push specialisation, not two
+
+    rej_since = st[S_REJ_SINCE]
+    sh_r = st[S_SH_R]
+    sh_m = int(st[S_SH_M])
+    n_fix = st[S_N_FIX]
+    wh_c0 = st[S_WH_C0]
+    wh_c1 = st[S_WH_C1]
+    wh_c2 = st[S_WH_C2]
+    wh_ue = st[S_WH_UE]
+    wh_un = st[S_WH_UN]
+    wh_ue2 = st[S_WH_UE2]
+    wh_un2 = st[S_WH_UN2]
+    wh_t = st[S_WH_T]
+    wh_t2 = st[S_WH_T2]
+    wh_m = st[S_WH_M]
+    wh_static = st[S_WH_STATIC]
+    b_since = st[S_B_SINCE]
+    ye = z_e[k] - x[0]
+    yn = z_n[k] - x[3]
+    if ge_on is not None:  # z = position + b + v: the predicted fix includes the bias
+        if ge_pred:
+            ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[P_GE_VAR])  # no rows yet
+            ge_pred = False
+        if gate and n_fix >= prm[P_GATE_WARMUP]:
+            # bias gate (our choice): multipath decorrelates as the car moves; an
+            # estimated b outside the gate of its stationary distribution for
+            # gate_reset_s while moving is not multipath but fixes that moved (a datum
+            # change) or a DR error: b goes into the position, whose variance grows by
+            # it (no lock-out, like the gate reset; a 30 m step otherwise stayed half
+            # in b, the track 16 m off)
+            if (ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN] > prm[P_GATE_THR] * prm[P_GE_VAR]
+                    and not is_static):
+                if b_since < 0.0:
+                    b_since = t
+                if t - b_since >= prm[P_GATE_RESET]:
+                    x[0] += ge[GE_BE]
+                    x[3] += ge[GE_BN]
+                    add_e += ge[GE_BE] * ge[GE_BE]
+                    add_n += ge[GE_BN] * ge[GE_BN]
+                    P[0, 0] += ge[GE_BE] * ge[GE_BE]
+                    P[3, 3] += ge[GE_BN] * ge[GE_BN]
+                    ge[GE_BE] = 0.0
+                    ge[GE_BN] = 0.0
+                    b_since = -1.0
+                    info[I_GATE_RESETS] += 1.0
+            elif not is_static:
+                b_since = -1.0
+        ye = z_e[k] - x[0] - ge[GE_BE]
+        yn = z_n[k] - x[3] - ge[GE_BN]
+    # innovation whitening (aekf.innovation_whitening, Mehra 1970): an optimal filter's
+    # innovations are white; a lag-one correlation rho of the normalised innovations
+    # says the fixes' errors are time-correlated (multipath) and carry less independent
+    # information than R claims: R is scaled by the AR(1) variance factor of an average,
+    # (1 + rho)/(1 - rho), within [1, P_WH_MAX]
+    f_wh = 1.0
+    if whiten_off is None and wh_c0 > 0.0 and wh_c1 > 0.0:
+        # white + first-order Gauss-Markov innovations: lag-one and lag-two
+        # autocovariances c1 = s_c r, c2 = s_c r^2 give the correlation r of the
+        # coloured part and its share s_c of c0; R is scaled by the variance factor
+        # of an average of such a sequence, ((c0 - s_c) + s_c (1 + r)/(1 - r)) / c0
+        r_c = min(max(wh_c2 / wh_c1, 0.0), 0.999)
+        s_c = min(wh_c1 / max(r_c, 1e-3), wh_c0)
+        f_wh = min(((wh_c0 - s_c) + s_c * (1.0 + r_c) / (1.0 - r_c)) / wh_c0,
+                   prm[P_WH_MAX])
+    if whiten_off is None and is_static:
+        # parked, the antenna does not move and its multipath does not change: the
+        # m-th fix of a stop carries ~1/m of a fix's information (all m together about
+        # as much as one, not m), so R x m (our choice; aekf.innovation_whitening)
+        wh_static += 1.0
+        f_wh = max(f_wh, wh_static)
+    re = r_e[k] * sh_r * f_wh
+    rn = r_n[k] * sh_r * f_wh
+    # NIS, gate and the seed 001 factor with the nominal R: the whitening factor scales
+    # the information of a fix, not the spread of its error (which the NIS tests)
+    s00 = P[0, 0] + r_e[k] * sh_r
+    s11 = P[3, 3] + r_n[k] * sh_r
+    s01 = P[0, 3]
+    if ge_on is not None:  # H = [I_pos, I_b]: S gains 2 P(pos, b) + P(b, b)
+        s00 += 2.0 * ge[0] + ge[GE_PEE]
+        s11 += 2.0 * ge[7] + ge[GE_PNN]
+        s01 += ge[1] + ge[6] + ge[GE_PEN]
+    nis = nis_2d(ye, yn, s00, s01, s11)
+    nis_out[k] = nis
+    accept = True
+    reset = False
+    r_fac = 1.0
+    if gate and n_fix >= prm[P_GATE_WARMUP]:  # no gate before the filter has converged
+        thr = prm[P_GATE_THR]
+        if nis > thr:
+            if rej_since < 0.0:
+                rej_since = t
+            if t - rej_since >= prm[P_GATE_RESET]:
+                # no lock-out: accept and inflate P by the innovation.  First, also in
+                # inflate mode: fixes that have disagreed for gate_reset_s are a new
+                # truth (a datum change), not an error to down-weight forever (with the
+                # GNSS error states, down-weighted fixes of a 30 m step went into b and
+                # the track stayed 16 m off)
+                reset = True
+                rej_since = -1.0
+                info[I_GATE_RESETS] += 1.0
+            elif (inflate_on is not None and nis <= thr * prm[P_GATE_INFLATE_MAX]
+                    and t - rej_since >= prm[P_GATE_INFLATE_AFTER]):
+                # robust "opposite lever" (ALGORITHMS.md 3) once the fixes have
+                # disagreed for gate_inflate_after_s (a short multipath burst is still
+                # rejected): accept with R scaled so that the NIS equals the gate
+                r_fac = nis / thr
+                info[I_INFLATED] += 1.0
+            else:
+                accept = False
+                gnss_rej[k] = True
+        else:
+            rej_since = -1.0
+    if accept:
+        if innov_on is not None and r_fac == 1.0 and not gap:  # seed 001: P(k|k-1) /= alpha (not on a fix the
+            # gate down-weighted as an outlier: in reject mode it would not be used at all)
+            af = adaptive_factor(ye, yn, s00 + s11, prm[P_INNOV_C])
+            if af < 1.0:
+                g = 1.0 / af
+                inflate_kinematic(P, g)
+                if ge_on is not None:  # the same congruence on P(x, b)'s kinematic rows
+                    for i in range(12):
+                        ge[i] *= math.sqrt(g)
+        if reset:
+            add_e += ye * ye
+            add_n += yn * yn
+            P[0, 0] += ye * ye
+            P[3, 3] += yn * yn
+        if sage_on is not None:  # seed 004 Sage-Husa on a scale of R, with the divergence guard
+            sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e[k] + r_n[k])
+            sh_r = sage_husa_r(sh_r, sh_m, prm[P_SH_B], sample, prm[P_SH_RMIN],
+                               prm[P_SH_RMAX])
+            sh_m += 1
+            re = r_e[k] * sh_r * f_wh
+            rn = r_n[k] * sh_r * f_wh
+        if (whiten_off is None and not reset and r_fac == 1.0 and nis <= prm[P_WH_NIS]
+                and not is_static  # a stop has its own rule (R x m, above)
+                and P[0, 0] + P[3, 3] < (r_e[k] + r_n[k]) * sh_r):  # converged only
+            # normalised innovations; their lag-one product only between fixes at most
+            # P_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
+            # under P_WH_NIS: a filter error (a drive-off with an unknown heading, the
+            # end of an outage) also makes the innovations correlated, and inflating R
+            # then slowed its correction (11 m instead of 7 m, 10 s later)
+            ue = ye / math.sqrt(P[0, 0] + r_e[k] * sh_r)
+            un = yn / math.sqrt(P[3, 3] + r_n[k] * sh_r)
+            d_wh = (1.0 - prm[P_WH_B]) / (1.0 - prm[P_WH_B] ** (wh_m + 1.0))
+            wh_c0 = (1.0 - d_wh) * wh_c0 + d_wh * 0.5 * (ue * ue + un * un)
+            if t - wh_t <= prm[P_WH_GAP]:
+                wh_c1 = (1.0 - d_wh) * wh_c1 + d_wh * 0.5 * (ue * wh_ue + un * wh_un)
+            if t - wh_t2 <= 2.0 * prm[P_WH_GAP]:
+                wh_c2 = (1.0 - d_wh) * wh_c2 + d_wh * 0.5 * (ue * wh_ue2 + un * wh_un2)
+            wh_ue2 = wh_ue
+            wh_un2 = wh_un
+            wh_t2 = wh_t
+            wh_ue = ue
+            wh_un = un
+            wh_t = t
+            wh_m += 1.0
+        re *= r_fac
+        rn *= r_fac
+        if ge_on is not None:
+            # the bias is estimated only when the velocity is known independently of the
+            # fixes, from the receiver (Doppler) or by a standstill (ZUPT): otherwise a
+            # slow drift of the fixes cannot be told from a DR heading error, and the
+            # states absorbed a drive-off's wrong heading (15 m); then b is a consider
+            # state (it widens S only)
+            est_b = is_static or (math.isfinite(gv_e[k]) and math.isfinite(gv_n[k])
+                                  and prm[P_GVEL_VAR] > 0.0)
+            ok1 = ge_fix_update(x, P, ge, z_e[k], z_n[k], re, rn, K, est_b)
+            ok2 = ok1
+        else:
+            ok1 = unit_update(x, P, i_e, ye, re, K, PHt, Bh, no_cons)
+            ok2 = unit_update(x, P, i_n, z_n[k] - x[3], rn, K, PHt, Bh, no_cons)
+        if ok1 and ok2:
+            gnss_used[k] = True
+            n_fix += 1.0
+            if math.isfinite(gv_e[k]) and math.isfinite(gv_n[k]) and prm[P_GVEL_VAR] > 0.0:
+                # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
+                for idx in (1, 4):
+                    y = (gv_e[k] if idx == 1 else gv_n[k]) - x[idx]
+                    ok_v = unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
+                    if ge_on is not None:  # noqa: SIM102 (a plain test: numba prunes it when off)
+                        if ok_v:
+                            n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[P_GVEL_VAR], y)
+        else:
+            info[I_SKIPPED] += 1.0
+    st[S_REJ_SINCE] = rej_since
+    st[S_SH_R] = sh_r
+    st[S_SH_M] = sh_m
+    st[S_N_FIX] = n_fix
+    st[S_WH_C0] = wh_c0
+    st[S_WH_C1] = wh_c1
+    st[S_WH_C2] = wh_c2
+    st[S_WH_UE] = wh_ue
+    st[S_WH_UN] = wh_un
+    st[S_WH_UE2] = wh_ue2
+    st[S_WH_UN2] = wh_un2
+    st[S_WH_T] = wh_t
+    st[S_WH_T2] = wh_t2
+    st[S_WH_M] = wh_m
+    st[S_WH_STATIC] = wh_static
+    st[S_B_SINCE] = b_since
+    return add_e, add_n, g, n_rows, ge_pred
+
+
 @njit(cache=True, error_model="numpy")
 def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n: np.ndarray,
                      r_e: np.ndarray, r_n: np.ndarray, ka: np.ndarray, has_gyro: np.ndarray,
@@ -696,13 +936,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     psi_mem = st[S_PSI]
     is_static = st[S_STATIC] != 0.0
     t = st[S_T]
-    rej_since = st[S_REJ_SINCE]
-    sh_r = st[S_SH_R]
-    sh_m = int(st[S_SH_M])
     r_w = prm[P_R_OMEGA]
     w_held = st[S_W]
     w_t = st[S_W_T]
-    n_fix = st[S_N_FIX]
     vpsi = st[S_VPSI]
     cpe = st[S_CPE]
     heading_min = prm[P_HEADING_MIN]
@@ -713,22 +949,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     zupt_pos = flg[F_ZUPT_POS]  # 0 never, 1 in GNSS outages, 2 always
     # state indices and the empty consider mask as int64 values, not integer literals: numba
     # compiles a helper once per literal argument (cold start: 4 copies of unit_update)
-    i_e = np.int64(0)
-    i_n = np.int64(3)
     i_eps = np.int64(6)
     no_cons = np.int64(0)
-    wh_c0 = st[S_WH_C0]
-    wh_c1 = st[S_WH_C1]
-    wh_ue = st[S_WH_UE]
-    wh_un = st[S_WH_UN]
-    wh_c2 = st[S_WH_C2]
-    wh_ue2 = st[S_WH_UE2]
-    wh_un2 = st[S_WH_UN2]
-    wh_t2 = st[S_WH_T2]
-    wh_t = st[S_WH_T]
-    wh_m = st[S_WH_M]
-    wh_static = st[S_WH_STATIC]
-    b_since = st[S_B_SINCE]
     for k in range(k_start, k_end):
         T = dt[k]
         qa_e = 0.0
@@ -830,180 +1052,16 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         gnss_used[k] = False
         gnss_rej[k] = False
         if has_gnss[k]:
-            ye = z_e[k] - x[0]
-            yn = z_n[k] - x[3]
-            if ge_on is not None:  # z = position + b + v: the predicted fix includes the bias
-                if ge_pred:
-                    ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[P_GE_VAR])  # no rows yet
-                    ge_pred = False
-                if gate and n_fix >= prm[P_GATE_WARMUP]:
-                    # bias gate (our choice): multipath decorrelates as the car moves; an
-                    # estimated b outside the gate of its stationary distribution for
-                    # gate_reset_s while moving is not multipath but fixes that moved (a datum
-                    # change) or a DR error: b goes into the position, whose variance grows by
-                    # it (no lock-out, like the gate reset; a 30 m step otherwise stayed half
-                    # in b, the track 16 m off)
-                    if (ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN] > prm[P_GATE_THR] * prm[P_GE_VAR]
-                            and not is_static):
-                        if b_since < 0.0:
-                            b_since = t
-                        if t - b_since >= prm[P_GATE_RESET]:
-                            x[0] += ge[GE_BE]
-                            x[3] += ge[GE_BN]
-                            add_e += ge[GE_BE] * ge[GE_BE]
-                            add_n += ge[GE_BN] * ge[GE_BN]
-                            P[0, 0] += ge[GE_BE] * ge[GE_BE]
-                            P[3, 3] += ge[GE_BN] * ge[GE_BN]
-                            ge[GE_BE] = 0.0
-                            ge[GE_BN] = 0.0
-                            b_since = -1.0
-                            info[I_GATE_RESETS] += 1.0
-                    elif not is_static:
-                        b_since = -1.0
-                ye = z_e[k] - x[0] - ge[GE_BE]
-                yn = z_n[k] - x[3] - ge[GE_BN]
-            # innovation whitening (aekf.innovation_whitening, Mehra 1970): an optimal filter's
-            # innovations are white; a lag-one correlation rho of the normalised innovations
-            # says the fixes' errors are time-correlated (multipath) and carry less independent
-            # information than R claims: R is scaled by the AR(1) variance factor of an average,
-            # (1 + rho)/(1 - rho), within [1, P_WH_MAX]
-            f_wh = 1.0
-            if whiten_off is None and wh_c0 > 0.0 and wh_c1 > 0.0:
-                # white + first-order Gauss-Markov innovations: lag-one and lag-two
-                # autocovariances c1 = s_c r, c2 = s_c r^2 give the correlation r of the
-                # coloured part and its share s_c of c0; R is scaled by the variance factor
-                # of an average of such a sequence, ((c0 - s_c) + s_c (1 + r)/(1 - r)) / c0
-                r_c = min(max(wh_c2 / wh_c1, 0.0), 0.999)
-                s_c = min(wh_c1 / max(r_c, 1e-3), wh_c0)
-                f_wh = min(((wh_c0 - s_c) + s_c * (1.0 + r_c) / (1.0 - r_c)) / wh_c0,
-                           prm[P_WH_MAX])
-            if whiten_off is None and is_static:
-                # parked, the antenna does not move and its multipath does not change: the
-                # m-th fix of a stop carries ~1/m of a fix's information (all m together about
-                # as much as one, not m), so R x m (our choice; aekf.innovation_whitening)
-                wh_static += 1.0
-                f_wh = max(f_wh, wh_static)
-            re = r_e[k] * sh_r * f_wh
-            rn = r_n[k] * sh_r * f_wh
-            # NIS, gate and the seed 001 factor with the nominal R: the whitening factor scales
-            # the information of a fix, not the spread of its error (which the NIS tests)
-            s00 = P[0, 0] + r_e[k] * sh_r
-            s11 = P[3, 3] + r_n[k] * sh_r
-            s01 = P[0, 3]
-            if ge_on is not None:  # H = [I_pos, I_b]: S gains 2 P(pos, b) + P(b, b)
-                s00 += 2.0 * ge[0] + ge[GE_PEE]
-                s11 += 2.0 * ge[7] + ge[GE_PNN]
-                s01 += ge[1] + ge[6] + ge[GE_PEN]
-            nis = nis_2d(ye, yn, s00, s01, s11)
-            nis_out[k] = nis
-            accept = True
-            reset = False
-            r_fac = 1.0
-            if gate and n_fix >= prm[P_GATE_WARMUP]:  # no gate before the filter has converged
-                thr = prm[P_GATE_THR]
-                if nis > thr:
-                    if rej_since < 0.0:
-                        rej_since = t
-                    if t - rej_since >= prm[P_GATE_RESET]:
-                        # no lock-out: accept and inflate P by the innovation.  First, also in
-                        # inflate mode: fixes that have disagreed for gate_reset_s are a new
-                        # truth (a datum change), not an error to down-weight forever (with the
-                        # GNSS error states, down-weighted fixes of a 30 m step went into b and
-                        # the track stayed 16 m off)
-                        reset = True
-                        rej_since = -1.0
-                        info[I_GATE_RESETS] += 1.0
-                    elif (inflate_on is not None and nis <= thr * prm[P_GATE_INFLATE_MAX]
-                            and t - rej_since >= prm[P_GATE_INFLATE_AFTER]):
-                        # robust "opposite lever" (ALGORITHMS.md 3) once the fixes have
-                        # disagreed for gate_inflate_after_s (a short multipath burst is still
-                        # rejected): accept with R scaled so that the NIS equals the gate
-                        r_fac = nis / thr
-                        info[I_INFLATED] += 1.0
-                    else:
-                        accept = False
-                        gnss_rej[k] = True
-                else:
-                    rej_since = -1.0
-            if accept:
-                if innov_on is not None and r_fac == 1.0 and not gap:  # seed 001: P(k|k-1) /= alpha (not on a fix the
-                    # gate down-weighted as an outlier: in reject mode it would not be used at all)
-                    af = adaptive_factor(ye, yn, s00 + s11, prm[P_INNOV_C])
-                    if af < 1.0:
-                        g = 1.0 / af
-                        inflate_kinematic(P, g)
-                        if ge_on is not None:  # the same congruence on P(x, b)'s kinematic rows
-                            for i in range(12):
-                                ge[i] *= math.sqrt(g)
-                if reset:
-                    add_e += ye * ye
-                    add_n += yn * yn
-                    P[0, 0] += ye * ye
-                    P[3, 3] += yn * yn
-                if sage_on is not None:  # seed 004 Sage-Husa on a scale of R, with the divergence guard
-                    sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e[k] + r_n[k])
-                    sh_r = sage_husa_r(sh_r, sh_m, prm[P_SH_B], sample, prm[P_SH_RMIN],
-                                       prm[P_SH_RMAX])
-                    sh_m += 1
-                    re = r_e[k] * sh_r * f_wh
-                    rn = r_n[k] * sh_r * f_wh
-                if (whiten_off is None and not reset and r_fac == 1.0 and nis <= prm[P_WH_NIS]
-                        and not is_static  # a stop has its own rule (R x m, above)
-                        and P[0, 0] + P[3, 3] < (r_e[k] + r_n[k]) * sh_r):  # converged only
-                    # normalised innovations; their lag-one product only between fixes at most
-                    # P_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
-                    # under P_WH_NIS: a filter error (a drive-off with an unknown heading, the
-                    # end of an outage) also makes the innovations correlated, and inflating R
-                    # then slowed its correction (11 m instead of 7 m, 10 s later)
-                    ue = ye / math.sqrt(P[0, 0] + r_e[k] * sh_r)
-                    un = yn / math.sqrt(P[3, 3] + r_n[k] * sh_r)
-                    d_wh = (1.0 - prm[P_WH_B]) / (1.0 - prm[P_WH_B] ** (wh_m + 1.0))
-                    wh_c0 = (1.0 - d_wh) * wh_c0 + d_wh * 0.5 * (ue * ue + un * un)
-                    if t - wh_t <= prm[P_WH_GAP]:
-                        wh_c1 = (1.0 - d_wh) * wh_c1 + d_wh * 0.5 * (ue * wh_ue + un * wh_un)
-                    if t - wh_t2 <= 2.0 * prm[P_WH_GAP]:
-                        wh_c2 = (1.0 - d_wh) * wh_c2 + d_wh * 0.5 * (ue * wh_ue2 + un * wh_un2)
-                    wh_ue2 = wh_ue
-                    wh_un2 = wh_un
-                    wh_t2 = wh_t
-                    wh_ue = ue
-                    wh_un = un
-                    wh_t = t
-                    wh_m += 1.0
-                re *= r_fac
-                rn *= r_fac
-                if ge_on is not None:
-                    # the bias is estimated only when the velocity is known independently of the
-                    # fixes, from the receiver (Doppler) or by a standstill (ZUPT): otherwise a
-                    # slow drift of the fixes cannot be told from a DR heading error, and the
-                    # states absorbed a drive-off's wrong heading (15 m); then b is a consider
-                    # state (it widens S only)
-                    est_b = is_static or (math.isfinite(gv_e[k]) and math.isfinite(gv_n[k])
-                                          and prm[P_GVEL_VAR] > 0.0)
-                    ok1 = ge_fix_update(x, P, ge, z_e[k], z_n[k], re, rn, K, est_b)
-                    ok2 = ok1
-                else:
-                    ok1 = unit_update(x, P, i_e, ye, re, K, PHt, Bh, no_cons)
-                    ok2 = unit_update(x, P, i_n, z_n[k] - x[3], rn, K, PHt, Bh, no_cons)
-                if ok1 and ok2:
-                    gnss_used[k] = True
-                    n_fix += 1.0
-                    if math.isfinite(gv_e[k]) and math.isfinite(gv_n[k]) and prm[P_GVEL_VAR] > 0.0:
-                        # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
-                        for idx in (1, 4):
-                            y = (gv_e[k] if idx == 1 else gv_n[k]) - x[idx]
-                            ok_v = unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
-                            if ge_on is not None:  # noqa: SIM102 (a plain test: numba prunes it when off)
-                                if ok_v:
-                                    n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[P_GVEL_VAR], y)
-                else:
-                    info[I_SKIPPED] += 1.0
+            add_e, add_n, g, n_rows, ge_pred = gnss_fix(
+                k, z_e, z_n, r_e, r_n, gv_e, gv_n, x, P, st, prm, ge, gw, wk, info, nis_out,
+                gnss_used, gnss_rej, t, is_static, gap, gate, ge_pred, add_e, add_n, innov_on,
+                sage_on, whiten_off, inflate_on, ge_on)
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
         if has_odo[k]:
             u = odo[k]
             is_static = standstill and u < prm[P_STATIC_SPEED]
             if not is_static:
-                wh_static = 0.0  # a new stop starts a new count of its fixes
+                st[S_WH_STATIC] = 0.0  # a new stop starts a new count of its fixes
             if is_static:
                 zupt_cons = CONS_POS if (zupt_pos == 2 or (zupt_pos == 1 and outage[k])) else 0
                 for idx in (1, 4, 2, 5):
@@ -1125,24 +1183,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     st[S_PSI] = psi_mem
     st[S_STATIC] = 1.0 if is_static else 0.0
     st[S_T] = t
-    st[S_REJ_SINCE] = rej_since
-    st[S_SH_R] = sh_r
-    st[S_SH_M] = sh_m
     st[S_HEADING_KNOWN] = 1.0 if heading_known else 0.0
     st[S_W] = w_held
     st[S_W_T] = w_t
-    st[S_N_FIX] = n_fix
     st[S_VPSI] = vpsi
     st[S_CPE] = cpe
-    st[S_WH_C0] = wh_c0
-    st[S_WH_C1] = wh_c1
-    st[S_WH_UE] = wh_ue
-    st[S_WH_UN] = wh_un
-    st[S_WH_C2] = wh_c2
-    st[S_WH_UE2] = wh_ue2
-    st[S_WH_UN2] = wh_un2
-    st[S_WH_T2] = wh_t2
-    st[S_WH_T] = wh_t
-    st[S_WH_M] = wh_m
-    st[S_WH_STATIC] = wh_static
-    st[S_B_SINCE] = b_since
