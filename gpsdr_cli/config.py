@@ -204,11 +204,21 @@ beta_gnss = 0.5          # fkf, FR mode: information share of the GNSS local fil
 jerk_psd_m2ps5 = 1.0     # white-jerk spectral density per axis of the shared model's Q (m^2/s^5)
 gnss_err_tau_s = 60.0    # correlation time of the GNSS position error states eps_e, eps_n
 gnss_err_sd_m = 1.0      # steady-state sigma of eps_e, eps_n
-gnss_err_dist_m = 0.0    # eps_e, eps_n also decorrelate over this distance driven (m; 0: time only, seed 002):
-                         #   multipath follows the antenna's displacement.  Off: mixed benchmark -- 300 m gave
-                         #   urban fkf/fafkf 5.65/5.75 -> 5.52/5.58 m, one_hour 5.48/5.01 -> 5.34/4.84 m, but the
-                         #   fault suite's open-sky drive 1.5/0.8 -> 1.7/0.9 m (gnss_clock_back fafkf 9.6 -> 13.9 m)
-                         #   and comma2k19 +0.02..0.07 m
+gnss_err_dist_m = 0.0    # eps_e, eps_n also decorrelate over this distance driven (m; 0: time only, seed 002).
+                         #   Clear sky: off -- comma2k19 (PDOP 1.8) at the README offset 0.486 m with 0, 0.506 m
+                         #   with 300, 0.530 m with 50 (its error drifts in time); multipath: gnss_err_obstructed_*
+gnss_err_pdop = 2.0      # fixes with PDOP >= this are obstructed: eps follows the gnss_err_obstructed_* keys
+                         #   (multipath), else the three keys above (clear sky); fkf.multipath_regime.  Benchmark
+                         #   (seeds 1-3, fkf forward / RTS m): urban 2.69/1.75 -> 2.13/1.23, one_hour 1.62/1.17 ->
+                         #   1.15/0.78, stop_and_go 0.87/0.65 -> 0.62/0.38; open sky, tunnels, comma2k19 unchanged
+                         #   (PDOP 1.5 / 1.8 there; 2.5: stop_and_go 0.75/0.48, its PDOP is 2.2; inf: one regime)
+gnss_err_window_s = 120.0  # the regime of a fix: the share of obstructed fixes in a centred window this long (0: its
+                         #   own -- open sky 0.46/0.34 -> 0.53/0.36 m, stop_and_go 0.62/0.38 -> 0.68/0.49 m; 60: within 3 %)
+gnss_err_obstructed_sd_m = 3.0     # steady-state sigma of eps under obstruction (m; 2.5: urban 2.20/1.30 m, 4: urban
+                                   #   2.10/1.18 but stop_and_go RTS 0.41 m)
+gnss_err_obstructed_tau_s = 180.0  # its correlation time when parked (s; 60: within 1 %)
+gnss_err_obstructed_dist_m = 50.0  # ... and its decorrelation distance: 1/tau = 1/tau_s + speed/dist (m; 75: urban
+                                   #   RTS +3 %, stop_and_go +10 %; 0: time only)
 gnss_velocity = true     # the GNSS local filter also takes the receiver's velocity (speed and course from
                          #   RMC/VTG: Doppler, barely touched by multipath) with each accepted fix (our choice)
 gnss_velocity_sd_mps = 0.2  # its sigma per axis (m/s)

@@ -17,8 +17,10 @@ Model (ALGORITHMS.md section 2), shared by both local filters::
 
 ``eps_e, eps_n`` GNSS position error (Gauss-Markov, ``tau_eps``; our choice
 beyond the paper: its factor is ``exp(-T/tau - |v| T/D)``, the error also
-decorrelating over the distance ``D = [fkf] gnss_err_dist_m`` driven, since
-multipath follows the antenna's displacement -- :func:`eps_decay`), ``q_w`` the
+decorrelating over the distance ``D`` driven, since multipath follows the
+antenna's displacement -- :func:`eps_decay`; and tau, D and its sigma per
+step from two regimes, clear and obstructed sky, by the share of recent fixes
+with a high PDOP -- :func:`select_eps`, ``fkf.multipath_regime``), ``q_w`` the
 heading-sensor error and ``q_s`` the odometer distance error (random walks).
 Q (our choice, the paper gives none): per axis the white-jerk discretisation
 ``q_j * [[T^5/20, T^4/8, T^3/6], [T^4/8, T^3/3, T^2/2], [T^3/6, T^2/2, T]]``
@@ -157,7 +159,14 @@ K_DR_STALE_S = 19  # s, DR filter without any update for longer: left out of the
 K_GATE_WARMUP = 20  # no GNSS gate before this many fixes were accepted
 K_EPS_DIST = 21    # m, eps_e, eps_n also decorrelate over this distance driven; <= 0: off
 K_GVEL_VAR = 22    # (m/s)^2, variance of the receiver velocity rows; <= 0: not used
-N_PAR = 23
+# eps regimes (select_eps writes K_TAU_EPS, K_EPS_SD, K_EPS_DIST from these each epoch):
+K_TAU_EPS_C = 23   # s, clear sky (the latest fix's PDOP < [fkf] gnss_err_pdop)
+K_EPS_SD_C = 24    # m
+K_EPS_DIST_C = 25  # m; <= 0: time only
+K_TAU_EPS_O = 26   # s, obstructed sky (PDOP >= gnss_err_pdop): multipath
+K_EPS_SD_O = 27    # m
+K_EPS_DIST_O = 28  # m; <= 0: time only
+N_PAR = 29
 
 #: heading row only while v^2 >= this x var(speed), var(speed) = u^T P_vv u, u = v/|v|:
 #: a speed of 3 sigmas or more
@@ -417,6 +426,35 @@ def eps_decay(x: np.ndarray, T: float, par: np.ndarray) -> float:
     if par[K_EPS_DIST] > 0.0:
         rate += math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN]) / par[K_EPS_DIST]
     return math.exp(-T * rate)
+
+
+@njit(cache=True)
+def select_eps(par: np.ndarray, w: float) -> None:
+    """The eps model of a step into an epoch of regime ``w``
+    (:func:`gpsdr_cli.filters.fkf.multipath_regime`): ``par[K_TAU_EPS, K_EPS_SD,
+    K_EPS_DIST]`` from the clear-sky (``w <= 0``) or obstructed-sky (``w >= 1``)
+    regime, in between blended in rate and variance (``1/tau``, ``1/D``, ``sd^2``
+    linear in w).  Copied, so a regime's floats are the parameter's own.  The
+    variance of eps relaxes to a new regime's at the process's own rate (Q =
+    ``sd^2 (1 - f^2)``); the regime itself changes gradually (a share over a window).
+    """
+    if w <= 0.0:
+        par[K_TAU_EPS] = par[K_TAU_EPS_C]
+        par[K_EPS_SD] = par[K_EPS_SD_C]
+        par[K_EPS_DIST] = par[K_EPS_DIST_C]
+    elif w >= 1.0:
+        par[K_TAU_EPS] = par[K_TAU_EPS_O]
+        par[K_EPS_SD] = par[K_EPS_SD_O]
+        par[K_EPS_DIST] = par[K_EPS_DIST_O]
+    else:
+        par[K_TAU_EPS] = 1.0 / ((1.0 - w) / par[K_TAU_EPS_C] + w / par[K_TAU_EPS_O])
+        par[K_EPS_SD] = math.sqrt((1.0 - w) * par[K_EPS_SD_C] ** 2 + w * par[K_EPS_SD_O] ** 2)
+        inv = 0.0
+        if par[K_EPS_DIST_C] > 0.0:
+            inv += (1.0 - w) / par[K_EPS_DIST_C]
+        if par[K_EPS_DIST_O] > 0.0:
+            inv += w / par[K_EPS_DIST_O]
+        par[K_EPS_DIST] = 1.0 / inv if inv > 0.0 else 0.0
 
 
 @njit(cache=True)
@@ -1001,7 +1039,8 @@ def _load_checkpoint(segment: int | None, row: np.ndarray, vec: np.ndarray, mats
 
 
 def _smooth_segment(segment: int | None, xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int,
-                    k_lo: int, n: int, dt: np.ndarray, static: np.ndarray, par: np.ndarray,
+                    k_lo: int, n: int, dt: np.ndarray, static: np.ndarray, eps_w: np.ndarray,
+                    par: np.ndarray,
                     x_sn: np.ndarray, P_sn: np.ndarray, out: np.ndarray,
                     stats: np.ndarray) -> None:  # pragma: no cover
     """:func:`smooth_range`, or nothing when ``segment`` is None."""
@@ -1029,11 +1068,11 @@ def _ol_load_checkpoint(segment, row, vec, mats, aux, ring, pc, sc):
 
 
 @overload(_smooth_segment)
-def _ol_smooth_segment(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_sn,
-                       out, stats):
+def _ol_smooth_segment(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, eps_w, par, x_sn,
+                       P_sn, out, stats):
     if isinstance(segment, types.NoneType):
-        return (lambda segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_sn, out,
-                stats: None)
+        return (lambda segment, xs, Ps, off, k_hi, k_lo, n, dt, static, eps_w, par, x_sn, P_sn,
+                out, stats: None)
     return smooth_range
 
 
@@ -1053,8 +1092,8 @@ def store_track(out: np.ndarray, k: int, x: np.ndarray, P: np.ndarray) -> None:
 def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                    gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
                    gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray,
-                   dist: np.ndarray, t_m: np.ndarray, static: np.ndarray, x0: np.ndarray,
-                   P0: np.ndarray, psi0: float, par: np.ndarray, flags: np.ndarray,
+                   dist: np.ndarray, t_m: np.ndarray, static: np.ndarray, eps_w: np.ndarray,
+                   x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray, flags: np.ndarray,
                    r_table: np.ndarray, w_table: np.ndarray, segment: int | None):
     """The forward pass of fkf or fafkf (``flags`` from :func:`kernel_flags`) over all epochs.
 
@@ -1099,6 +1138,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
       (:func:`copy_state`).
     """
     n = dt.shape[0]
+    par = par.copy()                                # its eps slots change per epoch (select_eps)
     store = flags[F_STORE] != 0
     adaptive = flags[F_ADAPT_R] != 0
     m_window = max(flags[F_WINDOW], 1)
@@ -1243,6 +1283,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
             T = dt[kx] if kx > 0 else 0.0
             t_now += T
             st = static[kx]
+            select_eps(par, eps_w[kx])                  # the eps model of the step into kx
             if shared:
                 # FR with one share per filter (fkf, fafkf scalar weights): the local
                 # filters are x_g, P_g/c_i after the last reset and D_i = I/sqrt(c_i)
@@ -1529,8 +1570,8 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
         sc[S_REJ_SHARE] = rej_share
         sc[S_T_LAST_FIX] = t_last_fix
         if job >= n_fwd:                            # RTS backward over the segment
-            _smooth_segment(segment, xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, par, x_sn,
-                            P_sn, out, stats)
+            _smooth_segment(segment, xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, eps_w, par,
+                            x_sn, P_sn, out, stats)
     return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps, stats
 
 
@@ -1551,7 +1592,7 @@ def kernel_flags(fafkf: bool, flags: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndarray,
-                 par: np.ndarray) -> tuple[np.ndarray, int, int]:
+                 eps_w: np.ndarray, par: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Fixed-interval RTS smoother over the fused sequence with the master's prediction,
     from the fused x and packed P_g of every epoch (``segment <= 0``: O(n) storage).
 
@@ -1566,12 +1607,12 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
     x_sn = np.zeros(NX)
     P_sn = np.zeros((NX, NX))
     stats = np.zeros(2, np.int64)
-    _smooth_segment(n, xs, Ps, 0, n - 1, 0, n, dt, static, par, x_sn, P_sn, out, stats)
+    _smooth_segment(n, xs, Ps, 0, n - 1, 0, n, dt, static, eps_w, par, x_sn, P_sn, out, stats)
     return out, stats[0], stats[1]
 
 
-def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_sn, out,
-                 stats):  # hints: _smooth_segment
+def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, eps_w, par, x_sn, P_sn,
+                 out, stats):  # hints: _smooth_segment
     """Backward RTS steps k = k_hi, k_hi - 1, .., k_lo over the fused posteriors
     ``xs[k - off]``, ``Ps[k - off]`` (packed) of an n-epoch pass.
 
@@ -1582,6 +1623,7 @@ def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_s
     ``stats[1]`` the restarts of the guard below.  Compiled through
     :func:`_smooth_segment` (``segment``, unused here, selects it at compile time).
     """
+    par = par.copy()                                # eps slots per step (select_eps)
     x_post = np.zeros(NX)
     P_post = np.zeros((NX, NX))
     x_prior = np.zeros(NX)
@@ -1604,6 +1646,7 @@ def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, par, x_sn, P_s
                 x_post[i] = xs[k - off, i]
             unpack(Ps[k - off], P_post)
             copy_state(x_post, P_post, x_prior, P_prior)
+            select_eps(par, eps_w[k + 1])           # the forward pass's model of this step
             predict(x_prior, P_prior, dt[k + 1], static[k + 1], par, ones)
             rts_step_fused(x_post, P_post, x_prior, P_prior, dt[k + 1], static[k + 1],
                            eps_decay(x_post, dt[k + 1], par), x_sn, P_sn, x_s, P_s, wL, wB,

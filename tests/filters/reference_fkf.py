@@ -38,6 +38,23 @@ def eps_factor(T: float, par: np.ndarray, x: np.ndarray) -> float:
     return math.exp(-T * rate)
 
 
+def regime_par(par: np.ndarray, w: float) -> np.ndarray:
+    """``par`` with the eps model of a step into regime ``w`` (0 clear sky, 1 obstructed,
+    between: 1/tau, 1/D and sd^2 interpolated linearly; a distance <= 0 adds no rate)."""
+    out = par.copy()
+    c = (par[kf.K_TAU_EPS_C], par[kf.K_EPS_SD_C], par[kf.K_EPS_DIST_C])
+    o = (par[kf.K_TAU_EPS_O], par[kf.K_EPS_SD_O], par[kf.K_EPS_DIST_O])
+    if w <= 0 or w >= 1:
+        tau, sd, dist = c if w <= 0 else o
+    else:
+        tau = 1 / ((1 - w) / c[0] + w / o[0])
+        sd = math.sqrt((1 - w) * c[1] ** 2 + w * o[1] ** 2)
+        inv = (1 - w) * (1 / c[2] if c[2] > 0 else 0) + w * (1 / o[2] if o[2] > 0 else 0)
+        dist = 1 / inv if inv > 0 else 0.0
+    out[kf.K_TAU_EPS], out[kf.K_EPS_SD], out[kf.K_EPS_DIST] = tau, sd, dist
+    return out
+
+
 def Phi_of(T: float, static: bool, par: np.ndarray, x: np.ndarray) -> np.ndarray:
     """seed 002 eqs. (2)-(3) with the T^2/2 erratum; kinematics held at standstill."""
     Phi = np.eye(NX)
@@ -213,8 +230,9 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         t += T
         st = bool(prep.static[k])
         if T > 0:
-            Phi1, Q1 = Phi_of(T, st, par, x1), Q_of(T, st, par, x1)
-            Phi2, Q2 = Phi_of(T, st, par, x2), Q_of(T, st, par, x2)
+            pk = regime_par(par, prep.eps_w[k])           # the eps model of this step
+            Phi1, Q1 = Phi_of(T, st, pk, x1), Q_of(T, st, pk, x1)
+            Phi2, Q2 = Phi_of(T, st, pk, x2), Q_of(T, st, pk, x2)
             x1, x2 = Phi1 @ x1, Phi2 @ x2
             P1 = cap(Phi1 @ P1 @ Phi1.T + np.outer(d1, d1) * Q1)
             P2 = cap(Phi2 @ P2 @ Phi2.T + np.outer(d2, d2) * Q2)
@@ -363,9 +381,10 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         out_x, out_P = xs.copy(), Ps.copy()
         for k in range(n - 2, -1, -1):
             T, st = prep.dt[k + 1], bool(prep.static[k + 1])
-            Phi = Phi_of(T, st, par, xs[k])
+            pk = regime_par(par, prep.eps_w[k + 1])
+            Phi = Phi_of(T, st, pk, xs[k])
             x_prior = Phi @ xs[k]
-            P_prior = cap(Phi @ Ps[k] @ Phi.T + Q_of(T, st, par, xs[k]))
+            P_prior = cap(Phi @ Ps[k] @ Phi.T + Q_of(T, st, pk, xs[k]))
             C = np.linalg.solve(P_prior, Phi @ Ps[k]).T   # P Phi^T P_prior^-1
             x_s = xs[k] + C @ (x_s - x_prior)
             P_s = Ps[k] + C @ (P_s - P_prior) @ C.T

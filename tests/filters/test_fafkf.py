@@ -18,6 +18,7 @@ from tests.filters.test_fkf import (
     _errors,
     _params,
     _rmse,
+    _with_pdop,
     assert_matches_reference,
     survival_case,
 )
@@ -65,6 +66,22 @@ def test_fafkf_rts_smoothing_reproduces_the_reference(busy_drive, mode: str) -> 
     assert result.info["smoothing"] == "rts_fused"
     assert_matches_reference(result, run_reference(fkf.prepare(epochs, params), "fafkf",
                                                    smooth=True))
+    _assert_sane(result, len(epochs))
+
+
+@pytest.mark.parametrize("weights", ["shares", "block"])
+def test_fafkf_kernel_reproduces_the_reference_across_multipath_regimes(busy_drive,
+                                                                       weights: str) -> None:
+    """eps's regime moving between clear and obstructed sky (blended in a 10-s window)."""
+    drive, frame, _ = busy_drive
+    params = _params(fkf={"gnss_err_window_s": 10.0}, fafkf={"weights": weights},
+                     filter={"smooth": weights == "shares"})
+    epochs = build_epochs(drive, frame, params)
+    _with_pdop(epochs, (epochs.t_ns - epochs.t_ns[0]) / 1e9)
+    prep = fkf.prepare(epochs, params)
+    assert prep.eps_w.max() == 1.0
+    result = get("fafkf")(epochs, params)
+    assert_matches_reference(result, run_reference(prep, "fafkf", smooth=weights == "shares"))
     _assert_sane(result, len(epochs))
 
 
