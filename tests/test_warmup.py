@@ -55,6 +55,50 @@ def test_warm_up_compiles_every_kernel_a_real_fuse_calls(name: str, smooth: bool
     assert "NEW {}" in res.stdout, res.stdout  # a kernel compiled after the warm-up: it missed it
 
 
+#: Runs, in a fresh interpreter with an empty numba cache, the ekf/aekf kernel's compile
+#: parts (warmup.compile_parts) and then warm_up: the kernel must find every callee the
+#: parts compiled with its own argument types (else numba compiles it again, the cold
+#: start's time lost).
+PARTS = textwrap.dedent("""
+    import json, sys
+    from numba.core import event
+    from gpsdr_cli.config import defaults
+    from gpsdr_cli import warmup
+    p = defaults()
+    p["filter"]["name"] = sys.argv[1]
+    for sec, kv in json.loads(sys.argv[2]).items():
+        p[sec].update(kv)
+    parts = warmup.compile_parts(p)
+    for part in parts:
+        part()
+    compiled = []
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            pass
+        def on_end(self, ev):
+            compiled.append(ev.data["dispatcher"].py_func.__name__)
+    event.register("numba:compile", Listener())
+    warmup.warm_up(p)
+    print("PARTS", len(parts), "COMPILED", sorted(compiled))
+""")
+
+
+@pytest.mark.parametrize(("name", "options"), [
+    ("aekf", {}),
+    ("ekf", {"aekf": {"gnss_err_states": False, "turn_propagation": False},
+             "adaptive": {"sage_husa": True, "innovation_factor": True}}),
+])
+def test_compile_parts_leave_only_the_kernel_to_compile(tmp_path: Path, name: str,
+                                                        options: dict) -> None:
+    import json
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    res = subprocess.run([sys.executable, "-c", PARTS, name, json.dumps(options)], env=env,
+                         capture_output=True, text=True, cwd=REPO, check=False, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "PARTS 3 COMPILED ['cs_filter_kernel']" in res.stdout, res.stdout
+
+
 def test_tiny_epochs_exercise_every_input() -> None:
     from gpsdr_cli.warmup import tiny_epochs
 

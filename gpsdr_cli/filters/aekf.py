@@ -52,6 +52,7 @@ velocity is known); DR-only drives start at e = n = 0 with
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -444,6 +445,74 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
                          pcov, sd, P_seg, b_out, bool(flg[kn.F_GE]))
     del P_seg, checkpoints
     return _result(epochs, x_out, pcov, sd, gnss_used, gnss_rej, nis, static, info, b_out)
+
+
+def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], ...]:
+    """Parts of the compile of :func:`run_cs`'s kernel that two processes can share.
+
+    The cold start (:mod:`gpsdr_cli.warmup`): numba's compile of the kernel and its
+    callees is ~7 s of CPU, and the kernel needs every callee compiled first.  Each part
+    runs its functions once on placeholder values with exactly the argument types
+    :func:`run_cs` gives them (the same options from ``params``), so numba compiles, or
+    loads from its cache, the specialisations the kernel then uses:
+
+    [0] ``joseph_apply``, which both halves call (before the fork: once);
+    [1] the GNSS fix's helpers (``nis_2d``, ``ge_fix_update``, ``unit_update``,
+    ``ge_push``) and then :func:`kernels_aekf.gnss_fix
+    <gpsdr_cli.filters.kernels_aekf.gnss_fix>` itself, which finds ``ge_epoch`` in the
+    cache when [2] compiled it by then (else it compiles it too: time, not a fault);
+    [2] ``ge_epoch`` first, then what only the kernel's 100-Hz path calls
+    (``predict_cov``, ``turn_predict``, ``ge_turn``, ``row_update``, ``pack``).
+
+    The kernel, compiled after [1] and [2] where [2] ran, then finds them compiled in
+    its process or in the cache.  A type that drifted from the kernel's only costs time
+    (tests/test_warmup.py checks that nothing is compiled twice).
+    """
+    prm, flg = kernel_params(params, adaptive, bool(params["filter"]["smooth"]))
+    opts = kn.kernel_options(flg)
+    ge0 = initial_gnss_err(params)
+    ge_on = "ge_on" in opts
+
+    def state() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return (np.zeros(N_STATES), np.eye(N_STATES), np.zeros((5, N_STATES)),
+                np.zeros((kn.GW_ROWS, N_STATES)), ge0.copy())
+
+    def shared() -> None:
+        _, P, wk, _, _ = state()
+        kn.joseph_apply(P, wk[1], wk[2], 1.0, 1.0, wk[3])
+
+    def gnss_part() -> None:
+        x, P, wk, gw, ge = state()
+        no_cons = np.int64(0)
+        kn.nis_2d(0.0, 0.0, 1.0, 0.0, 1.0)
+        if ge_on:
+            kn.ge_fix_update(x, P, ge, 0.0, 0.0, 1.0, 1.0, wk[1], False)
+            kn.ge_push(gw, no_cons, 1.0, wk[0], wk[2], 1.0, 0.0)
+        kn.unit_update(x, P, no_cons, 0.0, 1.0, wk[1], wk[2], wk[3], no_cons)
+        one = np.ones(1)
+        nan = np.full(1, np.nan)
+        kn.gnss_fix(0, one, one, one, one, nan, nan, x, P, np.zeros(kn.N_ST), prm, ge, gw, wk,
+                    np.zeros(kn.N_INFO), np.zeros(1), np.zeros(1, bool), np.zeros(1, bool), 0.0,
+                    False, False, bool(flg[kn.F_GATE]), False, 0.0, 0.0,
+                    *(opts.get(k) for k in ("innov_on", "sage_on", "whiten_off", "inflate_on",
+                                            "ge_on")))
+
+    def dr_part() -> None:
+        x, P, wk, gw, ge = state()
+        if ge_on:
+            kn.ge_epoch(ge, gw, np.int64(0), False, prm[kn.P_ALPHA], prm[kn.P_GE_VAR])
+        kn.predict_cov(P, 0.01, prm[kn.P_ALPHA], 1.0, 1.0, 1.0, prm[kn.P_Q_EPS], prm[kn.P_Q_KS],
+                       1.0, False, wk[4])
+        kn.turn_predict(x, P, 0.01, 0.0, prm[kn.P_R_OMEGA])  # compiled with turn_off too
+        if ge_on:
+            kn.ge_turn(gw, x, 0.01, 0.0)
+        nz = kn.NZ_ODO.copy()
+        nz.flags.writeable = False  # a global array is read-only in the kernel: the same type
+        kn.row_update(x, P, wk[0], nz, 0.0, 1.0, wk[1], wk[2], wk[3], 0, 0.0, 0.0)
+        if "store_on" in opts:
+            kn.pack(P, np.zeros((1, kn.N_PACKED + kn.N_GE_PACKED))[0])
+
+    return shared, gnss_part, dr_part
 
 
 def initial_gnss_err(params: Params) -> np.ndarray:

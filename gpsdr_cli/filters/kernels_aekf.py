@@ -966,7 +966,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         fl_en = 0.0
         f_b = 1.0
         n_rows = 0  # DR rows waiting for the GNSS error block (ge_epoch)
-        ge_pred = False
+        ge_pred = np.bool_(False)  # a bool, not the literal False: gnss_fix's type with ge off
         # a step longer than aekf.max_gap_s (a logger pause, a far-future stamp) is not
         # propagated: held like a standstill, the position variance grown by (speed bound x T)^2
         gap = T > prm[P_MAX_GAP]
