@@ -210,13 +210,13 @@ gnss_err_dist_m = 0.0    # eps_e, eps_n also decorrelate over this distance driv
 gnss_err_pdop = 2.0      # fixes with PDOP >= this are obstructed: eps follows the gnss_err_obstructed_* keys
                          #   (multipath), else the three keys above (clear sky); fkf.multipath_regime.  Benchmark
                          #   (seeds 1-3, fkf forward / RTS m): urban 2.69/1.75 -> 2.13/1.23, one_hour 1.62/1.17 ->
-                         #   1.15/0.78, stop_and_go 0.87/0.65 -> 0.62/0.38; open sky, tunnels, comma2k19 unchanged
+                         #   1.16/0.79, stop_and_go 0.87/0.65 -> 0.63/0.37; open sky, tunnels, comma2k19 unchanged
                          #   (PDOP 1.5 / 1.8 there; 2.5: stop_and_go 0.75/0.48, its PDOP is 2.2; inf: one regime)
 gnss_err_window_s = 120.0  # the regime of a fix: the share of obstructed fixes in a centred window this long (0: its
                          #   own -- open sky 0.46/0.34 -> 0.53/0.36 m, stop_and_go 0.62/0.38 -> 0.68/0.49 m; 60: within 3 %)
-gnss_err_obstructed_sd_m = 3.0     # steady-state sigma of eps under obstruction (m; 2.5: urban 2.20/1.30 m, 4: urban
-                                   #   2.10/1.18 but stop_and_go RTS 0.41 m)
-gnss_err_obstructed_tau_s = 180.0  # its correlation time when parked (s; 60: within 1 %)
+gnss_err_obstructed_sd_m = 3.0     # steady-state sigma of eps under obstruction (m; seeds 1-6: 2: urban 2.12/1.63 m
+                                   #   against 2.03/1.49 m, one_hour 1.37/0.97 against 1.28/0.88, stop_and_go equal)
+gnss_err_obstructed_tau_s = 60.0   # its correlation time when parked (s; 180: within 1 %, stop_and_go RTS +3 %)
 gnss_err_obstructed_dist_m = 50.0  # ... and its decorrelation distance: 1/tau = 1/tau_s + speed/dist (m; 75: urban
                                    #   RTS +3 %, stop_and_go +10 %; 0: time only)
 gnss_velocity = true     # the GNSS local filter also takes the receiver's velocity (speed and course from

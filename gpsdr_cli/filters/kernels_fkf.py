@@ -1277,13 +1277,16 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
         omin2 = par[K_OMEGA_MIN] ** 2
         chi2 = par[K_GATE_CHI2]
         tau_rej = par[K_GATE_RESET_S] / math.log(2.0)   # all gated for gate_reset_s: share 1/2
+        w_eps = -1.0                                    # eps regime in par: none yet (select_eps)
 
         for kx in range(k0, k1):
             ko = kx - p_off
             T = dt[kx] if kx > 0 else 0.0
             t_now += T
             st = static[kx]
-            select_eps(par, eps_w[kx])                  # the eps model of the step into kx
+            if eps_w[kx] != w_eps:                      # the eps model of the step into kx
+                w_eps = eps_w[kx]
+                select_eps(par, w_eps)
             if shared:
                 # FR with one share per filter (fkf, fafkf scalar weights): the local
                 # filters are x_g, P_g/c_i after the last reset and D_i = I/sqrt(c_i)

@@ -210,8 +210,8 @@ def test_multipath_regimes_on_the_simulated_urban_canyon() -> None:
     """Issue #4: the simulator's urban multipath (4 m per axis, 1/tau = 1/60 s + speed/50 m)
     seen by eps as a 1-m, 60-s time-only error made fkf trust the fixes' slow multipath:
     on this 5-min drive (seed 3) 3.41 m forward, 2.39 m RTS with one regime
-    (gnss_err_pdop = inf); with the obstructed-sky model (PDOP >= 2: 3 m, 50 m) 2.91 m and
-    1.39 m.  Bounds: forward 10 %, RTS 30 % below the one-regime model."""
+    (gnss_err_pdop = inf); with the obstructed-sky model (PDOP >= 2: 3 m, 60 s, 50 m) 2.90 m
+    and 1.35 m.  Bounds: forward 10 %, RTS 30 % below the one-regime model."""
     from gpsdr_cli.simulate import simulate_drive
 
     sim = simulate_drive("urban_canyon", seed=3, duration_s=300.0)
