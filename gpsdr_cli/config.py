@@ -212,6 +212,8 @@ gnss_err_pdop = 2.0      # fixes with PDOP >= this are obstructed: eps follows t
                          #   (seeds 1-3, fkf forward / RTS m): urban 2.69/1.75 -> 2.13/1.23, one_hour 1.62/1.17 ->
                          #   1.16/0.79, stop_and_go 0.87/0.65 -> 0.63/0.37; open sky, tunnels, comma2k19 unchanged
                          #   (PDOP 1.5 / 1.8 there; 2.5: stop_and_go 0.75/0.48, its PDOP is 2.2; inf: one regime)
+gnss_err_sigma_m = 2.2   # a fix without PDOP is obstructed when its base sigma (m, per axis) >= this: PDOP 2 at
+                         #   HDOP = 0.62 PDOP with the UERE fallback, 2 x 0.62 x 2.5/sqrt(2); ROS NavSatFix has no DOP
 gnss_err_window_s = 120.0  # the regime of a fix: the share of obstructed fixes in a centred window this long (0: its
                          #   own -- open sky 0.46/0.34 -> 0.53/0.36 m, stop_and_go 0.62/0.38 -> 0.68/0.49 m; 60: within 3 %)
 gnss_err_obstructed_sd_m = 3.0     # steady-state sigma of eps under obstruction (m; seeds 1-6: 2: urban 2.12/1.63 m

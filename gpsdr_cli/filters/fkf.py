@@ -241,8 +241,14 @@ def multipath_regime(epochs: Epochs, params: Params) -> np.ndarray:
     """Per epoch, the regime of the GNSS error states eps in [0, 1]: 0 clear sky, 1 obstructed.
 
     A fix is obstructed when its PDOP >= ``[fkf] gnss_err_pdop`` (2: the top of
-    the usual "excellent" DOP class; a fix without PDOP counts as clear, as in
-    seed 000's regimes); the regime of a fix is the share of obstructed fixes
+    the usual "excellent" DOP class; ``inf``: every fix clear, one regime); a
+    fix without PDOP (ROS NavSatFix, NMEA without GSA) when its base sigma
+    (:func:`gpsdr_cli.align.base_sigma`: the receiver's, else HDOP x UERE, else
+    the default) >= ``[fkf] gnss_err_sigma_m`` (2.2 m: PDOP 2 at HDOP = 0.62
+    PDOP and the default UERE 2.5 m, HDOP x UERE/sqrt 2).  Without it the
+    simulated urban MCAP sample (NavSatFix: covariance, no DOP) stayed in the
+    clear-sky regime: fkf 2.70 m forward, 2.60 m RTS.  The regime of a fix is
+    the share of obstructed fixes
     in a centred window of ``[fkf] gnss_err_window_s`` (0: its own), and an
     epoch takes the latest fix's (before the first fix, the first one's; across
     an outage, the last one's).  :func:`~.kernels_fkf.select_eps` blends the
@@ -270,10 +276,12 @@ def multipath_regime(epochs: Epochs, params: Params) -> np.ndarray:
     n = len(epochs)
     thr = params["fkf"]["gnss_err_pdop"]
     f = np.flatnonzero(epochs.has_gnss)
-    if not len(f):
-        return np.zeros(n)
+    if not len(f) or thr == math.inf:
+        return np.zeros(n)                  # one regime: the clear-sky keys
     pd_f = epochs.pdop[f]
-    ob = np.where(np.isfinite(pd_f), pd_f >= thr, thr <= 0.0).astype(float)
+    sd_f = np.maximum(epochs.gnss_sd_e[f], epochs.gnss_sd_n[f])
+    ob = np.where(np.isfinite(pd_f), pd_f >= thr,
+                  sd_f >= params["fkf"]["gnss_err_sigma_m"]).astype(float)
     window = params["fkf"]["gnss_err_window_s"]
     if window > 0:                          # share of obstructed fixes in a centred window
         t_s = (epochs.t_ns - epochs.t_ns[0]) / NS_PER_S

@@ -183,8 +183,9 @@ def test_select_eps_blends_rates_and_variances(w: float) -> None:
 
 
 def test_multipath_regime_is_the_share_of_high_pdop_fixes() -> None:
-    """Share of fixes with PDOP >= gnss_err_pdop in a centred window, held from the latest
-    fix (GNSS gaps, the epochs before the first fix: the first fix's); no PDOP: clear."""
+    """Share of fixes with PDOP >= gnss_err_pdop (without PDOP: base sigma >= gnss_err_sigma_m)
+    in a centred window, held from the latest fix (GNSS gaps, the epochs before the first fix:
+    the first fix's)."""
     drive, frame, _ = tiny_drive(60.0, gnss_gap=(40, 50))
     params = _params(fkf={"gnss_err_window_s": 0.0})
     epochs = build_epochs(drive, frame, params)
@@ -201,8 +202,11 @@ def test_multipath_regime_is_the_share_of_high_pdop_fixes() -> None:
     assert w[k] == pytest.approx(0.5, abs=0.05)
     assert w[f[np.argmin(np.abs(t_s[f] - 25.0))]] == 1.0
     assert w[f[np.argmin(np.abs(t_s[f] - 5.0))]] == 0.0
-    assert np.all(w[t_s >= 56.0] == 0.0)                      # no PDOP: clear sky
-    params = _params(fkf={"gnss_err_pdop": math.inf})
+    assert np.all(w[t_s >= 56.0] == 0.0)        # no PDOP: by the base sigma, 1 m < 2.2 m: clear
+    params = _params(fkf={"gnss_err_window_s": 0.0, "gnss_err_sigma_m": 1.0})
+    w = fkf.multipath_regime(epochs, params)
+    assert np.all(w[t_s >= 50.0] == 1.0) and np.all(w[t_s < 15.0] == 0.0)  # 1 m >= 1 m
+    params = _params(fkf={"gnss_err_pdop": math.inf, "gnss_err_sigma_m": 1.0})
     assert not fkf.multipath_regime(epochs, params).any()  # one regime: the clear-sky keys
 
 
