@@ -181,16 +181,38 @@ def flush_std_streams() -> None:
             pass
 
 
+def prepare_loading(name: str) -> None:
+    """The caller's own start-up of the kernels that does not need the cache: import the
+    filter's module and initialise numba's CPU target.
+
+    The first kernel call in a process refreshes numba's target context (its extra
+    registries, numpy support, the BLAS check: ~0.45 s), cache hit or not;
+    :meth:`BackgroundWarmUp.wait` does it while the compile runs, not after.
+    """
+    from numba.core.registry import cpu_target
+
+    from . import filters
+
+    filters.get(name)
+    cpu_target.target_context.refresh()
+
+
 class BackgroundWarmUp:
     """A forked process running :func:`warm_up`; :meth:`wait` joins it."""
 
-    def __init__(self, proc: Any) -> None:
+    def __init__(self, proc: Any, name: str = "") -> None:
         self.proc = proc
+        self.name = name
 
     def wait(self, timeout_s: float = WAIT_TIMEOUT_S) -> bool:
-        """Block until the compile finished; False if it failed or timed out (harmless)."""
+        """Block until the compile finished; False if it failed or timed out (harmless).
+
+        Meanwhile this process prepares to load the kernels (:func:`prepare_loading`).
+        """
         if self.proc is None:
             return False
+        if self.name:
+            prepare_loading(self.name)
         self.proc.join(timeout_s)
         if self.proc.is_alive():
             self.proc.terminate()
@@ -310,4 +332,4 @@ def start_background(params: Params, *, auto_gnss_offset: bool = False) -> Backg
     proc = mp.get_context("fork").Process(target=_child, args=(params, auto_gnss_offset),
                                           name="gpsdr-warm-up", daemon=True)
     proc.start()
-    return BackgroundWarmUp(proc)
+    return BackgroundWarmUp(proc, params["filter"]["name"])
