@@ -38,6 +38,9 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   filter's velocity rows (``[fkf] gnss_velocity``).
 * standstill: the latest odometer speed (at most 1 s old) below
   ``[standstill] speed_mps``.
+* the regime of the GNSS error states eps per epoch, clear or obstructed sky
+  (:func:`multipath_regime`: the share of recent fixes with a high PDOP);
+  the kernel blends the two eps models by it (our choice, issue #4).
 * initial state: the first usable fix (else e = n = 0), speed from the first
   odometer (else GNSS) record along the aligned heading.
 
