@@ -645,7 +645,9 @@ def oracle_params(noise: dict, params: Params) -> Params:
 
     Gyro: white noise, Gauss-Markov drift (the simulator's drift *is* the model's);
     odometer: effective speed sigma and scale-factor prior; FKF: the GNSS error
-    states get the multipath sigma and correlation time; ekf/aekf's multipath
+    states' clear-sky model gets the multipath sigma, time constant and
+    decorrelation distance of the drive's environment with the least multipath,
+    its obstructed-sky model those of the one with the most; ekf/aekf's multipath
     states (``[aekf] gnss_err_*``) get the drive's RMS multipath sigma and the
     time constant and decorrelation distance of its environment with the largest
     multipath (the simulator's 1/tau = 1/tau_s + speed/distance is the model's);
@@ -657,6 +659,7 @@ def oracle_params(noise: dict, params: Params) -> Params:
     out = copy.deepcopy(params)
     envs = list((noise.get("gnss_environments") or {}).values())
     worst = max(envs, key=lambda e: e["multipath_sd_m"]) if envs else {}
+    best = min(envs, key=lambda e: e["multipath_sd_m"]) if envs else {}
     want = {
         "gyro": {"noise_sd_radps": noise.get("gyro_noise_sd_radps"),
                  "bias_tau_s": noise.get("gyro_bias_tau_s"),
@@ -666,8 +669,12 @@ def oracle_params(noise: dict, params: Params) -> Params:
                 "scale_init_sd": noise.get("odo_scale_sd"),
                 "scale_rw_sd": 1e-5},
         "gnss": {"k_good": 1.0, "k_medium": 1.0, "k_poor": 1.0},
-        "fkf": {"gnss_err_tau_s": noise.get("multipath_tau_s"),
-                "gnss_err_sd_m": noise.get("multipath_sd_m")},
+        "fkf": {"gnss_err_sd_m": best.get("multipath_sd_m"),
+                "gnss_err_tau_s": best.get("multipath_tau_s"),
+                "gnss_err_dist_m": best.get("multipath_decorrelation_m"),
+                "gnss_err_obstructed_sd_m": worst.get("multipath_sd_m"),
+                "gnss_err_obstructed_tau_s": worst.get("multipath_tau_s"),
+                "gnss_err_obstructed_dist_m": worst.get("multipath_decorrelation_m")},
         "aekf": {"gnss_err_sd_m": noise.get("multipath_sd_m"),
                  "gnss_err_tau_s": worst.get("multipath_tau_s"),
                  "gnss_err_dist_m": worst.get("multipath_decorrelation_m")},

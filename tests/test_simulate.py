@@ -219,9 +219,13 @@ def test_oracle_params_only_known_keys(urban):
         assert set(values) == set(DEFAULTS[section])
     assert p["gyro"]["noise_sd_radps"] == pytest.approx(urban.noise["gyro_noise_sd_radps"])
     assert p["gyro"]["bias_tau_s"] == pytest.approx(urban.noise["gyro_bias_tau_s"])
-    assert p["fkf"]["gnss_err_sd_m"] == pytest.approx(urban.noise["multipath_sd_m"])
-    # ekf/aekf multipath states: the urban environment's time constant and distance
+    # fkf: both eps regimes get the one environment's multipath (the urban canyon has one)
     env = urban.noise["gnss_environments"]["urban"]
+    for prefix in ("gnss_err_", "gnss_err_obstructed_"):
+        assert p["fkf"][prefix + "sd_m"] == pytest.approx(env["multipath_sd_m"])
+        assert p["fkf"][prefix + "tau_s"] == pytest.approx(env["multipath_tau_s"])
+        assert p["fkf"][prefix + "dist_m"] == pytest.approx(env["multipath_decorrelation_m"])
+    # ekf/aekf multipath states: the urban environment's time constant and distance
     assert p["aekf"]["gnss_err_sd_m"] == pytest.approx(urban.noise["multipath_sd_m"])
     assert p["aekf"]["gnss_err_tau_s"] == pytest.approx(env["multipath_tau_s"])
     assert p["aekf"]["gnss_err_dist_m"] == pytest.approx(env["multipath_decorrelation_m"])
@@ -236,3 +240,13 @@ def test_oracle_drive_white_only_for_multipath_states(urban):
     ok = od.gnss.valid
     np.testing.assert_allclose(od.gnss.sigma_e_m[ok], urban.gnss_errors["white_sd_m"][ok])
     assert np.all(np.isnan(od.gnss.sigma_e_m[~ok]))
+
+
+def test_oracle_params_fkf_regimes_from_least_and_most_multipath():
+    envs = {"open": {"multipath_sd_m": 0.4, "multipath_tau_s": 120.0, "multipath_decorrelation_m": 300.0},
+            "urban": {"multipath_sd_m": 4.0, "multipath_tau_s": 60.0, "multipath_decorrelation_m": 50.0},
+            "suburb": {"multipath_sd_m": 1.5, "multipath_tau_s": 90.0, "multipath_decorrelation_m": 100.0}}
+    p = oracle_params({"gnss_environments": envs}, defaults())
+    assert (p["fkf"]["gnss_err_sd_m"], p["fkf"]["gnss_err_tau_s"], p["fkf"]["gnss_err_dist_m"]) == (0.4, 120.0, 300.0)
+    assert (p["fkf"]["gnss_err_obstructed_sd_m"], p["fkf"]["gnss_err_obstructed_tau_s"],
+            p["fkf"]["gnss_err_obstructed_dist_m"]) == (4.0, 60.0, 50.0)
