@@ -287,13 +287,12 @@ def multipath_regime(epochs: Epochs, params: Params) -> np.ndarray:
                   sd_f >= params["fkf"]["gnss_err_sigma_m"]).astype(float)
     window = params["fkf"]["gnss_err_window_s"]
     if window > 0:                          # share of obstructed fixes in a centred window
-        t_s = (epochs.t_ns - epochs.t_ns[0]) / NS_PER_S
-        tf = t_s[f]
+        tf = (epochs.t_ns[f] - epochs.t_ns[0]) / NS_PER_S
         c = np.concatenate(([0.0], np.cumsum(ob)))
         lo = np.searchsorted(tf, tf - 0.5 * window, side="left")
         hi = np.searchsorted(tf, tf + 0.5 * window, side="right")
         ob = (c[hi] - c[lo]) / (hi - lo)
-    last = np.searchsorted(f, np.arange(n), side="right") - 1      # latest fix <= k
+    last = np.cumsum(epochs.has_gnss) - 1                         # latest fix <= k
     w = ob[np.maximum(last, 0)]
     return w
 
