@@ -232,8 +232,8 @@ class BackgroundWarmUp:
 def compile_parts(params: Params) -> tuple[Any, ...]:
     """Parts of the filter's kernel compile (callables) for :func:`_warm_up_in_two`, or ().
 
-    ekf/aekf: :func:`gpsdr_cli.filters.aekf.compile_parts`: [0] shared helpers, [1] and
-    [2] two independent halves.  The kernel itself compiles after them, in :func:`warm_up`.
+    ekf/aekf: :func:`gpsdr_cli.filters.aekf.compile_parts` (five parts, run as
+    :func:`_warm_up_in_two` says).  The kernel itself compiles after them, in :func:`warm_up`.
     """
     name = params["filter"]["name"]
     if name not in ("ekf", "aekf"):
@@ -262,28 +262,35 @@ def _warm_up_in_two(params: Params, auto_gnss_offset: bool) -> None:
     """:func:`warm_up` with the kernel's callees compiled in two processes.
 
     On two CPUs the parent reading the logs, this process and a forked helper share
-    them: part [0] of :func:`compile_parts` here, then the helper compiles part [1]
-    while this process compiles part [2], waits for the helper and compiles the
-    kernel, which loads the helper's functions from numba's cache.  The helper failing
-    or being slow costs only time: the kernel compiles what it misses.  A plain
-    ``os.fork``: this process is a daemonic multiprocessing child, which may not
-    start multiprocessing children of its own.
+    them.  With the five parts of :func:`compile_parts`: [0] here, before the fork;
+    then the helper runs [1], waits until this process has run [3] (the end of a pipe
+    this process closes then, or dies with) and runs [2], while this process runs [3] and [4],
+    waits for the helper and compiles the kernel, which loads the helper's functions
+    from numba's cache.  The helper failing or being slow costs only time: the kernel
+    compiles what it misses.  A plain ``os.fork``: this process is a daemonic
+    multiprocessing child, which may not start multiprocessing children of its own.
     """
+    import select
     import signal
 
     parts = compile_parts(params)
-    if len(parts) < 3:
+    if len(parts) != 5:
         warm_up(params, auto_gnss_offset=auto_gnss_offset)
         return
     parts[0]()  # what both halves need, once; numba's own start-up (~0.5 s) too
+    ready_r, ready_w = os.pipe()
     pid = os.fork()
-    if pid == 0:  # the helper: part [1] and out, without the parent's exit handlers
+    if pid == 0:  # the helper, out without the parent's exit handlers
         code = 1
         try:
+            os.close(ready_w)
             parts[1]()
+            select.select([ready_r], [], [], WAIT_TIMEOUT_S)
+            parts[2]()
             code = 0
         finally:
             os._exit(code)
+    os.close(ready_r)
 
     def stop(signum: int, frame: Any) -> None:  # cancelled by the parent: the helper too
         os.kill(pid, signal.SIGKILL)
@@ -291,8 +298,11 @@ def _warm_up_in_two(params: Params, auto_gnss_offset: bool) -> None:
 
     previous = signal.signal(signal.SIGTERM, stop)
     try:
-        for part in parts[2:]:
-            part()
+        try:
+            parts[3]()
+        finally:
+            os.close(ready_w)  # the end of the pipe wakes the helper, [3] done or failed
+        parts[4]()
     finally:
         _join(pid, WAIT_TIMEOUT_S)
         signal.signal(signal.SIGTERM, previous)

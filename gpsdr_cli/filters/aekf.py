@@ -454,17 +454,17 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
     callees is ~7 s of CPU, and the kernel needs every callee compiled first.  Each part
     runs its functions once on placeholder values with exactly the argument types
     :func:`run_cs` gives them (the same options from ``params``), so numba compiles, or
-    loads from its cache, the specialisations the kernel then uses:
+    loads from its cache, the specialisations the kernel then uses.  In order:
 
     [0] ``joseph_apply``, which both halves call (before the fork: once);
-    [1] the GNSS fix's helpers (``nis_2d``, ``ge_fix_update``, ``unit_update``,
-    ``ge_push``) and then :func:`kernels_aekf.gnss_fix
-    <gpsdr_cli.filters.kernels_aekf.gnss_fix>` itself, which finds ``ge_epoch`` in the
-    cache when [2] compiled it by then (else it compiles it too: time, not a fault);
-    [2] ``ge_epoch`` first, then what only the kernel's 100-Hz path calls
-    (``predict_cov``, ``turn_predict``, ``ge_turn``, ``row_update``, ``pack``).
+    [1] (helper) the GNSS fix's helpers ``nis_2d``, ``ge_fix_update``, ``ge_push``,
+    ``unit_update``; [2] (helper, once [3] is done) :func:`kernels_aekf.gnss_fix
+    <gpsdr_cli.filters.kernels_aekf.gnss_fix>`, which loads [3]'s ``ge_epoch`` from the
+    cache;
+    [3] ``ge_epoch``; [4] what only the kernel's 100-Hz path calls (``predict_cov``,
+    ``turn_predict``, ``ge_turn``, ``row_update``, ``pack``).
 
-    The kernel, compiled after [1] and [2] where [2] ran, then finds them compiled in
+    The kernel, compiled after all of them where [3] and [4] ran, finds them compiled in
     its process or in the cache.  A type that drifted from the kernel's only costs time
     (tests/test_warmup.py checks that nothing is compiled twice).
     """
@@ -472,6 +472,7 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
     opts = kn.kernel_options(flg)
     ge0 = initial_gnss_err(params)
     ge_on = "ge_on" in opts
+    no_cons = np.int64(0)
 
     def state() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         return (np.zeros(N_STATES), np.eye(N_STATES), np.zeros((5, N_STATES)),
@@ -481,14 +482,16 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
         _, P, wk, _, _ = state()
         kn.joseph_apply(P, wk[1], wk[2], 1.0, 1.0, wk[3])
 
-    def gnss_part() -> None:
+    def fix_helpers() -> None:
         x, P, wk, gw, ge = state()
-        no_cons = np.int64(0)
         kn.nis_2d(0.0, 0.0, 1.0, 0.0, 1.0)
         if ge_on:
             kn.ge_fix_update(x, P, ge, 0.0, 0.0, 1.0, 1.0, wk[1], False)
             kn.ge_push(gw, no_cons, 1.0, wk[0], wk[2], 1.0, 0.0)
         kn.unit_update(x, P, no_cons, 0.0, 1.0, wk[1], wk[2], wk[3], no_cons)
+
+    def fix() -> None:
+        x, P, wk, gw, ge = state()
         one = np.ones(1)
         nan = np.full(1, np.nan)
         kn.gnss_fix(0, one, one, one, one, nan, nan, x, P, np.zeros(kn.N_ST), prm, ge, gw, wk,
@@ -497,10 +500,13 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
                     *(opts.get(k) for k in ("innov_on", "sage_on", "whiten_off", "inflate_on",
                                             "ge_on")))
 
-    def dr_part() -> None:
-        x, P, wk, gw, ge = state()
+    def block() -> None:
+        _, _, _, gw, ge = state()
         if ge_on:
-            kn.ge_epoch(ge, gw, np.int64(0), False, prm[kn.P_ALPHA], prm[kn.P_GE_VAR])
+            kn.ge_epoch(ge, gw, no_cons, False, prm[kn.P_ALPHA], prm[kn.P_GE_VAR])
+
+    def dr_helpers() -> None:
+        x, P, wk, gw, _ = state()
         kn.predict_cov(P, 0.01, prm[kn.P_ALPHA], 1.0, 1.0, 1.0, prm[kn.P_Q_EPS], prm[kn.P_Q_KS],
                        1.0, False, wk[4])
         kn.turn_predict(x, P, 0.01, 0.0, prm[kn.P_R_OMEGA])  # compiled with turn_off too
@@ -512,7 +518,7 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
         if "store_on" in opts:
             kn.pack(P, np.zeros((1, kn.N_PACKED + kn.N_GE_PACKED))[0])
 
-    return shared, gnss_part, dr_part
+    return shared, fix_helpers, fix, block, dr_helpers
 
 
 def initial_gnss_err(params: Params) -> np.ndarray:
