@@ -279,7 +279,13 @@ def _warm_up_in_two(params: Params, auto_gnss_offset: bool) -> None:
         return
     parts[0]()  # what both halves need, once; numba's own start-up (~0.5 s) too
     ready_r, ready_w = os.pipe()
-    pid = os.fork()
+    try:
+        pid = os.fork()
+    except OSError:  # no second process (a limit): everything here
+        os.close(ready_r)
+        os.close(ready_w)
+        warm_up(params, auto_gnss_offset=auto_gnss_offset)
+        return
     if pid == 0:  # the helper, out without the parent's exit handlers
         code = 1
         try:

@@ -99,6 +99,35 @@ def test_compile_parts_leave_only_the_kernel_to_compile(tmp_path: Path, name: st
     assert "PARTS 5 COMPILED ['cs_filter_kernel']" in res.stdout, res.stdout
 
 
+#: The two-process warm-up with a helper that fails at once: the kernel still compiles
+#: (what the helper should have compiled with it) and the cache ends up fresh.
+HELPER_FAILS = textwrap.dedent("""
+    from gpsdr_cli import warmup
+    from gpsdr_cli.config import defaults
+    own = warmup.compile_parts
+    def failing(params):
+        parts = list(own(params))
+        def boom():
+            raise RuntimeError("helper failed")
+        parts[1] = boom
+        return tuple(parts)
+    warmup.compile_parts = failing
+    p = defaults()
+    print("FRESH BEFORE", warmup.cache_is_fresh(p))
+    warmup._warm_up_in_two(p, False)
+    print("FRESH AFTER", warmup.cache_is_fresh(p))
+""")
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="the helper is forked")
+def test_two_process_warm_up_survives_a_failing_helper(tmp_path: Path) -> None:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    res = subprocess.run([sys.executable, "-c", HELPER_FAILS], env=env, capture_output=True,
+                         text=True, cwd=REPO, check=False, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "FRESH BEFORE False" in res.stdout and "FRESH AFTER True" in res.stdout, res.stdout
+
+
 def test_tiny_epochs_exercise_every_input() -> None:
     from gpsdr_cli.warmup import tiny_epochs
 
