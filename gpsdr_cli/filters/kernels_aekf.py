@@ -39,6 +39,12 @@ caller (no ``np.zeros`` specialisations), state indices are passed as int64
 values, not literals (one signature per helper), and every function uses
 ``error_model="numpy"`` (every division is guarded; no ZeroDivisionError paths
 to lower).  aekf forward on the one-hour drive: cold ``gpsdr fuse`` 7.6 -> 6.0 s.
+The GNSS fix (section 2, 5 Hz) is its own function, :func:`gnss_fix` (issue #5: with
+the GNSS error states the kernel's own compile had grown to ~4 s, numba's type
+inference and SSA growing faster than linearly with a function's size); the 100-Hz
+sections stay in the kernel (a call with their ~15 array arguments per epoch cost
+30 % of the forward speed).  :func:`gpsdr_cli.filters.aekf.compile_parts` splits the
+callees' compile over two processes (:mod:`gpsdr_cli.warmup`).
 
 For the RTS smoother the kernel optionally stores the packed upper triangle of
 P(k|k) and the seven scalars that rebuild P(k|k-1) from it exactly
