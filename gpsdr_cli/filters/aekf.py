@@ -492,13 +492,10 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
 
     def fix() -> None:
         x, P, wk, gw, ge = state()
-        one = np.ones(1)
-        nan = np.full(1, np.nan)
-        kn.gnss_fix(0, one, one, one, one, nan, nan, x, P, np.zeros(kn.N_ST), prm, ge, gw, wk,
-                    np.zeros(kn.N_INFO), np.zeros(1), np.zeros(1, bool), np.zeros(1, bool), 0.0,
-                    False, False, bool(flg[kn.F_GATE]), False, 0.0, 0.0,
-                    *(opts.get(k) for k in ("innov_on", "sage_on", "whiten_off", "inflate_on",
-                                            "ge_on")))
+        kn.gnss_fix(1.0, 1.0, 1.0, 1.0, math.nan, math.nan, x, P, np.zeros(kn.N_ST), prm, ge, gw,
+                    wk, np.zeros(kn.N_INFO), 0.0, False, False, bool(flg[kn.F_GATE]), False, 0.0,
+                    0.0, *(opts.get(k) for k in ("innov_on", "sage_on", "whiten_off",
+                                                 "inflate_on", "ge_on")))
 
     def block() -> None:
         _, _, _, gw, ge = state()

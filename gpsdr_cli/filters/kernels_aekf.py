@@ -637,28 +637,31 @@ def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps:
 
 
 @njit(cache=True, error_model="numpy")
-def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.ndarray,
-             gv_e: np.ndarray, gv_n: np.ndarray, x: np.ndarray, P: np.ndarray, st: np.ndarray,
-             prm: np.ndarray, ge: np.ndarray, gw: np.ndarray, wk: np.ndarray, info: np.ndarray,
-             nis_out: np.ndarray, gnss_used: np.ndarray, gnss_rej: np.ndarray, t: float,
-             is_static: bool, gap: bool, gate: bool, ge_pred: bool, add_e: float, add_n: float,
+def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: float,
+             x: np.ndarray, P: np.ndarray, st: np.ndarray, prm: np.ndarray, ge: np.ndarray,
+             gw: np.ndarray, wk: np.ndarray, info: np.ndarray, t: float, is_static: bool,
+             gap: bool, gate: bool, ge_pred: bool, add_e: float, add_n: float,
              innov_on: int | None = None, sage_on: int | None = None,
              whiten_off: int | None = None, inflate_on: int | None = None,
-             ge_on: int | None = None) -> tuple[float, float, float, int, bool]:
-    """Section 2 of :func:`cs_filter_kernel`: the GNSS position fix of epoch k (5 Hz).
+             ge_on: int | None = None) -> tuple[float, float, float, int, bool, float, bool, bool]:
+    """Section 2 of :func:`cs_filter_kernel`: the GNSS position fix of an epoch (5 Hz).
 
     Its own function for the cold start: numba's type inference and SSA
     reconstruction grow faster than linearly with a function's size, and this
     block was half of the kernel's body (cold compile of the kernel 7.4 s).  Its
     memory (gate timers, Sage-Husa, whitening, fix count: the S_* entries) lives
-    in ``st`` only, so the 100-Hz path between fixes carries none of it.  ``t``
+    in ``st`` only, so the 100-Hz path between fixes carries none of it.  The epoch's
+    fix ``z_e, z_n`` (m), variances ``r_e, r_n`` (m^2) and receiver velocity ``gv_e,
+    gv_n`` (m/s, NaN when none) come as values, not arrays: a call passes every array
+    as ~7 values, and 17 arrays cost 4 % of the forward speed at 5 Hz.  ``t``
     (s since the start), ``is_static``, ``gap`` (a step not propagated), ``gate``
     and ``ge_pred`` (the GNSS error block's prediction still pending) come from the
     kernel; ``add_e, add_n`` the position variance added to P(k|k-1) so far
     (m^2).  The options are the kernel's None-or-int keyword arguments (numba
     prunes a None one before type inference).  Returns the updated ``add_e,
     add_n``, the seed 001 factor g applied to P(k|k-1), the number of DR rows
-    queued in ``gw`` for the block and ``ge_pred``.
+    queued in ``gw`` for the block, ``ge_pred``, the NIS, and whether the fix was used
+    and whether the gate rejected it.
     """
     H = wk[0]
     K = wk[1]
@@ -670,6 +673,8 @@ def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.
     i_n = np.int64(3)
     no_cons = np.int64(0)
     g = 1.0
+    used = False
+    rej = False
     n_rows = np.int64(0)  # not the literal 0: one ge_push specialisation, not two
 
     rej_since = st[S_REJ_SINCE]
@@ -688,8 +693,8 @@ def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.
     wh_m = st[S_WH_M]
     wh_static = st[S_WH_STATIC]
     b_since = st[S_B_SINCE]
-    ye = z_e[k] - x[0]
-    yn = z_n[k] - x[3]
+    ye = z_e - x[0]
+    yn = z_n - x[3]
     if ge_on is not None:  # z = position + b + v: the predicted fix includes the bias
         if ge_pred:
             ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[P_GE_VAR])  # no rows yet
@@ -718,8 +723,8 @@ def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.
                     info[I_GATE_RESETS] += 1.0
             elif not is_static:
                 b_since = -1.0
-        ye = z_e[k] - x[0] - ge[GE_BE]
-        yn = z_n[k] - x[3] - ge[GE_BN]
+        ye = z_e - x[0] - ge[GE_BE]
+        yn = z_n - x[3] - ge[GE_BN]
     # innovation whitening (aekf.innovation_whitening, Mehra 1970): an optimal filter's
     # innovations are white; a lag-one correlation rho of the normalised innovations
     # says the fixes' errors are time-correlated (multipath) and carry less independent
@@ -741,19 +746,18 @@ def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.
         # as much as one, not m), so R x m (our choice; aekf.innovation_whitening)
         wh_static += 1.0
         f_wh = max(f_wh, wh_static)
-    re = r_e[k] * sh_r * f_wh
-    rn = r_n[k] * sh_r * f_wh
+    re = r_e * sh_r * f_wh
+    rn = r_n * sh_r * f_wh
     # NIS, gate and the seed 001 factor with the nominal R: the whitening factor scales
     # the information of a fix, not the spread of its error (which the NIS tests)
-    s00 = P[0, 0] + r_e[k] * sh_r
-    s11 = P[3, 3] + r_n[k] * sh_r
+    s00 = P[0, 0] + r_e * sh_r
+    s11 = P[3, 3] + r_n * sh_r
     s01 = P[0, 3]
     if ge_on is not None:  # H = [I_pos, I_b]: S gains 2 P(pos, b) + P(b, b)
         s00 += 2.0 * ge[0] + ge[GE_PEE]
         s11 += 2.0 * ge[7] + ge[GE_PNN]
         s01 += ge[1] + ge[6] + ge[GE_PEN]
     nis = nis_2d(ye, yn, s00, s01, s11)
-    nis_out[k] = nis
     accept = True
     reset = False
     r_fac = 1.0
@@ -780,7 +784,7 @@ def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.
                 info[I_INFLATED] += 1.0
             else:
                 accept = False
-                gnss_rej[k] = True
+                rej = True
         else:
             rej_since = -1.0
     if accept:
@@ -799,22 +803,22 @@ def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.
             P[0, 0] += ye * ye
             P[3, 3] += yn * yn
         if sage_on is not None:  # seed 004 Sage-Husa on a scale of R, with the divergence guard
-            sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e[k] + r_n[k])
+            sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e + r_n)
             sh_r = sage_husa_r(sh_r, sh_m, prm[P_SH_B], sample, prm[P_SH_RMIN],
                                prm[P_SH_RMAX])
             sh_m += 1
-            re = r_e[k] * sh_r * f_wh
-            rn = r_n[k] * sh_r * f_wh
+            re = r_e * sh_r * f_wh
+            rn = r_n * sh_r * f_wh
         if (whiten_off is None and not reset and r_fac == 1.0 and nis <= prm[P_WH_NIS]
                 and not is_static  # a stop has its own rule (R x m, above)
-                and P[0, 0] + P[3, 3] < (r_e[k] + r_n[k]) * sh_r):  # converged only
+                and P[0, 0] + P[3, 3] < (r_e + r_n) * sh_r):  # converged only
             # normalised innovations; their lag-one product only between fixes at most
             # P_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
             # under P_WH_NIS: a filter error (a drive-off with an unknown heading, the
             # end of an outage) also makes the innovations correlated, and inflating R
             # then slowed its correction (11 m instead of 7 m, 10 s later)
-            ue = ye / math.sqrt(P[0, 0] + r_e[k] * sh_r)
-            un = yn / math.sqrt(P[3, 3] + r_n[k] * sh_r)
+            ue = ye / math.sqrt(P[0, 0] + r_e * sh_r)
+            un = yn / math.sqrt(P[3, 3] + r_n * sh_r)
             d_wh = (1.0 - prm[P_WH_B]) / (1.0 - prm[P_WH_B] ** (wh_m + 1.0))
             wh_c0 = (1.0 - d_wh) * wh_c0 + d_wh * 0.5 * (ue * ue + un * un)
             if t - wh_t <= prm[P_WH_GAP]:
@@ -836,20 +840,20 @@ def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.
             # slow drift of the fixes cannot be told from a DR heading error, and the
             # states absorbed a drive-off's wrong heading (15 m); then b is a consider
             # state (it widens S only)
-            est_b = is_static or (math.isfinite(gv_e[k]) and math.isfinite(gv_n[k])
+            est_b = is_static or (math.isfinite(gv_e) and math.isfinite(gv_n)
                                   and prm[P_GVEL_VAR] > 0.0)
-            ok1 = ge_fix_update(x, P, ge, z_e[k], z_n[k], re, rn, K, est_b)
+            ok1 = ge_fix_update(x, P, ge, z_e, z_n, re, rn, K, est_b)
             ok2 = ok1
         else:
             ok1 = unit_update(x, P, i_e, ye, re, K, PHt, Bh, no_cons)
-            ok2 = unit_update(x, P, i_n, z_n[k] - x[3], rn, K, PHt, Bh, no_cons)
+            ok2 = unit_update(x, P, i_n, z_n - x[3], rn, K, PHt, Bh, no_cons)
         if ok1 and ok2:
-            gnss_used[k] = True
+            used = True
             n_fix += 1.0
-            if math.isfinite(gv_e[k]) and math.isfinite(gv_n[k]) and prm[P_GVEL_VAR] > 0.0:
+            if math.isfinite(gv_e) and math.isfinite(gv_n) and prm[P_GVEL_VAR] > 0.0:
                 # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
                 for idx in (1, 4):
-                    y = (gv_e[k] if idx == 1 else gv_n[k]) - x[idx]
+                    y = (gv_e if idx == 1 else gv_n) - x[idx]
                     ok_v = unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
                     if ge_on is not None:  # noqa: SIM102 (a plain test: numba prunes it when off)
                         if ok_v:
@@ -872,7 +876,7 @@ def gnss_fix(k: int, z_e: np.ndarray, z_n: np.ndarray, r_e: np.ndarray, r_n: np.
     st[S_WH_M] = wh_m
     st[S_WH_STATIC] = wh_static
     st[S_B_SINCE] = b_since
-    return add_e, add_n, g, n_rows, ge_pred
+    return add_e, add_n, g, n_rows, ge_pred, nis, used, rej
 
 
 @njit(cache=True, error_model="numpy")
@@ -1058,15 +1062,15 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         gnss_used[k] = False
         gnss_rej[k] = False
         if has_gnss[k]:
-            add_e, add_n, g, n_rows, ge_pred = gnss_fix(
-                k, z_e, z_n, r_e, r_n, gv_e, gv_n, x, P, st, prm, ge, gw, wk, info, nis_out,
-                gnss_used, gnss_rej, t, is_static, gap, gate, ge_pred, add_e, add_n, innov_on,
-                sage_on, whiten_off, inflate_on, ge_on)
+            add_e, add_n, g, n_rows, ge_pred, nis_out[k], gnss_used[k], gnss_rej[k] = gnss_fix(
+                z_e[k], z_n[k], r_e[k], r_n[k], gv_e[k], gv_n[k], x, P, st, prm, ge, gw, wk, info,
+                t, is_static, gap, gate, ge_pred, add_e, add_n, innov_on, sage_on, whiten_off,
+                inflate_on, ge_on)
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
         if has_odo[k]:
             u = odo[k]
             is_static = standstill and u < prm[P_STATIC_SPEED]
-            if not is_static:
+            if whiten_off is None and not is_static:  # (a store to st at 100 Hz only if used)
                 st[S_WH_STATIC] = 0.0  # a new stop starts a new count of its fixes
             if is_static:
                 zupt_cons = CONS_POS if (zupt_pos == 2 or (zupt_pos == 1 and outage[k])) else 0
