@@ -274,7 +274,7 @@ def _warm_up_in_two(params: Params, auto_gnss_offset: bool) -> None:
     import signal
 
     parts = compile_parts(params)
-    if len(parts) != 5:
+    if not parts:  # fkf/fafkf: one process
         warm_up(params, auto_gnss_offset=auto_gnss_offset)
         return
     parts[0]()  # what both halves need, once; numba's own start-up (~0.5 s) too

@@ -293,8 +293,7 @@ def multipath_regime(epochs: Epochs, params: Params) -> np.ndarray:
         hi = np.searchsorted(tf, tf + 0.5 * window, side="right")
         ob = (c[hi] - c[lo]) / (hi - lo)
     last = np.cumsum(epochs.has_gnss) - 1                         # latest fix <= k
-    w = ob[np.maximum(last, 0)]
-    return w
+    return ob[np.maximum(last, 0)]
 
 
 def distance_rows(t_s: np.ndarray, o: np.ndarray, speed: np.ndarray, interval_s: float,
@@ -437,18 +436,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         speed0 = 0.0
     x0[kf.IVE] = speed0 * math.sin(psi0)
     x0[kf.IVN] = speed0 * math.cos(psi0)
-    w0 = min(max(float(eps_w[0]), 0.0), 1.0)                    # eps's regime at the start
-    eps_sd0 = math.sqrt((1.0 - w0) * fp["gnss_err_sd_m"] ** 2 + w0 * fp["gnss_err_obstructed_sd_m"] ** 2)
-    P0 = np.diag(np.array([
-        fp["init_pos_sd_m"], fp["init_vel_sd_mps"], fp["init_acc_sd_mps2"],
-        fp["init_pos_sd_m"], fp["init_vel_sd_mps"], fp["init_acc_sd_mps2"],
-        eps_sd0, eps_sd0,
-        fp["init_heading_err_sd_rad"], fp["init_dist_err_sd_m"]]) ** 2)
 
     g_p = params["gnss"]
     par = np.zeros(kf.N_PAR)
-    par[kf.K_TAU_EPS] = fp["gnss_err_tau_s"]
-    par[kf.K_EPS_SD] = fp["gnss_err_sd_m"]
     par[kf.K_JERK_PSD] = fp["jerk_psd_m2ps5"]
     par[kf.K_QW_RW] = fp["heading_err_rw_sd"]
     par[kf.K_QS_RW] = fp["dist_err_rw_sd"]
@@ -459,7 +449,6 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_GATE_CHI2] = gate_threshold(g_p["gate_prob"], 2) if g_p["gate"] else 0.0
     par[kf.K_GATE_RESET_S] = g_p["gate_reset_s"]
     par[kf.K_GATE_WARMUP] = g_p["gate_warmup_fixes"]
-    par[kf.K_EPS_DIST] = fp["gnss_err_dist_m"]
     par[kf.K_GVEL_VAR] = fp["gnss_velocity_sd_mps"] ** 2 if fp["gnss_velocity"] else 0.0
     par[kf.K_TAU_EPS_C] = fp["gnss_err_tau_s"]
     par[kf.K_EPS_SD_C] = fp["gnss_err_sd_m"]
@@ -486,10 +475,18 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             raise ConfigError(f"{key} = {value}: expected a value > 0 (a zero sigma makes a "
                               "measurement or state exact, a zero time constant makes the filter "
                               "divide by zero)")
-    if not (par[kf.K_TAU_EPS] > 0 and 0 < par[kf.K_R_MIN] <= 1.0 <= par[kf.K_R_MAX]):
+    if not (par[kf.K_TAU_EPS_C] > 0 and 0 < par[kf.K_R_MIN] <= 1.0 <= par[kf.K_R_MAX]):
         raise ConfigError("fkf.gnss_err_tau_s must be > 0 and fafkf.r_min_factor <= 1 <= "
-                          f"fafkf.r_max_factor (got {par[kf.K_TAU_EPS]}, {par[kf.K_R_MIN]}, "
+                          f"fafkf.r_max_factor (got {par[kf.K_TAU_EPS_C]}, {par[kf.K_R_MIN]}, "
                           f"{par[kf.K_R_MAX]})")
+    # the eps model at the start (tau, sigma, distance of the first epoch's regime): the
+    # kernel's own blend, which also gives eps's initial sigma
+    kf.select_eps(par, float(eps_w[0]) if len(eps_w) else 0.0)
+    P0 = np.diag(np.array([
+        fp["init_pos_sd_m"], fp["init_vel_sd_mps"], fp["init_acc_sd_mps2"],
+        fp["init_pos_sd_m"], fp["init_vel_sd_mps"], fp["init_acc_sd_mps2"],
+        par[kf.K_EPS_SD], par[kf.K_EPS_SD],
+        fp["init_heading_err_sd_rad"], fp["init_dist_err_sd_m"]]) ** 2)
 
     flags = np.zeros(kf.N_FLAGS, np.int64)
     flags[kf.F_MODE_FR] = fp["mode"] == "fr"
