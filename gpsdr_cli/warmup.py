@@ -16,6 +16,11 @@ the filter and its parameters (which options are on), so two things help:
   and :func:`BackgroundWarmUp.wait` joins it just before the filter runs; the
   filter then loads the kernels from numba's cache.  The second core turns
   ~0.7 s of reading into time the compiler had anyway.
+* While it waits, the calling process prepares to load the kernels
+  (:func:`prepare_loading`, ~0.4 s) -- but only once the background process
+  says a CPU is free (:func:`_signal_free`): during the two-process phase below
+  both CPUs compile, and a third process on them slowed that critical path by
+  as much as it saved.
 
 Why a process and not a thread: compiling is pure Python (type inference and
 lowering hold the GIL), so a thread slowed the reading down as much as it
@@ -198,19 +203,35 @@ def prepare_loading(name: str) -> None:
 
 
 class BackgroundWarmUp:
-    """A forked process running :func:`warm_up`; :meth:`wait` joins it."""
+    """A forked process running :func:`warm_up`; :meth:`wait` joins it.
 
-    def __init__(self, proc: Any, name: str = "") -> None:
+    ``free_fd``: the read end of a pipe on which the process writes a byte when it
+    leaves a CPU free (:func:`_signal_free`), or None.
+    """
+
+    def __init__(self, proc: Any, name: str = "", free_fd: int | None = None) -> None:
         self.proc = proc
         self.name = name
+        self.free_fd = free_fd
+
+    def _close_free_fd(self) -> None:
+        if self.free_fd is not None:
+            os.close(self.free_fd)
+            self.free_fd = None
 
     def wait(self, timeout_s: float = WAIT_TIMEOUT_S) -> bool:
         """Block until the compile finished; False if it failed or timed out (harmless).
 
-        Meanwhile this process prepares to load the kernels (:func:`prepare_loading`).
+        Meanwhile, once the process signals a free CPU (or ends), this process prepares
+        to load the kernels (:func:`prepare_loading`).
         """
+        import select
+
         if self.proc is None:
             return False
+        if self.free_fd is not None:
+            select.select([self.free_fd], [], [], timeout_s)  # a byte, or EOF: it ended
+            self._close_free_fd()
         if self.name:
             prepare_loading(self.name)
         self.proc.join(timeout_s)
@@ -223,6 +244,7 @@ class BackgroundWarmUp:
 
     def cancel(self) -> None:
         """Stop the compile if it still runs (the caller failed before it needed the kernels)."""
+        self._close_free_fd()
         if self.proc is not None and self.proc.is_alive():
             self.proc.terminate()
             self.proc.join(5.0)
@@ -258,7 +280,18 @@ def _join(pid: int, timeout_s: float) -> None:
     os.waitpid(pid, 0)
 
 
-def _warm_up_in_two(params: Params, auto_gnss_offset: bool) -> None:
+def _signal_free(fd: int | None) -> None:
+    """Tell the waiting caller that a CPU is free now (one byte on ``fd``; then closed)."""
+    if fd is None:
+        return
+    try:
+        os.write(fd, b"1")
+    except OSError:  # the caller has gone: nobody to tell
+        pass
+    os.close(fd)
+
+
+def _warm_up_in_two(params: Params, auto_gnss_offset: bool, free_fd: int | None = None) -> None:
     """:func:`warm_up` with the kernel's callees compiled in two processes.
 
     On two CPUs the parent reading the logs, this process and a forked helper share
@@ -269,12 +302,15 @@ def _warm_up_in_two(params: Params, auto_gnss_offset: bool) -> None:
     from numba's cache.  The helper failing or being slow costs only time: the kernel
     compiles what it misses.  A plain ``os.fork``: this process is a daemonic
     multiprocessing child, which may not start multiprocessing children of its own.
+    When the kernel's compile starts (one process, a CPU free) it writes to ``free_fd``
+    (:func:`_signal_free`; at once without a helper).
     """
     import select
     import signal
 
     parts = compile_parts(params)
     if not parts:  # fkf/fafkf: one process
+        _signal_free(free_fd)
         warm_up(params, auto_gnss_offset=auto_gnss_offset)
         return
     parts[0]()  # what both halves need, once; numba's own start-up (~0.5 s) too
@@ -284,12 +320,15 @@ def _warm_up_in_two(params: Params, auto_gnss_offset: bool) -> None:
     except OSError:  # no second process (a limit): everything here
         os.close(ready_r)
         os.close(ready_w)
+        _signal_free(free_fd)
         warm_up(params, auto_gnss_offset=auto_gnss_offset)
         return
     if pid == 0:  # the helper, out without the parent's exit handlers
         code = 1
         try:
             os.close(ready_w)
+            if free_fd is not None:
+                os.close(free_fd)  # only this process's byte or end may wake the caller
             parts[1]()
             select.select([ready_r], [], [], WAIT_TIMEOUT_S)
             parts[2]()
@@ -312,19 +351,25 @@ def _warm_up_in_two(params: Params, auto_gnss_offset: bool) -> None:
     finally:
         _join(pid, WAIT_TIMEOUT_S)
         signal.signal(signal.SIGTERM, previous)
+    _signal_free(free_fd)  # the kernel compiles in this process alone
     warm_up(params, auto_gnss_offset=auto_gnss_offset)
 
 
-def _child(params: Params, auto_gnss_offset: bool) -> None:
+def _child(params: Params, auto_gnss_offset: bool, fds: tuple[int, int] | None = None) -> None:
     # no output from here: the parent owns stdout (it may be a pipe carrying the track)
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)
     os.dup2(devnull, 2)
     sys.stdout = sys.stderr = open(os.devnull, "w")  # noqa: SIM115 - lives as long as the process
+    free_fd = None
+    if fds is not None:
+        os.close(fds[0])  # the caller's end
+        free_fd = fds[1]
     if os.environ.get("GPSDR_WARM_UP_SPLIT", "1") == "0":
+        _signal_free(free_fd)
         warm_up(params, auto_gnss_offset=auto_gnss_offset)
     else:
-        _warm_up_in_two(params, auto_gnss_offset)
+        _warm_up_in_two(params, auto_gnss_offset, free_fd)
 
 
 def start_background(params: Params, *, auto_gnss_offset: bool = False) -> BackgroundWarmUp | None:
@@ -345,7 +390,11 @@ def start_background(params: Params, *, auto_gnss_offset: bool = False) -> Backg
     if cpus < 2 or cache_is_fresh(params, auto_gnss_offset=auto_gnss_offset):
         return None
     flush_std_streams()
-    proc = mp.get_context("fork").Process(target=_child, args=(params, auto_gnss_offset),
+    fds = os.pipe()
+    proc = mp.get_context("fork").Process(target=_child, args=(params, auto_gnss_offset, fds),
                                           name="gpsdr-warm-up", daemon=True)
-    proc.start()
-    return BackgroundWarmUp(proc, params["filter"]["name"])
+    try:
+        proc.start()
+    finally:
+        os.close(fds[1])  # the child's end: its byte, or its exit, wakes wait()
+    return BackgroundWarmUp(proc, params["filter"]["name"], fds[0])

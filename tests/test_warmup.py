@@ -175,3 +175,51 @@ def test_cold_fuse_with_a_background_compile_gives_the_same_track(tmp_path: Path
     b = pd.read_csv(pd.io.common.BytesIO(warm.stdout))
     assert len(a) > 10_000
     pd.testing.assert_frame_equal(a, b)
+
+
+#: The "CPU free" signal of the two-process warm-up: written once every part has run (the
+#: helper's too), before the kernel compiles; at once when there are no parts (fkf).
+FREE_SIGNAL = textwrap.dedent("""
+    import os, sys, time
+    from gpsdr_cli import warmup
+    from gpsdr_cli.config import defaults
+    log = sys.argv[1]
+    def mark(tag):
+        with open(log, "a") as f:
+            f.write(tag)
+    def part(tag, delay=0.0):
+        def run():
+            time.sleep(delay)
+            mark(tag)
+        return run
+    n_parts = int(sys.argv[2])
+    warmup.compile_parts = lambda params: tuple(
+        part(str(i), 0.5 if i == 1 else 0.0) for i in range(n_parts))
+    warmup.warm_up = lambda params, auto_gnss_offset=False: mark("K")
+    own_signal = warmup._signal_free
+    def signal(fd):
+        mark("S")
+        own_signal(fd)
+    warmup._signal_free = signal
+    r, w = os.pipe()
+    warmup._warm_up_in_two(defaults(), False, w)
+    print("PIPE", os.read(r, 8))
+""")
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="the helper is forked")
+@pytest.mark.parametrize("n_parts", [5, 0])
+def test_warm_up_signals_a_free_cpu_before_the_kernel_compiles(tmp_path: Path,
+                                                                n_parts: int) -> None:
+    log = tmp_path / "order.txt"
+    res = subprocess.run([sys.executable, "-c", FREE_SIGNAL, str(log), str(n_parts)],
+                         capture_output=True, text=True, cwd=REPO, check=False, timeout=120)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "PIPE b'1'" in res.stdout, res.stdout
+    order = log.read_text()
+    if n_parts:
+        # part 0 first; the helper's slow part 1 (and 2) before the signal; the kernel last
+        assert order[0] == "0" and sorted(order[1:5]) == list("1234"), order
+        assert order[5:] == "SK", order
+    else:
+        assert order == "SK", order
