@@ -1,19 +1,53 @@
 """Accuracy benchmark: every registered filter, forward and RTS-smoothed, on every
 simulated scenario (fixed seeds 1, 2, 3, figures pooled) and on the real comma2k19 drive, next to GNSS alone
 and the oracle (the same filter told the true noise: ``simulate.oracle_params`` and
-``simulate.oracle_drive``).
+``simulate.oracle_drive``), checked against issue #4's accuracy targets.
 
-    .venv/bin/python benchmarks/accuracy.py                 # everything -> benchmarks/accuracy.md
-    .venv/bin/python benchmarks/accuracy.py --seeds 1       # one seed per scenario (2-3 min)
-    .venv/bin/python benchmarks/accuracy.py --quick         # 3-minute drives, no one_hour
+    .venv/bin/python benchmarks/accuracy.py                 # everything -> benchmarks/accuracy.md (~3 min)
+    .venv/bin/python benchmarks/accuracy.py --seeds 1       # one seed per scenario
+    .venv/bin/python benchmarks/accuracy.py --quick         # 3-minute drives, no one_hour, no oracle
     .venv/bin/python benchmarks/accuracy.py --scenarios tunnels --filters ekf,aekf
+    .venv/bin/python benchmarks/accuracy.py --no-paper      # without the seeds' plain baselines
 
 Figures per run: RMSE, CEP95, max horizontal error against the truth (m), and the
 60-s-outage drift: the error at the end of each GNSS outage of 50-70 s as % of the
 distance driven in it (mean over such outages; "-" when the drive has none).
-comma2k19: the u-blox fixes sit ~0.1 s ahead of the reference; the runs apply
-``[time] gnss_offset_s = 0.1`` (the README's calibration) and, for comparison,
-0.0; the table also states what ``latency.estimate_gnss_offset`` finds.
+
+Paper baselines (``--no-paper`` skips them).  Our ``ekf`` and ``fkf`` carry model
+extensions the seeds' baselines do not have, so four more methods are run on
+urban_canyon and one_hour (forward and RTS, no oracle), through config overrides only:
+
+* ``ekf (seed 000 plain)``, ``aekf (seed 000 plain)``: filter ekf / aekf with
+  ``[aekf] gnss_err_states = false, gnss_velocity = false`` (GNSS positions only,
+  white-noise R; no multipath states);
+* ``fkf (seed 002 plain)``, ``fafkf (seed 002 plain)``: filter fkf / fafkf with
+  ``[fkf] gnss_velocity = false, gnss_err_pdop = inf`` (one regime), ``gnss_err_dist_m = 0,
+  gnss_err_sd_m = 1, gnss_err_tau_s = 60`` (the seed's one time-only error state).
+
+comma2k19: the u-blox fixes sit ~0.1 s ahead of the reference.  Four runs of every
+filter: ``[time] gnss_offset_s = 0.1`` (the README's calibration: the latency applied),
+``auto`` (estimated by gpsdr itself: ``pipeline.fuse(..., auto_gnss_offset=True)``, what
+``gpsdr fuse --gnss-offset auto`` does; each filter estimates its own offset), 0.135 s
+(``latency.estimate_gnss_offset`` of the raw fixes against the reference, a cheat the
+tool cannot do) and 0 (as logged).  Every comma2k19 row's GNSS-only figure is taken
+from the fixes at the time shift that run applied (the ``gnss_e/gnss_n`` of its own track).
+
+Targets (issue #4), two tables.  Issue scope, counted in the header ("N of M issue
+targets pass", then one line per miss):
+
+* every shipped filter's RMSE within 15 % of its oracle, on every simulated scenario;
+* urban canyon: every shipped filter >= 40 % below GNSS-only RMSE;
+* urban canyon: aekf >= 30 % below ekf (RMSE) and fafkf's error variance (mean squared
+  error) >= 50 % below fkf's, each checked three ways with its own verdict (no combined
+  one): (a) literal, shipped against shipped; (b) adaptation alone, as the seed measured
+  it: plain adaptive against plain baseline; (c) the shipped adaptive filter against the
+  seed's plain baseline;
+* every shipped filter's 60-s outage ends within 2 % (forward) / 1 % (RTS) of the distance;
+* comma2k19, per shipped filter and mode: fused RMSE below GNSS-only RMSE with the
+  latency applied (0.1 s) OR estimated by gpsdr (auto); both figures in the row.
+
+Beyond the issue's scope (informational, not counted): the comparisons (a)-(c) on other
+drives, comma2k19 at 0.135 s and 0 s, and the paper baselines' own GNSS/drift figures.
 
 Conventions: gpsdr_cli.conventions (metres, local frame of the first fix).
 """
@@ -47,6 +81,37 @@ from gpsdr_cli.simulate import SCENARIOS, oracle_drive, oracle_params, simulate_
 
 COMMA = ROOT.parent / "shared" / "data" / "comma2k19"
 
+#: seed 000's baseline: GNSS positions only, white-noise R (no multipath states, no velocity)
+AEKF_PLAIN = {"aekf": {"gnss_err_states": False, "gnss_velocity": False}}
+#: seed 002's baseline: GNSS positions only, one time-only error state (1 m, 60 s)
+FKF_PLAIN = {"fkf": {"gnss_velocity": False, "gnss_err_pdop": math.inf, "gnss_err_dist_m": 0.0,
+                     "gnss_err_sd_m": 1.0, "gnss_err_tau_s": 60.0}}
+#: method -> (registered filter, config overrides)
+PAPER = {
+    "ekf (seed 000 plain)": ("ekf", AEKF_PLAIN),
+    "aekf (seed 000 plain)": ("aekf", AEKF_PLAIN),
+    "fkf (seed 002 plain)": ("fkf", FKF_PLAIN),
+    "fafkf (seed 002 plain)": ("fafkf", FKF_PLAIN),
+}
+PAPER_SCENARIOS = ("urban_canyon", "one_hour")
+#: the scenario the issue sets the comparative and the GNSS-reduction targets for
+URBAN = "urban_canyon"
+#: the comparative targets: (check, what it measures, adaptive method, baseline method,
+#: figure compared (RMSE or the mean squared error), reduction needed)
+COMPARISONS = [
+    ("a", "literal, shipped vs shipped", "aekf", "ekf", "rmse", 0.30),
+    ("b", "adaptation alone, plain vs plain (seed 000)", "aekf (seed 000 plain)",
+     "ekf (seed 000 plain)", "rmse", 0.30),
+    ("c", "shipped aekf vs seed 000's plain ekf", "aekf", "ekf (seed 000 plain)", "rmse", 0.30),
+    ("a", "literal, shipped vs shipped", "fafkf", "fkf", "mse", 0.50),
+    ("b", "adaptation alone, plain vs plain (seed 002)", "fafkf (seed 002 plain)",
+     "fkf (seed 002 plain)", "mse", 0.50),
+    ("c", "shipped fafkf vs seed 002's plain fkf", "fafkf", "fkf (seed 002 plain)", "mse", 0.50),
+]
+#: comma2k19: the offset keys of the target's OR-rule (latency applied, estimated by gpsdr)
+COMMA_APPLIED = "0.1"
+COMMA_AUTO = "auto"
+
 
 @dataclass
 class Row:
@@ -61,7 +126,25 @@ class Row:
     oracle_drift60_pct: float = math.nan
     seconds: float = math.nan
     note: str = ""
+    #: comma2k19: RMSE of the GNSS fixes alone at the time shift this run applied (m)
+    gnss_rmse_m: float = math.nan
+    #: comma2k19: which offset ("0.1", "auto", "0.135", "0"); "" for simulated drives
+    offset: str = ""
+    #: comma2k19: the GNSS time offset the run applied (s)
+    offset_s: float = math.nan
     extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class Target:
+    """One checked target: what, where, the measured figure, PASS/MISS, and its scope."""
+
+    target: str
+    drive: str
+    measured: str
+    verdict: str            # "PASS" | "MISS"
+    issue: bool             # True: one of issue #4's targets (counted); False: informational
+    shortfall: str = ""     # for a MISS: by how much
 
 
 def available_filters(wanted: list[str] | None) -> list[str]:
@@ -76,16 +159,40 @@ def available_filters(wanted: list[str] | None) -> list[str]:
     return names
 
 
-def run_filter(drive, params: dict) -> tuple[pd.DataFrame, object, float]:
-    """Fuse with the pipeline if it is there, else build_epochs + filter + a small track."""
+def scenario_of(row: Row) -> str:
+    """``urban_canyon`` of ``urban_canyon (seeds 1,2,3)``, ``comma2k19`` of ``comma2k19 (...)``."""
+    return row.drive.split(" ")[0]
+
+
+def params_for(name: str, smooth: bool, overrides: dict | None = None) -> dict:
+    """Default parameters for filter ``name`` (+ RTS), with config overrides {section: {key: value}}."""
+    p = config.defaults()
+    p["filter"]["name"] = name
+    p["filter"]["smooth"] = smooth
+    for section, values in (overrides or {}).items():
+        for key, value in values.items():
+            if key not in p[section]:
+                raise KeyError(f"config has no [{section}] {key} (gpsdr_cli/config.py DEFAULTS_TOML)")
+            p[section][key] = value
+    return p
+
+
+def run_filter(drive, params: dict, auto_offset: bool = False
+               ) -> tuple[pd.DataFrame, object, float, float, str]:
+    """Fuse with the pipeline (``auto_offset``: gpsdr estimates the GNSS time offset itself,
+    as ``gpsdr fuse --gnss-offset auto``), else build_epochs + filter + a small track.
+    Returns the track, the frame, seconds, the GNSS offset applied (s) and how it was found."""
     t0 = time.perf_counter()
     try:
         from gpsdr_cli.pipeline import fuse
     except ImportError:
         fuse = None
     if fuse is not None:
-        res = fuse(drive, params)
-        return res.track, res.frame, time.perf_counter() - t0
+        res = fuse(drive, params, auto_gnss_offset=auto_offset)
+        return (res.track, res.frame, time.perf_counter() - t0, res.gnss_offset_s,
+                res.gnss_offset_note)
+    if auto_offset:
+        raise GpsdrError("the GNSS offset estimate needs gpsdr_cli.pipeline")
     from gpsdr_cli.align import build_epochs
     from gpsdr_cli.geodesy import LocalFrame
 
@@ -99,7 +206,7 @@ def run_filter(drive, params: dict) -> tuple[pd.DataFrame, object, float]:
         "gnss_outage": ep.gnss_outage, "static": r.static, "nis": r.nis,
         "gnss_rejected": r.gnss_rejected, "gnss_used": r.gnss_used,
     })
-    return track, frame, time.perf_counter() - t0
+    return (track, frame, time.perf_counter() - t0, float(params["time"]["gnss_offset_s"]), "")
 
 
 def drift60(stats: pd.DataFrame) -> float:
@@ -120,7 +227,7 @@ def figures(track: pd.DataFrame, ref: pd.DataFrame, name: str, params: dict) -> 
 
 
 def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_modes: list[bool],
-              oracle: bool, keep: dict, seed: int) -> list[Row]:
+              oracle: bool, keep: dict, seed: int, paper: bool = True) -> list[Row]:
     sim = simulate_drive(scenario, seed=seed, duration_s=duration_s)
     label = f"{scenario} (seed {seed}, {sim.truth['t_ns'].size / 100 / 60:.0f} min)"
     rows: list[Row] = []
@@ -128,15 +235,17 @@ def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_
     odrive = oracle_drive(sim)
     odrive_gm = oracle_drive(sim, multipath_in_sigma=False)  # filters with multipath states
     ref = None
-    for name in names:
+    # (method, filter, overrides, with oracle): the shipped filters, then the paper baselines
+    runs: list[tuple[str, str, dict | None, bool]] = [(n, n, None, oracle) for n in names]
+    if paper and scenario in PAPER_SCENARIOS:
+        runs += [(m, n, o, False) for m, (n, o) in PAPER.items() if n in names]
+    for base, name, overrides, with_oracle in runs:
         for smooth in smooth_modes:
-            p = config.defaults()
-            p["filter"]["name"] = name
-            p["filter"]["smooth"] = smooth
-            method = name + (" + RTS" if smooth else "")
+            method = base + (" + RTS" if smooth else "")
             row = Row(label, method)
             try:
-                track, frame, secs = run_filter(sim.drive, p)
+                p = params_for(name, smooth, overrides)
+                track, frame, secs, _, _ = run_filter(sim.drive, p)
                 if ref is None:
                     ref = reference_en(truth_ll, frame)
                     g = gnss_only_errors(track, ref)
@@ -147,10 +256,10 @@ def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_
                 keep[(scenario, method)] = (track, ref)
                 row.rmse_m, row.cep95_m, row.max_m = f["rmse_m"], f["cep95_m"], f["max_m"]
                 row.mse_m2, row.drift60_pct, row.seconds = f["mse_m2"], f["drift60_pct"], secs
-                if oracle:
+                if with_oracle:
                     po = oracle_params(sim.noise, p)
                     states = name in ("fkf", "fafkf") or bool(p["aekf"]["gnss_err_states"])
-                    otrack, _, _ = run_filter(odrive_gm if states else odrive, po)
+                    otrack, _, _, _, _ = run_filter(odrive_gm if states else odrive, po)
                     fo = figures(otrack, ref, method + " oracle", po)
                     row.oracle_rmse_m, row.oracle_drift60_pct = fo["rmse_m"], fo["drift60_pct"]
             except Exception as err:  # a broken filter must not stop the table  # noqa: BLE001
@@ -181,40 +290,56 @@ def bench_comma(names: list[str], smooth_modes: list[bool], keep: dict) -> list[
     fixes = pd.DataFrame({"t_ns": ep0.t_ns, "gnss_e": ep0.gnss_e, "gnss_n": ep0.gnss_n,
                           "e": np.nan, "n": np.nan, "v_e": np.nan, "v_n": np.nan})
     est0 = estimate_gnss_offset(fixes, reference_en(refobj, frame0))
-    offsets = [(0.1, "README calibration"), (round(est0.offset_s, 3), "estimated vs reference"),
-               (0.0, "as logged")]
-    for offset, why in offsets:
-        label = f"comma2k19 (gnss_offset_s = {offset:g}, {why})"
+    est0_s = round(est0.offset_s, 3)
+    offsets: list[tuple[str, float | None, str]] = [
+        (COMMA_APPLIED, 0.1, "README calibration"),
+        (COMMA_AUTO, None, "estimated by gpsdr"),
+        (f"{est0_s:g}", est0_s, "estimated vs reference"),
+        ("0", 0.0, "as logged"),
+    ]
+    for key, offset, why in offsets:
+        label = f"comma2k19 (gnss_offset_s = {key}, {why})"
+        auto = offset is None
         ref = None
+        block: list[Row] = []
+        gnss_rows: dict[float, Row] = {}  # GNSS-only row per time shift applied (to 1 ms)
         for name in names:
             for smooth in smooth_modes:
-                p = config.defaults()
-                p["filter"]["name"] = name
-                p["filter"]["smooth"] = smooth
-                p["time"]["gnss_offset_s"] = offset
+                p = params_for(name, smooth)
+                p["time"]["gnss_offset_s"] = 0.0 if auto else offset
                 method = name + (" + RTS" if smooth else "")
-                row = Row(label, method)
+                row = Row(label, method, offset=key)
                 try:
-                    track, frame, secs = run_filter(copy.deepcopy(drive), p)
+                    track, frame, secs, used_s, how = run_filter(copy.deepcopy(drive), p, auto)
                     if ref is None:
                         ref = reference_en(refobj, frame)
-                        s = summarise(gnss_only_errors(track, ref))
+                    # the fixes at the time shift this very run applied (auto: its own estimate)
+                    s = summarise(gnss_only_errors(track, ref))
+                    shift_ms = round(used_s, 3)
+                    if shift_ms not in gnss_rows:
                         est_ref = estimate_gnss_offset(track, ref)
-                        rows.append(Row(label, "GNSS only", s["rmse_m"], s["cep95_m"],
-                                                       s["max_m"], s["rmse_m"] ** 2,
-                                                       note=f"offset vs reference: "
-                                                            f"{est_ref.offset_s:+.3f} s more"))
+                        gname = f"GNSS only (at {used_s:+.3f} s)" if auto else "GNSS only"
+                        gnss_rows[shift_ms] = Row(
+                            label, gname, s["rmse_m"], s["cep95_m"], s["max_m"], s["rmse_m"] ** 2,
+                            note=f"offset vs reference: {est_ref.offset_s:+.3f} s more",
+                            gnss_rmse_m=s["rmse_m"], offset=key, offset_s=used_s)
                     f = figures(track, ref, method, p)
-                    keep[("comma2k19", offset, method)] = (track, ref)
-                    est = estimate_gnss_offset(track)
+                    keep[("comma2k19", key, method)] = (track, ref)
                     row.rmse_m, row.cep95_m, row.max_m = f["rmse_m"], f["cep95_m"], f["max_m"]
                     row.mse_m2, row.seconds = f["mse_m2"], secs
-                    row.note = (f"offset from track: {est.offset_s:+.3f} s more" if est.identified
-                                else f"offset: {est.reason}")
+                    row.gnss_rmse_m, row.offset_s = s["rmse_m"], used_s
+                    if auto:
+                        row.note = (f"gpsdr's offset {used_s:+.3f} s ({how}); GNSS only at it: "
+                                    f"{s['rmse_m']:.2f} m")
+                    else:
+                        est = estimate_gnss_offset(track)
+                        row.note = (f"offset from track: {est.offset_s:+.3f} s more"
+                                    if est.identified else f"offset: {est.reason}")
                 except Exception as err:  # noqa: BLE001
                     row.note = f"failed: {type(err).__name__}: {str(err)[:80]}"
                     traceback.print_exc(file=sys.stderr)
-                rows.append(row)
+                block.append(row)
+        rows += list(gnss_rows.values()) + block
     return rows
 
 
@@ -259,44 +384,154 @@ def table(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
-def targets(rows: list[Row]) -> str:
-    """The project's accuracy targets, each with the measured figure and PASS/MISS."""
-    by = {(r.drive.split(" ")[0], r.drive, r.method): r for r in rows}
-    out = ["| target | drive | measured | verdict |", "|---|---|---|---|"]
+def _finite(*xs: float) -> bool:
+    return all(x is not None and np.isfinite(x) for x in xs)
 
-    def add(target: str, drive: str, measured: str, ok: bool | None) -> None:
-        verdict = "-" if ok is None else ("PASS" if ok else "MISS")
-        out.append(f"| {target} | {drive} | {measured} | {verdict} |")
 
-    for (_, drive, method), r in sorted(by.items()):
-        if np.isfinite(r.oracle_rmse_m) and np.isfinite(r.rmse_m):
+def _is_paper(method: str) -> bool:
+    return "plain)" in method
+
+
+def _below(red: float) -> str:
+    """A reduction as '53 % below' or, when negative, '40 % above'."""
+    pct = round(100 * red)
+    return f"{pct} % below" if pct >= 0 else f"{-pct} % above"
+
+
+def _gnss_of(row: Row, by: dict[tuple[str, str], Row]) -> float:
+    """GNSS-only RMSE at this run's time shift: its own figure, else its drive's GNSS row."""
+    if _finite(row.gnss_rmse_m):
+        return row.gnss_rmse_m
+    g = by.get((row.drive, "GNSS only"))
+    return g.rmse_m if g is not None else math.nan
+
+
+def targets(rows: list[Row]) -> list[Target]:
+    """Issue #4's accuracy targets (``issue=True``) and the comparisons beyond its scope
+    (``issue=False``), each with the measured figure, PASS/MISS and, for a miss, by how much."""
+    by = {(r.drive, r.method): r for r in rows}
+    out: list[Target] = []
+
+    def add(target: str, drive: str, measured: str, ok: bool, issue: bool, short: str) -> None:
+        out.append(Target(target, drive, measured, "PASS" if ok else "MISS", issue,
+                          "" if ok else short))
+
+    # 1. within 15 % of the oracle, every scenario, every shipped filter
+    for r in rows:
+        if _finite(r.oracle_rmse_m, r.rmse_m) and r.oracle_rmse_m > 0:
             ratio = r.rmse_m / r.oracle_rmse_m
-            add(f"{method}: RMSE within 15 % of the oracle", drive, f"{ratio:.2f} x oracle",
-                ratio <= 1.15)
-    for (key, drive, method), r in sorted(by.items()):
-        gnss = by.get((key, drive, "GNSS only"))
-        if key == "urban_canyon" and gnss and method != "GNSS only" and np.isfinite(r.rmse_m):
-            red = 1 - r.rmse_m / gnss.rmse_m
-            add(f"{method}: >= 40 % below GNSS-only", drive, f"{100 * red:.0f} % below", red >= 0.40)
-        if key == "comma2k19" and gnss and method != "GNSS only" and np.isfinite(r.rmse_m):
-            add(f"{method}: below GNSS-only", drive, f"{r.rmse_m:.2f} vs {gnss.rmse_m:.2f} m",
-                r.rmse_m < gnss.rmse_m)
-        if method in ("aekf", "aekf + RTS"):
-            ekf = by.get((key, drive, method.replace("aekf", "ekf")))
-            if ekf and np.isfinite(ekf.rmse_m) and np.isfinite(r.rmse_m):
-                red = 1 - r.rmse_m / ekf.rmse_m
-                add(f"{method}: >= 30 % below ekf", drive, f"{100 * red:.0f} % below", red >= 0.30)
-        if method in ("fafkf", "fafkf + RTS"):
-            fkf = by.get((key, drive, method.replace("fafkf", "fkf")))
-            if fkf and np.isfinite(fkf.mse_m2) and np.isfinite(r.mse_m2):
-                red = 1 - r.mse_m2 / fkf.mse_m2
-                add(f"{method}: error variance >= 50 % below fkf", drive, f"{100 * red:.0f} % below",
-                    red >= 0.50)
-        if np.isfinite(r.drift60_pct):
-            lim = 1.0 if "RTS" in method else 2.0
-            add(f"{method}: 60 s outage ends within {lim:g} % of distance", drive,
-                f"{r.drift60_pct:.2f} %", r.drift60_pct <= lim)
-    return "\n".join(out)
+            add(f"{r.method}: RMSE within 15 % of the oracle", r.drive, f"{ratio:.2f} x oracle",
+                ratio <= 1.15, True, f"{ratio:.2f} x oracle, limit 1.15 x")
+    # 2. urban canyon: >= 40 % below GNSS-only (the paper baselines: informational)
+    for r in rows:
+        if scenario_of(r) != URBAN or r.method.startswith("GNSS only") or not _finite(r.rmse_m):
+            continue
+        gnss = _gnss_of(r, by)
+        if _finite(gnss) and gnss > 0:
+            red = 1 - r.rmse_m / gnss
+            add(f"{r.method}: >= 40 % below GNSS-only", r.drive, _below(red),
+                red >= 0.40, not _is_paper(r.method),
+                f"{_below(red)}, needs 40 % below ({100 * (0.40 - red):.0f} points short)")
+    # 3. the comparative targets, a/b/c; issue scope in the urban canyon only
+    drives = list(dict.fromkeys(r.drive for r in rows))
+    for drive in drives:
+        for suffix in ("", " + RTS"):
+            for check, what, adaptive, baseline, figure, need in COMPARISONS:
+                ra, rb = by.get((drive, adaptive + suffix)), by.get((drive, baseline + suffix))
+                if ra is None or rb is None:
+                    continue
+                xa, xb = (ra.rmse_m, rb.rmse_m) if figure == "rmse" else (ra.mse_m2, rb.mse_m2)
+                if not _finite(xa, xb) or xb <= 0:
+                    continue
+                red = 1 - xa / xb
+                quantity = "RMSE" if figure == "rmse" else "error variance"
+                unit = "m" if figure == "rmse" else "m^2"
+                add(f"({check}) {adaptive + suffix}: {quantity} >= {100 * need:.0f} % below "
+                    f"{baseline + suffix} [{what}]", drive,
+                    f"{xa:.2f} vs {xb:.2f} {unit}: {_below(red)}", red >= need,
+                    scenario_of(ra) == URBAN,
+                    f"{_below(red)}, needs {100 * need:.0f} % below "
+                    f"({100 * (need - red):.0f} points short)")
+    # 4. a 60-s outage ends within 2 % (forward) / 1 % (RTS) of the distance
+    for r in rows:
+        if _finite(r.drift60_pct):
+            lim = 1.0 if "RTS" in r.method else 2.0
+            add(f"{r.method}: 60 s outage ends within {lim:g} % of distance", r.drive,
+                f"{r.drift60_pct:.2f} %", r.drift60_pct <= lim, not _is_paper(r.method),
+                f"{r.drift60_pct:.2f} %, limit {lim:g} %")
+    # 5. comma2k19: below GNSS-only with the latency applied (0.1 s) OR estimated by gpsdr
+    comma = [r for r in rows if scenario_of(r) == "comma2k19" and not r.method.startswith("GNSS only")]
+    methods = list(dict.fromkeys(r.method for r in comma))
+    for method in methods:
+        parts, oks, shorts, where = [], [], [], []
+        for key, name in ((COMMA_APPLIED, "applied 0.1 s"), (COMMA_AUTO, "auto")):
+            r = next((x for x in comma if x.method == method and x.offset == key), None)
+            if r is None or not _finite(r.rmse_m):
+                continue
+            gnss = _gnss_of(r, by)
+            if not _finite(gnss):
+                continue
+            if key == COMMA_AUTO and _finite(r.offset_s):
+                name = f"auto {r.offset_s:+.3f} s"
+            parts.append(f"{name}: {r.rmse_m:.3f} vs {gnss:.3f} m")
+            oks.append(r.rmse_m < gnss)
+            shorts.append(f"{r.rmse_m - gnss:+.3f} m at {name}")
+            where.append(key)
+        if parts:
+            add(f"{method}: below GNSS-only, latency applied or estimated",
+                f"comma2k19 (gnss_offset_s = {' / '.join(where)})", "; ".join(parts),
+                any(oks), True, "fused - GNSS-only: " + ", ".join(shorts))
+    for r in comma:
+        if r.offset in (COMMA_APPLIED, COMMA_AUTO) or not _finite(r.rmse_m):
+            continue
+        gnss = _gnss_of(r, by)
+        if _finite(gnss):
+            add(f"{r.method}: below GNSS-only", r.drive, f"{r.rmse_m:.3f} vs {gnss:.3f} m",
+                r.rmse_m < gnss, False, f"{r.rmse_m - gnss:+.3f} m")
+    return out
+
+
+def _target_table(tgts: list[Target]) -> str:
+    lines = ["| target | drive | measured | verdict |", "|---|---|---|---|"]
+    lines += [f"| {t.target} | {t.drive} | {t.measured} | {t.verdict} |" for t in tgts]
+    return "\n".join(lines)
+
+
+def verdict_summary(tgts: list[Target]) -> str:
+    """'N of M issue targets pass', then one line per miss: target, drive, by how much."""
+    issue = [t for t in tgts if t.issue]
+    misses = [t for t in issue if t.verdict == "MISS"]
+    lines = [f"**{len(issue) - len(misses)} of {len(issue)} issue targets pass.**"]
+    if misses:
+        lines += ["", "Misses:", ""]
+        lines += [f"- {t.target} -- {t.drive} -- {t.shortfall}" for t in misses]
+    return "\n".join(lines)
+
+
+COMPARISON_NOTE = (
+    "The comparative targets come from seed 000 (aekf >= 30 % below ekf) and seed 002 (fafkf's "
+    "error variance >= 50 % below fkf), which measured their adaptive filter against a plain "
+    "baseline: GNSS positions only, fixed white-noise R. Our shipped ekf and fkf are not that "
+    "baseline: they carry model extensions (ekf: Gauss-Markov multipath states and the GNSS "
+    "velocity; fkf: two-regime multipath error states and the GNSS velocity) that already put "
+    "them within a few % of their oracle, so (a), shipped against shipped, leaves no room for "
+    "30 % or 50 %; (b) measures the adaptation alone as the seeds did (plain against plain, "
+    "config overrides only, see the module docstring), and (c) the shipped adaptive filter "
+    "against the seed's plain baseline. Each check keeps its own verdict; there is no combined "
+    "one, and the figures are what they are.")
+
+
+def targets_markdown(tgts: list[Target]) -> str:
+    """The Targets section: the note on a/b/c, the issue-scope table, the informational one."""
+    issue = [t for t in tgts if t.issue]
+    beyond = [t for t in tgts if not t.issue]
+    text = COMPARISON_NOTE + "\n\n### Issue #4's targets\n\n" + _target_table(issue) + "\n"
+    if beyond:
+        text += ("\n### Beyond the issue's scope (informational, not counted)\n\n"
+                 "The comparisons (a)-(c) on drives other than the urban canyon, comma2k19 at "
+                 "the offset estimated against the reference and as logged, and the paper "
+                 "baselines' own GNSS-reduction and drift figures.\n\n" + _target_table(beyond) + "\n")
+    return text
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -308,6 +543,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-comma", action="store_true")
     ap.add_argument("--no-smooth", action="store_true")
     ap.add_argument("--no-oracle", action="store_true")
+    ap.add_argument("--no-paper", action="store_true",
+                    help="skip the seeds' plain baselines (ekf/aekf seed 000, fkf/fafkf seed 002)")
     ap.add_argument("--seeds", default="1,2,3", help="simulation seeds, comma-separated (default 1,2,3); "
                     "with several, each figure is pooled over the seeds (RMSE as the root of "
                     "the mean square, CEP95 and drift as means, max as the max)")
@@ -325,22 +562,28 @@ def main(argv: list[str] | None = None) -> int:
     for sc in scen:
         print(f"# {sc} ...", file=sys.stderr)
         per_seed = [bench_sim(sc, names, 180.0 if args.quick and sc != "tunnels" else None,
-                              smooth_modes, not (args.no_oracle or args.quick), keep, seed)
+                              smooth_modes, not (args.no_oracle or args.quick), keep, seed,
+                              paper=not args.no_paper)
                     for seed in seeds]
         rows += per_seed[0] if len(seeds) == 1 else pool(per_seed, sc, seeds)
     if not args.no_comma and COMMA.exists():
         print("# comma2k19 ...", file=sys.stderr)
         rows += bench_comma(names, smooth_modes, keep)
     tab = table(rows)
-    tgt = targets(rows)
+    tgts = targets(rows)
     text = (f"# gpsdr accuracy benchmark\n\n`.venv/bin/python benchmarks/accuracy.py"
             f"{' ' + ' '.join(argv or sys.argv[1:]) if (argv or sys.argv[1:]) else ''}` "
             f"(seeds {args.seeds}, filters: {', '.join(names)}; {time.perf_counter() - t0:.0f} s)\n\n"
+            + verdict_summary(tgts) + "\n\n"
             "Errors are horizontal, against the simulator's truth (or comma2k19's reference), over "
-            "every filter epoch; GNSS only: the fixes themselves. 60-s drift: error at the end of "
-            "each 50-70 s GNSS outage as % of the distance driven in it. Oracle: the same filter "
-            "with the true noise parameters and per-fix sigmas (`simulate.oracle_params`, "
-            "`simulate.oracle_drive`).\n\n" + tab + "\n\n## Targets\n\n" + tgt + "\n")
+            "every filter epoch; GNSS only: the fixes themselves (comma2k19: at the time shift "
+            "each run applied; with `auto` each filter estimates its own). 60-s drift: error at "
+            "the end of each 50-70 s GNSS outage as % of the distance driven in it. Oracle: the "
+            "same filter with the true noise parameters and per-fix sigmas "
+            "(`simulate.oracle_params`, `simulate.oracle_drive`). `(seed 000 plain)` / "
+            "`(seed 002 plain)`: the seeds' baselines, our filters with the model extensions "
+            "switched off by config (module docstring).\n\n" + tab
+            + "\n\n## Targets\n\n" + targets_markdown(tgts))
     print(text)
     Path(args.out).write_text(text, encoding="utf-8")
     return 0
