@@ -3,7 +3,7 @@ simulated scenario (fixed seeds 1, 2, 3, figures pooled) and on the real comma2k
 and the oracle (the same filter told the true noise: ``simulate.oracle_params`` and
 ``simulate.oracle_drive``), checked against issue #4's accuracy targets.
 
-    .venv/bin/python benchmarks/accuracy.py                 # everything -> benchmarks/accuracy.md (~3 min)
+    .venv/bin/python benchmarks/accuracy.py                 # everything -> benchmarks/accuracy.md (~2.5 min, 2 vCPUs)
     .venv/bin/python benchmarks/accuracy.py --seeds 1       # one seed per scenario
     .venv/bin/python benchmarks/accuracy.py --quick         # 3-minute drives, no one_hour, no oracle
     .venv/bin/python benchmarks/accuracy.py --scenarios tunnels --filters ekf,aekf
