@@ -251,6 +251,13 @@ heading_course_window_s = 10.0  # gyro heading steered to the GNSS course averag
                          #   clipped at 0.05 rad/s gave 6.3 m with good GNSS; tunnels fkf 15.1 -> 10.8 m)
                          #   (removes the integrated gyro bias; 0: aligned once at the start, seed 002)
 course_min_speed_mps = 3.0  # GNSS course used for that only at this speed or more
+fix_course_velocity_share = 0.5  # positions only: when fewer than this share of the fixes carry the receiver's
+                         #   speed (GGA without RMC/VTG, a ROS NavSatFix), the course steering and the odometer
+                         #   scale come from chords between fixes (fkf.fix_chords; never velocity rows)
+fix_chord_course_sd_rad = 0.05  # ... each chord at least sqrt(2 (sigma_fix^2 + sigma_eps^2)) / this long
+fix_chord_max_s = 30.0   # ... and at most this long in time
+fix_course_window_s = 60.0  # ... their heading corrections averaged over this centred window (weights |dr|^2/var)
+fix_odo_scale_window_s = 900.0  # ... and the odometer scale from them over a centred window this long
 odo_scale_window_s = 300.0  # odometer speeds times sum(GNSS speed) / sum(odometer speed) over the fixes
                          #   (>= course_min_speed_mps) in a centred window this long: removes the
                          #   wheel-scale error that q_s cannot hold (0: off, as in seed 002)

@@ -33,6 +33,19 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   speed reads 0.8 % low and the fused track fell 3.5 m behind in 60 s; a
   scale state ``S = (1 + q_s) T_m v`` instead let (q_s, v) wander along their
   unobservable ridge in GNSS outages: 1.7 km after 10 min).
+* positions only (the receiver's speed at fewer than ``[fkf]
+  fix_course_velocity_share`` of the fixes: NMEA GGA without RMC/VTG, a ROS
+  NavSatFix), the course steering and the odometer scale come instead from
+  chords between fixes compared with the dead-reckoned chords over the same
+  times (:func:`fix_chords`, :func:`chord_course_correction`,
+  :func:`chord_odometer_scale`; ``info["course_source"] = "fix_chords"``).
+  Per drive, not per fix: a drive with the receiver's velocity keeps its
+  course steering bit for bit, and a chord is worth far less than a Doppler
+  course beside it.  Without them the gyro bias ran into Theta and the
+  odometer kept its 2-4 % scale error: fkf open sky seed 1 12.17 / 10.72 m
+  (forward / RTS), urban 13.36 / 11.17, tunnels up to 287 m.  The chords
+  never become velocity rows (they are made of the same fixes the GNSS
+  filter already takes: counted twice).
 * receiver velocity ``(speed sin(course), speed cos(course))`` at fixes with
   speed >= ``[fkf] gnss_velocity_min_mps`` (else NaN): the GNSS local
   filter's velocity rows (``[fkf] gnss_velocity``).
@@ -203,6 +216,181 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     hi = np.searchsorted(tk, tk + half, side="right")
     d_mean = (c[hi] - c[lo]) / (hi - lo)     # centred average, shrinking at the ends: no lag
     return np.interp(tg, tk, d_mean)
+
+
+@dataclass
+class FixChords:
+    """Displacements between pairs of GNSS fixes and the dead-reckoned ones over the same times.
+
+    ``g`` and ``dr``: complex ``east + 1j*north`` (m), the fixes' chord and the chord of the
+    track dead-reckoned from the gyro heading (uncorrected) and the unscaled odometer speed
+    (unit speed without an odometer); ``t_mid`` the chord's mid time (s), ``var`` the modelled
+    variance of ``g`` per axis (m^2: both fixes' sigmas and the GNSS error states' share
+    that the two ends do not have in common).  A rotation ``g ~ k exp(-1j*delta) dr`` (heading
+    clockwise from north) gives the heading correction ``delta`` and the odometer scale ``k``.
+    """
+
+    t_mid: np.ndarray
+    g: np.ndarray
+    dr: np.ndarray
+    var: np.ndarray
+
+
+def receiver_velocity_share(epochs: Epochs) -> float:
+    """Share of the usable fixes that carry the receiver's speed (RMC/VTG), 0 without fixes."""
+    n_fix = int(np.count_nonzero(epochs.has_gnss))
+    if n_fix == 0:
+        return 0.0
+    return float(np.count_nonzero(epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps))) / n_fix
+
+
+def dr_positions(t_s: np.ndarray, tg: np.ndarray, psi: np.ndarray, t_odo: np.ndarray | None,
+                 speed: np.ndarray | None, at: np.ndarray) -> np.ndarray:
+    """Dead-reckoned position (complex ``e + 1j n``, m, arbitrary origin) at times ``at`` (s).
+
+    Trapezoid integral on the gyro grid ``tg`` of ``v (sin psi, cos psi)``, ``v`` the
+    odometer speed interpolated to ``tg`` (1 m/s without an odometer: then only the
+    direction of a chord means anything)."""
+    v = np.interp(tg, t_odo, speed) if t_odo is not None and len(t_odo) else np.ones(len(tg))
+    z = v * np.exp(1j * (0.5 * np.pi - psi))            # e + 1j n = v (sin psi + 1j cos psi)
+    cum = np.zeros(len(tg), complex)
+    cum[1:] = np.cumsum(0.5 * (z[1:] + z[:-1]) * np.diff(tg))
+    return np.interp(at, tg, cum.real) + 1j * np.interp(at, tg, cum.imag)
+
+
+def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarray,
+               t_odo: np.ndarray | None, speed: np.ndarray | None, eps_w: np.ndarray,
+               params: Params) -> FixChords:
+    """Chords between fixes, long enough that their course is known to ``[fkf]
+    fix_chord_course_sd_rad`` (for a receiver that reports positions only).
+
+    From each fix ``i`` the chord runs to the first fix ``j`` at least ``D_i`` further
+    along the road (odometer distance; without an odometer, the fixes' own distance) and
+    at most ``[fkf] fix_chord_max_s`` later, ``D_i = sqrt(2 (sigma_i^2 + sigma_eps,i^2)) /
+    fix_chord_course_sd_rad``: the chord's error with both ends' white noise and the GNSS
+    error states' stationary sigma (the multipath allowance: eps's regime at fix ``i``,
+    :func:`multipath_regime`, blends the clear and obstructed sigmas) fully decorrelated.
+    Open sky (sigma 1 m, eps 1 m): 40 m; urban canyon (2.6 m, 3 m): 112 m.  Chords of a
+    fixed time fail both ways: 2 s gave 18.5 m in the urban canyon (multipath makes short
+    chords garbage), 5 s 4.5 m.  Each chord's variance ``var`` counts the eps share that
+    the ends do not have in common, ``2 sigma_eps^2 (1 - exp(-dt/tau - L/dist))``.
+    """
+    fp = params["fkf"]
+    f = np.flatnonzero(epochs.has_gnss)
+    empty = FixChords(np.zeros(0), np.zeros(0, complex), np.zeros(0, complex), np.zeros(0))
+    if len(f) < 2 or len(tg) < 2:
+        return empty
+    tf = t_s[f]
+    pf = epochs.gnss_e[f] + 1j * epochs.gnss_n[f]
+    var_fix = 0.5 * (epochs.gnss_sd_e[f] ** 2 + epochs.gnss_sd_n[f] ** 2)
+    w = eps_w[f]
+    var_eps = (1.0 - w) * fp["gnss_err_sd_m"] ** 2 + w * fp["gnss_err_obstructed_sd_m"] ** 2
+    d_min = np.sqrt(2.0 * (var_fix + var_eps)) / fp["fix_chord_course_sd_rad"]
+    if t_odo is not None and len(t_odo) > 1:
+        cum = np.concatenate(([0.0], np.cumsum(speed[1:] * np.diff(t_odo))))
+        s_f = np.interp(tf, t_odo, cum)
+        j = np.searchsorted(s_f, s_f + d_min, side="left")     # odometer distance: monotonic
+    else:                               # the first fix D away within fix_chord_max_s
+        j = np.full(len(f), len(f))
+        last = np.searchsorted(tf, tf + fp["fix_chord_max_s"], side="right")
+        for a in range(len(f)):
+            far = np.flatnonzero(np.abs(pf[a + 1:last[a]] - pf[a]) >= d_min[a])
+            if len(far):
+                j[a] = a + 1 + far[0]
+    ok = j < len(f)
+    i = np.flatnonzero(ok)
+    j = j[ok]
+    keep = tf[j] - tf[i] <= fp["fix_chord_max_s"]
+    i, j = i[keep], j[keep]
+    if not len(i):
+        return empty
+    g = pf[j] - pf[i]
+    p_dr = dr_positions(t_s, tg, psi_g, t_odo, speed, np.concatenate((tf[i], tf[j])))
+    dr = p_dr[len(i):] - p_dr[:len(i)]
+    dt = tf[j] - tf[i]
+    length = np.abs(g)
+    wi = w[i]
+
+    def rho(tau: float, dist: float) -> np.ndarray:
+        return np.exp(-dt / tau - (length / dist if dist > 0 else 0.0))
+
+    corr = ((1.0 - wi) * rho(fp["gnss_err_tau_s"], fp["gnss_err_dist_m"])
+            + wi * rho(fp["gnss_err_obstructed_tau_s"], fp["gnss_err_obstructed_dist_m"]))
+    var = var_fix[i] + var_fix[j] + 2.0 * var_eps[i] * (1.0 - corr)
+    t_mid = 0.5 * (tf[i] + tf[j])
+    # in time order (D varies from fix to fix, so the ends need not be)
+    k = np.flatnonzero(np.abs(dr) > 0.0)
+    k = k[np.argsort(t_mid[k], kind="stable")]
+    return FixChords(t_mid[k], g[k], dr[k], var[k])
+
+
+def chord_course_correction(chords: FixChords, tg: np.ndarray, params: Params) -> np.ndarray:
+    """Slow correction (rad) of the integrated gyro heading at ``tg`` from fix chords.
+
+    The chord of the fixes and the dead-reckoned chord over the same times differ by the
+    heading error the gyro heading had over them: ``delta_k = arg(dr_k conj(g_k))``
+    (clockwise positive; exact for any road shape when the error is constant over the
+    chord).  ``delta`` unwrapped; at each chord a straight line fitted by weighted least
+    squares to the ``delta`` in a window of ``[fkf] fix_course_window_s`` centred on it (cut
+    at the data's ends, at outages and stops: the line needs no symmetry), weights
+    ``|dr_k|^2 / var_k`` (the inverse variance of ``delta_k``); its value there,
+    interpolated in time.  A line, not :func:`course_correction`'s mean: the gyro bias
+    makes the heading error a ramp (0.3 deg/s: 0.3 rad a minute), and a mean over the
+    one-sided window at the edge of a tunnel lagged it by 0.06-0.09 rad (tunnels seed 2:
+    fkf 50.7 m).
+    """
+    window = params["fkf"]["fix_course_window_s"]
+    if window <= 0 or len(chords.t_mid) < 2:
+        return np.zeros(len(tg))
+    tk = chords.t_mid
+    d = np.unwrap(np.angle(chords.dr * np.conj(chords.g)))
+    wk = np.abs(chords.dr) ** 2 / chords.var
+    t0 = tk - tk[0]
+
+    def csum(x: np.ndarray) -> np.ndarray:
+        return np.concatenate(([0.0], np.cumsum(x)))
+
+    c_w, c_t, c_tt = csum(wk), csum(wk * t0), csum(wk * t0 * t0)
+    c_d, c_td = csum(wk * d), csum(wk * t0 * d)
+    lo = np.searchsorted(tk, tk - 0.5 * window, side="left")
+    hi = np.searchsorted(tk, tk + 0.5 * window, side="right")
+    sw, st, stt = c_w[hi] - c_w[lo], c_t[hi] - c_t[lo], c_tt[hi] - c_tt[lo]
+    sd, std = c_d[hi] - c_d[lo], c_td[hi] - c_td[lo]
+    # the line about the window's weighted mean time tm: d(t) = mean + slope (t - tm)
+    tm = st / sw
+    mean = sd / sw
+    var_t = stt / sw - tm * tm
+    cov = std / sw - tm * mean
+    # a window without a spread in time (a single chord) gives its mean
+    span_ok = var_t > 1e-6 * window * window
+    slope = np.where(span_ok, cov / np.where(span_ok, var_t, 1.0), 0.0)
+    d_fit = mean + slope * (t0 - tm)
+    return np.interp(tg, tk, d_fit)
+
+
+def chord_odometer_scale(chords: FixChords, t_odo: np.ndarray, params: Params
+                         ) -> tuple[np.ndarray, float]:
+    """:func:`odometer_scale` from fix chords: per odometer record at ``t_odo``, the
+    weighted least-squares scale of ``g ~ k dr`` (``dr`` dead-reckoned with the corrected
+    heading) over a centred ``[fkf] fix_odo_scale_window_s``: ``k = sum Re(g conj(dr))/var /
+    sum |dr|^2/var`` -- the fixes' noise along the chord averages out (the ratio of
+    chord lengths would be biased up by it).  Clamped to [0.8, 1.25]; needs
+    ``MIN_SCALE_FIXES`` chords, else 1.  Returns (k per record, median k)."""
+    window = params["fkf"]["fix_odo_scale_window_s"]
+    ones = np.ones(len(t_odo))
+    inside = (chords.t_mid >= t_odo[0]) & (chords.t_mid <= t_odo[-1]) if len(t_odo) else None
+    if window <= 0 or len(t_odo) < 2 or np.count_nonzero(inside) < MIN_SCALE_FIXES:
+        return ones, 1.0
+    tk = chords.t_mid[inside]
+    g, dr, var = chords.g[inside], chords.dr[inside], chords.var[inside]
+    cn = np.concatenate(([0.0], np.cumsum((g * np.conj(dr)).real / var)))
+    cd = np.concatenate(([0.0], np.cumsum(np.abs(dr) ** 2 / var)))
+    lo = np.searchsorted(tk, tk - 0.5 * window, side="left")
+    hi = np.searchsorted(tk, tk + 0.5 * window, side="right")
+    den = cd[hi] - cd[lo]
+    ratio = np.where(den > 0.0, (cn[hi] - cn[lo]) / np.where(den > 0.0, den, 1.0), 1.0)
+    ratio = np.clip(ratio, 0.8, 1.25)
+    return np.interp(t_odo, tk, ratio), float(np.median(ratio))
 
 
 def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np.ndarray,
@@ -376,6 +564,16 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     t_a, psi_a, source = heading_alignment(epochs, t_s, params)
     theta = np.full(n, np.nan)
     g = np.flatnonzero(epochs.has_gyro)
+    o = np.flatnonzero(epochs.has_odo)
+    odo_spikes = 0
+    if len(o):
+        speed, odo_spikes = despike(np.abs(epochs.odo_speed_mps[o]), fp["odo_spike_mps"])
+    eps_w = multipath_regime(epochs, params)
+    # positions only (GGA without RMC/VTG, a ROS NavSatFix): course and odometer scale
+    # from chords between fixes instead of the receiver's course and speed
+    v_share = receiver_velocity_share(epochs)
+    from_fixes = bool(gnss_on and v_share < fp["fix_course_velocity_share"])
+    chords = None
     if len(g):
         tg = t_s[g]
         rate, gyro_spikes = despike(-epochs.yaw_rate_radps[g], fp["gyro_spike_radps"])
@@ -383,7 +581,16 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         integral = np.zeros(len(g))
         integral[1:] = np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(tg))
         psi_g = psi_a + integral - np.interp(t_a, tg, integral)
-        psi_g = psi_g + course_correction(epochs, t_s, tg, psi_g, params)
+        if from_fixes:
+            t_odo, sp_odo = (t_s[o], speed) if len(o) else (None, None)
+            chords = fix_chords(epochs, t_s, tg, psi_g, t_odo, sp_odo, eps_w, params)
+            psi_g = psi_g + chord_course_correction(chords, tg, params)
+            if len(chords.t_mid) >= 2 and fp["fix_course_window_s"] > 0:
+                source = "fix_chords"       # the alignment was only the chords' reference
+            if len(o):      # the chords again, dead-reckoned with the corrected heading
+                chords = fix_chords(epochs, t_s, tg, psi_g, t_s[o], speed, eps_w, params)
+        else:
+            psi_g = psi_g + course_correction(epochs, t_s, tg, psi_g, params)
         slot = np.floor(tg / max(fp["heading_interval_s"], 1e-9))
         if np.all(slot[1:] >= slot[:-1]):               # epochs are in time order: O(n)
             first = np.flatnonzero(np.concatenate(([True], slot[1:] != slot[:-1])))
@@ -391,7 +598,10 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             _, first = np.unique(slot, return_index=True)
         use = g[first]
         theta[use] = np.angle(np.exp(1j * psi_g[first]))     # wrapped to (-pi, pi]
-        psi0 = float(psi_a - np.interp(t_a, tg, integral) + np.interp(0.0, tg, integral))
+        if from_fixes:      # the heading at the start: the corrected gyro heading
+            psi0 = float(np.interp(0.0, tg, psi_g))
+        else:
+            psi0 = float(psi_a - np.interp(t_a, tg, integral) + np.interp(0.0, tg, integral))
     else:
         psi0 = psi_a
         gyro_spikes = 0
@@ -399,14 +609,14 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     # ---- odometer distance S and standstill -----------------------------------------
     dist = np.full(n, np.nan)
     t_m = np.zeros(n)
-    o = np.flatnonzero(epochs.has_odo)
-    odo_spikes = 0
     odo_scale = 1.0
     speed0 = math.nan
     static = np.zeros(n, bool)
     if len(o):
-        speed, odo_spikes = despike(np.abs(epochs.odo_speed_mps[o]), fp["odo_spike_mps"])
-        scale, odo_scale = odometer_scale(epochs, t_s, t_s[o], speed, params)
+        if chords is not None:
+            scale, odo_scale = chord_odometer_scale(chords, t_s[o], params)
+        else:
+            scale, odo_scale = odometer_scale(epochs, t_s, t_s[o], speed, params)
         speed = speed * scale
         rows, d_rows, tm_rows = distance_rows(t_s, o, speed, fp["distance_interval_s"],
                                               np.isfinite(theta))
@@ -421,8 +631,6 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             held = np.zeros(n)
             held[o] = speed
             static = fresh & (held[lastc] < sp["speed_mps"])
-
-    eps_w = multipath_regime(epochs, params)
 
     # ---- initial state ---------------------------------------------------------------
     x0 = np.zeros(kf.NX)
@@ -514,6 +722,10 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             "gyro_spikes_removed": gyro_spikes, "odo_spikes_removed": odo_spikes,
             "odo_scale": odo_scale,
             "local_filters": ",".join(name for name, on in (("gnss", gnss_on), ("dr", dr_on)) if on)}
+    if from_fixes:      # positions only: say so, and how many chords stood in for the course
+        info["course_source"] = "fix_chords"
+        info["fix_chords"] = 0 if chords is None else len(chords.t_mid)
+        info["receiver_velocity_share"] = v_share
     return Prepared(dt=np.ascontiguousarray(epochs.dt_s, dtype=float),
                     has_gnss=np.ascontiguousarray(epochs.has_gnss, dtype=bool),
                     gnss_e=np.nan_to_num(epochs.gnss_e), gnss_n=np.nan_to_num(epochs.gnss_n),
