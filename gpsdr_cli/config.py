@@ -253,11 +253,25 @@ heading_course_window_s = 10.0  # gyro heading steered to the GNSS course averag
 course_min_speed_mps = 3.0  # GNSS course used for that only at this speed or more
 fix_course_velocity_share = 0.5  # positions only: when fewer than this share of the fixes carry the receiver's
                          #   speed (GGA without RMC/VTG, a ROS NavSatFix), the course steering and the odometer
-                         #   scale come from chords between fixes (fkf.fix_chords; never velocity rows)
-fix_chord_course_sd_rad = 0.05  # ... each chord at least sqrt(2 (sigma_fix^2 + sigma_eps^2)) / this long
-fix_chord_max_s = 30.0   # ... and at most this long in time
-fix_course_window_s = 60.0  # ... their heading corrections averaged over this centred window (weights |dr|^2/var)
-fix_odo_scale_window_s = 900.0  # ... and the odometer scale from them over a centred window this long
+                         #   scale come from chords between fixes against the dead-reckoned chords (fkf.fix_chords;
+                         #   never velocity rows).  Without: fkf seeds 1-3 forward/RTS, open sky 2.1-12.2/1.9-10.7 m,
+                         #   urban 8.7-13.4/5.2-11.2, tunnels 81-287 m (GNSS alone 1.4 / 7.6)
+fix_chord_course_sd_rad = 0.05  # ... each chord at least sqrt(2 (sigma_fix^2 + sigma_eps^2)) / this long (open sky
+                         #   ~40 m, urban ~110 m).  Positions-only fkf, means of seeds 1-3 fwd/RTS m (one_hour: seed
+                         #   1) at the defaults below: 0.04: open 0.81/0.75, urban 4.03/2.34; 0.05: 0.77/0.71,
+                         #   4.07/2.59; 0.06: 0.78/0.71, 4.22/2.57, stop_and_go 1.45/1.31 (0.05: 1.38/1.20).
+                         #   Fixed-time chords, seed 1: 2 s urban 18.5/16.5 (multipath), 5 s 4.6/4.0
+fix_chord_max_s = 15.0   # ... and at most this long in time (window 60 s: 5: urban 10.7/7.8, stop_and_go 31.8/30.9;
+                         #   8: one_hour 4.46/2.66; 10: urban 4.30/2.75, one_hour 3.09/1.99; 15: 4.22/2.48, 2.87/1.91;
+                         #   30: 4.31/2.62, 3.02/2.02; 60: 4.28/2.83, tunnels RTS 1.71 -> 2.86)
+fix_course_window_s = 90.0  # ... their heading errors fitted by a line (weights |dr|^2/var) over this centred window
+                         #   (60: urban 4.22/2.48, one_hour 2.87/1.91, tunnels 9.28/1.71, stop_and_go 1.35/1.22; 90:
+                         #   4.08/2.55, 2.59/1.73, 9.19/1.66, 1.39/1.22; 120: 3.96/2.48, 2.61/1.68, 9.82/1.74,
+                         #   1.39/1.22; a mean instead of a line lagged the gyro-bias ramp at tunnel edges: 50 m)
+fix_odo_scale_window_s = 900.0  # ... and the odometer scale from them by weighted least squares over a centred
+                         #   window this long (a chord's length is far noisier than a Doppler speed; stop_and_go,
+                         #   max 30 s, window 60 s: 300: 1.62/1.59; 900: 1.48/1.32; whole drive: 1.44/1.27; at the
+                         #   defaults 600: 1.37/1.26, 900: 1.38/1.20, 1800: 1.35/1.16 but tunnels RTS 1.65 -> 1.79)
 odo_scale_window_s = 300.0  # odometer speeds times sum(GNSS speed) / sum(odometer speed) over the fixes
                          #   (>= course_min_speed_mps) in a centred window this long: removes the
                          #   wheel-scale error that q_s cannot hold (0: off, as in seed 002)

@@ -273,7 +273,11 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarra
     Open sky (sigma 1 m, eps 1 m): 40 m; urban canyon (2.6 m, 3 m): 112 m.  Chords of a
     fixed time fail both ways: 2 s gave 18.5 m in the urban canyon (multipath makes short
     chords garbage), 5 s 4.5 m.  Each chord's variance ``var`` counts the eps share that
-    the ends do not have in common, ``2 sigma_eps^2 (1 - exp(-dt/tau - L/dist))``.
+    the ends do not have in common, ``2 sigma_eps^2 (1 - exp(-dt/tau - L/dist))``; its
+    time ``t_mid`` is the distance-weighted mean time of its travel (``int t ds / int ds``
+    on the odometer; the midpoint without one), as the heading error it measures is
+    weighted by the distance driven.  Longer chords in time lost (``fix_chord_max_s``):
+    a 30-s limit let slow chords with a ramping heading error dominate the weights.
     """
     fp = params["fkf"]
     f = np.flatnonzero(epochs.has_gnss)
@@ -286,8 +290,12 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarra
     w = eps_w[f]
     var_eps = (1.0 - w) * fp["gnss_err_sd_m"] ** 2 + w * fp["gnss_err_obstructed_sd_m"] ** 2
     d_min = np.sqrt(2.0 * (var_fix + var_eps)) / fp["fix_chord_course_sd_rad"]
-    if t_odo is not None and len(t_odo) > 1:
+    with_odo = t_odo is not None and len(t_odo) > 1
+    if with_odo:
         cum = np.concatenate(([0.0], np.cumsum(speed[1:] * np.diff(t_odo))))
+        # int t ds: a chord's time is the distance-weighted mean time of its travel
+        cum_t = np.concatenate(([0.0], np.cumsum(speed[1:] * np.diff(t_odo)
+                                                 * 0.5 * (t_odo[1:] + t_odo[:-1]))))
         s_f = np.interp(tf, t_odo, cum)
         j = np.searchsorted(s_f, s_f + d_min, side="left")     # odometer distance: monotonic
     else:                               # the first fix D away within fix_chord_max_s
@@ -318,6 +326,10 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarra
             + wi * rho(fp["gnss_err_obstructed_tau_s"], fp["gnss_err_obstructed_dist_m"]))
     var = var_fix[i] + var_fix[j] + 2.0 * var_eps[i] * (1.0 - corr)
     t_mid = 0.5 * (tf[i] + tf[j])
+    if with_odo:        # the heading error a chord measures is weighted by the distance driven
+        ct_f = np.interp(tf, t_odo, cum_t)
+        ds = s_f[j] - s_f[i]
+        t_mid = np.where(ds > 0.0, (ct_f[j] - ct_f[i]) / np.where(ds > 0.0, ds, 1.0), t_mid)
     # in time order (D varies from fix to fix, so the ends need not be)
     k = np.flatnonzero(np.abs(dr) > 0.0)
     k = k[np.argsort(t_mid[k], kind="stable")]
