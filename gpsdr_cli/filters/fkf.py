@@ -258,7 +258,7 @@ def dr_positions(t_s: np.ndarray, tg: np.ndarray, psi: np.ndarray, t_odo: np.nda
     return np.interp(at, tg, cum.real) + 1j * np.interp(at, tg, cum.imag)
 
 
-def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarray,
+def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray | None, psi_g: np.ndarray | None,
                t_odo: np.ndarray | None, speed: np.ndarray | None, eps_w: np.ndarray,
                params: Params) -> FixChords:
     """Chords between fixes, long enough that their course is known to ``[fkf]
@@ -270,7 +270,10 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarra
     fix_chord_course_sd_rad``: the chord's error with both ends' white noise and the GNSS
     error states' stationary sigma (the multipath allowance: eps's regime at fix ``i``,
     :func:`multipath_regime`, blends the clear and obstructed sigmas) fully decorrelated.
-    Open sky (sigma 1 m, eps 1 m): 40 m; urban canyon (2.6 m, 3 m): 112 m.  Chords of a
+    Open sky (sigma 1 m, eps 1 m): 40 m; urban canyon (2.6 m, 3 m): 112 m.  Without an
+    odometer the dead-reckoned chord takes its speed profile from the chords themselves
+    (``|g|/dt`` at their mid times); without a gyro (``tg`` None) ``dr`` is the odometer
+    distance along the fixes' own chord, straight chords only (for the scale alone).  Chords of a
     fixed time fail both ways: 2 s gave 18.5 m in the urban canyon (multipath makes short
     chords garbage), 5 s 4.5 m.  Each chord's variance ``var`` counts the eps share that
     the ends do not have in common, ``2 sigma_eps^2 (1 - exp(-dt/tau - L/dist))``; its
@@ -282,7 +285,8 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarra
     fp = params["fkf"]
     f = np.flatnonzero(epochs.has_gnss)
     empty = FixChords(np.zeros(0), np.zeros(0, complex), np.zeros(0, complex), np.zeros(0))
-    if len(f) < 2 or len(tg) < 2:
+    no_gyro = tg is None or len(tg) < 2
+    if len(f) < 2 or (no_gyro and (t_odo is None or len(t_odo) < 2)):
         return empty
     tf = t_s[f]
     pf = epochs.gnss_e[f] + 1j * epochs.gnss_n[f]
@@ -313,9 +317,23 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarra
     if not len(i):
         return empty
     g = pf[j] - pf[i]
-    p_dr = dr_positions(t_s, tg, psi_g, t_odo, speed, np.concatenate((tf[i], tf[j])))
-    dr = p_dr[len(i):] - p_dr[:len(i)]
     dt = tf[j] - tf[i]
+    if no_gyro:
+        # odometer distance along the fixes' own chord, on straight chords only: the middle
+        # fix (half the odometer distance on) within one sigma of the chord's line -- an arc
+        # is longer than its chord (a sagitta of L/30 already 0.3 %)
+        m = np.minimum(np.searchsorted(s_f, 0.5 * (s_f[i] + s_f[j]), side="left"), len(f) - 1)
+        u = g / np.where(np.abs(g) > 0.0, np.abs(g), 1.0)
+        sag = np.abs(((pf[m] - pf[i]) * np.conj(u)).imag)
+        straight = sag <= np.sqrt(var_fix[m] + var_eps[m])
+        i, j, g, dt, u = i[straight], j[straight], g[straight], dt[straight], u[straight]
+        dr = (s_f[j] - s_f[i]) * u
+    else:
+        if not with_odo:    # the speed profile from the chords themselves (|g| / dt)
+            t_odo = 0.5 * (tf[i] + tf[j])
+            speed = np.abs(g) / dt
+        p_dr = dr_positions(t_s, tg, psi_g, t_odo, speed, np.concatenate((tf[i], tf[j])))
+        dr = p_dr[len(i):] - p_dr[:len(i)]
     length = np.abs(g)
     wi = w[i]
 
@@ -625,6 +643,8 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     speed0 = math.nan
     static = np.zeros(n, bool)
     if len(o):
+        if from_fixes and chords is None:       # no gyro: straight chords for the scale
+            chords = fix_chords(epochs, t_s, None, None, t_s[o], speed, eps_w, params)
         if chords is not None:
             scale, odo_scale = chord_odometer_scale(chords, t_s[o], params)
         else:

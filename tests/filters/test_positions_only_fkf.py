@@ -48,12 +48,27 @@ def test_chords_recover_the_heading_error_and_the_odometer_scale() -> None:
     assert np.all(np.abs(chords.dr) >= 40.0 * 1.03 - 1.0)   # m, dead-reckoned: 3 % long
     corr = fkf.chord_course_correction(chords, tg, p)
     resid = np.angle(np.exp(1j * (corr + err)))          # the correction should be -err
-    assert np.sqrt(np.mean(resid ** 2)) < 0.01            # rad
-    assert np.max(np.abs(resid)) < 0.03                   # rad, the ends included
+    assert np.sqrt(np.mean(resid ** 2)) < 0.004           # rad
+    assert np.max(np.abs(resid)) < 0.02                   # rad, the ends included
     chords2 = fkf.fix_chords(ep, t_s, tg, psi_g + corr, t_s, speed, eps_w, p)
     k, k_med = fkf.chord_odometer_scale(chords2, t_s, p)
     assert abs(k_med * 1.03 - 1.0) < 0.003               # relative: 3 % scale found to 0.3 %
     assert np.all(np.abs(k * 1.03 - 1.0) < 0.005)
+
+
+def test_chords_without_odometer_or_gyro() -> None:
+    ep, t_s, tg, psi_g, err, speed = _synthetic()
+    p = config.defaults()
+    eps_w = np.zeros(len(t_s))
+    # no odometer: the dead-reckoned chords take their speed from the chords (|g| / dt)
+    chords = fkf.fix_chords(ep, t_s, tg, psi_g, None, None, eps_w, p)
+    resid = np.angle(np.exp(1j * (fkf.chord_course_correction(chords, tg, p) + err)))
+    assert np.sqrt(np.mean(resid ** 2)) < 0.004           # rad
+    # no gyro: odometer distance along the straight chords gives the scale
+    chords = fkf.fix_chords(ep, t_s, None, None, t_s, speed, eps_w, p)
+    assert len(chords.t_mid) > 100
+    _, k_med = fkf.chord_odometer_scale(chords, t_s, p)
+    assert abs(k_med * 1.03 - 1.0) < 0.003               # relative
 
 
 @pytest.fixture(scope="module")
