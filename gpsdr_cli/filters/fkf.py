@@ -223,8 +223,8 @@ class FixChords:
     """Displacements between pairs of GNSS fixes and the dead-reckoned ones over the same times.
 
     ``g`` and ``dr``: complex ``east + 1j*north`` (m), the fixes' chord and the chord of the
-    track dead-reckoned from the gyro heading (uncorrected) and the unscaled odometer speed
-    (unit speed without an odometer); ``t_mid`` the chord's mid time (s), ``var`` the modelled
+    track dead-reckoned from the gyro heading and the unscaled odometer speed (see
+    :func:`fix_chords`); ``t_mid`` the chord's time (s), ``var`` the modelled
     variance of ``g`` per axis (m^2: both fixes' sigmas and the GNSS error states' share
     that the two ends do not have in common).  A rotation ``g ~ k exp(-1j*delta) dr`` (heading
     clockwise from north) gives the heading correction ``delta`` and the odometer scale ``k``.
@@ -244,13 +244,13 @@ def receiver_velocity_share(epochs: Epochs) -> float:
     return float(np.count_nonzero(epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps))) / n_fix
 
 
-def dr_positions(t_s: np.ndarray, tg: np.ndarray, psi: np.ndarray, t_odo: np.ndarray | None,
+def dr_positions(tg: np.ndarray, psi: np.ndarray, t_odo: np.ndarray | None,
                  speed: np.ndarray | None, at: np.ndarray) -> np.ndarray:
     """Dead-reckoned position (complex ``e + 1j n``, m, arbitrary origin) at times ``at`` (s).
 
     Trapezoid integral on the gyro grid ``tg`` of ``v (sin psi, cos psi)``, ``v`` the
-    odometer speed interpolated to ``tg`` (1 m/s without an odometer: then only the
-    direction of a chord means anything)."""
+    speed (``speed`` at ``t_odo``) interpolated to ``tg`` (1 m/s without one: then only
+    the direction of a chord means anything)."""
     v = np.interp(tg, t_odo, speed) if t_odo is not None and len(t_odo) else np.ones(len(tg))
     z = v * np.exp(1j * (0.5 * np.pi - psi))            # e + 1j n = v (sin psi + 1j cos psi)
     cum = np.zeros(len(tg), complex)
@@ -332,7 +332,7 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray | None, psi_g: np
         if not with_odo:    # the speed profile from the chords themselves (|g| / dt)
             t_odo = 0.5 * (tf[i] + tf[j])
             speed = np.abs(g) / dt
-        p_dr = dr_positions(t_s, tg, psi_g, t_odo, speed, np.concatenate((tf[i], tf[j])))
+        p_dr = dr_positions(tg, psi_g, t_odo, speed, np.concatenate((tf[i], tf[j])))
         dr = p_dr[len(i):] - p_dr[:len(i)]
     length = np.abs(g)
     wi = w[i]
