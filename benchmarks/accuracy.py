@@ -458,8 +458,9 @@ def targets(rows: list[Row]) -> list[Target]:
                 f"{_below(red)}, needs 40 % below ({100 * (0.40 - red):.0f} points short)")
     # 2b. positions only (informational): below GNSS-only on every drive
     for r in rows:
-        if POSITIONS_ONLY not in r.method or not _finite(r.rmse_m) or scenario_of(r) == URBAN:
-            continue  # (the urban canyon's are in 2. above)
+        if (POSITIONS_ONLY not in r.method or not _finite(r.rmse_m)
+                or scenario_of(r) in (URBAN, "tunnels")):
+            continue  # the urban canyon's are in 2. above; in tunnels GNSS alone has no outage epochs
         gnss = _gnss_of(r, by)
         if _finite(gnss) and gnss > 0:
             red = 1 - r.rmse_m / gnss
