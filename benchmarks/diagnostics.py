@@ -79,6 +79,11 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+# the seeds' plain models (GNSS positions only, white-noise R / one time-only error state)
+# and the parameter builder: the accuracy benchmark's, so both tell of the same filters
+from accuracy import AEKF_PLAIN, FKF_PLAIN, params_for
 
 from gpsdr_cli import config
 from gpsdr_cli.config import Params
@@ -89,13 +94,6 @@ from gpsdr_cli.simulate import SimDrive, oracle_drive, oracle_params, simulate_d
 COMMA = ROOT.parent / "shared" / "data" / "comma2k19"
 COMMA_FALLBACK = ROOT / "sample_logs" / "comma2k19"
 OUT_PNG = ROOT / "docs" / "accuracy_diagnostics.png"
-
-#: seed 000's plain model for ekf/aekf: GNSS positions only, white-noise R
-#: (the same overrides as benchmarks/accuracy.py's "seed 000 plain" rows)
-AEKF_PLAIN = {"aekf": {"gnss_err_states": False, "gnss_velocity": False}}
-#: seed 002's plain model for fkf/fafkf: GNSS positions only, one time-only 1-m, 60-s error state
-FKF_PLAIN = {"fkf": {"gnss_velocity": False, "gnss_err_pdop": math.inf, "gnss_err_dist_m": 0.0,
-                     "gnss_err_sd_m": 1.0, "gnss_err_tau_s": 60.0}}
 
 #: method label -> (registered filter, config overrides, run the oracle too)
 SIM_METHODS: dict[str, tuple[str, dict | None]] = {
@@ -119,19 +117,6 @@ COMMA_FILTERS = ("ekf", "aekf", "fkf", "fafkf")
 COMMA_OFFSETS = tuple(sorted({round(x, 3) for x in np.arange(0.05, 0.2001, 0.01)}
                              | {0.095, 0.105, 0.115, 0.125, 0.135}))
 README_OFFSET_S = 0.1
-
-
-def params_for(name: str, smooth: bool, overrides: dict | None = None) -> Params:
-    """Default parameters for filter ``name`` (+ RTS) with {section: {key: value}} overrides."""
-    p = config.defaults()
-    p["filter"]["name"] = name
-    p["filter"]["smooth"] = smooth
-    for section, values in (overrides or {}).items():
-        for key, value in values.items():
-            if key not in p[section]:
-                raise KeyError(f"config has no [{section}] {key} (gpsdr_cli/config.py DEFAULTS_TOML)")
-            p[section][key] = value
-    return p
 
 
 def mode_label(method: str, smooth: bool) -> str:
