@@ -236,6 +236,9 @@ gnss_velocity_min_mps = 1.0  # below this speed the course is noise: not used
 gnss_standstill_speed_mps = 0.5  # no odometer: stopped while every receiver (Doppler) speed over
                          #   gnss_standstill_window_s is below this (fkf.gnss_standstill; 0: off)
 gnss_standstill_window_s = 1.0
+fix_standstill_speed_mps = 1.0  # ... stopped while every such speed over gnss_standstill_window_s is below this
+fix_standstill_window_s = 6.0  # positions only and no odometer: the speed for that from the median positions of
+                         #   the fixes in each half of a centred window this long (fkf.fix_speeds; 0: off)
 heading_sd_rad = 0.03    # sigma of the gyro-integrated heading measurement (0.01: a clipped gyro dragged the
                          #   track, fault gyro_saturation 6.3 m; 0.03: fafkf urban 7.2 -> 5.8 m, one_hour 5.8 -> 5.1 m)
 heading_err_rw_sd = 0.005  # random walk of q_w, rad per sqrt(s) (the course steering removes the gyro bias;

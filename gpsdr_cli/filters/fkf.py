@@ -50,7 +50,12 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   speed >= ``[fkf] gnss_velocity_min_mps`` (else NaN): the GNSS local
   filter's velocity rows (``[fkf] gnss_velocity``).
 * standstill: the latest odometer speed (at most 1 s old) below
-  ``[standstill] speed_mps``.
+  ``[standstill] speed_mps``; without an odometer, the receiver's (Doppler)
+  speed below ``[fkf] gnss_standstill_speed_mps`` over ``gnss_standstill_window_s``
+  (:func:`gnss_standstill`), or with positions only the speed between the median
+  positions of the fixes either side (:func:`fix_speeds`) below
+  ``fix_standstill_speed_mps``.  Without it the velocity ran away at stops: no
+  odometer, nothing else says the car stopped (stop_and_go seed 1, fkf 17.3 m).
 * the regime of the GNSS error states eps per epoch, clear or obstructed sky
   (:func:`multipath_regime`: the share of recent fixes with a high PDOP);
   the kernel blends the two eps models by it (our choice, issue #4).
@@ -460,7 +465,8 @@ def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np
     return np.interp(t_odo, tk, ratio), float(np.median(ratio))
 
 
-def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params) -> np.ndarray:
+def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params,
+                    speeds: np.ndarray | None = None) -> np.ndarray:
     """Standstill from the receiver's (Doppler) speed, for drives without an odometer.
 
     The epochs in ``(t_k, t_k+1]`` between consecutive fixes are static when both fixes,
@@ -476,16 +482,20 @@ def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params) -> np.ndarr
     while a multipath burst was gated, the burst's 8th fix (27 m off) passed
     the gate, moved the velocity by 17 m/s, and every good fix after it was
     gated until the reset: stop_and_go seed 1, fkf 17.3 m RMSE, 355 m at worst.
+    ``speeds`` (m/s, one per fix) stands in for the receiver's speed when given
+    (positions only: :func:`fix_speeds`).
     """
     fp = params["fkf"]
     n = len(t_s)
     static = np.zeros(n, bool)
     f = np.flatnonzero(epochs.has_gnss)
     thr, window = fp["gnss_standstill_speed_mps"], fp["gnss_standstill_window_s"]
+    if speeds is not None:
+        thr = fp["fix_standstill_speed_mps"]
     if len(f) < 2 or not thr > 0:
         return static
     tf = t_s[f]
-    spd = epochs.gnss_speed_mps[f]
+    spd = epochs.gnss_speed_mps[f] if speeds is None else speeds
     still = np.isfinite(spd) & (spd < thr)
     bad = np.concatenate(([0], np.cumsum(~still)))       # fixes not still before index j
     j0 = np.minimum(np.searchsorted(tf, tf[1:] - max(window, 0.0), "left"), np.arange(len(f) - 1))
@@ -495,6 +505,31 @@ def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params) -> np.ndarr
     np.add.at(mark, f[i] + 1, 1)
     np.add.at(mark, f[i + 1] + 1, -1)
     return np.cumsum(mark[:n]) > 0
+
+
+def fix_speeds(epochs: Epochs, t_s: np.ndarray, window_s: float) -> np.ndarray:
+    """Speed (m/s) at each fix from the positions alone: the distance between the median
+    position of the fixes in ``[t - W/2, t]`` and in ``[t, t + W/2]`` over the time between
+    their median times (``W = window_s``; NaN with fewer than two fixes on a side).
+
+    Medians, not a fitted line: a multipath jump inside the window moves a line's slope by
+    metres per second, a median not while under half of a side's fixes jumped.
+    """
+    f = np.flatnonzero(epochs.has_gnss)
+    tf, e, nn = t_s[f], epochs.gnss_e[f], epochs.gnss_n[f]
+    half = 0.5 * window_s
+    lo = np.searchsorted(tf, tf - half, "left")
+    hi = np.searchsorted(tf, tf + half, "right")
+    out = np.full(len(f), np.nan)
+    for i in range(len(f)):
+        a, b = slice(lo[i], i + 1), slice(i, hi[i])
+        if i + 1 - lo[i] < 2 or hi[i] - i < 2:
+            continue
+        dt = np.median(tf[b]) - np.median(tf[a])
+        if dt > 0:
+            out[i] = math.hypot(np.median(e[b]) - np.median(e[a]),
+                                np.median(nn[b]) - np.median(nn[a])) / dt
+    return out
 
 
 def multipath_regime(epochs: Epochs, params: Params) -> np.ndarray:
@@ -703,7 +738,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             held[o] = speed
             static = fresh & (held[lastc] < sp["speed_mps"])
     elif sp["enabled"] and gnss_on:        # no odometer: the receiver's speed says when stopped
-        static = gnss_standstill(epochs, t_s, params)
+        speeds = (fix_speeds(epochs, t_s, fp["fix_standstill_window_s"])
+                  if from_fixes and fp["fix_standstill_window_s"] > 0 else None)
+        static = gnss_standstill(epochs, t_s, params, speeds)
 
     # ---- initial state ---------------------------------------------------------------
     x0 = np.zeros(kf.NX)

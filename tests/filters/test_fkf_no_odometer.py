@@ -61,6 +61,28 @@ def test_no_odometer_stops_do_not_run_away(stop_and_go_no_odo, name, smooth):
     assert np.all(true_speed[r.static] < 0.5)
 
 
+#: m: positions only (no receiver speed either): new code 1.18-1.69 m, old code 10.5-43.2 m
+POSITIONS_ONLY_BOUND_M = 2.5
+
+
+@pytest.mark.parametrize("name", ["fkf", "fafkf"])
+@pytest.mark.parametrize("smooth", [False, True])
+def test_positions_only_no_odometer_stops(stop_and_go_no_odo, name, smooth):
+    """GGA without RMC/VTG and no odometer: the standstill from the fixes' median positions
+    (:func:`gpsdr_cli.filters.fkf.fix_speeds`).  Old code: fkf 43.18 / 42.92 m, fafkf
+    11.17 / 10.48 m (forward / RTS); GNSS alone 3.94 m."""
+    sim, drive = stop_and_go_no_odo
+    drive = copy.deepcopy(drive)
+    drive.gnss.speed_mps[:] = np.nan
+    drive.gnss.course_deg[:] = np.nan
+    rmse, gnss, r, true_speed = _rmse(sim, drive, name, smooth)
+    assert r.info["course_source"] == "fix_chords"
+    assert rmse < POSITIONS_ONLY_BOUND_M, f"{name} smooth={smooth}: {rmse:.2f} m RMSE"
+    assert rmse < gnss
+    assert r.info["zupt_epochs"] > 0
+    assert np.all(true_speed[r.static] < 1.0)          # m/s: the fixes' speed threshold
+
+
 def test_gnss_standstill_off_reproduces_runaway(stop_and_go_no_odo):
     """gnss_standstill_speed_mps = 0 is the old behaviour: the bound above fails there."""
     sim, drive = stop_and_go_no_odo
