@@ -236,6 +236,9 @@ gnss_velocity_min_mps = 1.0  # below this speed the course is noise: not used
 gnss_standstill_speed_mps = 0.5  # no odometer: stopped while every receiver (Doppler) speed over
                          #   gnss_standstill_window_s is below this (fkf.gnss_standstill; 0: off)
 gnss_standstill_window_s = 1.0
+coast_acc_psd = 1.0      # no odometer, GNSS outage: zero-acceleration rows with r = this / T (m^2/s^3; 0: off):
+                         #   the constant-acceleration model otherwise carried a drive-off's acceleration through
+                         #   a 10-s outage (urban seed 2: 26 m/s instead of 12, 128 m off)
 fix_standstill_speed_mps = 1.0  # ... stopped while every such speed over gnss_standstill_window_s is below this
 fix_standstill_window_s = 6.0  # positions only and no odometer: the speed for that from the median positions of
                          #   the fixes in each half of a centred window this long (fkf.fix_speeds; 0: off)

@@ -120,6 +120,10 @@ MIN_SCALE_FIXES = 20
 COURSE_BASE_S = 2.0
 #: seconds: two fixes further apart do not make a standstill from the receiver's speed
 MAX_STILL_GAP_S = 2.0
+#: seconds: a longer GNSS outage is never taken for a standstill
+MAX_BRIDGE_S = 30.0
+#: rad: ... nor one across which the gyro heading turned this much
+BRIDGE_TURN_RAD = 0.35
 
 
 @dataclass
@@ -466,7 +470,8 @@ def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np
 
 
 def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params,
-                    speeds: np.ndarray | None = None) -> np.ndarray:
+                    speeds: np.ndarray | None = None,
+                    heading: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Standstill from the receiver's (Doppler) speed, for drives without an odometer.
 
     The epochs in ``(t_k, t_k+1]`` between consecutive fixes are static when both fixes,
@@ -484,6 +489,13 @@ def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params,
     gated until the reset: stop_and_go seed 1, fkf 17.3 m RMSE, 355 m at worst.
     ``speeds`` (m/s, one per fix) stands in for the receiver's speed when given
     (positions only: :func:`fix_speeds`).
+
+    A GNSS outage of at most ``MAX_BRIDGE_S`` is static too when the fix before it
+    was still, every fix in the window after it is still, the two fixes lie within 3
+    sigma of each other and the gyro heading ``heading = (t s, psi rad unwrapped)``
+    turned less than ``BRIDGE_TURN_RAD`` across it: the car braked into the outage
+    and waited (urban seed 1: an 8-s outage at a stop, the decelerating velocity
+    extrapolated to 76 m off).
     """
     fp = params["fkf"]
     n = len(t_s)
@@ -499,7 +511,21 @@ def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params,
     still = np.isfinite(spd) & (spd < thr)
     bad = np.concatenate(([0], np.cumsum(~still)))       # fixes not still before index j
     j0 = np.minimum(np.searchsorted(tf, tf[1:] - max(window, 0.0), "left"), np.arange(len(f) - 1))
-    ok = (bad[np.arange(2, len(f) + 1)] - bad[j0] == 0) & (np.diff(tf) <= MAX_STILL_GAP_S)
+    gap = np.diff(tf)
+    ok = (bad[np.arange(2, len(f) + 1)] - bad[j0] == 0) & (gap <= MAX_STILL_GAP_S)
+    if heading is not None and len(heading[0]) > 1:
+        # an outage (MAX_STILL_GAP_S < gap <= MAX_BRIDGE_S) entered slowly, left stopped
+        # (every fix in the window after it still), at the same place (within 3 sigma of the
+        # two fixes) and with the same heading (gyro): the car waited there
+        j1 = np.searchsorted(tf, tf[1:] + max(window, 0.0), "right")     # window after
+        after = (bad[j1] - bad[np.arange(1, len(f))] == 0) & (j1 - np.arange(1, len(f)) >= 2)
+        tg, psi = heading
+        turn = np.abs(np.interp(tf[1:], tg, psi) - np.interp(tf[:-1], tg, psi))
+        e, nn = epochs.gnss_e[f], epochs.gnss_n[f]
+        var = epochs.gnss_sd_e[f] ** 2 + epochs.gnss_sd_n[f] ** 2
+        moved = np.hypot(np.diff(e), np.diff(nn))
+        ok |= ((gap > MAX_STILL_GAP_S) & (gap <= MAX_BRIDGE_S) & still[:-1] & after
+               & (turn < BRIDGE_TURN_RAD) & (moved <= 3.0 * np.sqrt(var[:-1] + var[1:])))
     mark = np.zeros(n + 1, np.int64)                     # epochs f[i] + 1 .. f[i + 1]
     i = np.flatnonzero(ok)
     np.add.at(mark, f[i] + 1, 1)
@@ -740,7 +766,8 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     elif sp["enabled"] and gnss_on:        # no odometer: the receiver's speed says when stopped
         speeds = (fix_speeds(epochs, t_s, fp["fix_standstill_window_s"])
                   if from_fixes and fp["fix_standstill_window_s"] > 0 else None)
-        static = gnss_standstill(epochs, t_s, params, speeds)
+        static = gnss_standstill(epochs, t_s, params, speeds,
+                                 (t_s[g], psi_g) if len(g) else None)
 
     # ---- initial state ---------------------------------------------------------------
     x0 = np.zeros(kf.NX)
@@ -783,6 +810,8 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_HEAD_CHI2] = chi2_1(g_p["gate_prob"]) if g_p["gate"] else 0.0
     par[kf.K_GNSS_STALE_S] = epochs.gap_s
     par[kf.K_DR_STALE_S] = fp["dr_stale_s"]
+    # no odometer: in GNSS outages nothing measures the speed (kernels_fkf: zero-acceleration rows)
+    par[kf.K_COAST_Q] = 0.0 if len(o) else fp["coast_acc_psd"]
     positive = {"fkf.heading_sd_rad": fp["heading_sd_rad"], "odo.noise_sd_mps": par[kf.K_ODO_SD],
                 "standstill.zupt_sd_mps": sp["zupt_sd_mps"], "fkf.gnss_err_sd_m": fp["gnss_err_sd_m"],
                 "fkf.gnss_err_obstructed_sd_m": fp["gnss_err_obstructed_sd_m"],
@@ -974,6 +1003,7 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
         "heading_skipped_slow": int(counters[kf.C_HEADING_SLOW]),
         "distance_updates": int(counters[kf.C_DIST]),
         "gnss_velocity_updates": int(counters[kf.C_GVEL]),
+        "coast_updates": int(counters[kf.C_COAST]),
         "zupt_epochs": int(counters[kf.C_ZUPT]),
         "r_adaptations": int(counters[kf.C_R_ADAPT]),
         "heading_rejected": int(counters[kf.C_HEAD_REJECTED]),

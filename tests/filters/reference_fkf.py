@@ -279,6 +279,12 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 x2, P2 = zupt(x2, P2)
                 t_dr = t_dist = t
             else:
+                if (par[kf.K_COAST_Q] > 0 and T > 0 and t - t_dist > par[kf.K_DR_STALE_S]
+                        and t - t_acc > par[kf.K_GNSS_STALE_S]):    # no speed measured: a = 0 rows
+                    for i in (2, 5):
+                        H = np.zeros(NX)
+                        H[i] = 1
+                        x2, P2 = kf_update(x2, P2, H, -x2[i], par[kf.K_COAST_Q] / T)
                 th, dist, t_m = prep.theta[k], prep.dist[k], prep.t_m[k]
                 do_head = do_dist = False
                 if not math.isnan(th):

@@ -19,6 +19,8 @@ from gpsdr_cli import config, filters
 from gpsdr_cli.align import build_epochs
 from gpsdr_cli.filters import fkf
 from gpsdr_cli.simulate import simulate_drive
+from tests.filters import test_fkf as fkf_tests
+from tests.filters.reference_fkf import run_reference, tiny_drive
 
 #: m: RMSE bound against truth (new code 0.47-0.74 m, GNSS alone 3.94 m, old code 10.9-42.9 m)
 RMSE_BOUND_M = 1.5
@@ -84,9 +86,11 @@ def test_positions_only_no_odometer_stops(stop_and_go_no_odo, name, smooth):
 
 
 def test_gnss_standstill_off_reproduces_runaway(stop_and_go_no_odo):
-    """gnss_standstill_speed_mps = 0 is the old behaviour: the bound above fails there."""
+    """gnss_standstill_speed_mps = coast_acc_psd = 0 is the old behaviour: the bound above
+    fails there."""
     sim, drive = stop_and_go_no_odo
-    rmse, _, r, _ = _rmse(sim, drive, "fkf", False, {"fkf": {"gnss_standstill_speed_mps": 0.0}})
+    rmse, _, r, _ = _rmse(sim, drive, "fkf", False, {"fkf": {"gnss_standstill_speed_mps": 0.0,
+                                                             "coast_acc_psd": 0.0}})
     assert r.info["zupt_epochs"] == 0
     assert rmse > 10.0 * RMSE_BOUND_M                # 42.94 m
 
@@ -128,3 +132,47 @@ def test_odometer_drive_ignores_gnss_standstill():
         out.append(filters.get("fkf")(ep, p))
     np.testing.assert_array_equal(out[0].e, out[1].e)
     np.testing.assert_array_equal(out[0].static, out[1].static)
+
+
+@pytest.mark.parametrize("kind", ["fkf", "fafkf"])
+@pytest.mark.parametrize("mode", ["nr", "fr"])
+@pytest.mark.parametrize("smooth", [False, True])
+def test_kernel_reproduces_the_reference_without_odometer(kind: str, mode: str, smooth: bool):
+    """60 s on a circle, a 10-s stop (standstill from the receiver's speed) and a 10-s GNSS
+    gap (no speed measured: the zero-acceleration rows, [fkf] coast_acc_psd): kernel and plain
+    reference agree to the reference tolerance."""
+    drive, frame, _ = tiny_drive(60.0, turn_radps=0.05, stop=(20, 30), gnss_gap=(40, 50))
+    drive.odo = None
+    params = config.merge(config.defaults(), {"fkf": {"check_spd": True, "mode": mode},
+                                              "filter": {"smooth": smooth}})
+    if kind == "fafkf" and smooth:
+        params["fafkf"]["weights"] = "shares"         # the fused RTS (the reference's)
+    epochs = build_epochs(drive, frame, params)
+    result = filters.get(kind)(epochs, params)
+    assert result.info["zupt_epochs"] > 0 and result.info["coast_updates"] > 0
+    assert result.info["spd_failures"] == 0
+    ref = run_reference(fkf.prepare(epochs, params), kind, smooth=smooth)
+    fkf_tests.assert_matches_reference(result, ref)
+
+
+def test_gnss_standstill_bridges_an_outage_at_a_stop():
+    """A 5-s outage between still fixes at the same place with the gyro heading unchanged is
+    a stop; the same outage across a 30-deg turn, or with the fixes 20 m apart, is not."""
+    t = np.arange(0.0, 12.0, 0.1)                     # s
+    n = len(t)
+    has = np.zeros(n, bool)
+    has[::2] = True
+    has[(t > 4.0 + 1e-9) & (t < 9.0 - 1e-9)] = False   # outage: fixes at 4.0 and 9.0 s
+    zeros = np.zeros(n)
+    ep = SimpleNamespace(has_gnss=has, gnss_speed_mps=np.where(has, 0.1, np.nan),
+                         gnss_e=zeros.copy(), gnss_n=zeros.copy(),
+                         gnss_sd_e=np.full(n, 2.0), gnss_sd_n=np.full(n, 2.0))
+    p = config.defaults()
+    gap = (t > 4.0 + 1e-9) & (t <= 9.0 + 1e-9)
+    straight = (t, np.zeros(n))
+    assert fkf.gnss_standstill(ep, t, p, heading=straight)[gap].all()
+    assert not fkf.gnss_standstill(ep, t, p)[gap].any()          # no gyro: no bridge
+    turned = (t, np.where(t > 6.0, np.radians(30.0), 0.0))
+    assert not fkf.gnss_standstill(ep, t, p, heading=turned)[gap].any()
+    ep.gnss_e[t >= 9.0 - 1e-9] = 20.0                  # m: beyond 3 sigma of the two fixes (12 m)
+    assert not fkf.gnss_standstill(ep, t, p, heading=straight)[gap].any()
