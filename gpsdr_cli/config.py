@@ -239,6 +239,9 @@ gnss_standstill_window_s = 1.0
 coast_acc_psd = 1.0      # no odometer, GNSS outage: zero-acceleration rows with r = this / T (m^2/s^3; 0: off):
                          #   the constant-acceleration model otherwise carried a drive-off's acceleration through
                          #   a 10-s outage (urban seed 2: 26 m/s instead of 12, 128 m off)
+no_odo_gate_reset_s = 3.0  # no odometer: [gnss] gate_reset_s shortened to this (0: not) -- with nothing else
+                         #   measuring the speed, fixes gated for seconds mean the state ran off (positions only,
+                         #   urban seeds 1-3 fkf forward 13.2/23.6/23.2 -> 7.1/8.9/12.4 m; with Doppler: same)
 fix_standstill_speed_mps = 1.0  # ... stopped while every such speed over gnss_standstill_window_s is below this
 fix_standstill_window_s = 6.0  # positions only and no odometer: the speed for that from the median positions of
                          #   the fixes in each half of a centred window this long (fkf.fix_speeds; 0: off)

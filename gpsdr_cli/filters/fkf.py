@@ -793,6 +793,8 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_OMEGA_MIN] = max(sp["omega_min_speed_mps"], 1e-3)
     par[kf.K_GATE_CHI2] = gate_threshold(g_p["gate_prob"], 2) if g_p["gate"] else 0.0
     par[kf.K_GATE_RESET_S] = g_p["gate_reset_s"]
+    if not len(o) and fp["no_odo_gate_reset_s"] > 0:   # no odometer: the state is the outlier sooner
+        par[kf.K_GATE_RESET_S] = min(g_p["gate_reset_s"], fp["no_odo_gate_reset_s"])
     par[kf.K_GATE_WARMUP] = g_p["gate_warmup_fixes"]
     par[kf.K_GVEL_VAR] = fp["gnss_velocity_sd_mps"] ** 2 if fp["gnss_velocity"] else 0.0
     par[kf.K_TAU_EPS_C] = fp["gnss_err_tau_s"]

@@ -86,11 +86,11 @@ def test_positions_only_no_odometer_stops(stop_and_go_no_odo, name, smooth):
 
 
 def test_gnss_standstill_off_reproduces_runaway(stop_and_go_no_odo):
-    """gnss_standstill_speed_mps = coast_acc_psd = 0 is the old behaviour: the bound above
-    fails there."""
+    """gnss_standstill_speed_mps = coast_acc_psd = no_odo_gate_reset_s = 0 is the old
+    behaviour: the bound above fails there."""
     sim, drive = stop_and_go_no_odo
-    rmse, _, r, _ = _rmse(sim, drive, "fkf", False, {"fkf": {"gnss_standstill_speed_mps": 0.0,
-                                                             "coast_acc_psd": 0.0}})
+    old = {"gnss_standstill_speed_mps": 0.0, "coast_acc_psd": 0.0, "no_odo_gate_reset_s": 0.0}
+    rmse, _, r, _ = _rmse(sim, drive, "fkf", False, {"fkf": old})
     assert r.info["zupt_epochs"] == 0
     assert rmse > 10.0 * RMSE_BOUND_M                # 42.94 m
 
