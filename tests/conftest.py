@@ -1,9 +1,13 @@
-"""Shared fixtures: the bundled comma2k19 sample drive and a CliRunner for ``gpsdr``."""
+"""Shared fixtures: the bundled comma2k19 sample drive and a CliRunner for ``gpsdr``;
+:func:`load_benchmark` for the tests of the benchmark scripts."""
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 from click.testing import CliRunner, Result
@@ -30,6 +34,15 @@ def gpsdr() -> Callable[..., Result]:
         return runner.invoke(cli, [str(a) for a in args], input=input, catch_exceptions=False)
 
     return run
+
+
+def load_benchmark(name: str) -> ModuleType:
+    """``benchmarks/<name>.py`` imported as the module ``<name>_bench`` (benchmarks/ is no package)."""
+    spec = importlib.util.spec_from_file_location(f"{name}_bench", REPO / "benchmarks" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[f"{name}_bench"] = mod
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def one_line_error(result: Result) -> str:

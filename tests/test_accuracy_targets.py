@@ -5,22 +5,14 @@ applied at 0.1 s or estimated by gpsdr, each against the GNSS fixes at its own s
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "accuracy.py"
+from tests.conftest import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def acc():
-    spec = importlib.util.spec_from_file_location("accuracy_bench", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["accuracy_bench"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("accuracy")
 
 
 URBAN = "urban_canyon (seeds 1,2,3)"

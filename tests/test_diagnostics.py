@@ -6,25 +6,18 @@ with the pipeline's own statistics."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "diagnostics.py"
+from tests.conftest import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def diag():
-    spec = importlib.util.spec_from_file_location("diagnostics_bench", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["diagnostics_bench"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("diagnostics")
 
 
 def test_offset_sweep_finds_a_simulated_gnss_offset(diag):

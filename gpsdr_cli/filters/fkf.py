@@ -424,14 +424,21 @@ def chord_odometer_scale(chords: FixChords, t_odo: np.ndarray, params: Params
         return ones, 1.0
     tk = chords.t_mid[inside]
     g, dr, var = chords.g[inside], chords.dr[inside], chords.var[inside]
-    cn = np.concatenate(([0.0], np.cumsum((g * np.conj(dr)).real / var)))
-    cd = np.concatenate(([0.0], np.cumsum(np.abs(dr) ** 2 / var)))
-    lo = np.searchsorted(tk, tk - 0.5 * window, side="left")
-    hi = np.searchsorted(tk, tk + 0.5 * window, side="right")
-    den = cd[hi] - cd[lo]
-    ratio = np.where(den > 0.0, (cn[hi] - cn[lo]) / np.where(den > 0.0, den, 1.0), 1.0)
-    ratio = np.clip(ratio, 0.8, 1.25)
+    ratio = windowed_ratio(tk, (g * np.conj(dr)).real / var, np.abs(dr) ** 2 / var, window)
     return np.interp(t_odo, tk, ratio), float(np.median(ratio))
+
+
+def windowed_ratio(tk: np.ndarray, num: np.ndarray, den: np.ndarray, window_s: float) -> np.ndarray:
+    """``sum(num) / sum(den)`` over a window of ``window_s`` seconds centred on each time ``tk``
+    (sorted, s), 1 where the window's ``den`` sums to zero, clamped to [0.8, 1.25]: an
+    odometer scale (a ratio outside is a unit error, not a wheel)."""
+    cn = np.concatenate(([0.0], np.cumsum(num)))
+    cd = np.concatenate(([0.0], np.cumsum(den)))
+    lo = np.searchsorted(tk, tk - 0.5 * window_s, side="left")
+    hi = np.searchsorted(tk, tk + 0.5 * window_s, side="right")
+    d = cd[hi] - cd[lo]
+    ratio = np.where(d > 0.0, (cn[hi] - cn[lo]) / np.where(d > 0.0, d, 1.0), 1.0)
+    return np.clip(ratio, 0.8, 1.25)
 
 
 def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np.ndarray,
@@ -459,13 +466,7 @@ def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np
     if len(k) < MIN_SCALE_FIXES:
         return ones, 1.0
     tk = t_s[k]
-    cg = np.concatenate(([0.0], np.cumsum(epochs.gnss_speed_mps[k])))
-    co = np.concatenate(([0.0], np.cumsum(np.interp(tk, t_odo, speed))))
-    lo = np.searchsorted(tk, tk - 0.5 * window, side="left")
-    hi = np.searchsorted(tk, tk + 0.5 * window, side="right")
-    den = co[hi] - co[lo]
-    ratio = np.where(den > 0.0, (cg[hi] - cg[lo]) / np.where(den > 0.0, den, 1.0), 1.0)
-    ratio = np.clip(ratio, 0.8, 1.25)
+    ratio = windowed_ratio(tk, epochs.gnss_speed_mps[k], np.interp(tk, t_odo, speed), window)
     return np.interp(t_odo, tk, ratio), float(np.median(ratio))
 
 
