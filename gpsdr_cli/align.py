@@ -64,6 +64,14 @@ class Epochs:
     def n_gnss(self) -> int:
         return int(self.has_gnss.sum())
 
+    @property
+    def velocity_share(self) -> float:
+        """Share of the usable fixes that carry the receiver's speed (RMC/VTG); 0 without fixes."""
+        n_fix = self.n_gnss
+        if n_fix == 0:
+            return 0.0
+        return float(np.count_nonzero(self.has_gnss & np.isfinite(self.gnss_speed_mps))) / n_fix
+
 
 def clean_times(t_ns: np.ndarray, finite: np.ndarray, name: str,
                 report: SkipReport) -> np.ndarray:

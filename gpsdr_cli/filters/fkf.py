@@ -247,14 +247,6 @@ class FixChords:
     var: np.ndarray
 
 
-def receiver_velocity_share(epochs: Epochs) -> float:
-    """Share of the usable fixes that carry the receiver's speed (RMC/VTG), 0 without fixes."""
-    n_fix = int(np.count_nonzero(epochs.has_gnss))
-    if n_fix == 0:
-        return 0.0
-    return float(np.count_nonzero(epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps))) / n_fix
-
-
 def dr_positions(tg: np.ndarray, psi: np.ndarray, t_odo: np.ndarray | None,
                  speed: np.ndarray | None, at: np.ndarray) -> np.ndarray:
     """Dead-reckoned position (complex ``e + 1j n``, m, arbitrary origin) at times ``at`` (s).
@@ -720,7 +712,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     eps_w = multipath_regime(epochs, params)
     # positions only (GGA without RMC/VTG, a ROS NavSatFix): course and odometer scale
     # from chords between fixes instead of the receiver's course and speed
-    v_share = receiver_velocity_share(epochs)
+    v_share = epochs.velocity_share
     from_fixes = bool(gnss_on and v_share < fp["fix_course_velocity_share"])
     chords = None
     if len(g):

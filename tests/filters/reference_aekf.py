@@ -23,11 +23,13 @@ import numpy as np
 
 from gpsdr_cli.filters import kernels_aekf as kn
 from gpsdr_cli.filters.aekf import (
+    gnss_err_states_on,
     gnss_noise,
     gnss_velocity,
     initial_heading_var,
     initial_state,
     kernel_params,
+    odometer_inputs,
     sensor_masks,
 )
 from gpsdr_cli.models.cs_model import cs_sigma_a2, newton_matrix, phi_matrix, q_matrix
@@ -105,11 +107,12 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     n = len(epochs)
     smooth = bool(params["filter"]["smooth"])
     r_e, r_n, ka, _ = gnss_noise(epochs, params, adaptive)
-    has_gyro, has_odo = sensor_masks(epochs, params)  # plausible readings only
+    has_gyro, _ = sensor_masks(epochs, params)  # plausible readings only
+    has_odo, odo_speed, _ = odometer_inputs(epochs, params)  # ... or the GNSS's standstill
     gv_e, gv_n = gnss_velocity(epochs, params)  # receiver speed/course as (v_e, v_n), or NaN
     x, P, psi_mem, heading_known = initial_state(epochs, params)
     a_p = params["aekf"]
-    ge = bool(a_p["gnss_err_states"])  # GNSS error states b_e, b_n: x and P 10-long
+    ge = gnss_err_states_on(epochs, params)  # GNSS error states b_e, b_n: x and P 10-long
     m = 10 if ge else 8
     var_b = a_p["gnss_err_sd_m"] ** 2
     if ge:
@@ -309,7 +312,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         if turn_on and (lat_mode == "always" or (lat_mode == "outage" and epochs.gnss_outage[k])):
             cons_w = (0, 1, 3, 4, 6, 7)  # the lateral row corrects the acceleration only
         if has_odo[k]:
-            u = epochs.odo_speed_mps[k]
+            u = odo_speed[k]
             is_static = standstill and u < st["speed_mps"]
             if not is_static:
                 wh_static = 0
@@ -324,7 +327,9 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     d_e, d_n, use = x[1] / v, x[4] / v, True
                 else:
                     d_e, d_n, use = math.sin(psi_mem), math.cos(psi_mem), heading_known
-                if use:  # u = k_s * |v| (seed 000's s = k_s T v divided by T)
+                # u = k_s * |v| (seed 000's s = k_s T v divided by T); a NaN record (the end of
+                # a standstill from the GNSS, aekf.odometer_inputs) only ends the standstill
+                if use and math.isfinite(u):
                     H = np.zeros(m)
                     H[1], H[4], H[7] = x[7] * d_e, x[7] * d_n, x[1] * d_e + x[4] * d_n
                     h = x[7] * (x[1] * d_e + x[4] * d_n)

@@ -98,3 +98,27 @@ def test_kernel_matches_reference(drive, name, option, smooth, monkeypatch):
     m = np.isfinite(ref["nis"])
     np.testing.assert_array_equal(np.isfinite(res.nis), m)
     _close(res.nis[m], ref["nis"][m], "nis")
+
+
+@pytest.mark.parametrize("name", ["ekf", "aekf"])
+@pytest.mark.parametrize("smooth", [False, True])
+@pytest.mark.parametrize("gnss_vel", [True, False])
+def test_kernel_matches_reference_without_an_odometer(name, smooth, gnss_vel, monkeypatch):
+    """GNSS and gyro only: the standstill from the GNSS (aekf.odometer_inputs) and, with
+    positions only, no GNSS error states -- kernel and reference alike."""
+    epochs, _ = tiny_drive(70.0, seed=5, dr_hz=20.0, gyro_bias_radps=0.02, odo=False,
+                           outages=((20.0, 26.0),), stops=((40.0, 50.0),), gnss_vel=gnss_vel)
+    monkeypatch.setattr(aekf_module, "SEGMENT_EPOCHS", 257)
+    params = defaults()
+    params["filter"]["smooth"] = smooth
+    res = get(name)(epochs, params)
+    assert res.info["gnss_standstill_epochs"] > 100  # the 10-s stop at 20 Hz, about
+    assert res.info["gnss_err_states"] is gnss_vel
+    ref = reference_filter(epochs, params, adaptive=(name == "aekf"))
+    x, P = ref["x"], ref["P"]
+    _close(res.e, x[:, 0], "e")
+    _close(res.n, x[:, 3], "n")
+    _close(res.v_e, x[:, 1], "v_e", RTOL_HIDDEN)
+    _close(res.var_e, P[:, 0, 0], "var_e")
+    np.testing.assert_array_equal(res.static, ref["static"])
+    np.testing.assert_array_equal(res.gnss_used, ref["gnss_used"])
