@@ -374,16 +374,17 @@ def gnss_err_states_on(epochs: Epochs, params: Params) -> bool:
     return bool(a["gnss_err_states"]) and epochs.velocity_share >= a["gnss_err_min_velocity_share"]
 
 
-def odometer_inputs(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray, int]:
+def odometer_inputs(epochs: Epochs, params: Params, use_odo: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, int]:
     """The odometer the kernel reads: (records used, speed m/s, records made from the GNSS).
 
-    With an odometer: its plausible readings (:func:`sensor_masks`) and speeds.  Without
+    With an odometer: ``use_odo``, its plausible readings (:func:`sensor_masks`), and speeds.  Without
     one (GNSS and gyro only: a phone, a ROS bag without wheel odometry) nothing told the
     filter that the car stopped: the velocity wandered on the fixes' noise at every stop.
-    There the standstill comes from the GNSS as for fkf (:func:`.fkf.gnss_standstill`:
+    There the standstill comes from the GNSS as for fkf (:func:`.standstill.standstill_from_gnss`:
     the receiver's Doppler speed under ``[fkf] gnss_standstill_speed_mps`` over
     ``gnss_standstill_window_s``, or with positions only the speed between the median
-    positions of the fixes either side, :func:`.fkf.fix_speeds`): a zero-speed record at
+    positions of the fixes either side, :func:`.standstill.fix_speeds`): a zero-speed record at
     each standstill epoch (the kernel's zero-velocity update and position hold) and a NaN
     record at the first epoch after each (it ends the standstill; the kernel skips the
     speed row of a NaN).  Urban canyon seeds 1-3, aekf forward / RTS m: with the receiver's
@@ -392,18 +393,12 @@ def odometer_inputs(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndar
     positions only 9.60/5.89, 10.93/5.71, 15.27/9.77 -> 8.44/5.59, 10.97/5.18, 10.80/5.41
     (the forward pass cannot beat the fixes there: nothing measures the speed in an outage).
     """
-    _, use_odo = sensor_masks(epochs, params)
     if (epochs.has_odo.any() or not params["standstill"]["enabled"]
             or epochs.n_gnss < 2):
         return use_odo, epochs.odo_speed_mps, 0
-    from .fkf import fix_speeds, gnss_standstill
+    from .standstill import standstill_from_gnss
 
-    t_s = (epochs.t_ns - epochs.t_ns[0]) / 1e9
-    fp = params["fkf"]
-    speeds = None
-    if epochs.velocity_share < fp["fix_course_velocity_share"] and fp["fix_standstill_window_s"] > 0:
-        speeds = fix_speeds(epochs, t_s, fp["fix_standstill_window_s"])
-    still = gnss_standstill(epochs, t_s, params, speeds, None)
+    still = standstill_from_gnss(epochs, (epochs.t_ns - epochs.t_ns[0]) / 1e9, params)
     ends = np.zeros(len(still), bool)
     ends[1:] = still[:-1] & ~still[1:]
     return still | ends, np.where(still, 0.0, np.nan), int(np.count_nonzero(still))
@@ -445,8 +440,8 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     info_v = np.zeros(kn.N_INFO)
     info_v[kn.I_MIN_DIAG] = math.inf
     c64 = np.ascontiguousarray  # no copies of the (already contiguous) inputs: memory
-    use_gyro, _ = sensor_masks(epochs, params)
-    use_odo, odo_speed, gnss_still = odometer_inputs(epochs, params)
+    use_gyro, use_odo = sensor_masks(epochs, params)
+    use_odo, odo_speed, gnss_still = odometer_inputs(epochs, params, use_odo)
     gv_e, gv_n = gnss_velocity(epochs, params)
     inputs = (
         c64(epochs.dt_s, f64), c64(epochs.has_gnss, bool), c64(epochs.gnss_e, f64),

@@ -107,8 +107,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     n = len(epochs)
     smooth = bool(params["filter"]["smooth"])
     r_e, r_n, ka, _ = gnss_noise(epochs, params, adaptive)
-    has_gyro, _ = sensor_masks(epochs, params)  # plausible readings only
-    has_odo, odo_speed, _ = odometer_inputs(epochs, params)  # ... or the GNSS's standstill
+    has_gyro, has_odo = sensor_masks(epochs, params)  # plausible readings only
+    has_odo, odo_speed, _ = odometer_inputs(epochs, params, has_odo)  # ... or the GNSS's standstill
     gv_e, gv_n = gnss_velocity(epochs, params)  # receiver speed/course as (v_e, v_n), or NaN
     x, P, psi_mem, heading_known = initial_state(epochs, params)
     a_p = params["aekf"]

@@ -1,6 +1,6 @@
 """fkf/fafkf on a drive without an odometer (GNSS + gyro only: a phone, a GNSS/IMU logger).
 
-Nothing but the receiver then says when the car stopped: :func:`gpsdr_cli.filters.fkf.gnss_standstill`
+Nothing but the receiver then says when the car stopped: :func:`gpsdr_cli.filters.standstill.gnss_standstill`
 takes the standstill from the receiver's (Doppler) speed.  Without it the velocity wandered on
 GNSS noise at every stop, a gated multipath burst let its variance grow until one of the burst's
 fixes passed the gate, and the velocity jumped and ran away (stop_and_go seed 2, 300 s, old code:
@@ -17,7 +17,7 @@ import pytest
 
 from gpsdr_cli import config, filters
 from gpsdr_cli.align import build_epochs
-from gpsdr_cli.filters import fkf
+from gpsdr_cli.filters import fkf, standstill
 from gpsdr_cli.simulate import simulate_drive
 from tests.filters import test_fkf as fkf_tests
 from tests.filters.reference_fkf import run_reference, tiny_drive
@@ -71,7 +71,7 @@ POSITIONS_ONLY_BOUND_M = 2.5
 @pytest.mark.parametrize("smooth", [False, True])
 def test_positions_only_no_odometer_stops(stop_and_go_no_odo, name, smooth):
     """GGA without RMC/VTG and no odometer: the standstill from the fixes' median positions
-    (:func:`gpsdr_cli.filters.fkf.fix_speeds`).  Old code: fkf 43.18 / 42.92 m, fafkf
+    (:func:`gpsdr_cli.filters.standstill.fix_speeds`).  Old code: fkf 43.18 / 42.92 m, fafkf
     11.17 / 10.48 m (forward / RTS); GNSS alone 3.94 m."""
     sim, drive = stop_and_go_no_odo
     drive = copy.deepcopy(drive)
@@ -108,7 +108,7 @@ def test_gnss_standstill_intervals():
     ep = SimpleNamespace(has_gnss=has, gnss_speed_mps=speed)
     p = config.defaults()
     p["fkf"]["gnss_standstill_window_s"] = 1.25
-    st = fkf.gnss_standstill(ep, t, p)
+    st = standstill.gnss_standstill(ep, t, p)
     expected = np.zeros(n, bool)
     # the interval ending at 1.0 s sees 2.0 m/s at 0.0 s in its window [-0.25, 1.0]; those
     # ending at 1.5 and 2.0 s are still; 2.5 s (0.9 m/s) breaks it, and stays in the window
@@ -117,7 +117,7 @@ def test_gnss_standstill_intervals():
         expected[(t > a + 1e-9) & (t <= b + 1e-9)] = True
     np.testing.assert_array_equal(st, expected)
     p["fkf"]["gnss_standstill_speed_mps"] = 0.0       # off
-    assert not fkf.gnss_standstill(ep, t, p).any()
+    assert not standstill.gnss_standstill(ep, t, p).any()
 
 
 def test_odometer_drive_ignores_gnss_standstill():
@@ -170,9 +170,9 @@ def test_gnss_standstill_bridges_an_outage_at_a_stop():
     p = config.defaults()
     gap = (t > 4.0 + 1e-9) & (t <= 9.0 + 1e-9)
     straight = (t, np.zeros(n))
-    assert fkf.gnss_standstill(ep, t, p, heading=straight)[gap].all()
-    assert not fkf.gnss_standstill(ep, t, p)[gap].any()          # no gyro: no bridge
+    assert standstill.gnss_standstill(ep, t, p, heading=straight)[gap].all()
+    assert not standstill.gnss_standstill(ep, t, p)[gap].any()          # no gyro: no bridge
     turned = (t, np.where(t > 6.0, np.radians(30.0), 0.0))
-    assert not fkf.gnss_standstill(ep, t, p, heading=turned)[gap].any()
+    assert not standstill.gnss_standstill(ep, t, p, heading=turned)[gap].any()
     ep.gnss_e[t >= 9.0 - 1e-9] = 20.0                  # m: beyond 3 sigma of the two fixes (12 m)
-    assert not fkf.gnss_standstill(ep, t, p, heading=straight)[gap].any()
+    assert not standstill.gnss_standstill(ep, t, p, heading=straight)[gap].any()
