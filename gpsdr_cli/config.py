@@ -195,6 +195,9 @@ gnss_err_min_velocity_share = 0.5  # the error states only when at least this sh
                          #   off): open sky 0.86/2.28 -> 0.83/0.67, urban 6.65/4.99 -> 4.93/3.58 (seeds 2, 3:
                          #   5.61/4.50 -> 4.69/2.90, 4.37/5.14 -> 4.59/2.62), one_hour 3.60/4.34 -> 3.42/2.25,
                          #   stop_and_go 2.81/5.79 -> 1.24/0.99, tunnels 13.0/2.25 -> 10.3/3.19 (0: always on)
+coast_acc_psd = 1.0      # no odometer, GNSS outage: zero-acceleration rows with r = this / T (m^2/s^3; 0: off),
+                         #   as [fkf] coast_acc_psd: the CS model's mean carried the last acceleration through the
+                         #   outage (one_hour seed 2, 60 s: 12 -> 106 m/s, 3 km off)
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)

@@ -404,6 +404,17 @@ def odometer_inputs(epochs: Epochs, params: Params, use_odo: np.ndarray
     return still | ends, np.where(still, 0.0, np.nan), int(np.count_nonzero(still))
 
 
+def coast_psd(epochs: Epochs, params: Params) -> float:
+    """``aekf.coast_acc_psd`` (m^2/s^3) on a drive without an odometer, else 0 (off).
+
+    Coasting: in a GNSS outage with nothing measuring the speed, the kernel takes
+    zero-acceleration rows ``a_e = a_n = 0`` with ``r = q_c / T`` (kernels_aekf step 3).
+    The current statistical model's mean keeps the last acceleration estimate, so without
+    them a drive-off or a braking carried on through the outage.
+    """
+    return 0.0 if epochs.has_odo.any() else max(float(params["aekf"]["coast_acc_psd"]), 0.0)
+
+
 def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> FilterResult:
     """Forward pass (and RTS when ``params["filter"]["smooth"]``) of the CS-model filter."""
     n = len(epochs)
@@ -414,6 +425,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     r_e, r_n, ka, sigma_const = gnss_noise(epochs, params, adaptive)
     x0, P0, psi0, heading_known = initial_state(epochs, params)
     prm, flg = kernel_params(params, adaptive, smooth)
+    prm[kn.P_COAST_Q] = coast_psd(epochs, params)
     st = np.zeros(kn.N_ST)
     st[kn.S_PSI] = psi0
     st[kn.S_REJ_SINCE] = -1.0
@@ -489,6 +501,8 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         "ekf_gnss_sigma_m": sigma_const,
         "gnss_err_states": bool(params["aekf"]["gnss_err_states"]),
         "gnss_standstill_epochs": gnss_still,
+        "coast_epochs": int(np.count_nonzero(epochs.gnss_outage & ~static & (epochs.dt_s > 0.0)))
+        if prm[kn.P_COAST_Q] > 0.0 else 0,
     }
     if ge_wanted and not params["aekf"]["gnss_err_states"]:
         info["gnss_err_states_off"] = (f"the receiver gives its velocity at {epochs.velocity_share:.0%} "

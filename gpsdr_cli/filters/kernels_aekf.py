@@ -69,8 +69,8 @@ P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = ran
 P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_MIN = range(20, 25)
 P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP, P_GVEL_VAR, P_WH_NIS, P_SCALE_VAR = range(25, 33)
-P_GE_VAR, P_GE_RATE, P_GE_DIST_RATE = range(33, 36)
-N_PRM = 36
+P_GE_VAR, P_GE_RATE, P_GE_DIST_RATE, P_COAST_Q = range(33, 37)
+N_PRM = 37
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
@@ -1101,6 +1101,19 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                         for i in range(n):
                             gw[GW_H + n_rows, i] = H[i]
                         n_rows = ge_push(gw, n_rows, GW_ODO, H, PHt, prm[P_R_ODO], u - h)
+        if prm[P_COAST_Q] > 0.0 and outage[k] and not is_static and T > 0.0:
+            # coasting (aekf.coast_acc_psd; a drive without an odometer, in a GNSS outage): nothing
+            # measures the speed, and the current statistical model's mean (abar = a_hat) carries
+            # the last acceleration through the outage (one_hour seed 2: 12 -> 106 m/s in 60 s);
+            # zero-acceleration rows with r = q_c / T (information T / q_c per step, whatever the
+            # rate) hold the speed instead, as fkf's kernels_fkf coasting
+            r_c = prm[P_COAST_Q] / T
+            for idx in (2, 5):
+                y = -x[idx]
+                if not unit_update(x, P, idx, y, r_c, K, PHt, Bh, no_cons):
+                    info[I_SKIPPED] += 1.0
+                elif ge_on is not None:
+                    n_rows = ge_push(gw, n_rows, float(idx), H, PHt, r_c, y)
         static_out[k] = is_static
         hold_out[k] = hold
         # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill

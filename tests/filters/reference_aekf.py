@@ -23,6 +23,7 @@ import numpy as np
 
 from gpsdr_cli.filters import kernels_aekf as kn
 from gpsdr_cli.filters.aekf import (
+    coast_psd,
     gnss_err_states_on,
     gnss_noise,
     gnss_velocity,
@@ -119,6 +120,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         x = np.concatenate([x, [0.0, 0.0]])
         P = embed(P, m, var_b)
     prm, _ = kernel_params(params, adaptive, smooth)
+    coast = coast_psd(epochs, params)
     alpha, tau_eps = prm[kn.P_ALPHA], prm[kn.P_TAU_EPS]
     sigma_a = prm[kn.P_SIGMA_A]
     st = params["standstill"]
@@ -338,6 +340,9 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                                             (d_e, d_n))
                     else:
                         x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons)
+        if coast > 0.0 and epochs.gnss_outage[k] and not is_static and T > 0.0:
+            for i in (2, 5):  # coasting without an odometer (aekf.coast_acc_psd): a = 0 rows
+                x, P = joseph(x, P, unit(i, m), -x[i], coast / T)
         static[k] = is_static
         if has_gyro[k]:
             w = -epochs.yaw_rate_radps[k]  # d(psi)/dt = -yaw_rate

@@ -74,3 +74,30 @@ def test_without_an_odometer_the_gnss_says_when_the_car_stands(name: str) -> Non
     rts, _ = _rmse_m(sim, d, name, True)
     assert info["gnss_standstill_epochs"] > 5000  # 100 Hz: the stops last minutes
     assert fwd < 1.2 and rts < 1.5  # m, against the truth (GNSS alone ~3.4 m)
+
+
+@pytest.fixture(scope="module")
+def tunnels_no_odo():
+    sim = simulate_drive("tunnels", seed=1)
+    drive = copy.deepcopy(sim.drive)
+    drive.odo = None
+    return sim, drive
+
+
+#: m: forward RMSE bound on tunnels seed 1 without an odometer (30-, 60- and 120-s outages,
+#: nothing measuring the speed in them): with the coast rows 34.8 m, without 297 m
+COAST_RMSE_BOUND_M = 60.0
+
+
+@pytest.mark.parametrize("name", ["ekf", "aekf"])
+def test_without_an_odometer_outages_coast_at_the_entry_speed(tunnels_no_odo, name: str) -> None:
+    """In a GNSS outage with no odometer, the zero-acceleration rows (``aekf.coast_acc_psd``)
+    hold the speed; without them the current statistical model's mean kept the last
+    acceleration estimate and the speed ran away (one_hour seed 2: 106 m/s)."""
+    sim, drive = tunnels_no_odo
+    rmse, info = _rmse_m(sim, drive, name, False)
+    assert info["coast_epochs"] > 100 * 200         # 210 s of outage at 100 Hz, about
+    assert rmse < COAST_RMSE_BOUND_M, f"{name}: {rmse:.1f} m"
+    old, old_info = _rmse_m(sim, drive, name, False, coast_acc_psd=0.0)
+    assert old_info["coast_epochs"] == 0
+    assert old > 4 * COAST_RMSE_BOUND_M, f"{name} without coasting: {old:.1f} m"
