@@ -198,6 +198,8 @@ gnss_err_min_velocity_share = 0.5  # the error states only when at least this sh
 coast_acc_psd = 1.0      # no odometer, GNSS outage: zero-acceleration rows with r = this / T (m^2/s^3; 0: off),
                          #   as [fkf] coast_acc_psd: the CS model's mean carried the last acceleration through the
                          #   outage (one_hour seed 2, 60 s: 12 -> 106 m/s, 3 km off)
+drive_off_speed_sd_mps = 0.5  # sigma added to v_e, v_n (m/s) and a_e, a_n (m/s^2, next key) where a
+drive_off_acc_sd_mps2 = 1.0   #   standstill ends (0: not); see aekf.drive_off_var
 
 [adaptive]
 innovation_factor = false  # seed 001 adaptive factor on P(k|k-1)

@@ -69,8 +69,8 @@ P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = ran
 P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
 P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_MIN = range(20, 25)
 P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP, P_GVEL_VAR, P_WH_NIS, P_SCALE_VAR = range(25, 33)
-P_GE_VAR, P_GE_RATE, P_GE_DIST_RATE, P_COAST_Q = range(33, 37)
-N_PRM = 37
+P_GE_VAR, P_GE_RATE, P_GE_DIST_RATE, P_COAST_Q, P_OFF_VVAR, P_OFF_AVAR = range(33, 39)
+N_PRM = 39
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
@@ -1069,7 +1069,22 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
         if has_odo[k]:
             u = odo[k]
+            was_static = is_static
             is_static = standstill and u < prm[P_STATIC_SPEED]
+            if was_static and not is_static and heading_known:
+                # drive-off (aekf.drive_off_*): the stop's zero-velocity updates left v and a known
+                # to mm/s, and the record that ends it says the car moves off at an acceleration
+                # nothing has measured yet (no odometer: open sky seed 1, the forward speed ran
+                # 1.3 m/s behind for seconds, 1.6 m off).  Along the remembered heading only: the
+                # car drives off the way it faced, and an isotropic v lost the heading (positions
+                # only, open sky 0.74 -> 11.5 m)
+                ue = math.sin(psi_mem)
+                un = math.cos(psi_mem)
+                for i, j, var in ((1, 4, prm[P_OFF_VVAR]), (2, 5, prm[P_OFF_AVAR])):
+                    P[i, i] += var * ue * ue
+                    P[j, j] += var * un * un
+                    P[i, j] += var * ue * un
+                    P[j, i] = P[i, j]
             if whiten_off is None and not is_static:  # (a store to st at 100 Hz only if used)
                 st[S_WH_STATIC] = 0.0  # a new stop starts a new count of its fixes
             if is_static:

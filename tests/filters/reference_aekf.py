@@ -24,6 +24,7 @@ import numpy as np
 from gpsdr_cli.filters import kernels_aekf as kn
 from gpsdr_cli.filters.aekf import (
     coast_psd,
+    drive_off_var,
     gnss_err_states_on,
     gnss_noise,
     gnss_velocity,
@@ -121,6 +122,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         P = embed(P, m, var_b)
     prm, _ = kernel_params(params, adaptive, smooth)
     coast = coast_psd(epochs, params)
+    off_v, off_a = drive_off_var(params)
     alpha, tau_eps = prm[kn.P_ALPHA], prm[kn.P_TAU_EPS]
     sigma_a = prm[kn.P_SIGMA_A]
     st = params["standstill"]
@@ -315,7 +317,14 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             cons_w = (0, 1, 3, 4, 6, 7)  # the lateral row corrects the acceleration only
         if has_odo[k]:
             u = odo_speed[k]
+            was_static = is_static
             is_static = standstill and u < st["speed_mps"]
+            if was_static and not is_static and heading_known:  # drive-off (aekf.drive_off_*),
+                u_h = np.zeros(m)                                # along the remembered heading
+                u_a = np.zeros(m)
+                u_h[1], u_h[4] = math.sin(psi_mem), math.cos(psi_mem)
+                u_a[2], u_a[5] = u_h[1], u_h[4]
+                P = P + off_v * np.outer(u_h, u_h) + off_a * np.outer(u_a, u_a)
             if not is_static:
                 wh_static = 0
             if is_static:  # zero-velocity update (seed 004)
