@@ -330,7 +330,7 @@ def drop_stray_records(drive: Drive) -> Drive:
 def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progress | None,
               ready: Callable[[], object] | None = None,
               ) -> tuple[Epochs, FilterResult, pd.DataFrame, Any]:
-    from . import filters
+    from . import filters, lead_in
     from .align import build_epochs
 
     # build_epochs counts what it drops into the drive's SkipReport: work on a copy so
@@ -348,7 +348,12 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
                  + (" + RTS smoother" if params["filter"]["smooth"] else ""))
     if ready is not None:
         ready()  # e.g. a background compile of the kernels (gpsdr_cli.warmup) has finished
-    result = run(epochs, params)
+    # the epochs before the first fix (gyro and odometer logged before the receiver had a
+    # fix): the filter starts at the fix, the lead-in is dead-reckoned back from it
+    k_fix, from_fix = lead_in.split(epochs)
+    result = run(from_fix, params)
+    if k_fix:
+        result = lead_in.backfill(epochs, k_fix, result)
     track = track_frame(epochs, result, frame)
     if work.gnss is not None and len(work.gnss):
         shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
