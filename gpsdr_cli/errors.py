@@ -53,3 +53,7 @@ class ChecksumError(ParseError):
 
 class NoDataError(InputError):
     """A file parsed, but holds no usable records of the kind required."""
+
+
+class MissingDateError(NoDataError):
+    """An NMEA log with fixes but no date (GGA without RMC/ZDA) and none given."""

@@ -76,7 +76,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpsdr_cli.errors import ChecksumError, InputError, NoDataError, ParseError
+from gpsdr_cli.errors import ChecksumError, InputError, MissingDateError, NoDataError, ParseError
 from gpsdr_cli.io.drive import Drive, GnssFixes, SkipReport, Source
 
 __all__ = ["looks_like_nmea", "parse_nmea", "read_nmea"]
@@ -775,7 +775,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     day, meta["date_source"] = _epoch_days(parsed, epoch_sod, date)
     if day is None:
         if (e["q"][row] > 0).any():
-            raise NoDataError(name, "no date in the log (no RMC or ZDA sentence with a date); "
+            raise MissingDateError(name, "no date in the log (no RMC or ZDA sentence with a date); "
                                     "pass --date YYYY-MM-DD (the UTC date of the first fix)")
         raise NoDataError(name, "no fix and no date in the log (only no-fix epochs without "
                                 "RMC/ZDA dates)")

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
+from collections.abc import Callable
 from pathlib import Path
 
 from ..config import Params
-from ..errors import InputError, NoDataError, UsageError
+from ..errors import InputError, MissingDateError, NoDataError, UsageError
 from .csv import _parse_header, read_gyro_csv, read_odo_csv, text_problem
 from .drive import Drive
 
@@ -128,6 +129,26 @@ def share_heap_with_arrow() -> None:
         pa.set_memory_pool(pa.system_memory_pool())
 
 
+def _gps_dated_by(read_gps: Callable[[dt.date | None], Drive], dr_parts: list[Drive]) -> Drive | None:
+    """The NMEA log read with the UTC date taken from the gyro/odometer records (the day of
+    their first stamp, or the day before or after when the fixes' time of day then falls
+    more than 12 h from it: a drive across midnight); None without DR records."""
+    starts = [int(getattr(p, s).t_ns[0]) for p in dr_parts for s in ("gyro", "odo")
+              if getattr(p, s) is not None and len(getattr(p, s).t_ns)]
+    if not starts:
+        return None
+    t0 = min(starts)
+    day = dt.datetime.fromtimestamp(t0 / 1e9, dt.UTC).date()
+    part = read_gps(day)
+    if part.gnss is not None and len(part.gnss.t_ns):
+        off_days = round((int(part.gnss.t_ns[0]) - t0) / (86400 * 1e9))
+        if off_days:
+            day = day - dt.timedelta(days=off_days)
+            part = read_gps(day)
+    part.meta["date_from_dr"] = day.isoformat()
+    return part
+
+
 def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
                gyro: str | Path | None = None, odo: str | Path | None = None, params: Params,
                topics: dict[str, str] | None = None, date: dt.date | None = None,
@@ -154,18 +175,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
         warnings.extend(part.meta.get("warnings", []))
         drive.merge(part)
 
-    if gps is not None:
-        if str(gps) == "-":
-            from .nmea import read_nmea
-
-            part = read_nmea("-", date=date)
-        else:
-            part = _read_log(gps, role="GNSS input (--gps)", topics=topics, date=date,
-                             use_log_time=use_log_time)
-            part = _only(part, "gnss")
-        if part.gnss is None:
-            raise NoDataError(str(gps), "no GNSS fixes")
-        add(part)
+    dr_parts: list[Drive] = []
     for path, stream, reader, section in ((gyro, "gyro", read_gyro_csv, "gyro"),
                                           (odo, "odo", read_odo_csv, "odo")):
         if path is None:
@@ -178,6 +188,29 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
                 raise NoDataError(str(path), f"no {stream} messages in the MCAP")
         else:
             part = reader(path, params[section])
+        dr_parts.append(part)
+    if gps is not None:
+        def read_gps(day: dt.date | None) -> Drive:
+            if str(gps) == "-":
+                from .nmea import read_nmea
+
+                return read_nmea("-", date=day)
+            return _only(_read_log(gps, role="GNSS input (--gps)", topics=topics, date=day,
+                                   use_log_time=use_log_time), "gnss")
+
+        try:
+            part = read_gps(date)
+        except MissingDateError:
+            # GGA without RMC/ZDA: the gyro/odometer files carry full UTC stamps
+            part = None if str(gps) == "-" else _gps_dated_by(read_gps, dr_parts)  # stdin: read once
+            if part is None:
+                raise
+            warnings.append(f"{gps}: no date in the log; took {part.meta['date_from_dr']} "
+                            "from the gyro/odometer time stamps (give --date to override)")
+        if part.gnss is None:
+            raise NoDataError(str(gps), "no GNSS fixes")
+        add(part)
+    for part in dr_parts:
         add(part)
     if log is not None:
         add(_read_log(log, role="LOG", topics=topics, date=date, use_log_time=use_log_time))
