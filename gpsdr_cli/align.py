@@ -1,13 +1,24 @@
 """Merge a drive's streams into one time-ordered epoch sequence for the filters.
 
 An *epoch* is one distinct time stamp at which at least one stream has a
-record.  Each stream is first shifted by its time offset (``[time]`` section:
-``t_true = t_logged + offset``), then cleaned: non-finite values and records
-whose time is not later than every earlier record of the same stream
-(duplicates, steps backwards) are dropped and counted in the drive's
-:class:`~gpsdr_cli.io.drive.SkipReport`.  Then all stamps are merged with
-``np.unique`` and each stream's values scattered onto its epochs, NaN where the
-stream has nothing.
+record.  Each stream is first cleaned (:func:`clean_times`): non-finite values
+are dropped, and of the rest the longest subsequence whose stamps strictly
+increase is kept -- a lone stamp out of line with both neighbours (one corrupt
+record, however far off), backward jitter and repeated stamps cost only
+themselves, and after a clock step back only the records overlapping the kept
+ones in time are dropped.  (Keeping only records later than the running maximum,
+as before, let one stamp 480 s late throw away the next 480 s of the stream.)
+Every drop is counted in the drive's :class:`~gpsdr_cli.io.drive.SkipReport` by
+stream, file, record and reason, and a stream that loses more than
+:data:`LOSS_WARN_SHARE` of its records gets a line in ``drive.meta["warnings"]``
+(``gpsdr fuse`` prints those).  Then each stream is shifted by its time offset
+(``[time]`` section: ``t_true = t_logged + offset``), all stamps are merged and
+each stream's values scattered onto its epochs, NaN where the stream has nothing.
+
+Why a hand-written longest increasing subsequence (a Fenwick-tree dynamic
+programme, O(n log n), numba) and not a library: numpy and scipy have none, and
+ours needs a tie-break (records close to their neighbours win).  It runs only on
+a stream that is not already in order (recognised with one ``np.diff``).
 
 Conventions: :mod:`gpsdr_cli.conventions` (int64 ns UTC, metres, ENU, yaw rate
 CCW-positive as read; the filters convert it to ``d(psi)/dt = -yaw_rate``).
@@ -15,9 +26,12 @@ CCW-positive as read; the filters convert it to ``d(psi)/dt = -yaw_rate``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
+import pandas as pd
 
 from .config import Params
 from .conventions import FIX_DR, NS_PER_S
@@ -73,26 +87,177 @@ class Epochs:
         return float(np.count_nonzero(self.has_gnss & np.isfinite(self.gnss_speed_mps))) / n_fix
 
 
+#: A stream losing more than this share of its records in cleaning gets a warning.
+LOSS_WARN_SHARE = 0.01
+#: Out-of-order records in a row up to this count are a spike or jitter; a longer
+#: run of them is reported as a clock step (the drop is the same: fewest records).
+SPIKE_MAX_RECORDS = 10
+#: SkipReport reasons (after ``"<stream>: "``) of :func:`clean_times`
+REASON_DUPLICATE = "duplicate timestamp"
+REASON_SPIKE = "time stamp out of line with its neighbours (a lone spike or jitter; dropped by itself)"
+REASON_STEP = (f"time stamps out of order for more than {SPIKE_MAX_RECORDS} records in a row (clock "
+               "stepped back; the records overlapping the kept ones in time dropped)")
+
+
+def _heaviest_increasing_py(rank: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Mask of the strictly increasing (in ``rank``) subsequence of largest total ``weight``.
+
+    Dynamic programme over a Fenwick tree of prefix maxima: ``best[i]`` = weight[i] +
+    the best chain ending at a smaller rank, found in O(log n).  A later record replaces
+    a node only with a strictly larger chain weight, so of equal chains the earlier one
+    stays (the first of equal stamps wins).  Compiled with numba by :func:`_kernel`.
+    """
+    n = len(rank)
+    m = int(rank.max()) + 1 if n else 0
+    tree_val = np.full(m + 1, -1.0)
+    tree_idx = np.full(m + 1, -1, np.int64)
+    best = np.zeros(n)
+    prev = np.full(n, -1, np.int64)
+    for i in range(n):
+        # prefix maximum over ranks < rank[i] (tree positions 1 .. rank[i])
+        v, j, pos = 0.0, -1, rank[i]
+        while pos > 0:
+            if tree_val[pos] > v:
+                v, j = tree_val[pos], tree_idx[pos]
+            pos -= pos & -pos
+        best[i] = v + weight[i]
+        prev[i] = j
+        pos = rank[i] + 1
+        while pos <= m:
+            if best[i] > tree_val[pos]:
+                tree_val[pos] = best[i]
+                tree_idx[pos] = i
+            pos += pos & -pos
+    keep = np.zeros(n, np.bool_)
+    if n == 0:
+        return keep
+    i = int(np.argmax(best))
+    while i >= 0:
+        keep[i] = True
+        i = prev[i]
+    return keep
+
+
+@lru_cache(maxsize=1)
+def _kernel() -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """The numba-compiled :func:`_heaviest_increasing_py` (imported only when a stream is out
+    of order: numba costs nothing to a drive whose stamps are in order)."""
+    from numba import njit
+
+    return njit(cache=True)(_heaviest_increasing_py)
+
+
+def increasing_subsequence(t: np.ndarray) -> np.ndarray:
+    """Mask of a longest strictly increasing subsequence of ``t`` (the fewest records dropped).
+
+    Among the longest, the one whose records lie closest to their neighbours: each record
+    weighs 1 plus a tie-break below 1/n that shrinks with its distance from the median
+    stamp of the five records around it (in read order), in units of the stream's median
+    step.  Without it a lone stamp 480 s early at the start ``[t0, t0 - 480 s, t1, ...]``
+    could be kept in place of ``t0`` (both give the same count).  Of equal stamps the
+    first stays.
+    """
+    t = np.asarray(t, np.int64)
+    n = len(t)
+    if n < 2:
+        return np.ones(n, bool)
+    rel = (t - t.min()).astype(float)
+    med = pd.Series(rel).rolling(5, center=True, min_periods=1).median().to_numpy()
+    steps = np.diff(np.sort(rel))
+    steps = steps[steps > 0]
+    step = float(np.median(steps)) if len(steps) else 1.0
+    in_line = 1.0 / (1.0 + np.abs(rel - med) / step)          # 1 on the line, -> 0 far off it
+    weight = 1.0 + in_line / (n + 1.0)                         # the count always dominates
+    rank = np.unique(t, return_inverse=True)[1].astype(np.int64)
+    return np.asarray(_kernel()(rank, weight), bool)
+
+
+def _iso(t_ns: int) -> str:
+    return pd.Timestamp(int(t_ns), unit="ns", tz="UTC").isoformat()
+
+
 def clean_times(t_ns: np.ndarray, finite: np.ndarray, name: str,
-                report: SkipReport) -> np.ndarray:
-    """Indices of records to keep: finite values, strictly increasing time (first wins)."""
-    n = len(t_ns)
-    bad = ~finite
-    report.add(f"{name}: non-finite value", name, int(bad.sum()))
+                report: SkipReport, source: str = "") -> np.ndarray:
+    """Indices of the records to keep, ascending: finite values whose stamps form a longest
+    strictly increasing subsequence of the stream (first of equal stamps wins).
+
+    Drops are counted in ``report`` by reason -- ``non-finite value``; of runs of at
+    most :data:`SPIKE_MAX_RECORDS` dropped records in a row, ``duplicate timestamp``
+    (equal to a kept record's) and ``time stamp out of line with its neighbours`` (a
+    corrupt stamp, jitter); longer runs ``time stamps out of order`` (the clock stepped
+    back; the records overlapping the kept ones in time go) -- each with the first place:
+    ``source`` (the file), the stream's record number (1-based, in read order), its
+    stamp and how far it lies from the kept record before it.
+    """
+    t_ns = np.asarray(t_ns, np.int64)
+    bad = ~np.asarray(finite, bool)
+    where = f"{source}: " if source else ""
+
+    def place(i: int, ref: int | None = None) -> str:
+        off = "" if ref is None else f", {(int(t_ns[i]) - int(t_ns[ref])) / NS_PER_S:+.3f} s " \
+            "from the kept record before it"
+        return f"{where}{name} record {i + 1} ({_iso(t_ns[i])}{off})"
+
+    if bad.any():
+        report.add(f"{name}: non-finite value", place(int(np.flatnonzero(bad)[0])), int(bad.sum()))
     idx = np.flatnonzero(~bad)
     t = t_ns[idx]
-    if len(t) == 0:
+    if len(t) < 2 or bool(np.all(np.diff(t) > 0)):
         return idx
-    prev_max = np.maximum.accumulate(t)
+    # a stamp repeating the record just before it is a duplicate whatever the rest does:
+    # the first stays (the subsequence's tie-break could otherwise pick either)
     keep = np.ones(len(t), bool)
-    keep[1:] = t[1:] > prev_max[:-1]
-    dup = ~keep.copy()
-    dup[1:] &= t[1:] == prev_max[:-1]
-    report.add(f"{name}: duplicate timestamp", name, int(dup.sum()))
-    report.add(f"{name}: timestamp earlier than a previous record", name,
-               int((~keep).sum() - dup.sum()))
-    del n
+    keep[1:] = t[1:] != t[:-1]
+    rest = np.flatnonzero(keep)
+    keep[rest] = increasing_subsequence(t[rest])
+    dropped = np.flatnonzero(~keep)
+    kept_t = t[keep]
+    pos = np.searchsorted(kept_t, t[dropped])
+    dup = (pos < len(kept_t)) & (kept_t[np.minimum(pos, len(kept_t) - 1)] == t[dropped])
+    # the kept record before each dropped one (in read order), for the report
+    last_kept = np.maximum.accumulate(np.where(keep, np.arange(len(t)), -1))
+    # runs of consecutive dropped records (read order), duplicates included
+    run_id = np.cumsum(np.concatenate(([1], np.diff(dropped) != 1)))
+    run_len = np.bincount(run_id)[run_id]
+    step = run_len > SPIKE_MAX_RECORDS  # a clock step back: even stamps equal to kept ones
+    dup &= ~step
+    spike = ~dup & ~step
+    for mask, reason in ((dup, REASON_DUPLICATE), (spike, REASON_SPIKE), (step, REASON_STEP)):
+        if mask.any():
+            j = int(dropped[np.flatnonzero(mask)[0]])
+            ref = int(last_kept[j]) if last_kept[j] >= 0 else None
+            report.add(f"{name}: {reason}", place(int(idx[j]), None if ref is None else int(idx[ref])),
+                       int(mask.sum()))
     return idx[keep]
+
+
+def stream_source(drive: Drive, name: str) -> str:
+    """The file that supplied stream ``name`` (its Source path), or ``""`` when unknown."""
+    named = [s.path for s in drive.sources if name in s.streams]
+    if named:
+        return named[0]
+    unnamed = [s.path for s in drive.sources if not s.streams]
+    return unnamed[0] if len(unnamed) == 1 else ""
+
+
+def _clean_stream(drive: Drive, name: str, t_ns: np.ndarray, finite: np.ndarray) -> np.ndarray:
+    """:func:`clean_times` on one of the drive's streams, counted in ``drive.skipped``; a
+    line in ``drive.meta["warnings"]`` when it loses more than :data:`LOSS_WARN_SHARE` of
+    its records (added once, however often the drive is aligned)."""
+    source = stream_source(drive, name)
+    report = SkipReport()
+    keep = clean_times(t_ns, finite, name, report, source)
+    drive.skipped.merge(report)
+    n, lost = len(t_ns), len(t_ns) - len(keep)
+    if n and lost > LOSS_WARN_SHARE * n:
+        why = "; ".join(f"{c} {r.split(': ', 1)[1]}, first {report.first[r]}"
+                        for r, c in report.counts.items())
+        msg = (f"{source or '<input>'}: {name}: {lost} of {n} records ({100.0 * lost / n:.1f} %) "
+               f"dropped while ordering the time stamps: {why}")
+        warnings = drive.meta.setdefault("warnings", [])
+        if msg not in warnings:
+            warnings.append(msg)
+    return keep
 
 
 def base_sigma(sigma_e: np.ndarray, sigma_n: np.ndarray, hdop: np.ndarray,
@@ -110,14 +275,13 @@ def base_sigma(sigma_e: np.ndarray, sigma_n: np.ndarray, hdop: np.ndarray,
 def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epochs:
     """Clean, shift, project and merge the drive's streams into :class:`Epochs`."""
     tp = params["time"]
-    rep = drive.skipped
     parts: list[np.ndarray] = []
 
     gnss_t = np.zeros(0, np.int64)
     g_rec: dict[str, np.ndarray] = {}
     if drive.gnss is not None and len(drive.gnss):
         g = drive.gnss
-        keep = clean_times(g.t_ns, np.ones(len(g), bool), "gnss", rep)
+        keep = _clean_stream(drive, "gnss", g.t_ns, np.ones(len(g), bool))
         gnss_t = g.t_ns[keep] + np.int64(round(tp["gnss_offset_s"] * NS_PER_S))
         q = g.fix_quality[keep]
         usable = g.valid[keep] & (q >= params["gnss"]["min_fix_quality"])
@@ -136,7 +300,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     gyro_t = np.zeros(0, np.int64)
     if drive.gyro is not None and len(drive.gyro):
         y = drive.gyro
-        keep = clean_times(y.t_ns, np.isfinite(y.yaw_rate_radps), "gyro", rep)
+        keep = _clean_stream(drive, "gyro", y.t_ns, np.isfinite(y.yaw_rate_radps))
         gyro_t = y.t_ns[keep] + np.int64(round(tp["gyro_offset_s"] * NS_PER_S))
         gyro_v = y.yaw_rate_radps[keep]
         parts.append(gyro_t)
@@ -144,7 +308,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     odo_t = np.zeros(0, np.int64)
     if drive.odo is not None and len(drive.odo):
         o = drive.odo
-        keep = clean_times(o.t_ns, np.isfinite(o.speed_mps), "odo", rep)
+        keep = _clean_stream(drive, "odo", o.t_ns, np.isfinite(o.speed_mps))
         odo_t = o.t_ns[keep] + np.int64(round(tp["odo_offset_s"] * NS_PER_S))
         odo_v = o.speed_mps[keep]
         parts.append(odo_t)
