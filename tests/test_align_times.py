@@ -13,8 +13,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gpsdr_cli import config
-from gpsdr_cli.align import (REASON_DUPLICATE, REASON_SPIKE, REASON_STEP, build_epochs,
-                             clean_times, increasing_subsequence)
+from gpsdr_cli.align import (
+    REASON_DUPLICATE,
+    REASON_SPIKE,
+    REASON_STEP,
+    build_epochs,
+    clean_times,
+    increasing_subsequence,
+)
 from gpsdr_cli.conventions import NS_PER_S
 from gpsdr_cli.io.drive import Drive, Odometry, SkipReport, Source, YawRates
 
