@@ -20,10 +20,16 @@ Segments
     flag; ``static``: the track's ``static`` flag (standstill detected).  Plus one
     row per GNSS outage, ``outage_<i>`` (i = 1, 2, ... in time order), with
     ``duration_s`` (from the last epoch before the outage to its last epoch),
-    ``distance_m`` (driven meanwhile: along the reference where it covers the
-    outage, else along the fused track), ``end_error_m`` (error at the outage's
-    last epoch, before the returning fix is applied) and
-    ``end_error_pct_distance``.
+    ``distance_m`` (driven meanwhile, step by step along the reference where it
+    covers both epochs of a step, else along the fused track), ``end_error_m``
+    (error at the outage's last epoch that the reference covers, before the
+    returning fix is applied; that epoch's time is ``end_error_utc`` -- earlier
+    than ``end_utc`` when the outage runs past the end of the reference, as a drive
+    whose GNSS stops before the log does) and ``end_error_pct_distance`` (the end
+    error over the distance driven from the last fix to that epoch).  An outage
+    that begins before the reference does is measured the same way: its end
+    error needs only the reference at its end, its distance falls back to the
+    fused track where the reference is missing.
 Without a reference (and always)
     ``nis_in_95_share``: share of 2-dof GNSS updates whose NIS is inside the 95 %
     chi-square bound 5.991; ``gnss_separation_rmse_m``: RMS of |GNSS fix -
@@ -222,7 +228,8 @@ def error_statistics(track: pd.DataFrame, reference_en: pd.DataFrame | None, fil
     """The statistics table: one row per segment, then one per GNSS outage.
 
     Columns: :data:`gpsdr_cli.conventions.STATS_COLUMNS` plus ``error_epochs`` (epochs
-    the reference covers) and ``start_utc``/``end_utc`` strings for outage rows.
+    the reference covers) and ``start_utc``/``end_utc``/``end_error_utc`` strings for
+    outage rows (``end_error_utc``: the epoch ``end_error_m`` is taken at).
     """
     m = len(track)
     t = _t_ns_of(track, "track")
@@ -279,7 +286,7 @@ def error_statistics(track: pd.DataFrame, reference_en: pd.DataFrame | None, fil
         vals = np.array(pd.to_numeric(out[col], errors="coerce").to_numpy(dtype=float, na_value=np.nan))
         vals[~np.isfinite(vals)] = np.nan
         out[col] = pd.array(vals, dtype="Float64")  # NaN -> <NA>: a Parquet null
-    for col in ("start_utc", "end_utc"):
+    for col in ("start_utc", "end_utc", "end_error_utc"):
         if col not in out:
             out[col] = None
         out[col] = out[col].astype("string")
@@ -295,34 +302,56 @@ def _bool_col(track: pd.DataFrame, name: str, m: int) -> np.ndarray:
 
 def _outage_row(k: int, i0: int, i1: int, t: np.ndarray, e: np.ndarray, n: np.ndarray,
                 errs: pd.DataFrame | None, filter_name: str) -> dict[str, Any]:
+    """The ``outage_<k>`` row of the outage at epochs ``i0 .. i1`` (see the module docstring).
+
+    The end error is read at the last epoch of the outage whose error is known (the
+    reference covers it), not blindly at ``i1``: an outage that runs to the end of the
+    log usually outlasts the reference, and would otherwise have no end error at all.
+    """
     start = i0 - 1 if i0 > 0 else i0  # the last epoch before the outage (last fix)
     duration = (t[i1] - t[start]) / NS_PER_S
-    sl = slice(start, i1 + 1)
     row: dict[str, Any] = {"filter": filter_name, "segment": f"outage_{k}", "epochs": i1 - i0 + 1,
                            "duration_s": float(duration),
                            "start_utc": pd.Timestamp(int(t[i0]), unit="ns", tz="UTC").isoformat(),
                            "end_utc": pd.Timestamp(int(t[i1]), unit="ns", tz="UTC").isoformat()}
-    dist = np.nan
-    if errs is not None:
-        valid = errs["ref_valid"].to_numpy()[sl]
-        if valid.all():
-            dist = _path_length(errs["ref_e"].to_numpy()[sl], errs["ref_n"].to_numpy()[sl])
-        d = errs["err_m"].to_numpy()[i0:i1 + 1]
-        s = summarise(d)
-        row.update({kk: v for kk, v in s.items() if kk != "count"})
-        row["error_epochs"] = s["count"]
-        row["along_rmse_m"] = _rms(errs["along_m"].to_numpy()[i0:i1 + 1])
-        row["cross_rmse_m"] = _rms(errs["cross_m"].to_numpy()[i0:i1 + 1])
-        end = float(errs["err_m"].to_numpy()[i1])
+    if errs is None:
+        row["distance_m"] = _path_length(e[start:i1 + 1], n[start:i1 + 1])
+        return row
+    err = errs["err_m"].to_numpy()
+    valid = errs["ref_valid"].to_numpy(bool) & np.isfinite(err)
+    ref_e, ref_n = errs["ref_e"].to_numpy(), errs["ref_n"].to_numpy()
+    row["distance_m"] = _mixed_path_length(e, n, ref_e, ref_n, valid, start, i1)
+    s = summarise(err[i0:i1 + 1])
+    row.update({kk: v for kk, v in s.items() if kk != "count"})
+    row["error_epochs"] = s["count"]
+    row["along_rmse_m"] = _rms(errs["along_m"].to_numpy()[i0:i1 + 1])
+    row["cross_rmse_m"] = _rms(errs["cross_m"].to_numpy()[i0:i1 + 1])
+    covered = np.flatnonzero(valid[i0:i1 + 1])
+    if len(covered):
+        i_end = i0 + int(covered[-1])
+        end = float(err[i_end])
         row["end_error_m"] = end
-        if not np.isfinite(dist):
-            dist = _path_length(e[sl], n[sl])
-        if np.isfinite(end) and np.isfinite(dist) and dist >= 1.0:
+        row["end_error_utc"] = pd.Timestamp(int(t[i_end]), unit="ns", tz="UTC").isoformat()
+        dist = _mixed_path_length(e, n, ref_e, ref_n, valid, start, i_end)
+        if np.isfinite(dist) and dist >= 1.0:
             row["end_error_pct_distance"] = 100.0 * end / dist
-    else:
-        dist = _path_length(e[sl], n[sl])
-    row["distance_m"] = dist
     return row
+
+
+def _mixed_path_length(e: np.ndarray, n: np.ndarray, ref_e: np.ndarray, ref_n: np.ndarray,
+                       ref_valid: np.ndarray, i0: int, i1: int) -> float:
+    """Distance (m) driven from epoch ``i0`` to ``i1``: each step along the reference where it
+    covers both ends of the step, else along the fused track; NaN with fewer than two epochs
+    or a step neither covers."""
+    if i1 <= i0:
+        return np.nan
+    sl = slice(i0, i1 + 1)
+    ok = ref_valid[sl]
+    both = ok[1:] & ok[:-1]
+    d_ref = np.hypot(np.diff(ref_e[sl]), np.diff(ref_n[sl]))
+    d_trk = np.hypot(np.diff(e[sl]), np.diff(n[sl]))
+    step = np.where(both, d_ref, d_trk)
+    return float(np.sum(step)) if np.all(np.isfinite(step)) else np.nan
 
 
 __all__ = ["CHI2_2DOF_95", "SEGMENTS", "error_statistics", "gnss_only_errors",
