@@ -97,7 +97,7 @@ ticks_per_m = 0.0        # required for kind = ticks
 time = "posix"
 start_posix_s = 0.0
 noise_sd_mps = 0.1       # speed sigma; distance sigma over T is noise_sd_mps x T (seed 000: 0.1)
-scale_init_sd = 0.1      # initial sigma of the scale factor k_s (covers a 5 % error)
+scale_init_sd = 0.05     # initial sigma of the scale factor k_s: a wheel odometer is within a few %
 scale_rw_sd = 0.0001     # random-walk sigma of k_s per sqrt(s)
 max_speed_mps = 100.0    # ekf/aekf: a reading beyond this is a glitch, treated as missing
 

@@ -101,3 +101,34 @@ def test_without_an_odometer_outages_coast_at_the_entry_speed(tunnels_no_odo, na
     old, old_info = _rmse_m(sim, drive, name, False, coast_acc_psd=0.0)
     assert old_info["coast_epochs"] == 0
     assert old > 4 * COAST_RMSE_BOUND_M, f"{name} without coasting: {old:.1f} m"
+
+
+def test_a_positions_only_start_takes_its_heading_from_a_chord(open_sky) -> None:
+    """10-Hz positions only: the first velocity is the odometer's speed along the chord to
+    a fix >= max(5 m, 4 sigma) away (aekf.chord_velocity), not the 0.1-s difference of two
+    fixes (sigma tens of m/s)."""
+    import dataclasses
+    import math
+
+    from gpsdr_cli.filters import aekf
+
+    p = config.defaults()
+    d = _positions_only(open_sky)
+    t_cut = int(d.gnss.t_ns[0]) + 30 * 10**9           # 30 s in: moving (the drives start parked)
+    for name in ("gnss", "gyro", "odo"):
+        s = getattr(d, name)
+        keep = s.t_ns >= t_cut
+        setattr(d, name, dataclasses.replace(s, **{
+            f.name: getattr(s, f.name)[keep] for f in dataclasses.fields(s)
+            if isinstance(getattr(s, f.name), np.ndarray) and len(getattr(s, f.name)) == len(keep)}))
+    ep = build_epochs(d, open_sky.frame, p)
+    x0, P0, psi0, known = aekf.initial_state(ep, p)
+    t = open_sky.truth
+    k = np.flatnonzero(ep.has_gnss)[0]
+    ve = float(np.interp(ep.t_ns[k], t["t_ns"], t["v_e"]))
+    vn = float(np.interp(ep.t_ns[k], t["t_ns"], t["v_n"]))
+    assert known
+    assert abs(math.hypot(x0[1], x0[4]) - math.hypot(ve, vn)) < 1.0    # m/s (odometer scale 2 %)
+    d_psi = math.degrees(abs(math.remainder(psi0 - math.atan2(ve, vn), 2 * math.pi)))
+    assert d_psi < 5.0                                                               # deg
+    assert math.sqrt(P0[1, 1] + P0[4, 4]) < 4.0   # m/s (two fixes 0.2 s apart: about 10 m/s)
