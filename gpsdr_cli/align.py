@@ -222,12 +222,21 @@ def clean_times(t_ns: np.ndarray, finite: np.ndarray, name: str,
     step = run_len > SPIKE_MAX_RECORDS  # a clock step back: even stamps equal to kept ones
     dup &= ~step
     spike = ~dup & ~step
-    for mask, reason in ((dup, REASON_DUPLICATE), (spike, REASON_SPIKE), (step, REASON_STEP)):
+    for mask, reason in ((dup, REASON_DUPLICATE), (spike, REASON_SPIKE)):
         if mask.any():
             j = int(dropped[np.flatnonzero(mask)[0]])
             ref = int(last_kept[j]) if last_kept[j] >= 0 else None
             report.add(f"{name}: {reason}", place(int(idx[j]), None if ref is None else int(idx[ref])),
                        int(mask.sum()))
+    if step.any():
+        # the first clock step: its largest step back among the dropped run and its edges
+        run = dropped[run_id == run_id[np.flatnonzero(step)[0]]]
+        lo, hi = max(int(run[0]), 1), min(int(run[-1]) + 1, len(t) - 1)
+        k = lo + int(np.argmin(np.diff(t[lo - 1:hi + 1])))
+        report.add(f"{name}: {REASON_STEP}",
+                   f"{where}{name} record {idx[k] + 1} ({_iso(t[k])}, "
+                   f"{(int(t[k]) - int(t[k - 1])) / NS_PER_S:+.3f} s after the record before it)",
+                   int(step.sum()))
     return idx[keep]
 
 
@@ -250,7 +259,8 @@ def _clean_stream(drive: Drive, name: str, t_ns: np.ndarray, finite: np.ndarray)
     drive.skipped.merge(report)
     n, lost = len(t_ns), len(t_ns) - len(keep)
     if n and lost > LOSS_WARN_SHARE * n:
-        why = "; ".join(f"{c} {r.split(': ', 1)[1]}, first {report.first[r]}"
+        lead = f"{source}: "
+        why = "; ".join(f"{c} {r.split(': ', 1)[1]}, first {report.first[r].removeprefix(lead)}"
                         for r, c in report.counts.items())
         msg = (f"{source or '<input>'}: {name}: {lost} of {n} records ({100.0 * lost / n:.1f} %) "
                f"dropped while ordering the time stamps: {why}")

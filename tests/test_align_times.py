@@ -91,6 +91,8 @@ def test_a_clock_step_back_drops_only_the_overlap_and_warns() -> None:
     assert np.all(np.diff(ep.t_ns) > 0)
     assert ep.t_ns[-1] == after[-1]                  # the drive after the step is all there
     assert drive.skipped.counts[f"gyro: {REASON_STEP}"] == lost
+    where = drive.skipped.first[f"gyro: {REASON_STEP}"]
+    assert where.startswith("logs/gyro.csv: gyro record 1001 (") and "-1.995 s after" in where
     (msg,) = drive.meta["warnings"]
     assert msg.startswith(f"logs/gyro.csv: gyro: {lost} of 4000 records (5.0 %) dropped")
     build_epochs(drive, None, config.defaults())     # aligning again adds no second warning
