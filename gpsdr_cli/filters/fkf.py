@@ -206,6 +206,14 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     too, since a log post-processor knows both ends.  A complementary filter:
     the gyro keeps the short-term heading, the course removes the integrated
     gyro bias (a 4 deg/s bias otherwise outruns the random walk q_w).
+
+    Each window's mean belongs to the mean time of the fixes in it, not to the
+    fix it is centred on: next to a GNSS outage the window is one-sided, and a
+    gyro bias makes ``d`` a ramp, so the mean placed at the fix lagged it.
+    comma2k19 with its uncalibrated gyro (bias about -4 deg/s) and a 20-s
+    outage: the correction at the last fix before it was -66.6 deg where -77.4
+    was due, 2.5 s of lag, and fkf ended the outage 35.9 m off (10.8 % of the
+    distance; ekf 3.2 m); placed at the mean time, 2.7 m.
     """
     fp = params["fkf"]
     window = fp["heading_course_window_s"]
@@ -220,8 +228,13 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     half = np.minimum(0.5 * window, np.minimum(tk - tk[0], tk[-1] - tk))
     lo = np.searchsorted(tk, tk - half, side="left")
     hi = np.searchsorted(tk, tk + half, side="right")
-    d_mean = (c[hi] - c[lo]) / (hi - lo)     # centred average, shrinking at the ends: no lag
-    return np.interp(tg, tk, d_mean)
+    d_mean = (c[hi] - c[lo]) / (hi - lo)     # centred average, shrinking at the ends
+    ct = np.concatenate(([0.0], np.cumsum(tk - tk[0])))
+    t_mean = tk[0] + (ct[hi] - ct[lo]) / (hi - lo)  # ... at its fixes' mean time: no lag on a ramp
+    # lo and hi never decrease with k, so neither does t_mean; equal times (a window
+    # that did not move) keep their first mean
+    keep = np.concatenate(([True], np.diff(t_mean) > 0.0))
+    return np.interp(tg, t_mean[keep], d_mean[keep])
 
 
 @dataclass
