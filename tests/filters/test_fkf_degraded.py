@@ -5,6 +5,10 @@
   window's mean course-minus-gyro at the fix it is centred on; next to an outage the
   window is one-sided and the bias ramp made the mean lag it (comma2k19, 20-s outage:
   fkf 35.9 m off at its end).  Now each mean sits at its fixes' mean time.
+* An odometer and no gyro across a GNSS outage: nothing measured the direction and the
+  heading ran off (comma2k19: 2.6 -> 59.6 deg on a straight road, 98.8 m off);
+  :func:`gpsdr_cli.filters.fkf.outage_headings` gives heading rows from the course at
+  both ends of the outage.
 
 Simulated drives with truth (:func:`gpsdr_cli.simulate.simulate_drive`), 300 s of the
 ``tunnels`` scenario: a 30-s straight tunnel and a 60-s one that holds a 69-deg curve.
@@ -19,7 +23,8 @@ import numpy as np
 import pytest
 
 from gpsdr_cli import config, filters
-from gpsdr_cli.align import build_epochs
+from gpsdr_cli.align import build_epochs, outage_mask
+from gpsdr_cli.conventions import NS_PER_S
 from gpsdr_cli.filters import fkf
 from gpsdr_cli.simulate import simulate_drive
 
@@ -31,6 +36,13 @@ GYRO_BIAS_DEGPS = -2.0
 BIASED_OUTAGE_END_M = 5.0
 #: m: RMSE over the drive with that bias, forward (new code 0.59 m, old 17.44 m)
 BIASED_RMSE_M = 2.0
+#: m: end error of the 30-s straight tunnel without a gyro, forward and RTS (new code
+#: 1.64 / 0.46 m, old 211.5 m both)
+NO_GYRO_STRAIGHT_END_M = 5.0
+#: m: RMSE over the drive without a gyro (new code 33.3 m, old 318 m; through the 60-s
+#: curve the heading is linear between its ends, 150 m off at its end: 1.3 km without a
+#: gyro)
+NO_GYRO_RMSE_M = 60.0
 
 
 @pytest.fixture(scope="module")
@@ -84,3 +96,46 @@ def test_course_correction_has_no_lag_at_a_gap():
     np.testing.assert_allclose(corr[edges], need[edges], atol=math.radians(0.1))
     # across the gap too: a ramp is interpolated exactly
     np.testing.assert_allclose(corr[~has], need[~has], atol=math.radians(0.1))
+
+
+@pytest.mark.parametrize("name", ["fkf", "fafkf"])
+@pytest.mark.parametrize("smooth", [False, True])
+def test_no_gyro_straight_outage(tunnels, name, smooth):
+    drive = copy.deepcopy(tunnels.drive)
+    drive.gyro = None
+    r, ep, err, ends = _run(tunnels, drive, name, smooth)
+    assert len(ends) == 2
+    t_s = (ep.t_ns - ep.t_ns[0]) / NS_PER_S
+    assert t_s[ends[0]] < 150.0                               # the 30-s straight tunnel first
+    assert err[ends[0]] < NO_GYRO_STRAIGHT_END_M, f"{name} smooth={smooth}: {err[ends]} m"
+    assert float(np.sqrt(np.mean(err ** 2))) < NO_GYRO_RMSE_M
+    assert r.info["heading_updates"] > 0
+
+
+def test_outage_headings_interpolate_straight_outages_only():
+    """Heading rows only inside outages, the two end courses interpolated; none across a
+    90-deg junction turn in 5 s (18 deg/s), nor with only one end."""
+    t = np.arange(0.0, 60.0, 0.01)                            # s, 100 Hz epochs
+    n = len(t)
+    has = np.zeros(n, bool)
+    has[::10] = True                                          # fixes at 10 Hz
+    has &= ~(((t >= 10.0) & (t < 20.0)) | ((t >= 30.0) & (t < 35.0)) | (t >= 50.0))
+    course = np.where(t < 15.0, math.radians(10.0), math.radians(14.0))   # a 4-deg bend
+    course = np.where(t >= 32.0, math.radians(104.0), course)            # a 90-deg turn
+    ep = type("E", (), {})()
+    ep.has_gnss = has
+    ep.gnss_course_rad = np.where(has, course, np.nan)
+    ep.gnss_speed_mps = np.where(has, 15.0, np.nan)
+    ep.gnss_outage = outage_mask((t * NS_PER_S).astype(np.int64),
+                                 (t[has] * NS_PER_S).astype(np.int64), 1.5)
+    o = np.arange(n)                                          # an odometer record each epoch
+    use, value = fkf.outage_headings(ep, t, o, config.defaults())
+    assert np.all((t[use] >= 9.9) & (t[use] < 20.0))          # the first outage only
+    assert len(use) == pytest.approx(100, abs=2)              # every 0.1 s for 10 s
+    # the two end courses (means over the fixes within 1 s of the outage), linear in time
+    out = np.flatnonzero(ep.gnss_outage & (t < 25.0))
+    ta, tb = t[out[0]], t[out[-1]]
+    t1 = np.mean(t[has & (t < ta) & (t >= ta - 1.0)])
+    t2 = np.mean(t[has & (t > tb) & (t <= tb + 1.0)])
+    expected = math.radians(10.0) + math.radians(4.0) * (t[use] - t1) / (t2 - t1)
+    np.testing.assert_allclose(value, expected, atol=1e-9)
