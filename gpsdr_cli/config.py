@@ -128,6 +128,9 @@ drift_mean_decay = false # true: the gyro drift's mean decays as exp(-T/tau) (se
                          #   mean is held (a turn-on bias does not fade in an outage), covariance stays Gauss-Markov
 drift_consider = "outage"  # never | outage | always: the yaw-rate and odometer updates do not correct the drift
                          #   (Schmidt consider state; Joseph keeps P exact) so sustained turns cannot leak into it
+odo_consider = "outage"  # never | outage | always: the odometer row corrects neither k_s nor the position
+                         #   (consider states; in an outage nothing else measures the speed: gyro + odometer
+                         #   alone on comma2k19 walked k_s 1.00 -> 1.15 and the position 153 m off; 37 m now)
 heading_consider = false # in outages the yaw-rate update does not correct the velocity either: removes the EKF's
                          #   spurious heading information (120 s tunnel: 260 -> 80 m) but cannot follow sharp turns
 turn_propagation = true  # our choice: the prediction turns v and a by the gyro's heading increment

@@ -386,6 +386,10 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
         raise ConfigError(f"aekf.drift_consider = {a['drift_consider']!r}: expected one of "
                           f"{', '.join(modes)}")
     flg[kn.F_DRIFT_CONSIDER] = modes[a["drift_consider"]]
+    if a["odo_consider"] not in modes:
+        raise ConfigError(f"aekf.odo_consider = {a['odo_consider']!r}: expected one of "
+                          f"{', '.join(modes)}")
+    flg[kn.F_ODO_CONSIDER] = modes[a["odo_consider"]]
     flg[kn.F_HEADING_CONSIDER] = int(a["heading_consider"])
     flg[kn.F_TURN] = int(a["turn_propagation"])
     flg[kn.F_ODO_ALONG] = int(a["odo_along_track"])

@@ -74,8 +74,8 @@ N_PRM = 39
 # indices into the integer flag vector ``flg``
 F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
-F_HEADING_FLOOR, F_LATERAL_ACC, F_WHITEN, F_ZUPT_POS, F_GE = 14, 15, 16, 17, 18
-N_FLG = 19
+F_HEADING_FLOOR, F_LATERAL_ACC, F_WHITEN, F_ZUPT_POS, F_GE, F_ODO_CONSIDER = 14, 15, 16, 17, 18, 19
+N_FLG = 20
 #: values of flg[F_TURN_OMEGA] (the seed 000 yaw-rate row when aekf.turn_propagation is on)
 OMEGA_SKIP, OMEGA_LATERAL = 0, 1
 #: values of flg[F_GATE_MODE] (gnss.gate_mode)
@@ -114,6 +114,7 @@ NZ_ODO = np.array([1, 4, 7], np.int64)
 NZ_OMEGA = np.array([1, 2, 4, 5, 6], np.int64)
 #: consider-state bit masks: the gyro drift; the velocity (for aekf.heading_consider)
 CONS_EPS = 1 << 6
+CONS_KS = 1 << 7
 CONS_VEL = (1 << 1) | (1 << 4)
 CONS_NOT_ACC = 0xFF & ~((1 << 2) | (1 << 5))
 CONS_POS = (1 << 0) | (1 << 3)
@@ -1108,6 +1109,15 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 if use:
                     h = odo_row(x, ue, un, H)
                     cons = CONS_EPS if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else 0
+                    # in a GNSS outage the speed row corrects neither the odometer scale nor the
+                    # position (aekf.odo_consider: consider states): nothing else measures the
+                    # speed, so the innovation split between k_s and a speed the motion model lags
+                    # in every acceleration walked k_s off, and P's position-velocity correlation
+                    # moved the position with every speed innovation (comma2k19, gyro + odometer
+                    # alone: k_s 1.00 -> 1.15, 153 m max; the scale alone 203 m; both 37 m, as plain
+                    # integration of the gyro heading with the odometer speed)
+                    if flg[F_ODO_CONSIDER] == 2 or (flg[F_ODO_CONSIDER] == 1 and outage[k]):
+                        cons |= CONS_KS | CONS_POS
                     pe = ue if along_off is None else 0.0
                     pn = un if along_off is None else 0.0
                     if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons, pe, pn):

@@ -311,6 +311,9 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     x, P = joseph(x, P, unit(1, m), gv_e[k] - x[1], r_v)
                     x, P = joseph(x, P, unit(4, m), gv_n[k] - x[4], r_v)
         cons = (6,) if mode == "always" or (mode == "outage" and epochs.gnss_outage[k]) else ()
+        o_mode = params["aekf"]["odo_consider"]  # k_s and the position
+        cons_o = cons + ((0, 3, 7) if o_mode == "always" or (o_mode == "outage" and epochs.gnss_outage[k])
+                         else ())
         cons_w = cons + ((1, 4) if params["aekf"]["heading_consider"] and epochs.gnss_outage[k]
                          else ())
         if turn_on and (lat_mode == "always" or (lat_mode == "outage" and epochs.gnss_outage[k])):
@@ -345,10 +348,10 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     H[1], H[4], H[7] = x[7] * d_e, x[7] * d_n, x[1] * d_e + x[4] * d_n
                     h = x[7] * (x[1] * d_e + x[4] * d_n)
                     if params["aekf"]["odo_along_track"]:
-                        x, P = along_joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons,
+                        x, P = along_joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons_o,
                                             (d_e, d_n))
                     else:
-                        x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons)
+                        x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons_o)
         if coast > 0.0 and epochs.gnss_outage[k] and not is_static and T > 0.0:
             for i in (2, 5):  # coasting without an odometer (aekf.coast_acc_psd): a = 0 rows
                 x, P = joseph(x, P, unit(i, m), -x[i], coast / T)
