@@ -329,7 +329,9 @@ def drop_stray_records(drive: Drive) -> Drive:
 
 def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progress | None,
               ready: Callable[[], object] | None = None,
-              ) -> tuple[Epochs, FilterResult, pd.DataFrame, Any]:
+              ) -> tuple[Epochs, FilterResult, pd.DataFrame, Drive]:
+    """(epochs, result, track, the drive as processed: its ``skipped`` and ``meta["warnings"]``
+    say what aligning it dropped)."""
     from . import filters, lead_in
     from .align import build_epochs
 
@@ -358,7 +360,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     if work.gnss is not None and len(work.gnss):
         shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
         track["pdop"] = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
-    return epochs, result, track, work.skipped
+    return epochs, result, track, work
 
 
 def latest_gnss_pdop(epochs: Epochs, gnss_t_ns: np.ndarray) -> np.ndarray:
@@ -416,7 +418,8 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
                            if math.isfinite(est.stderr_s) else est.method)
         else:
             offset_note = f"not estimated ({est.reason}); kept {offset_auto:+.3f} s"
-    epochs, result, track, skipped = _run_once(drive, params, frame, progress, ready)
+    epochs, result, track, work = _run_once(drive, params, frame, progress, ready)
+    skipped = work.skipped
 
     if progress:
         progress("statistics")
@@ -431,7 +434,9 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     return FuseResult(track=track, stats=stats, frame=frame, epochs=epochs, result=result,
                       metadata=meta, reference_en=ref_en,
                       gnss_offset_s=float(params["time"]["gnss_offset_s"]), params=params,
-                      drive_warnings=[str(w) for w in drive.meta.get("warnings", [])])
+                      drive_warnings=list(dict.fromkeys(  # reading's, then aligning's, once each
+                          str(w) for w in (*drive.meta.get("warnings", []),
+                                           *work.meta.get("warnings", [])))))
 
 
 def order_stats(stats: pd.DataFrame) -> pd.DataFrame:
@@ -446,6 +451,8 @@ STATS_EXTRA_UNITS: dict[str, str] = {
     "error_epochs": "count of epochs in the segment that the reference covers",
     "start_utc": "UTC ISO 8601, start of the outage (outage rows)",
     "end_utc": "UTC ISO 8601, end of the outage (outage rows)",
+    "end_error_utc": "UTC ISO 8601, epoch end_error_m is taken at: the outage's last epoch the "
+                     "reference covers (outage rows)",
 }
 
 
