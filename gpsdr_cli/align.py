@@ -282,6 +282,34 @@ def base_sigma(sigma_e: np.ndarray, sigma_n: np.ndarray, hdop: np.ndarray,
     return np.maximum(sd_e, g["sigma_min_m"]), np.maximum(sd_n, g["sigma_min_m"])
 
 
+def flicker_zeros(t_ns: np.ndarray, speed_mps: np.ndarray, stop_mps: float, min_stop_s: float
+                  ) -> np.ndarray:
+    """Odometer records to drop: runs of readings below ``stop_mps`` (m/s) that last less than
+    ``min_stop_s`` (s, from the run's first record to the next moving one).
+
+    A wheel-tick odometer at walking pace, or one whose speed is a tick count over a short
+    window, reads 1, 0, 0, 1 m/s while the car creeps; each zero said "stopped" and fired a
+    zero-velocity update (10 ticks/m, open sky ekf 1.97 m RMSE against 0.94 m for its oracle;
+    helper-23's sweep).  A real stop lasts longer; the dropped readings are ambiguous, not
+    wrong, so they are not counted as skipped.  A run at either end of the stream is kept.
+    """
+    n = len(t_ns)
+    if n < 3 or not min_stop_s > 0.0:
+        return np.zeros(n, bool)
+    low = np.abs(speed_mps) < stop_mps
+    prev = np.concatenate(([False], low[:-1]))
+    nxt = np.concatenate((low[1:], [False]))
+    starts = np.flatnonzero(low & ~prev)             # first low record of each run
+    ends = np.flatnonzero(low & ~nxt) + 1            # first record after it (n: none)
+    inner = (starts > 0) & (ends < n)                # runs at either end are kept
+    starts, ends = starts[inner], ends[inner]
+    short = (t_ns[ends] - t_ns[starts]) / NS_PER_S < min_stop_s
+    mark = np.zeros(n + 1, np.int64)
+    np.add.at(mark, starts[short], 1)
+    np.add.at(mark, ends[short], -1)
+    return np.cumsum(mark[:n]) > 0
+
+
 def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epochs:
     """Clean, shift, project and merge the drive's streams into :class:`Epochs`."""
     tp = params["time"]
@@ -321,6 +349,9 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
         keep = _clean_stream(drive, "odo", o.t_ns, np.isfinite(o.speed_mps))
         odo_t = o.t_ns[keep] + np.int64(round(tp["odo_offset_s"] * NS_PER_S))
         odo_v = o.speed_mps[keep]
+        sp = params["standstill"]
+        flicker = flicker_zeros(odo_t, odo_v, sp["speed_mps"], sp["min_stop_s"])
+        odo_t, odo_v = odo_t[~flicker], odo_v[~flicker]
         parts.append(odo_t)
 
     t = sorted_unique(np.concatenate(parts)) if parts else np.zeros(0, np.int64)

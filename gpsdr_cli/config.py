@@ -104,6 +104,9 @@ max_speed_mps = 100.0    # ekf/aekf: a reading beyond this is a glitch, treated 
 [standstill]
 enabled = true           # zero-velocity update and held position while stopped (seed 004)
 speed_mps = 0.05         # odometer speed below this = stopped
+min_stop_s = 0.3         # ... for at least this long: shorter runs of zero readings are dropped (align.flicker_zeros;
+                         #   a wheel-tick odometer at walking pace reads 1, 0, 0, 1 m/s, and every zero fired a
+                         #   zero-velocity update: 10 ticks/m, open sky ekf 1.97 m against 0.94 for its oracle)
 zupt_sd_mps = 0.01       # sigma of the zero-velocity pseudo-measurement
 zupt_keeps_position = "outage"  # never | outage | always (ekf/aekf): the zero-velocity update does not move
                          #   the position (consider states): through P's velocity-position correlation it halved
