@@ -942,6 +942,10 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     gate = flg[F_GATE] != 0
     heading_known = st[S_HEADING_KNOWN] != 0.0
     drift_consider = flg[F_DRIFT_CONSIDER]
+    odo_consider = flg[F_ODO_CONSIDER]
+    coast_q = prm[P_COAST_Q]
+    off_vvar = prm[P_OFF_VVAR]
+    off_avar = prm[P_OFF_AVAR]
     omega_min = prm[P_OMEGA_MIN]
     sigma_a = prm[P_SIGMA_A]
     psi_mem = st[S_PSI]
@@ -1081,7 +1085,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 # only, open sky 0.74 -> 11.5 m)
                 ue = math.sin(psi_mem)
                 un = math.cos(psi_mem)
-                for i, j, var in ((1, 4, prm[P_OFF_VVAR]), (2, 5, prm[P_OFF_AVAR])):
+                for i, j, var in ((1, 4, off_vvar), (2, 5, off_avar)):
                     P[i, i] += var * ue * ue
                     P[j, j] += var * un * un
                     P[i, j] += var * ue * un
@@ -1116,7 +1120,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     # moved the position with every speed innovation (comma2k19, gyro + odometer
                     # alone: k_s 1.00 -> 1.15, 153 m max; the scale alone 203 m; both 37 m, as plain
                     # integration of the gyro heading with the odometer speed)
-                    if flg[F_ODO_CONSIDER] == 2 or (flg[F_ODO_CONSIDER] == 1 and outage[k]):
+                    if odo_consider == 2 or (odo_consider == 1 and outage[k]):
                         cons |= CONS_KS | CONS_POS
                     pe = ue if along_off is None else 0.0
                     pn = un if along_off is None else 0.0
@@ -1126,13 +1130,13 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                         for i in range(n):
                             gw[GW_H + n_rows, i] = H[i]
                         n_rows = ge_push(gw, n_rows, GW_ODO, H, PHt, prm[P_R_ODO], u - h)
-        if prm[P_COAST_Q] > 0.0 and outage[k] and not is_static and T > 0.0:
+        if coast_q > 0.0 and outage[k] and not is_static and T > 0.0:
             # coasting (aekf.coast_acc_psd; a drive without an odometer, in a GNSS outage): nothing
             # measures the speed, and the current statistical model's mean (abar = a_hat) carries
             # the last acceleration through the outage (one_hour seed 2: 12 -> 106 m/s in 60 s);
             # zero-acceleration rows with r = q_c / T (information T / q_c per step, whatever the
             # rate) hold the speed instead, as fkf's kernels_fkf coasting
-            r_c = prm[P_COAST_Q] / T
+            r_c = coast_q / T
             for idx in (2, 5):
                 y = -x[idx]
                 if not unit_update(x, P, idx, y, r_c, K, PHt, Bh, no_cons):
