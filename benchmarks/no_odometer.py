@@ -4,8 +4,8 @@
     .venv/bin/python benchmarks/no_odometer.py --scenarios tunnels --filters aekf --seeds 1
 
 Every simulated scenario (``simulate_drive(name, seed)``) with ``drive.odo = None``, each
-filter forward and smoothed through ``build_epochs`` + the registered filter (as
-``benchmarks/accuracy.py`` runs them); prints per scenario the range over the seeds of the
+filter forward and smoothed through ``build_epochs`` + the registered filter
+(:func:`gpsdr_cli.testing.sim.run_filter`, as ``benchmarks/accuracy.py`` runs them); prints per scenario the range over the seeds of the
 RMSE (m, horizontal, every epoch, against the simulator's truth), next to the fixes alone.
 ``--positions-only`` also strips the receiver's speed and course.
 """
@@ -23,25 +23,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gpsdr_cli import config, filters
-from gpsdr_cli.align import build_epochs
 from gpsdr_cli.simulate import SCENARIOS, simulate_drive
-
-
-def rmse_m(sim, drive, name: str, smooth: bool) -> tuple[float, float]:
-    """(fused RMSE, fixes-alone RMSE), metres."""
-    p = config.defaults()
-    p["filter"]["name"] = name
-    p["filter"]["smooth"] = smooth
-    ep = build_epochs(copy.deepcopy(drive), sim.frame, p)
-    r = filters.get(name)(ep, p)
-    tr = sim.truth
-    te = np.interp(ep.t_ns, tr.t_ns, tr.e)
-    tn = np.interp(ep.t_ns, tr.t_ns, tr.n)
-    fused = float(np.sqrt(np.mean((r.e - te) ** 2 + (r.n - tn) ** 2)))
-    f = ep.has_gnss
-    gnss = float(np.sqrt(np.mean((ep.gnss_e[f] - te[f]) ** 2 + (ep.gnss_n[f] - tn[f]) ** 2)))
-    return fused, gnss
+from gpsdr_cli.testing.sim import run_filter
 
 
 def span(values: list[float]) -> str:
@@ -73,8 +56,9 @@ def main() -> int:
                 drive.gnss.course_deg[:] = np.nan
             for name in names:
                 for smooth in (False, True):
-                    fused, g = rmse_m(sim, drive, name, smooth)
-                    res.setdefault((name, smooth), []).append(fused)
+                    run = run_filter(sim, drive, name, smooth)
+                    res.setdefault((name, smooth), []).append(run.rmse_m)
+                    g = run.gnss_rmse_m
             gnss.append(g)
         cells = [f"{span(res[(n, False)])} / {span(res[(n, True)])}" for n in names]
         rows.append(f"| {scen} | {span(gnss)} | " + " | ".join(cells) + " |")

@@ -22,11 +22,12 @@ import math
 import numpy as np
 import pytest
 
-from gpsdr_cli import config, filters
-from gpsdr_cli.align import build_epochs, outage_mask
+from gpsdr_cli import config
+from gpsdr_cli.align import outage_mask
 from gpsdr_cli.conventions import NS_PER_S
 from gpsdr_cli.filters import fkf
 from gpsdr_cli.simulate import simulate_drive
+from gpsdr_cli.testing.sim import run_filter
 
 #: deg/s added to the simulated gyro: half comma2k19's uncalibrated bias (the full one turns
 #: the gyro heading 240 deg in the 60-s tunnel, beyond what the unwrapped course difference
@@ -52,13 +53,8 @@ def tunnels():
 
 def _run(sim, drive, name: str, smooth: bool):
     """(result, epochs, horizontal error m per epoch, outage end epoch indices)."""
-    p = config.defaults()
-    p["filter"]["name"] = name
-    p["filter"]["smooth"] = smooth
-    ep = build_epochs(drive, sim.frame, p)
-    r = filters.get(name)(ep, p)
-    tr = sim.truth
-    err = np.hypot(r.e - np.interp(ep.t_ns, tr.t_ns, tr.e), r.n - np.interp(ep.t_ns, tr.t_ns, tr.n))
+    run = run_filter(sim, drive, name, smooth)
+    r, ep, err = run.result, run.epochs, run.err_m
     out = ep.gnss_outage
     ends = np.flatnonzero(out[:-1] & ~out[1:])
     return r, ep, err, ends

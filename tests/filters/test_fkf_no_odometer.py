@@ -19,6 +19,7 @@ from gpsdr_cli import config, filters
 from gpsdr_cli.align import build_epochs
 from gpsdr_cli.filters import fkf, standstill
 from gpsdr_cli.simulate import simulate_drive
+from gpsdr_cli.testing.sim import run_filter
 from tests.filters import test_fkf as fkf_tests
 from tests.filters.reference_fkf import run_reference, tiny_drive
 
@@ -35,20 +36,8 @@ def stop_and_go_no_odo():
 
 
 def _rmse(sim, drive, name: str, smooth: bool, overrides: dict | None = None):
-    p = config.defaults()
-    p["filter"]["name"] = name
-    p["filter"]["smooth"] = smooth
-    for section, values in (overrides or {}).items():
-        p[section].update(values)
-    ep = build_epochs(drive, sim.frame, p)
-    r = filters.get(name)(ep, p)
-    tr = sim.truth
-    te = np.interp(ep.t_ns, tr.t_ns, tr.e)
-    tn = np.interp(ep.t_ns, tr.t_ns, tr.n)
-    rmse = float(np.sqrt(np.mean((r.e - te) ** 2 + (r.n - tn) ** 2)))
-    f = ep.has_gnss
-    gnss = float(np.sqrt(np.mean((ep.gnss_e[f] - te[f]) ** 2 + (ep.gnss_n[f] - tn[f]) ** 2)))
-    return rmse, gnss, r, np.interp(ep.t_ns, tr.t_ns, tr.speed)
+    run = run_filter(sim, drive, name, smooth, overrides)
+    return run.rmse_m, run.gnss_rmse_m, run.result, run.true_speed_mps
 
 
 @pytest.mark.parametrize("name", ["fkf", "fafkf"])

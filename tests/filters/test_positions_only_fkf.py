@@ -10,10 +10,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from gpsdr_cli import config, filters
-from gpsdr_cli.align import build_epochs
+from gpsdr_cli import config
 from gpsdr_cli.filters import fkf
 from gpsdr_cli.simulate import simulate_drive
+from gpsdr_cli.testing.sim import run_filter
 
 
 def _synthetic(seed: int = 7):
@@ -81,15 +81,8 @@ def _run(sim, name: str, smooth: bool, positions_only: bool) -> tuple[float, dic
     if positions_only:
         d.gnss.speed_mps[:] = np.nan
         d.gnss.course_deg[:] = np.nan
-    p = config.defaults()
-    p["filter"]["name"] = name
-    p["filter"]["smooth"] = smooth
-    ep = build_epochs(d, sim.frame, p)
-    r = filters.get(name)(ep, p)
-    tr = sim.truth
-    de = r.e - np.interp(ep.t_ns, tr["t_ns"], tr["e"])
-    dn = r.n - np.interp(ep.t_ns, tr["t_ns"], tr["n"])
-    return float(np.sqrt(np.mean(de * de + dn * dn))), r.info
+    run = run_filter(sim, d, name, smooth)
+    return run.rmse_m, run.result.info
 
 
 # RMSE bounds in metres (positions only, seed 1, 300 s; GNSS alone: open sky 1.41 m, urban
