@@ -282,6 +282,12 @@ def base_sigma(sigma_e: np.ndarray, sigma_n: np.ndarray, hdop: np.ndarray,
     return np.maximum(sd_e, g["sigma_min_m"]), np.maximum(sd_n, g["sigma_min_m"])
 
 
+def true_runs(flag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First and last index (inclusive, ascending int arrays) of every run of True in ``flag``."""
+    d = np.diff(np.concatenate(([0], np.asarray(flag, bool).astype(np.int8), [0])))
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+
+
 def flicker_zeros(t_ns: np.ndarray, speed_mps: np.ndarray, stop_mps: float, min_stop_s: float
                   ) -> np.ndarray:
     """Odometer records to drop: runs of readings below ``stop_mps`` (m/s) that last less than
@@ -296,11 +302,8 @@ def flicker_zeros(t_ns: np.ndarray, speed_mps: np.ndarray, stop_mps: float, min_
     n = len(t_ns)
     if n < 3 or not min_stop_s > 0.0:
         return np.zeros(n, bool)
-    low = np.abs(speed_mps) < stop_mps
-    prev = np.concatenate(([False], low[:-1]))
-    nxt = np.concatenate((low[1:], [False]))
-    starts = np.flatnonzero(low & ~prev)             # first low record of each run
-    ends = np.flatnonzero(low & ~nxt) + 1            # first record after it (n: none)
+    starts, last = true_runs(np.abs(speed_mps) < stop_mps)
+    ends = last + 1                                  # first record after each run (n: none)
     inner = (starts > 0) & (ends < n)                # runs at either end are kept
     starts, ends = starts[inner], ends[inner]
     short = (t_ns[ends] - t_ns[starts]) / NS_PER_S < min_stop_s

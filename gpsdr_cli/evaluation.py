@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+from .align import true_runs
 from .config import Params
 from .conventions import NS_PER_S, STATS_COLUMNS
 from .errors import InputError
@@ -204,13 +205,8 @@ def gnss_only_errors(epochs_or_track: Any, reference_en: pd.DataFrame) -> np.nda
 
 
 def outage_runs(flag: np.ndarray) -> list[tuple[int, int]]:
-    """(first, last) index of every run of True in ``flag``."""
-    f = np.asarray(flag, bool)
-    if not f.any():
-        return []
-    d = np.diff(np.concatenate(([0], f.astype(np.int8), [0])))
-    starts = np.flatnonzero(d == 1)
-    ends = np.flatnonzero(d == -1) - 1
+    """(first, last) index of every run of True in ``flag`` (:func:`gpsdr_cli.align.true_runs`)."""
+    starts, ends = true_runs(flag)
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 

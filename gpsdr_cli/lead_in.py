@@ -48,17 +48,13 @@ MIN_CALIBRATION_S = 10.0
 MIN_CALIBRATION_M = 100.0
 
 
-def first_fix_index(epochs: Epochs) -> int | None:
-    """Index of the first epoch with a usable GNSS fix, or None (no fix at all)."""
-    f = np.flatnonzero(epochs.has_gnss)
-    return int(f[0]) if len(f) else None
-
-
 def split(epochs: Epochs) -> tuple[int, Epochs]:
     """``(k, epochs[k:])`` where k is the first usable fix when the epochs before it span
     ``MIN_LEAD_IN_S`` or more and hold a gyro or odometer record; else ``(0, epochs)``."""
-    k = first_fix_index(epochs)
-    if not k:
+    if not epochs.has_gnss.any():
+        return 0, epochs
+    k = int(np.argmax(epochs.has_gnss))                 # the first usable fix
+    if k == 0:
         return 0, epochs
     span_s = (int(epochs.t_ns[k]) - int(epochs.t_ns[0])) / NS_PER_S
     if span_s < MIN_LEAD_IN_S or not (epochs.has_gyro[:k].any() or epochs.has_odo[:k].any()):
@@ -74,11 +70,11 @@ def split(epochs: Epochs) -> tuple[int, Epochs]:
 def _held(has: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Each epoch's latest record (``values`` where ``has``), the first record before any;
     NaN when there is none."""
-    idx = np.flatnonzero(has & np.isfinite(values))
-    if not len(idx):
+    ok = has & np.isfinite(values)
+    if not ok.any():
         return np.full(len(has), np.nan)
-    last = np.maximum.accumulate(np.where(has & np.isfinite(values), np.arange(len(has)), -1))
-    return values[np.where(last >= 0, last, idx[0])]
+    last = np.maximum.accumulate(np.where(ok, np.arange(len(has)), -1))
+    return values[np.where(last >= 0, last, np.argmax(ok))]
 
 
 def calibration(epochs: Epochs, k: int, result: FilterResult) -> tuple[float, float]:

@@ -223,11 +223,17 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
     x0[1], x0[4] = u0 * s, u0 * c
     var_along = params["odo"]["noise_sd_mps"] ** 2 + (params["odo"]["scale_init_sd"] * u0) ** 2
     var_cross = (u0 * psi_sd) ** 2 + params["odo"]["noise_sd_mps"] ** 2
-    # rotate diag(along, cross) into (e, n): along = (s, c), cross = (c, -s)
-    P0[1, 1] = var_along * s * s + var_cross * c * c
-    P0[4, 4] = var_along * c * c + var_cross * s * s
-    P0[1, 4] = P0[4, 1] = (var_along - var_cross) * s * c
+    P0[1, 1], P0[4, 4], P0[1, 4] = along_cross_cov(s, c, var_along, var_cross)
+    P0[4, 1] = P0[1, 4]
     return x0, P0, psi, True
+
+
+def along_cross_cov(s: float, c: float, var_along: float, var_cross: float
+                    ) -> tuple[float, float, float]:
+    """(var_e, var_n, cov_en) of a velocity whose variance is ``var_along`` along the unit
+    direction (s, c) = (sin psi, cos psi) and ``var_cross`` across it, (c, -s)."""
+    return (var_along * s * s + var_cross * c * c, var_along * c * c + var_cross * s * s,
+            (var_along - var_cross) * s * c)
 
 
 def chord_velocity(epochs: Epochs, fixes: np.ndarray, odo_speed: float, params: Params
@@ -265,9 +271,7 @@ def chord_velocity(epochs: Epochs, fixes: np.ndarray, odo_speed: float, params: 
                 speed = length / dt1
                 var_along = 2.0 * (sd01 / dt1) ** 2 + GNSS_VEL_SD_MPS ** 2
             var_cross = (speed * sd01 / length) ** 2 + GNSS_VEL_SD_MPS ** 2
-            # diag(along, cross) rotated into (e, n): along = (s, c), cross = (c, -s)
-            return (speed * s, speed * c, var_along * s * s + var_cross * c * c,
-                    var_along * c * c + var_cross * s * s, (var_along - var_cross) * s * c)
+            return (speed * s, speed * c, *along_cross_cov(s, c, var_along, var_cross))
     return None
 
 

@@ -106,7 +106,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ..align import Epochs
+from ..align import Epochs, true_runs
 from ..config import Params
 from ..conventions import NS_PER_S
 from ..errors import ConfigError, NoDataError
@@ -246,9 +246,8 @@ def outage_headings(epochs: Epochs, t_s: np.ndarray, o: np.ndarray, params: Para
         return none
     tk = t_s[k]
     uk = np.exp(1j * epochs.gnss_course_rad[k])
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], out.astype(np.int8), [0]))))
     use, value = [], []
-    for a, b in zip(edges[::2], edges[1::2] - 1):       # outage epochs a..b
+    for a, b in zip(*true_runs(out), strict=True):      # outage epochs a..b
         before = (tk < t_s[a]) & (tk >= t_s[a] - OUTAGE_EDGE_S)
         after = (tk > t_s[b]) & (tk <= t_s[b] + OUTAGE_EDGE_S)
         if not (before.any() and after.any()):

@@ -8,12 +8,14 @@ the file.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import hashlib
 from collections.abc import Callable
 from pathlib import Path
 
 from ..config import Params
+from ..conventions import NS_PER_S
 from ..errors import InputError, MissingDateError, NoDataError, UsageError
 from .csv import _parse_header, read_gyro_csv, read_odo_csv, text_problem
 from .drive import Drive
@@ -142,9 +144,10 @@ def _gps_dated_by(read_gps: Callable[[dt.date | None], Drive], dr_parts: list[Dr
     part = read_gps(day)
     if part.gnss is not None and len(part.gnss.t_ns):
         off_days = round((int(part.gnss.t_ns[0]) - t0) / (86400 * 1e9))
-        if off_days:
+        if off_days:  # the same as reading with the other day: every stamp moves by whole days
             day = day - dt.timedelta(days=off_days)
-            part = read_gps(day)
+            part.gnss = dataclasses.replace(
+                part.gnss, t_ns=part.gnss.t_ns - off_days * 86400 * NS_PER_S)
     part.meta["date_from_dr"] = day.isoformat()
     return part
 
