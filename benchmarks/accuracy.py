@@ -182,7 +182,7 @@ def params_for(name: str, smooth: bool, overrides: dict | None = None) -> dict:
     for section, values in (overrides or {}).items():
         for key, value in values.items():
             if key not in p[section]:
-                raise KeyError(f"config has no [{section}] {key} (gpsdr_cli/config.py DEFAULTS_TOML)")
+                raise KeyError(f"config has no [{section}] {key} (gpsdr_cli/defaults.toml)")
             p[section][key] = value
     return p
 

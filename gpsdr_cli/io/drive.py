@@ -23,7 +23,10 @@ class GnssFixes:
     """GNSS position fixes, one row per receiver epoch.
 
     ``fix_quality`` 0 marks an epoch without a fix (an outage): its lat/lon are NaN,
-    never zero.  Unknown values are NaN (floats) or -1 (``n_sats``).
+    never zero.  Codes are NMEA GGA's for every reader: 1 autonomous, 2 DGPS/SBAS,
+    3 PPS, 4 RTK fixed, 5 RTK float, 6 the receiver's own dead reckoning (not a fix),
+    7 manual, 8 simulator.  Other formats map onto them (UBX carrSoln, NavSatFix
+    status, RTKLIB Q).  Unknown values are NaN (floats) or -1 (``n_sats``).
     ``sigma_e_m``/``sigma_n_m``: 1-sigma horizontal errors reported by the
     receiver (NMEA GST, or a NavSatFix covariance), metres.
     ``speed_mps``/``course_deg``: RMC/VTG ground speed and course over ground
@@ -85,6 +88,21 @@ class Odometry:
 
 
 @dataclass
+class ForwardAccel:
+    """Specific force along the vehicle's forward axis, m/s^2, positive forward.
+
+    What an accelerometer measures: on a slope it includes ``g sin(pitch)`` (the car
+    climbing reads positive while at constant speed), and a constant bias.
+    """
+
+    t_ns: np.ndarray
+    accel_mps2: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+
+@dataclass
 class SkipReport:
     """Records a reader skipped, counted by reason, with the first place each occurred."""
 
@@ -122,6 +140,9 @@ class Drive:
     gnss: GnssFixes | None = None
     gyro: YawRates | None = None
     odo: Odometry | None = None
+    #: Forward accelerometer (optional: UBX ESF-MEAS, sensor_msgs/Imu linear_acceleration.x,
+    #: or an ``acc_x`` CSV column).
+    accel: ForwardAccel | None = None
     skipped: SkipReport = field(default_factory=SkipReport)
     sources: list[Source] = field(default_factory=list)
     #: Free-form facts a reader found (e.g. NMEA sentence counts, MCAP channels).
@@ -129,7 +150,7 @@ class Drive:
 
     def merge(self, other: Drive) -> None:
         """Take the streams ``other`` has and this drive lacks; add its report and sources."""
-        for name in ("gnss", "gyro", "odo"):
+        for name in ("gnss", "gyro", "odo", "accel"):
             if getattr(self, name) is None and getattr(other, name) is not None:
                 setattr(self, name, getattr(other, name))
         self.skipped.merge(other.skipped)
