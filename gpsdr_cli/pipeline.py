@@ -303,10 +303,42 @@ def stray_mask(t_ns: np.ndarray, all_t_ns: np.ndarray | None = None) -> np.ndarr
     return keep
 
 
+def _drop_far_no_fix(drive: Drive) -> None:
+    """Drop (and count) GNSS records without a fix lying more than STRAY_GAP_S from every
+    fix and sensor record: a receiver's cold start stamps them with its default date
+    (1980, 2000, ...) and they carry no position, yet they would stretch the drive over
+    years and hold most of a short log's records, so the cluster test cannot call them stray."""
+    g = drive.gnss
+    if g is None or not len(g):
+        return
+    valid = g.valid
+    if valid.all():
+        return
+    info = [g.t_ns[valid]] + [s.t_ns for s in (drive.gyro, drive.odo, drive.accel)
+                              if s is not None and len(s)]
+    ref = np.sort(np.concatenate(info))
+    if not len(ref):
+        return
+    t = g.t_ns
+    i = np.clip(np.searchsorted(ref, t), 1, len(ref) - 1) if len(ref) > 1 else np.zeros(len(t), int)
+    near = np.minimum(np.abs(t - ref[i]), np.abs(t - ref[np.maximum(i - 1, 0)]))
+    far = ~valid & (near > np.int64(STRAY_GAP_S * NS_PER_S))
+    if not far.any():
+        return
+    k = int(np.flatnonzero(far)[0])
+    drive.skipped.add(f"gnss: record without a fix more than {STRAY_GAP_S:.0f} s away from any "
+                      "fix or sensor record (a receiver's default date before its first fix)",
+                      f"gnss record {k + 1} ({_iso(t[k])})", int(far.sum()))
+    keep = ~far
+    drive.gnss = dataclasses.replace(
+        g, **{f.name: getattr(g, f.name)[keep] for f in dataclasses.fields(g)})
+
+
 def drop_stray_records(drive: Drive) -> Drive:
     """A copy of ``drive`` without stray-stamped records, counted in its SkipReport."""
     out = dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped))
-    streams = [(name, getattr(drive, name)) for name in ("gnss", "gyro", "odo")]
+    _drop_far_no_fix(out)
+    streams = [(name, getattr(out, name)) for name in ("gnss", "gyro", "odo")]
     streams = [(name, s) for name, s in streams if s is not None and len(s)]
     if not streams:
         return out

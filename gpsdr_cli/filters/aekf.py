@@ -172,7 +172,9 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
             d = float(np.nansum(np.abs(np.where(epochs.has_odo[:k0 + 1], epochs.odo_speed_mps[:k0 + 1],
                                                 0.0))[before] * epochs.dt_s[before])) * 1.2
         else:
-            d = MAX_SPEED_MPS * t_before
+            # capped as a gap is (aekf.max_gap_s): a larger variance carries no more meaning and
+            # costs the first fix its precision in float64 (negative variances, NaN sigma)
+            d = MAX_SPEED_MPS * min(t_before, float(a["max_gap_s"]))
         sd = max(float(epochs.gnss_sd_e[k0]), float(epochs.gnss_sd_n[k0]))
         x0[0], x0[3] = epochs.gnss_e[k0], epochs.gnss_n[k0]
         P0[0, 0] = P0[3, 3] = a["init_pos_sd_m"] ** 2 + sd ** 2 + d ** 2

@@ -1015,7 +1015,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 ge_pred = True
             t += T
             if gap:
-                add_e = (prm[P_GAP_SPEED] * T) ** 2
+                # capped at max_gap_s: past it the position is as good as unknown, and a
+                # larger variance only costs the next fix its precision in float64 (NaN P)
+                add_e = (prm[P_GAP_SPEED] * min(T, prm[P_MAX_GAP])) ** 2
                 add_n = add_e
                 P[0, 0] += add_e
                 P[3, 3] += add_n
