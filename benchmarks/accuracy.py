@@ -3,7 +3,8 @@ simulated scenario (fixed seeds 1, 2, 3, figures pooled) and on the real comma2k
 and the oracle (the same filter told the true noise: ``simulate.oracle_params`` and
 ``simulate.oracle_drive``), checked against issue #4's accuracy targets.
 
-    .venv/bin/python benchmarks/accuracy.py                 # everything -> benchmarks/accuracy.md (~2.5 min, 2 vCPUs)
+    # everything -> benchmarks/accuracy.md (~2.5 min, 2 vCPUs)
+    .venv/bin/python benchmarks/accuracy.py
     .venv/bin/python benchmarks/accuracy.py --seeds 1       # one seed per scenario
     .venv/bin/python benchmarks/accuracy.py --quick         # 3-minute drives, no one_hour, no oracle
     .venv/bin/python benchmarks/accuracy.py --scenarios tunnels --filters ekf,aekf
@@ -392,7 +393,8 @@ def table(rows: list[Row]) -> str:
             "RMSE/oracle | oracle 60-s drift % | s | note |")
     lines = [head, "|" + "---|" * 11]
     for r in rows:
-        ratio = r.rmse_m / r.oracle_rmse_m if np.isfinite(r.oracle_rmse_m) and r.oracle_rmse_m > 0 else math.nan
+        has_oracle = np.isfinite(r.oracle_rmse_m) and r.oracle_rmse_m > 0
+        ratio = r.rmse_m / r.oracle_rmse_m if has_oracle else math.nan
         lines.append(f"| {r.drive} | {r.method} | {fmt(r.rmse_m)} | {fmt(r.cep95_m)} | {fmt(r.max_m)} | "
                      f"{fmt(r.drift60_pct)} | {fmt(r.oracle_rmse_m)} | {fmt(ratio)} | "
                      f"{fmt(r.oracle_drift60_pct)} | {fmt(r.seconds, 1)} | {r.note} |")
