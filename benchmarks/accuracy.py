@@ -3,7 +3,8 @@ simulated scenario (fixed seeds 1, 2, 3, figures pooled) and on the real comma2k
 and the oracle (the same filter told the true noise: ``simulate.oracle_params`` and
 ``simulate.oracle_drive``), checked against issue #4's accuracy targets.
 
-    .venv/bin/python benchmarks/accuracy.py                 # everything -> benchmarks/accuracy.md (~2.5 min, 2 vCPUs)
+    # everything -> benchmarks/accuracy.md (~2.5 min, 2 vCPUs)
+    .venv/bin/python benchmarks/accuracy.py
     .venv/bin/python benchmarks/accuracy.py --seeds 1       # one seed per scenario
     .venv/bin/python benchmarks/accuracy.py --quick         # 3-minute drives, no one_hour, no oracle
     .venv/bin/python benchmarks/accuracy.py --scenarios tunnels --filters ekf,aekf
@@ -87,9 +88,9 @@ from gpsdr_cli.simulate import SCENARIOS, oracle_drive, oracle_params, simulate_
 
 COMMA = ROOT.parent / "shared" / "data" / "comma2k19"
 
-#: seed 000's baseline: GNSS positions only, white-noise R (no multipath states, no velocity)
+#: Fang et al.'s baseline: GNSS positions only, white-noise R (no multipath states, no velocity)
 AEKF_PLAIN = {"aekf": {"gnss_err_states": False, "gnss_velocity": False}}
-#: seed 002's baseline: GNSS positions only, one time-only error state (1 m, 60 s)
+#: Tang et al.'s baseline: GNSS positions only, one time-only error state (1 m, 60 s)
 FKF_PLAIN = {"fkf": {"gnss_velocity": False, "gnss_err_pdop": math.inf, "gnss_err_dist_m": 0.0,
                      "gnss_err_sd_m": 1.0, "gnss_err_tau_s": 60.0}}
 #: method -> (registered filter, config overrides)
@@ -110,13 +111,13 @@ URBAN = "urban_canyon"
 #: figure compared (RMSE or the mean squared error), reduction needed)
 COMPARISONS = [
     ("a", "literal, shipped vs shipped", "aekf", "ekf", "rmse", 0.30),
-    ("b", "adaptation alone, plain vs plain (seed 000)", "aekf (seed 000 plain)",
+    ("b", "adaptation alone, plain vs plain (Fang et al.)", "aekf (seed 000 plain)",
      "ekf (seed 000 plain)", "rmse", 0.30),
-    ("c", "shipped aekf vs seed 000's plain ekf", "aekf", "ekf (seed 000 plain)", "rmse", 0.30),
+    ("c", "shipped aekf vs Fang et al.'s plain ekf", "aekf", "ekf (seed 000 plain)", "rmse", 0.30),
     ("a", "literal, shipped vs shipped", "fafkf", "fkf", "mse", 0.50),
-    ("b", "adaptation alone, plain vs plain (seed 002)", "fafkf (seed 002 plain)",
+    ("b", "adaptation alone, plain vs plain (Tang et al.)", "fafkf (seed 002 plain)",
      "fkf (seed 002 plain)", "mse", 0.50),
-    ("c", "shipped fafkf vs seed 002's plain fkf", "fafkf", "fkf (seed 002 plain)", "mse", 0.50),
+    ("c", "shipped fafkf vs Tang et al.'s plain fkf", "fafkf", "fkf (seed 002 plain)", "mse", 0.50),
 ]
 #: comma2k19: the offset keys of the target's OR-rule (latency applied, estimated by gpsdr)
 COMMA_APPLIED = "0.1"
@@ -392,7 +393,8 @@ def table(rows: list[Row]) -> str:
             "RMSE/oracle | oracle 60-s drift % | s | note |")
     lines = [head, "|" + "---|" * 11]
     for r in rows:
-        ratio = r.rmse_m / r.oracle_rmse_m if np.isfinite(r.oracle_rmse_m) and r.oracle_rmse_m > 0 else math.nan
+        has_oracle = np.isfinite(r.oracle_rmse_m) and r.oracle_rmse_m > 0
+        ratio = r.rmse_m / r.oracle_rmse_m if has_oracle else math.nan
         lines.append(f"| {r.drive} | {r.method} | {fmt(r.rmse_m)} | {fmt(r.cep95_m)} | {fmt(r.max_m)} | "
                      f"{fmt(r.drift60_pct)} | {fmt(r.oracle_rmse_m)} | {fmt(ratio)} | "
                      f"{fmt(r.oracle_drift60_pct)} | {fmt(r.seconds, 1)} | {r.note} |")
@@ -543,7 +545,7 @@ def verdict_summary(tgts: list[Target]) -> str:
 
 
 COMPARISON_NOTE = (
-    "The comparative targets come from seed 000 (aekf >= 30 % below ekf) and seed 002 (fafkf's "
+    "The comparative targets come from Fang et al. (aekf >= 30 % below ekf) and Tang et al. (fafkf's "
     "error variance >= 50 % below fkf), which measured their adaptive filter against a plain "
     "baseline: GNSS positions only, fixed white-noise R. Our shipped ekf and fkf are not that "
     "baseline: they carry model extensions (ekf: Gauss-Markov multipath states and the GNSS "
@@ -578,7 +580,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-smooth", action="store_true")
     ap.add_argument("--no-oracle", action="store_true")
     ap.add_argument("--no-paper", action="store_true",
-                    help="skip the seeds' plain baselines (ekf/aekf seed 000, fkf/fafkf seed 002)")
+                    help="skip the seeds' plain baselines (ekf/aekf Fang et al., fkf/fafkf Tang et al.)")
     ap.add_argument("--no-positions-only", action="store_true",
                     help="skip the runs without the receiver's speed/course (positions only)")
     ap.add_argument("--seeds", default="1,2,3", help="simulation seeds, comma-separated (default 1,2,3); "

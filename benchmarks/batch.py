@@ -31,9 +31,9 @@ shared: before each pair the script waits (``--quiet-wait``) for idle CPUs,
 and it measures how much CPU other programs took during each run (the
 machine's busy time from /proc/stat minus this process tree's own CPU time).
 A pair from which others took more than ``--disturbed`` of the capacity (their
-CPU time beyond what the runs left idle) is rejected and run again (at most ``--tries`` pairs); the table says how many
-were rejected and how disturbed the kept ones were.  On a host that stays
-busy, giving the benchmark its own autogroup with a higher CPU weight keeps
+CPU time beyond what the runs left idle) is rejected and run again (at most
+``--tries`` pairs); the table says how many were rejected and how disturbed the kept
+ones were.  On a host that stays busy, giving the benchmark its own autogroup with a higher CPU weight keeps
 the others mostly off its cores (Linux, as root):
 
     setsid sh -c 'echo -15 > /proc/$$/autogroup; exec python benchmarks/batch.py'

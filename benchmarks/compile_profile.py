@@ -2,7 +2,8 @@
 
     find gpsdr_cli -name '*.nb[ic]' -delete      # clear numba's cache first (a cold start)
     python benchmarks/compile_profile.py DRIVE_DIR [--filter NAME]
-    # or, leaving your cache alone:  NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/compile_profile.py DRIVE_DIR
+    # or, leaving your cache alone:
+    NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/compile_profile.py DRIVE_DIR
 
 DRIVE_DIR holds gps.nmea, gyro.csv and odo.csv (``gpsdr simulate -o DIR --scenario
 one_hour``).  Two columns per compiled specialisation, in CPU seconds of this process

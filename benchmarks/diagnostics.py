@@ -584,7 +584,8 @@ def make_figure(study: SimStudy, comma: CommaStudy, params: Params):
                      color="tab:red", alpha=0.2, lw=0, label="GNSS outage")
     for k, thr in enumerate((good, poor)):
         axp.axhline(thr, color="tab:orange", ls=":", lw=0.9,
-                    label=f"aekf regimes: R x k^2, k = 1 | 3 | 10 at PDOP {good:g} | {poor:g}" if k == 0 else None)
+                    label=(f"aekf regimes: R x k^2, k = 1 | 3 | 10 at PDOP {good:g} | {poor:g}"
+                           if k == 0 else None))
     axp.set_ylabel("PDOP")
     axp.set_xlabel("time since start (s)")
     axp.legend(fontsize=6.5, loc="upper left", ncol=2)
@@ -621,7 +622,8 @@ def make_figure(study: SimStudy, comma: CommaStudy, params: Params):
     ax.legend(fontsize=7, loc="lower left")
     fmt = {m: " / ".join(f"{v:.2f}" for v in regimes[m].values()) for m in regimes}
     ax.set_title(f"(c) GNSS innovations, {seed_txt}, forward: mean NIS (2 dof) in the good / medium /\n"
-                 f"poor PDOP regimes: oracle {fmt.get('aekf oracle', '-')}, ekf (one R) {fmt.get('ekf', '-')}, "
+                 f"poor PDOP regimes: oracle {fmt.get('aekf oracle', '-')}, "
+                 f"ekf (one R) {fmt.get('ekf', '-')}, "
                  f"aekf (R x k^2)\n{fmt.get('aekf', '-')}: the receiver sigma already grows with PDOP; "
                  "aekf's k scales it twice", **TITLE)
 
@@ -709,7 +711,8 @@ def make_figure(study: SimStudy, comma: CommaStudy, params: Params):
     z = {m: along_zero(sweep, m) for m in ("GNSS only", "ekf", "ekf + RTS", "fkf", "fkf + RTS")}
     lag = comma.lags.set_index("run")
     ax.set_title(f"(g) comma2k19: mean along-track error is 0 at {z['GNSS only']:.3f} s for the fixes, "
-                 f"{z['ekf']:.3f} / {z['fkf']:.3f} s\nfor ekf / fkf forward (track - fixes: {lag.loc['ekf', 'along_m']:+.2f} / "
+                 f"{z['ekf']:.3f} / {z['fkf']:.3f} s\nfor ekf / fkf forward (track - fixes: "
+                 f"{lag.loc['ekf', 'along_m']:+.2f} / "
                  f"{lag.loc['fkf', 'along_m']:+.2f} m), {z['ekf + RTS']:.3f} / "
                  f"{z['fkf + RTS']:.3f} s RTS;\ncross track {cross.min():+.2f} to {cross.max():+.2f} m "
                  "whatever the offset", **TITLE)
@@ -731,7 +734,8 @@ def make_figure(study: SimStudy, comma: CommaStudy, params: Params):
     ax.set_title(f"(h) comma2k19 at {README_OFFSET_S} s: the fixes' error is slow, not noise: sub-3-s part "
                  f"{q['along_fast_rms_m']:.3f} /\n{q['cross_fast_rms_m']:.3f} m RMS along / cross, slow part "
                  f"{q['along_slow_rms_m']:.2f} / {q['cross_slow_rms_m']:.2f} m; cross mean "
-                 f"{gs['cross_m'].mean():+.2f} m, along drifts\n{q['along_drift_mps'] * 60:+.2f} m per minute; "
+                 f"{gs['cross_m'].mean():+.2f} m, along drifts\n"
+                 f"{q['along_drift_mps'] * 60:+.2f} m per minute; "
                  f"{sf} forward follows it (cross {fs['cross_m'].mean():+.2f} m)", **TITLE)
     return fig
 
@@ -814,8 +818,9 @@ def report(study: SimStudy, comma: CommaStudy, params: Params) -> str:
         q = slow_fast(ac)
         lines.append(f"- at {README_OFFSET_S} s, {label}: along mean {ac['along_m'].mean():+.3f} (sd "
                      f"{ac['along_m'].std():.3f}), cross mean {ac['cross_m'].mean():+.3f} (sd "
-                     f"{ac['cross_m'].std():.3f}); slow (3-s mean) / fast RMS along {q['along_slow_rms_m']:.3f} / "
-                     f"{q['along_fast_rms_m']:.3f}, cross {q['cross_slow_rms_m']:.3f} / {q['cross_fast_rms_m']:.3f}; "
+                     f"{ac['cross_m'].std():.3f}); slow (3-s mean) / fast RMS along "
+                     f"{q['along_slow_rms_m']:.3f} / {q['along_fast_rms_m']:.3f}, cross "
+                     f"{q['cross_slow_rms_m']:.3f} / {q['cross_fast_rms_m']:.3f}; "
                      f"along drift {q['along_drift_mps'] * 60:+.2f} m/min")
     return "\n".join(lines)
 

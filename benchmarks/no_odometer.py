@@ -5,8 +5,9 @@
 
 Every simulated scenario (``simulate_drive(name, seed)``) with ``drive.odo = None``, each
 filter forward and smoothed through ``build_epochs`` + the registered filter
-(:func:`gpsdr_cli.testing.sim.run_filter`, as ``benchmarks/accuracy.py`` runs them); prints per scenario the range over the seeds of the
-RMSE (m, horizontal, every epoch, against the simulator's truth), next to the fixes alone.
+(:func:`gpsdr_cli.testing.sim.run_filter`, as ``benchmarks/accuracy.py`` runs them);
+prints per scenario the range over the seeds of the RMSE (m, horizontal, every epoch,
+against the simulator's truth), next to the fixes alone.
 ``--positions-only`` also strips the receiver's speed and course.
 """
 

@@ -1,7 +1,8 @@
 """Speed of the NMEA reader on a generated one-hour 5 Hz log (GGA+RMC+GSA+GST per epoch).
 
 Run: ``.venv/bin/python benchmarks/read_nmea.py [--hours H] [--rate HZ] [--repeat N]``
-Prints sentences per second (best of N runs, default 5), by wall clock and by CPU time of :func:`gpsdr_cli.io.nmea.parse_nmea`.
+Prints sentences per second (best of N runs, default 5), by wall clock and by CPU time
+of :func:`gpsdr_cli.io.nmea.parse_nmea`.
 """
 
 from __future__ import annotations

@@ -43,7 +43,8 @@ plain edit a user's logger could have made (epochs dropped whole, RMC dropped, C
 rate lowered).
 
 Default run: 24 cases x 4 filters x 2 (forward, smoothed), two input-handling cases
-with ekf and fkf only, one (no --date: the date from the CSVs) with ekf only: 201 runs of ~1-2 s, two at a time
+with ekf and fkf only, one (no --date: the date from the CSVs) with ekf only: 201 runs
+of ~1-2 s, two at a time
 (``--jobs``): 2-6 min on 2 vCPUs depending on load (1 min 54 s when quiet).
 """
 
@@ -485,7 +486,8 @@ def evaluate(row: Row, track_path: Path, stats_path: Path, ref: pd.DataFrame, da
         row.flags.append("DROP")
         worst = max(json.loads(meta.get(b"skipped", b"{}")).items(), key=lambda kv: kv[1]["count"],
                     default=("", {"count": 0}))
-        row.note += f" {skipped} records skipped ({damaged} lines damaged; most: {worst[0]} x{worst[1]['count']})"
+        row.note += (f" {skipped} records skipped ({damaged} lines damaged; "
+                     f"most: {worst[0]} x{worst[1]['count']})")
     info = json.loads(meta.get(b"filter_info", b"{}"))
     if info.get("nonfinite_states") or info.get("spd_failures"):
         row.note += f" filter_info nonfinite={info.get('nonfinite_states')} spd={info.get('spd_failures')}"
@@ -583,11 +585,13 @@ def main(argv: list[str] | None = None) -> int:
     print(table(rows))
     print("\nflags: EXIT exit != 0 where a track is due; TB traceback; GNSS fused@fix RMSE > "
           f"{1 + GNSS_MARGIN:g} x GNSS-only@fix; "
-          f"OUT outage end error > {OUT_PCT_FORWARD:g} % (fwd) / {OUT_PCT_SMOOTHED:g} % (rts) of its distance; "
+          f"OUT outage end error > {OUT_PCT_FORWARD:g} % (fwd) / {OUT_PCT_SMOOTHED:g} % (rts) "
+          "of its distance; "
           "NAN non-finite track value or time order; DROP far more records skipped than damaged")
     flagged = [r for r in rows if r.flags]
     print(f"\n{len(flagged)} of {len(rows)} runs flagged: "
-          + ", ".join(f"{k} {sum(k in r.flags for r in rows)}" for k in ("EXIT", "TB", "GNSS", "OUT", "NAN", "DROP")))
+          + ", ".join(f"{k} {sum(k in r.flags for r in rows)}"
+                      for k in ("EXIT", "TB", "GNSS", "OUT", "NAN", "DROP")))
     return 0
 
 

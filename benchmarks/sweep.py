@@ -59,7 +59,8 @@ oracle ratio noisier than the full run's.
 ``--set section.key=value`` (repeatable) overrides a config key for every filter run and its
 oracle (a proposed default).  ``--ablate SETTING`` runs the shipped filter with the oracle's
 value of one config key at a time (and with the true per-fix sigmas alone): which mismatch
-costs what.  ``--diagnose SETTING`` prints, per filter and mode, the GNSS NIS per PDOP band (mean NIS of the accepted 2-dof fixes, expectation 2), the share of fixes
+costs what.  ``--diagnose SETTING`` prints, per filter and mode, the GNSS NIS per PDOP
+band (mean NIS of the accepted 2-dof fixes, expectation 2), the share of fixes
 gated, the along/cross-track error split and the error in 60-s windows, and draws the
 error against time next to the oracle into ``--plot`` (default /tmp/sweep_<setting>.png).
 

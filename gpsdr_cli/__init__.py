@@ -7,4 +7,9 @@ and ``cli`` is the thin command layer.  Frames, units, signs and the time base
 are declared once in :mod:`gpsdr_cli.conventions`.
 """
 
+# Before any kernel module is imported: numba's cache keyed by the kernels' sources.
+from .kernel_cache import configure as _configure_kernel_cache
+
 __version__ = "0.1.0"
+
+_configure_kernel_cache()

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import copy
 import math
+import re
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -121,3 +123,87 @@ def to_toml(params: Params) -> str:
 def flat(params: Params) -> dict[str, str]:
     """``section.key -> value`` strings, for Parquet file metadata."""
     return {f"{s}.{k}": _fmt(v) for s, vals in params.items() for k, v in vals.items()}
+
+
+#: Unit of a parameter from its name's suffix (the naming rule of :mod:`gpsdr_cli.conventions`).
+UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (
+    ("_m2ps5", "m^2/s^5"), ("_mps2", "m/s^2"), ("_mps", "m/s"), ("_radps", "rad/s"),
+    ("_rad", "rad"), ("_deg", "deg"), ("_hz", "Hz"), ("_m", "m"), ("_s", "s"),
+    ("_epochs", "epochs"), ("_fixes", "fixes"), ("_count", "readings"),
+)
+
+_KEY_LINE = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\s*=")
+_CONTINUATION = re.compile(r"^\s{8,}#\s?(.*)$")
+
+
+def unit_of(key: str) -> str:
+    """The unit a parameter's name declares (``gate_reset_s`` -> ``s``), or "" (none or a ratio)."""
+    for suffix, unit in UNIT_SUFFIXES:
+        if key.endswith(suffix):
+            return unit
+    return ""
+
+
+def parameter_docs(text: str = DEFAULTS_TOML) -> list[tuple[str, str, str]]:
+    """``(section, key, meaning)`` for every parameter, in file order, from the TOML comments.
+
+    The meaning is the comment after the value, joined with its indented continuation lines.
+    """
+    rows: list[tuple[str, str, str]] = []
+    section = ""
+    for line in text.splitlines():
+        stripped = line.strip()
+        if stripped.startswith("[") and stripped.endswith("]"):
+            section = stripped[1:-1]
+            continue
+        cont = _CONTINUATION.match(line)
+        if cont and rows:
+            sec, key, meaning = rows[-1]
+            rows[-1] = (sec, key, f"{meaning} {cont.group(1).strip()}".strip())
+            continue
+        m = _KEY_LINE.match(line)
+        if m:
+            comment = re.search(r"\s#\s?(.*)$", line[m.end():])
+            rows.append((section, m.group(1), comment.group(1).strip() if comment else ""))
+    return rows
+
+
+def parameters_markdown(params: Params | None = None) -> str:
+    """docs/parameters.md: every parameter with its section, default, unit and meaning."""
+    params = DEFAULTS if params is None else params
+    out = ["# Parameters", "",
+           "Generated from `gpsdr_cli/defaults.toml` by "
+           "`python -m gpsdr_cli.config --markdown > docs/parameters.md`; do not edit by hand.",
+           "Override any subset with `gpsdr fuse --config PARAMS.toml`; "
+           "`gpsdr fuse --print-config` prints the effective values.", ""]
+    section = None
+    for sec, key, meaning in parameter_docs():
+        if sec != section:
+            section = sec
+            out += [f"## [{sec}]", "", "| parameter | default | unit | meaning |",
+                    "|---|---|---|---|"]
+        value = _fmt(params[sec][key]).replace("|", "\\|")
+        text = meaning.replace("|", "\\|") or "-"
+        out.append(f"| `{sec}.{key}` | `{value}` | {unit_of(key) or '-'} | {text} |")
+        if sec != section:
+            out.append("")
+    lines: list[str] = []
+    for i, line in enumerate(out):  # a blank line after each table
+        if line.startswith("## [") and i and out[i - 1] != "":
+            lines.append("")
+        lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m gpsdr_cli.config --markdown``: print docs/parameters.md."""
+    args = sys.argv[1:] if argv is None else argv
+    if args != ["--markdown"]:
+        print("usage: python -m gpsdr_cli.config --markdown > docs/parameters.md", file=sys.stderr)
+        return 2
+    sys.stdout.write(parameters_markdown())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,6 +1,6 @@
 """Error statistics of a fused track, against a reference trajectory or on its own.
 
-ALGORITHMS.md section 6 and INTERFACE.md "Statistics Parquet".  Conventions:
+docs/algorithms.md#statistics and INTERFACE.md "Statistics Parquet".  Conventions:
 :mod:`gpsdr_cli.conventions` (int64 ns UTC, metres in the track's local frame,
 heading clockwise from north).
 

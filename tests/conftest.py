@@ -13,6 +13,52 @@ import pytest
 from click.testing import CliRunner, Result
 
 REPO = Path(__file__).resolve().parents[1]
+
+#: Tests that take more than ~2 s each on a warm numba cache (measured with
+#: ``python -m pytest FILE --durations=0``): whole modules, or module::function (every
+#: parametrisation).  ``pytest -m "not slow"`` leaves them out of the edit-test loop;
+#: plain ``pytest`` (the README's command, CI) runs them.  A list here rather than
+#: decorators: one place to keep up to date, and no edits scattered over the test files.
+SLOW_MODULES = frozenset({
+    "tests/filters/test_aekf_reference.py",   # the plain-numpy reference, per epoch
+    "tests/test_fuzz_e2e.py",                 # gpsdr fuse on many mutated files
+    "tests/test_warmup.py",                   # compiles the kernels in fresh processes
+    "tests/test_faults.py",                   # every fault x filter, ~1 min in all
+    "tests/io/test_nmea_props.py",            # hypothesis, ~2 s per property
+})
+SLOW_TESTS = frozenset({
+    "tests/filters/test_adaptive.py::test_gate_threshold_matches_chi2",
+    "tests/filters/test_fafkf.py::test_fafkf_kernel_reproduces_the_reference",
+    "tests/filters/test_fafkf.py::test_fafkf_kernel_reproduces_the_reference_across_multipath_regimes",
+    "tests/filters/test_fafkf.py::test_fafkf_smoothing_reproduces_the_reference",
+    "tests/filters/test_fafkf.py::test_fafkf_rts_smoothing_reproduces_the_reference",
+    "tests/filters/test_fkf.py::test_two_filter_combination_matches_reference",
+    "tests/filters/test_fkf.py::test_fkf_kernel_reproduces_the_reference",
+    "tests/filters/test_fkf.py::test_fkf_kernel_reproduces_the_reference_across_multipath_regimes",
+    "tests/filters/test_fkf_no_odometer.py::test_kernel_reproduces_the_reference_without_odometer",
+    "tests/filters/test_fkf_smoothing.py::test_checkpointed_smoother_equals_full_storage",
+    "tests/io/test_fuzz_readers.py::test_random_csv_rows",
+    "tests/io/test_fuzz_readers.py::test_truncated_and_bit_flipped_mcap",
+    "tests/test_batch.py::test_after_a_crash_the_rest_of_the_batch_runs_in_a_new_pool",
+    "tests/test_batch.py::test_a_crashing_worker_fails_only_its_drive",
+    "tests/test_batch.py::test_batch_cli_report_resume_and_force",
+    "tests/test_batch.py::test_batch_on_dask",
+    "tests/test_cli_fuse.py::test_plot",
+    "tests/test_geodesy.py::test_round_trip_property",
+    "tests/test_plot.py::test_report_with_reference",
+    "tests/test_plot.py::test_report_without_reference_and_minimal_track",
+    "tests/test_evaluation.py::test_figures_invariant_under_a_common_shift_and_exact_for_any_offset",
+    "tests/test_align.py::test_duplicates_and_backward_steps_are_dropped_and_counted",
+})
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark the tests of :data:`SLOW_MODULES` and :data:`SLOW_TESTS` ``slow``."""
+    for item in items:
+        module = Path(str(item.path)).resolve().relative_to(REPO).as_posix()
+        name = getattr(item, "originalname", None) or item.name
+        if module in SLOW_MODULES or f"{module}::{name}" in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)
 SAMPLE = REPO / "sample_logs" / "comma2k19"
 SHARED_DATA = REPO.parent / "shared" / "data"
 

@@ -63,18 +63,18 @@ def test_comparisons_abc_each_own_verdict_urban_scope(acc):
     tg = acc.targets(rows)
     a = find(tg, "(a) aekf: RMSE >= 30 % below ekf [literal, shipped vs shipped]", URBAN)
     b = find(tg, "(b) aekf (seed 000 plain): RMSE >= 30 % below ekf (seed 000 plain) "
-                 "[adaptation alone, plain vs plain (seed 000)]", URBAN)
+                 "[adaptation alone, plain vs plain (Fang et al.)]", URBAN)
     c = find(tg, "(c) aekf: RMSE >= 30 % below ekf (seed 000 plain) "
-                 "[shipped aekf vs seed 000's plain ekf]", URBAN)
+                 "[shipped aekf vs Fang et al.'s plain ekf]", URBAN)
     assert (a.measured, a.verdict, a.issue) == ("1.90 vs 2.00 m: 5 % below", "MISS", True)
     assert a.shortfall == "5 % below, needs 30 % below (25 points short)"
     assert (b.measured, b.verdict) == ("2.60 vs 4.00 m: 35 % below", "PASS")
     assert (c.measured, c.verdict) == ("1.90 vs 4.00 m: 52 % below", "PASS")
     # fafkf: error variance (mean squared error), 9 vs 16 m^2 = 44 % below: MISS
     fb = find(tg, "(b) fafkf (seed 002 plain): error variance >= 50 % below fkf (seed 002 plain) "
-                  "[adaptation alone, plain vs plain (seed 002)]", URBAN)
+                  "[adaptation alone, plain vs plain (Tang et al.)]", URBAN)
     fc = find(tg, "(c) fafkf: error variance >= 50 % below fkf (seed 002 plain) "
-                  "[shipped fafkf vs seed 002's plain fkf]", URBAN)
+                  "[shipped fafkf vs Tang et al.'s plain fkf]", URBAN)
     assert (fb.measured, fb.verdict) == ("9.00 vs 16.00 m^2: 44 % below", "MISS")
     assert (fc.measured, fc.verdict) == ("4.00 vs 16.00 m^2: 75 % below", "PASS")
     # the same comparisons on another drive: shown, not counted

@@ -48,7 +48,8 @@ def test_offset_sweep_finds_a_simulated_gnss_offset(diag):
 def test_nis_bands_reproduce_chi_square_means(diag):
     """chi-square(2) NIS has mean 2; scaled by 3 above PDOP 6 and cut at the gate 18.42 its
     mean is 3 (2 - c e^(-c/2)/(1 - e^(-c/2))) with c = 18.42/3 (5.10: an exponential of mean 2
-    cut at c), and a share e^(-c/2) (4.6 %) lies above the gate.  Tolerances: 0.1 for the means, 1 point for the share (20 000 samples)."""
+    cut at c), and a share e^(-c/2) (4.6 %) lies above the gate.  Tolerances: 0.1 for the
+    means, 1 point for the share (20 000 samples)."""
     rng = np.random.default_rng(7)
     n = 20000
     pdop = rng.uniform(1.0, 8.0, n)

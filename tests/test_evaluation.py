@@ -22,7 +22,8 @@ T0 = 1_700_000_000 * NS_PER_S
 SPEED = 10.0  # m/s, due north
 
 
-def straight_track(n_ep: int = 1001, rate_hz: float = 10.0, offset_en=(0.0, 0.0)) -> tuple[pd.DataFrame, pd.DataFrame]:
+def straight_track(n_ep: int = 1001, rate_hz: float = 10.0,
+                   offset_en=(0.0, 0.0)) -> tuple[pd.DataFrame, pd.DataFrame]:
     """A vehicle driving north at 10 m/s; the track = truth + a constant offset (m)."""
     t = T0 + (np.arange(n_ep) * (NS_PER_S / rate_hz)).astype(np.int64)
     n_true = SPEED * (t - T0) / NS_PER_S

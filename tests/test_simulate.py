@@ -58,8 +58,9 @@ def test_truth_is_consistent(urban):
     tr = urban.truth
     dt = 0.01
     # position is the integral of velocity (trapezoid) to within 1 cm over the drive
-    e_int = np.concatenate(([0.0], np.cumsum(0.5 * (tr["v_e"].to_numpy()[1:] + tr["v_e"].to_numpy()[:-1]) * dt)))
-    n_int = np.concatenate(([0.0], np.cumsum(0.5 * (tr["v_n"].to_numpy()[1:] + tr["v_n"].to_numpy()[:-1]) * dt)))
+    v_e, v_n = tr["v_e"].to_numpy(), tr["v_n"].to_numpy()
+    e_int = np.concatenate(([0.0], np.cumsum(0.5 * (v_e[1:] + v_e[:-1]) * dt)))
+    n_int = np.concatenate(([0.0], np.cumsum(0.5 * (v_n[1:] + v_n[:-1]) * dt)))
     assert np.max(np.abs(e_int - tr["e"])) < 0.01
     assert np.max(np.abs(n_int - tr["n"])) < 0.01
     # speed and heading agree with the velocity components
@@ -247,6 +248,7 @@ def test_oracle_params_fkf_regimes_from_least_and_most_multipath():
             "urban": {"multipath_sd_m": 4.0, "multipath_tau_s": 60.0, "multipath_decorrelation_m": 50.0},
             "suburb": {"multipath_sd_m": 1.5, "multipath_tau_s": 90.0, "multipath_decorrelation_m": 100.0}}
     p = oracle_params({"gnss_environments": envs}, defaults())
-    assert (p["fkf"]["gnss_err_sd_m"], p["fkf"]["gnss_err_tau_s"], p["fkf"]["gnss_err_dist_m"]) == (0.4, 120.0, 300.0)
+    fkf = p["fkf"]
+    assert (fkf["gnss_err_sd_m"], fkf["gnss_err_tau_s"], fkf["gnss_err_dist_m"]) == (0.4, 120.0, 300.0)
     assert (p["fkf"]["gnss_err_obstructed_sd_m"], p["fkf"]["gnss_err_obstructed_tau_s"],
             p["fkf"]["gnss_err_obstructed_dist_m"]) == (4.0, 60.0, 50.0)

@@ -152,7 +152,8 @@ def test_cold_fuse_with_a_background_compile_gives_the_same_track(tmp_path: Path
     d = tmp_path / "d"
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     env.pop("GPSDR_WARM_UP", None)
-    cmd = [sys.executable, "-c", "from gpsdr_cli.cli.main import main; main()", "fuse", "--gps", str(d / "gps.nmea"),
+    cmd = [sys.executable, "-c", "from gpsdr_cli.cli.main import main; main()",
+           "fuse", "--gps", str(d / "gps.nmea"),
            "--gyro", str(d / "gyro.csv"), "--odo", str(d / "odo.csv"), "-o", "-",
            "--format", "csv", "-q"]
     probe = textwrap.dedent("""

@@ -46,7 +46,7 @@ def info(logs: tuple[str, ...], as_json: bool, config_path: str | None, date: An
         except GpsdrError as err:
             if len(logs) == 1:
                 raise
-            from .main import to_click_exception
+            from .errors import to_click_exception
 
             to_click_exception(err).show()  # the other files still get described
             failed += 1

@@ -3,8 +3,9 @@
 Exit status: 0 success; 1 a processing failure (any :class:`GpsdrError`, or an
 internal error); 2 a usage error (click's, :class:`UsageError`,
 :class:`ConfigError`).  Every error is one line on stderr; ``--debug`` adds the
-traceback.  Command modules import only click at import time, so ``gpsdr
---help`` stays fast; the work is imported inside each command.
+traceback.  The mapping itself is :mod:`gpsdr_cli.cli.errors`, which commands import
+too (never this module: no import climbs back up).  Command modules import only click
+at import time, so ``gpsdr --help`` stays fast; the work is imported inside each command.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import Any
 
 import click
 
-from ..errors import GpsdrError, UsageError
+from .errors import to_click_exception
 from .options import STATE
 
 EPILOG = """\b
@@ -26,30 +27,6 @@ Examples:
   gpsdr info gps.nmea
   gpsdr batch 'logs/*' -o out/ --jobs 4
 """
-
-
-class GpsdrException(click.ClickException):
-    """A one-line error with gpsdr's exit status."""
-
-    def __init__(self, message: str, exit_code: int = 1) -> None:
-        super().__init__(message)
-        self.exit_code = exit_code
-
-    def show(self, file: Any = None) -> None:
-        click.echo(f"gpsdr: error: {self.format_message()}", err=True)
-
-
-def to_click_exception(err: BaseException) -> click.ClickException:
-    """Turn a library exception into the one line the user sees."""
-    if isinstance(err, UsageError):
-        return GpsdrException(str(err), 2)
-    if isinstance(err, GpsdrError):
-        return GpsdrException(str(err) or type(err).__name__, 1)
-    if isinstance(err, MemoryError):
-        return GpsdrException("out of memory", 1)
-    text = " ".join(str(err).split()) or type(err).__name__
-    return GpsdrException(f"internal error: {type(err).__name__}: {text} "
-                          "(rerun with --debug for the traceback)", 1)
 
 
 class GpsdrGroup(click.Group):

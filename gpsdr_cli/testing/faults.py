@@ -1374,7 +1374,8 @@ def accuracy_problems(case: FaultCase, inputs: CaseInputs, outcome: Outcome) -> 
 
     Every track fault: RMSE under :data:`RMSE_BOUND_M`.  Outages: horizontal sigma
     larger at the end than at the start (a stop inside the outage may trim it
-    through the zero-velocity update; the consistency check judges that); largest error under :func:`dr_bound_m`; end error within
+    through the zero-velocity update; the consistency check judges that); largest error
+    under :func:`dr_bound_m`; end error within
     :data:`CONSISTENT_SIGMAS`.  Jumps: every displaced fix rejected, error under
     :data:`JUMP_MAX_ERROR_M`.  Standstills: drift under :data:`STANDSTILL_DRIFT_M`.
     """

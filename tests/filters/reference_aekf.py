@@ -165,7 +165,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         hold = (standstill and is_static) or gap
         F = np.eye(m)
         if k > 0 and T > 0:
-            if adaptive:  # seed 000 eqs. (14)-(15)
+            if adaptive:  # Fang et al. eqs. (14)-(15)
                 s2e = sa_py(x[2], prm[kn.P_AMAX], prm[kn.P_AMIN], ka[k], sigma_a)
                 s2n = sa_py(x[5], prm[kn.P_AMAX], prm[kn.P_AMIN], ka[k], sigma_a)
             else:
@@ -246,7 +246,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             if whiten and is_static:  # the m-th fix of a stop: R x m
                 wh_static += 1
                 f_wh = max(f_wh, wh_static)
-            R = np.diag([r_e[k], r_n[k]]) * sh_r  # nominal: NIS, gate, seed 001 factor
+            R = np.diag([r_e[k], r_n[k]]) * sh_r  # nominal: NIS, gate, innovation adaptive factor
             S = Hg @ P @ Hg.T + R
             nis[k] = float(y @ np.linalg.solve(S, y))
             accept, reset, r_fac = True, False, 1.0
@@ -267,7 +267,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 else:
                     rej_since = -1.0
             if accept:
-                if ad["innovation_factor"] and r_fac == 1.0 and not gap:  # seed 001
+                if ad["innovation_factor"] and r_fac == 1.0 and not gap:  # the innovation-factor paper
                     beta = math.sqrt(float(y @ y) / np.trace(S))
                     a_f = 1.0 if beta <= ad["innovation_c"] else ad["innovation_c"] / beta
                     if a_f < 1.0:  # on the kinematic block only (see kernels_aekf)
@@ -275,7 +275,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                         P = D @ P @ D
                 if reset:  # no lock-out: accept and inflate the position variance
                     P = P + np.diag([y[0] ** 2, 0, 0, y[1] ** 2] + [0] * (m - 4))
-                Ps_prior[k] = P  # seed 001 factor and reset inflation are part of P(k|k-1)
+                Ps_prior[k] = P  # innovation adaptive factor and reset inflation are part of P(k|k-1)
                 if ad["sage_husa"]:
                     b = ad["sage_husa_b"]
                     d = (1 - b) / (1 - b ** (sh_m + 1))
@@ -330,7 +330,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 P = P + off_v * np.outer(u_h, u_h) + off_a * np.outer(u_a, u_a)
             if not is_static:
                 wh_static = 0
-            if is_static:  # zero-velocity update (seed 004)
+            if is_static:  # zero-velocity update (Zeng et al.)
                 zk = st["zupt_keeps_position"]  # position as consider states
                 keep = (0, 3) if zk == "always" or (zk == "outage" and epochs.gnss_outage[k]) else ()
                 for i in (1, 4, 2, 5):
@@ -341,7 +341,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                     d_e, d_n, use = x[1] / v, x[4] / v, True
                 else:
                     d_e, d_n, use = math.sin(psi_mem), math.cos(psi_mem), heading_known
-                # u = k_s * |v| (seed 000's s = k_s T v divided by T); a NaN record (the end of
+                # u = k_s * |v| (Fang et al.'s s = k_s T v divided by T); a NaN record (the end of
                 # a standstill from the GNSS, aekf.odometer_inputs) only ends the standstill
                 if use and math.isfinite(u):
                     H = np.zeros(m)
@@ -367,7 +367,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 ve, ae, vn, an = x[1], x[2], x[4], x[5]
                 v2 = ve ** 2 + vn ** 2
                 c = vn * ae - ve * an
-                H = np.zeros(m)  # seed 000 Jacobian of omega
+                H = np.zeros(m)  # Fang et al. Jacobian of omega
                 H[1] = (-an * v2 - 2 * ve * c) / v2 ** 2
                 H[4] = (ae * v2 - 2 * vn * c) / v2 ** 2
                 H[2], H[5], H[6] = vn / v2, -ve / v2, 1.0

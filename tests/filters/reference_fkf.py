@@ -1,4 +1,4 @@
-"""Plain numpy, per-epoch reference of fkf and fafkf (seed 002), in textbook letters.
+"""Plain numpy, per-epoch reference of fkf and fafkf (Tang et al.), in textbook letters.
 
 Written to be obviously right rather than fast: dense ``Phi``, ``Q``, ``H``;
 ``K = P H^T S^-1``; the Joseph form as a matrix product; the fusion with
@@ -56,7 +56,7 @@ def regime_par(par: np.ndarray, w: float) -> np.ndarray:
 
 
 def Phi_of(T: float, static: bool, par: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """seed 002 eqs. (2)-(3) with the T^2/2 erratum; kinematics held at standstill."""
+    """Tang et al. eqs. (2)-(3) with the T^2/2 erratum; kinematics held at standstill."""
     Phi = np.eye(NX)
     if not static:
         axis = np.array([[1.0, T, 0.5 * T * T], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
@@ -109,7 +109,7 @@ def wrap(a: float) -> float:
 
 def row(name: str, x: np.ndarray, t_m: float = 0.0, v_lin: float = 0.0,
         psi_hint: float = 0.0) -> tuple[np.ndarray, float]:
-    """Measurement row H and prediction h(x) (seed 002 eqs. (6), (8), (10)-(14) with errata)."""
+    """Measurement row H and prediction h(x) (Tang et al. eqs. (6), (8), (10)-(14) with errata)."""
     H = np.zeros(NX)
     ve, vn = x[1], x[4]
     if name == "e":
@@ -133,7 +133,7 @@ def row(name: str, x: np.ndarray, t_m: float = 0.0, v_lin: float = 0.0,
 
 
 class Window:
-    """Covariance matching for one component (seed 002 eqs. (15)-(18)) + fuzzy R step."""
+    """Covariance matching for one component (Tang et al. eqs. (15)-(18)) + fuzzy R step."""
 
     def __init__(self, M: int) -> None:
         self.buf = [0.0] * M
@@ -180,7 +180,7 @@ def normalise(a: float, b: float, log: bool) -> tuple[float, float]:
 
 def beta(P1: np.ndarray, P2: np.ndarray, d1: np.ndarray, d2: np.ndarray, idx: list[int],
          de: tuple[float, float], log: bool) -> float:
-    """seed 002 eq. (20) with PE = tr(M M^T), M = D^-1 P D^-1 over the block."""
+    """Tang et al. eq. (20) with PE = tr(M M^T), M = D^-1 P D^-1 over the block."""
     M1 = (P1 / np.outer(d1, d1))[np.ix_(idx, idx)]
     M2 = (P2 / np.outer(d2, d2))[np.ix_(idx, idx)]
     p1, p2 = normalise(float(np.trace(M1 @ M1.T)), float(np.trace(M2 @ M2.T)), log)
@@ -242,7 +242,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
             if prep.has_gnss[k]:
                 z = np.array([prep.gnss_e[k], prep.gnss_n[k]])
                 H1 = np.array([row("e", x1)[0], row("n", x1)[0]])
-                y = z - H1 @ x1                           # seed 002 eq. (15)
+                y = z - H1 @ x1                           # Tang et al. eq. (15)
                 HPH = H1 @ P1 @ H1.T
                 R0 = np.array([prep.gnss_var_e[k], prep.gnss_var_n[k]])
                 if adaptive:
@@ -368,7 +368,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 if fr:
                     w[6:8], w[8:10] = bp, bv
                 W1, W2 = np.diag(w), np.eye(NX) - np.diag(w)
-                xg = W1 @ x1 + W2 @ x2                    # seed 002 eq. (19)
+                xg = W1 @ x1 + W2 @ x2                    # Tang et al. eq. (19)
                 Pg = W1 @ P1 @ W1 + W2 @ P2 @ W2
                 beta_out[k] = [bp, bv]
             if fr:                                        # Carlson fusion-reset

@@ -127,7 +127,7 @@ def test_gate_never_locks_out(name):
 def test_options_keep_p_spd_under_multipath_bursts(option):
     """Every adaptive option on a drive with outlier bursts, PDOP changes and an outage:
     P SPD at every epoch (Cholesky check), finite, error < 4 m outside the outage
-    (6 m with the seed 001 factor, see below)."""
+    (6 m with the innovation adaptive factor, see below)."""
     ep, tr = tiny_drive(200.0, seed=13, dr_hz=20.0, outages=((120.0, 140.0),),
                         outliers=((40.0, 41.0, 25.0), (90.0, 90.6, -30.0)),
                         bad_pdop=((60.0, 80.0, 5.0),))
@@ -139,7 +139,7 @@ def test_options_keep_p_spd_under_multipath_bursts(option):
     assert np.isfinite(res.e).all() and np.isfinite(res.var_e).all()
     err = horizontal_error(res, tr)
     ok = (tr.t_s > 10.0) & ((tr.t_s < 120.0) | (tr.t_s > 150.0))
-    # 8 m with the seed 001 factor: gate_mode "inflate" down-weights the 25 m burst instead of
+    # 8 m with the innovation adaptive factor: gate_mode "inflate" down-weights the 25 m burst instead of
     # rejecting it, and the factor then inflates P on the fixes after it (measured 7.1 m with
     # the GNSS error states, 5.4 m without; 3.3 m with gate_mode "reject"); < 3 m with the
     # other options

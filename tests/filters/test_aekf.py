@@ -74,7 +74,7 @@ def test_open_sky_every_option(name, option):
     """Open sky, 5 Hz GNSS with ~1.5 m RMSE: every filter/option beats the raw fixes.
 
     Measured RMSE 0.75-0.89 m (GNSS alone 1.51 m); bound 1.2 m RMSE, 5 m max (6 m with the
-    seed 001 factor: it inflates P at every large innovation, measured 5.1 m).
+    innovation adaptive factor: it inflates P at every large innovation, measured 5.1 m).
     """
     _, ep, te, tn = sim_case("open_sky")
     res = run(name, ep, params_with(OPTIONS[option]))
@@ -196,7 +196,7 @@ def test_gyro_bias_and_odo_scale_estimated(name):
 def test_gnss_gone_ten_minutes(name):
     """GNSS lost for 10 minutes: complete, finite track; sigma grows and stays honest.
 
-    Heading is not a state of seed 000's model; the heading floor, the along-track
+    Heading is not a state of Fang et al.'s model; the heading floor, the along-track
     odometer and the acceleration-only lateral row keep its variance (before them:
     exit error 454/536 m at ~6 sigma).  Measured exit error 393 m (5.5 % of 7.2 km)
     at 0.14 sigma: the fixture's gyro has no drift, the filter's drift model allows

@@ -1,4 +1,4 @@
-"""fafkf (seed 002 fuzzy adaptive federated filter): kernel against the numpy reference,
+"""fafkf (Tang et al. fuzzy adaptive federated filter): kernel against the numpy reference,
 adaptation to a GNSS noise jump, fusion weights, never-NaN/never-diverge drives."""
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ def test_fafkf_smoothing_reproduces_the_reference(busy_drive, mode: str) -> None
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("mode", ["nr", "fr"])
 def test_fafkf_adapts_to_a_gnss_noise_jump(seed: int, mode: str) -> None:
-    """True GNSS noise x5 from 150 s while the receiver keeps reporting 1 m (seed 002's case:
+    """True GNSS noise x5 from 150 s while the receiver keeps reporting 1 m (Tang et al.'s case:
     an error model that changes).  FAFKF's R follows (x25 in variance), FKF's cannot."""
     drive, frame, truth = tiny_drive(300.0, turn_radps=0.02, gnss_sd_jump=(150.0, 5.0),
                                      seed=seed)

@@ -1,4 +1,4 @@
-"""fkf (seed 002 federated Kalman filter): closed-form pieces, the compiled kernel against
+"""fkf (Tang et al. federated Kalman filter): closed-form pieces, the compiled kernel against
 the numpy reference, accuracy against known truth, and the never-NaN/never-diverge cases."""
 
 from __future__ import annotations
@@ -482,7 +482,7 @@ def test_distance_rows_keep_the_distance_and_follow_the_heading_epochs() -> None
     epoch: the rows are the slots' first odometer records plus every heading epoch after
     the first record, each the distance since the previous row (the cumulative distance
     interpolated to the gyro-only epoch; tolerance 1e-9 m), summing to the records' total;
-    0 s gives every record (seed 002)."""
+    0 s gives every record (Tang et al.)."""
     t_s = np.arange(2001) * 0.005 + 0.003                  # epochs every 5 ms, off the grid
     o = np.arange(0, 2001, 2)                               # odometer at every second epoch
     t_odo = t_s[o]

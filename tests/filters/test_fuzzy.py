@@ -1,4 +1,4 @@
-"""The two Mamdani controllers of FAFKF (seed 002) against hand-computed values."""
+"""The two Mamdani controllers of FAFKF (Tang et al.) against hand-computed values."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ def test_weight_controller_hand_values(pe: float, de: float, expected: float) ->
 
 
 def test_rule_table_orientation() -> None:
-    # seed 002 Table 1: rows PE, columns DE, order VB NB NS VS ZO
+    # Tang et al. Table 1: rows PE, columns DE, order VB NB NS VS ZO
     assert fuzzy.rule_output("VB", "VB") == "VL"
     assert fuzzy.rule_output("ZO", "ZO") == "VH"
     assert fuzzy.rule_output("VB", "VS") == "M"

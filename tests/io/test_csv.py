@@ -135,7 +135,7 @@ def test_fast_and_slow_paths_agree(tmp_path):
     rng = np.random.default_rng(0)
     t = 1_700_000_000 + np.cumsum(rng.uniform(0.005, 0.015, 2000))
     v = rng.normal(0, 0.1, 2000)
-    lines = ["t,yaw_rate"] + [f"{a:.6f},{float(b)!r}" for a, b in zip(t, v)]
+    lines = ["t,yaw_rate"] + [f"{a:.6f},{float(b)!r}" for a, b in zip(t, v, strict=True)]
     clean = _csv(tmp_path, "\n".join(lines) + "\n", "clean.csv")
     dirty = _csv(tmp_path, "\n".join(lines[:500] + ["garbage"] + lines[500:]) + "\n", "dirty.csv")
     a = read_gyro_csv(clean, P["gyro"])
@@ -209,7 +209,8 @@ def test_lone_cr_newlines_both_paths(tmp_path):
 @pytest.mark.parametrize("t_text", ["1533226488429", "1533226488429536000", "1533226488429536000000"])
 def test_millisecond_or_nanosecond_stamps_are_named(tmp_path, t_text):
     p = _csv(tmp_path, f"t,yaw_rate\n{t_text},0.1\n")
-    with pytest.raises(NoDataError, match=r"time beyond year 2262 \(expected seconds, not ms/us/ns\) at .*:2"):
+    expected = r"time beyond year 2262 \(expected seconds, not ms/us/ns\) at .*:2"
+    with pytest.raises(NoDataError, match=expected):
         read_gyro_csv(p, P["gyro"])
 
 

@@ -597,15 +597,16 @@ def test_enu_velocity_becomes_the_fixes_speed_and_course(tmp_path):
                                              cov=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 4.0])))
         # heading 150 deg (south-south-east) at 8 m/s; the message 20 ms after the fix
         vel.append((t + 2 * 10**7, t + 2 * 10**7,
-                    ros2_fast.encode("twistcov", t + 2 * 10**7, "gps", vx=4.0, vy=-8.0 * np.cos(np.radians(30)))))
+                    ros2_fast.encode("twistcov", t + 2 * 10**7, "gps", vx=4.0,
+                                     vy=-8.0 * np.cos(np.radians(30)))))
         odo.append((t, t, ros2_fast.encode("twist", t, "base_link", vx=7.9, vy=0.0)))
     p = tmp_path / "vel.mcap"
     write_mcap(p, [("/fix", "navsatfix", fixes), ("/fix_velocity", "twistcov", vel),
                    ("/wheel", "twist", odo)])
     d = read_mcap(p)
     np.testing.assert_allclose(d.gnss.speed_mps, np.hypot(4.0, 8.0 * np.cos(np.radians(30))), rtol=1e-12)
-    np.testing.assert_allclose(d.gnss.course_deg, np.degrees(np.arctan2(4.0, -8.0 * np.cos(np.radians(30)))) % 360,
-                               rtol=1e-12)
+    course_deg = np.degrees(np.arctan2(4.0, -8.0 * np.cos(np.radians(30)))) % 360
+    np.testing.assert_allclose(d.gnss.course_deg, course_deg, rtol=1e-12)
     assert d.gnss.course_deg[0] == pytest.approx(150.0, abs=1e-9)  # clockwise from north
     np.testing.assert_allclose(d.odo.speed_mps, 7.9)
     assert d.meta["mcap"]["chosen"]["odo"] == "/wheel"

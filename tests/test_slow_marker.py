@@ -1,0 +1,18 @@
+"""The slow-test list in conftest.py names tests that exist (a renamed test would silently
+join the quick loop otherwise)."""
+
+from __future__ import annotations
+
+import ast
+
+from .conftest import REPO, SLOW_MODULES, SLOW_TESTS
+
+
+def test_every_listed_slow_test_exists() -> None:
+    for module in SLOW_MODULES:
+        assert (REPO / module).is_file(), module
+    for entry in SLOW_TESTS:
+        module, _, name = entry.partition("::")
+        tree = ast.parse((REPO / module).read_text(encoding="utf-8"))
+        names = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
+        assert name in names, entry
