@@ -2,8 +2,8 @@
 
 :func:`sniff` decides by content, not by file name: the MCAP magic, the Parquet
 magic, NMEA sentences with valid checksums, else a delimited text table with a
-header row.  Empty, binary and UTF-16 files are an :class:`InputError` naming
-the file.
+header row.  Empty and binary files, and UTF-16 files other than NMEA, are an
+:class:`InputError` naming the file.
 """
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ def sniff(path: str | Path) -> str:
     if head.startswith(PARQUET_MAGIC):
         return "parquet"
     problem = text_problem(head)
-    if problem and problem.startswith("UTF-16"):
-        raise InputError(path, problem)
+    if problem and problem.startswith("UTF-16") and not looks_like_nmea(head):
+        raise InputError(path, problem)  # UTF-16 NMEA is decoded by the NMEA reader
     if looks_like_nmea(head) or _nmea_after_noise(head, looks_like_nmea):
         return "nmea"
     if problem:
