@@ -921,8 +921,8 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     report = _report(probs, name, lines, strict, buf)
     epoch_sod = _assign_epochs(parsed)
     if epoch_sod is None:
-        what = ("GGA/RMC/GSA/VTG/GST/ZDA sentence with a valid checksum" if not parsed
-                else "GGA or RMC sentence with a time of day")
+        what = ("GGA/GNS/RMC/GLL/GSA/VTG/GST/ZDA sentence with a valid checksum" if not parsed
+                else "GGA, GNS, RMC or GLL sentence with a time of day")
         raise NoDataError(name, f"no {what} ({_summary(report)})")
     e = _merge_epochs(parsed, len(epoch_sod), position_from)
     row = e.pop("row")
@@ -935,7 +935,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         raise NoDataError(name, "no fix and no date in the log (only no-fix epochs without "
                                 "RMC/ZDA dates)")
     if not row.any():
-        raise NoDataError(name, f"no GGA or RMC sentence with a time of day ({_summary(report)})")
+        raise NoDataError(name, f"no GGA, GNS, RMC or GLL sentence with a time of day ({_summary(report)})")
     r = {f: v[row] for f, v in e.items()}
     t_us = day[row].astype(np.int64) * _US_PER_DAY + epoch_sod[row]
     fixes = GnssFixes(

@@ -359,7 +359,7 @@ def test_input_errors_name_the_file(tmp_path) -> None:
     binary = rng.integers(0, 256, 4000, dtype=np.uint8).tobytes().replace(b"$", b"")
     with pytest.raises(InputError, match=r"^b\.bin: binary file with no NMEA"):
         parse_nmea(binary, name="b.bin")
-    with pytest.raises(NoDataError, match="no GGA/RMC"):
+    with pytest.raises(NoDataError, match="no GGA/GNS/RMC"):
         parse_nmea(log(ck("GPGSV,1,1,00"), "hello"), name="g.nmea")
     with pytest.raises(InputError, match="cannot read"):
         read_nmea(tmp_path / "missing.nmea")
