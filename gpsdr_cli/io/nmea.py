@@ -41,7 +41,8 @@ Field choices, documented here once:
   field has one letter per system (GPS, GLONASS, Galileo, BeiDou, QZSS,
   NavIC); the best letter gives the quality (R 4 > F 5 > D 2 > P 3 > A 1 > E
   6; only N/M/S: no fix), so a fix exists when any system has one.  GNS
-  satellites, HDOP, altitude and geoid separation read as GGA's.
+  satellites, HDOP, altitude and geoid separation read as GGA's (GGA's win; a
+  GGA fix claiming 0 satellites leaves the count to GNS, else unknown).
 - Sentences of one epoch that disagree on the position (by more than 1e-7 deg
   and more than one unit of the last digit either prints) are counted in
   ``meta['position_disagreements']`` and a note, not as skipped records.
@@ -596,6 +597,8 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                              (bsep, "geoid separation")):
                 probs.add(f"malformed {fld} in GGA (field ignored)", s.pos[bad & keep])
             stats["alt_without_geoid_sep"] += int((fix & keep & np.isfinite(alt) & np.isnan(sep)).sum())
+            # a fix from 0 satellites is a receiver's placeholder (Furuno GT-88): unknown
+            nsat[fix & (nsat == 0)] = np.nan
             p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
                      alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
                      q=np.where(fix, qi, 0).astype(np.float64),

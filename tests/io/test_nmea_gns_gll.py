@@ -203,3 +203,26 @@ def test_utf16_log_reads_through_read_drive_and_info(tmp_path: Path) -> None:
     assert "text encoding UTF-16-LE (byte-order mark)" in result.output
     assert "1 epochs whose sentences disagree on the position" in result.output
     assert datetime.date(2024, 5, 17).isoformat() in result.output
+
+
+def test_real_furuno_gns_agrees_with_its_gga_and_reads_alone() -> None:
+    """A Furuno GT-88 (gpsd's regression log): its GNS mode ``NDD`` (GPS none, GLONASS and
+    Galileo differential) gives the quality its GGA states (2); with the GGA lines removed
+    the GNS gives the same fixes, with its own satellite count (the GGA says 00)."""
+    path = DATA / "gpsd-furuno_gl_ga-excerpt.log"
+    d = read_nmea(path)
+    assert d.gnss.fix_quality.tolist() == [2, 2, 2]
+    assert d.meta["position_disagreements"] == 0
+    assert d.gnss.n_sats.tolist() == [11, 11, 10]  # the GGA's 00 is no count
+    lat, lon = 59 + 57.0062 / 60, 11 + 0.6429 / 60
+    no_gga = b"".join(ln for ln in path.read_bytes().splitlines(keepends=True)
+                      if b"GGA," not in ln)
+    g, report, meta = parse_nmea(no_gga)
+    assert report.counts["not a sentence (no $ on the line)"] == 8  # the '#' header lines
+    assert "GGA" not in meta["sentences"] and meta["sentences"]["GNS"] == 3
+    assert g.fix_quality.tolist() == [2, 2, 2]
+    np.testing.assert_allclose(g.lat_deg, lat, atol=TOL_DEG, rtol=0)
+    np.testing.assert_allclose(g.lon_deg, lon, atol=TOL_DEG, rtol=0)
+    np.testing.assert_allclose(g.alt_m, 168.9 + 39.5, atol=1e-9, rtol=0)  # m
+    assert g.n_sats.tolist() == [11, 11, 10]
+    np.testing.assert_array_equal(g.t_ns, d.gnss.t_ns)
