@@ -228,3 +228,11 @@ def test_real_furuno_gns_agrees_with_its_gga_and_reads_alone() -> None:
     np.testing.assert_allclose(g.alt_m, 168.9 + 39.5, atol=1e-9, rtol=0)  # m
     assert g.n_sats.tolist() == [11, 11, 10]
     np.testing.assert_array_equal(g.t_ns, d.gnss.t_ns)
+    rows = [r.split("\t") for r in (DATA / "gpsd-furuno_gl_ga-expected.tsv").read_text()
+            .splitlines() if r and not r.startswith(("#", "time"))]
+    for fixes in (d.gnss, g):  # with and without the GGA lines: gpsd's TPV, 1e-6 deg
+        for (t, la, lo, h), tn, a, b, alt in zip(rows, fixes.t_ns, fixes.lat_deg, fixes.lon_deg,
+                                                 fixes.alt_m, strict=True):
+            assert np.datetime64(t.rstrip("Z"), "ns").astype(np.int64) == tn
+            assert abs(a - float(la)) < 1e-6 and abs(b - float(lo)) < 1e-6
+            assert abs(alt - float(h)) < 1e-6  # m, ellipsoidal (gpsd's altHAE)
