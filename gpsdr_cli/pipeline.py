@@ -661,6 +661,10 @@ def describe_log(path: str, params: Params, *, topics: dict[str, str] | None = N
             drive.meta.setdefault("notes", []).append(
                 "no date in the log (no RMC/ZDA date): times are times of day shown on "
                 "1970-01-01; give --date YYYY-MM-DD")
+    elif kind == "rtklib":
+        from .io.rtklib import read_rtklib
+
+        drive = read_rtklib(path)
     else:
         drive, ref = _read_csv_any(path, params)
         if ref is not None:

@@ -25,6 +25,7 @@ Examples:
   gpsdr fuse drive.mcap
   gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --reference truth.csv
   gpsdr info gps.nmea
+  gpsdr extract gps.nmea gyro.csv odo.csv -o drive.parquet
   gpsdr batch 'logs/*' -o out/ --jobs 4
 """
 
@@ -76,13 +77,14 @@ def cli() -> None:
 
 def _register() -> None:
     from .batch import batch
+    from .extract import extract
     from .fuse import fuse
     from .info import info
     from .plot import plot
     from .simulate import simulate
     from .stats import stats
 
-    for cmd in (fuse, info, stats, simulate, plot, batch):
+    for cmd in (fuse, info, stats, simulate, plot, batch, extract):
         cli.add_command(cmd)
 
 

@@ -1,4 +1,4 @@
-"""NMEA 0183 reader: GGA, GSA, RMC, VTG, GST and ZDA from any talker -> :class:`GnssFixes`.
+"""NMEA 0183 reader: GGA, GNS, RMC, GLL, GSA, VTG, GST and ZDA from any talker -> :class:`GnssFixes`.
 
 Why hand-written instead of pynmea2 / pynmeagps: those parse one sentence at a
 time into Python objects (tens of microseconds per sentence), and they raise or
@@ -18,10 +18,10 @@ sentence, see ``benchmarks/read_nmea.py``):
    one numpy cast; only a column holding a non-number falls back to a
    per-value loop, which marks that field bad.
 4. Group sentences into receiver epochs: a sentence with a time of day
-   (GGA, RMC, GST, ZDA) whose time (or date) differs from the previous timed
+   (GGA, GNS, RMC, GLL, GST, ZDA) whose time (or date) differs from the previous timed
    sentence's opens a new epoch; sentences without a time (GSA, VTG) belong to the epoch
    of the timed sentence before them (the first epoch if none precedes).  One
-   row per epoch that has a GGA or an RMC; within an epoch the last non-empty
+   row per epoch that has a position sentence (GGA, GNS, RMC or GLL); within an epoch the last non-empty
    value of each field wins (so one GSA per constellation merges into one row).
 
 Conventions (see :mod:`gpsdr_cli.conventions`): ``t_ns`` int64 ns UTC (time
@@ -31,10 +31,24 @@ with field 0 = the address (``GPGGA``).
 
 Field choices, documented here once:
 
-- Position, fix quality, satellites, HDOP: GGA.  An epoch without a GGA takes
-  its position from RMC (status ``A``; the NMEA 2.3 mode letter gives the
-  quality: A/blank -> 1, D -> 2, P -> 3, R -> 4, F -> 5, E -> 6, N/M/S -> 0).
-  When a GGA exists its quality wins over the RMC status.
+- Position, fix quality, satellites, HDOP: from the epoch's most informative
+  position sentence: GGA, else GNS, else RMC, else GLL (GGA and GNS carry quality,
+  satellites, HDOP and altitude, RMC a mode letter, GLL a status).  The kind
+  chosen decides even without a fix (a GGA with quality 0 is not overridden
+  by an RMC with status ``A``).  RMC and GLL (status ``A``): the NMEA 2.3 mode
+  letter gives the quality: A/blank -> 1, D -> 2, P -> 3, R -> 4, F -> 5,
+  E -> 6, N/M/S -> 0.  GNS (NMEA 4.x multi-constellation receivers): its mode
+  field has one letter per system (GPS, GLONASS, Galileo, BeiDou, QZSS,
+  NavIC); the best letter gives the quality (R 4 > F 5 > D 2 > P 3 > A 1 > E
+  6; only N/M/S: no fix), so a fix exists when any system has one.  GNS
+  satellites, HDOP, altitude and geoid separation read as GGA's (GGA's win; a
+  GGA fix claiming 0 satellites leaves the count to GNS, else unknown).
+- Sentences of one epoch that disagree on the position (by more than 1e-7 deg
+  and more than one unit of the last digit either prints) are counted in
+  ``meta['position_disagreements']`` and a note, not as skipped records.
+  Positions that agree that closely are one fix printed twice: the last of
+  them printed as finely as the chosen one gives the coordinates (a receiver
+  that rounds GGA and truncates GLL; gpsd reports the last, too).
 - No fix (GGA quality 0, RMC status ``V``, empty or ``0,0`` coordinates) gives a
   row with NaN lat/lon/alt and ``fix_quality`` 0, never zero coordinates.
 - ``alt_m``: ellipsoidal height = GGA altitude above mean sea level + geoid
@@ -57,6 +71,10 @@ Field choices, documented here once:
   or in the future (GPS week-rollover bugs) are kept
   as given, counted in ``meta['warning_counts']`` and explained in
   ``meta['warnings']`` (a list of one-line messages).
+
+Encoding: UTF-16 (LE/BE, with a byte-order mark or told by its NUL bytes) is
+decoded; Latin-1 bytes need no decoding (NMEA is ASCII); both are named in
+``meta['encoding']`` and a note.  Binary noise is skipped and counted.
 
 Everything that is skipped is counted by reason in the :class:`SkipReport`
 with the first ``name:line`` where it occurred; ``strict=True`` raises
@@ -86,10 +104,19 @@ _US_PER_DAY = 86_400_000_000
 _HALF_DAY_US = _US_PER_DAY // 2
 
 # kind codes of the sentences this reader uses
-_GGA, _RMC, _GSA, _VTG, _GST, _ZDA = range(6)
-_KNOWN = {b"GGA": _GGA, b"RMC": _RMC, b"GSA": _GSA, b"VTG": _VTG, b"GST": _GST, b"ZDA": _ZDA}
+_GGA, _RMC, _GSA, _VTG, _GST, _ZDA, _GNS, _GLL = range(8)
+_KNOWN = {b"GGA": _GGA, b"RMC": _RMC, b"GSA": _GSA, b"VTG": _VTG, b"GST": _GST, b"ZDA": _ZDA,
+          b"GNS": _GNS, b"GLL": _GLL}
 _TYPE_NAME = {v: k.decode() for k, v in _KNOWN.items()}
-_TIMED = (_GGA, _RMC, _GST, _ZDA)
+_TIMED = (_GGA, _RMC, _GST, _ZDA, _GNS, _GLL)
+_TIME_FIELD = {_GLL: 5}  # field number of the time of day; 1 for the other timed sentences
+#: Position sentences, most informative first: the epoch's position comes from the first
+#: of these it has (GGA and GNS carry quality, satellites, HDOP and altitude; RMC a mode;
+#: GLL only a status).
+_POSITION_RANK = (_GGA, _GNS, _RMC, _GLL)
+#: Sentences of one epoch whose positions differ by more than this (deg; 1.1 cm in
+#: latitude) disagree, unless one of them is printed more coarsely.
+_DISAGREE_DEG = 1e-7
 
 # hex digit value of each byte, -1 if not a hex digit (upper or lower case)
 _HEX = np.full(256, -1, np.int16)
@@ -102,11 +129,13 @@ for _c in b"ABCDEF":
 #: RMC/GNS mode indicator (NMEA 2.3+) -> GGA-style fix quality.
 _MODE_QUALITY = {b"": 1, b"A": 1, b"D": 2, b"P": 3, b"R": 4, b"F": 5, b"E": 6,
                  b"N": 0, b"M": 0, b"S": 0}
+#: GNS mode letters from best to worst: the epoch's quality is the best any constellation
+#: reports (a fix exists if one system has one).
+_GNS_RANK = b"RFDPAE"
 
 _CHUNK_BYTES = 1 << 22  # 4 MiB of whole lines scanned at a time
 _DOP_NONE = 99.99  # receivers' placeholder for "no DOP" (u-blox, Quectel, ...): read as NaN
 _MAX_FIELD = 40  # bytes; longer fields are never valid numbers or letters here
-_UTF16_HINT = "UTF-16 encoded; convert to ASCII/UTF-8 with iconv -f UTF-16 -t UTF-8"
 
 
 class _Problems:
@@ -322,6 +351,50 @@ def _lat_lon(val: np.ndarray, hemi: np.ndarray, pos_letter: bytes, neg_letter: b
     return np.where(ok, sign * out, np.nan), empty, bad
 
 
+def _resolution_deg(val: np.ndarray) -> np.ndarray:
+    """One unit of the last printed digit of ``(d)ddmm.mmmm`` values, in degrees."""
+    dot = np.strings.find(val, b".")
+    decimals = np.where(dot >= 0, np.strings.str_len(val) - dot - 1, 0)
+    return 10.0 ** -np.clip(decimals, 0, 12) / 60.0
+
+
+def _mode_quality(mode: np.ndarray) -> np.ndarray:
+    """RMC/GLL mode letters -> GGA-style quality (-1 where not a mode letter)."""
+    uniq, inv = np.unique(mode, return_inverse=True)
+    q = np.array([_MODE_QUALITY.get(m, -1) for m in uniq.tolist()], np.int64)
+    return q[inv.ravel()] if len(uniq) else np.zeros(0, np.int64)
+
+
+def _gns_one(mode: bytes) -> int:
+    """GGA-style quality of one GNS mode field (one letter per constellation); -1 if bad.
+
+    The best letter wins (R 4 > F 5 > D 2 > P 3 > A 1 > E 6); only N/M/S letters: 0.
+    """
+    if not mode or any(c not in b"NAEDFMPRS" for c in mode):
+        return -1
+    for c in _GNS_RANK:
+        if c in mode:
+            return _MODE_QUALITY[bytes([c])]
+    return 0
+
+
+def _gns_quality(mode: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """GNS mode fields -> (GGA-style quality, 0 where bad; bad mask), once per distinct value."""
+    uniq, inv = np.unique(mode, return_inverse=True)
+    q = np.array([_gns_one(m) for m in uniq.tolist()], np.int64)
+    q = q[inv.ravel()] if len(uniq) else np.zeros(0, np.int64)
+    bad = q < 0
+    return np.where(bad, 0, q), bad
+
+
+def _position(s: _Sentences, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fields ``k..k+3`` (lat, N/S, lon, E/W) -> (lat, lon deg, resolution deg, bad mask)."""
+    la, lo = s.f(k), s.f(k + 2)
+    lat, _, b1 = _lat_lon(la, s.f(k + 1), b"N", b"S", 90.0)
+    lon, _, b2 = _lat_lon(lo, s.f(k + 3), b"E", b"W", 180.0)
+    return lat, lon, np.maximum(_resolution_deg(la), _resolution_deg(lo)), b1 | b2
+
+
 # ------------------------------------------------------------------ the parser
 def _classify(head: bytes, bang: bool) -> int | str:
     """Kind code of a sentence from the first bytes of its body, or the skip reason."""
@@ -488,7 +561,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
 
     sent: dict[int, _Sentences] = {}
     commas = np.flatnonzero(arr == 44)
-    for kind in range(6):
+    for kind in range(len(_KNOWN)):
         sel = np.flatnonzero(kind_arr == kind)
         if len(sel) == 0:
             continue
@@ -501,18 +574,16 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         p: dict[str, np.ndarray] = {}
         keep = np.ones(s.n, bool)
         if kind in _TIMED:
-            sod, empty_t, bad_t = _time_of_day_us(s.f(1))
+            sod, empty_t, bad_t = _time_of_day_us(s.f(_TIME_FIELD.get(kind, 1)))
             probs.add(f"malformed time in {tname}", s.pos[bad_t])
             probs.add(f"{tname} without time (receiver not synchronised)", s.pos[empty_t],
                       fatal=False)
             keep &= sod >= 0
             p["sod"] = sod
         if kind == _GGA:
-            lat, _, b1 = _lat_lon(s.f(2), s.f(3), b"N", b"S", 90.0)
-            lon, _, b2 = _lat_lon(s.f(4), s.f(5), b"E", b"W", 180.0)
+            lat, lon, res, badpos = _position(s, 2)
             q, bq = _num(s.f(6))
             bq |= np.isfinite(q) & ((q != np.floor(q)) | (q < 0) | (q > 9))
-            badpos = b1 | b2
             probs.add("malformed position in GGA", s.pos[badpos & keep])
             probs.add("malformed fix quality in GGA", s.pos[bq & keep & ~badpos])
             keep &= ~badpos & ~bq
@@ -526,20 +597,55 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                              (bsep, "geoid separation")):
                 probs.add(f"malformed {fld} in GGA (field ignored)", s.pos[bad & keep])
             stats["alt_without_geoid_sep"] += int((fix & keep & np.isfinite(alt) & np.isnan(sep)).sum())
-            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan),
+            # a fix from 0 satellites is a receiver's placeholder (Furuno GT-88): unknown
+            nsat[fix & (nsat == 0)] = np.nan
+            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
                      alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
                      q=np.where(fix, qi, 0).astype(np.float64),
                      nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
                      hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan))
+        elif kind == _GNS:
+            lat, lon, res, badpos = _position(s, 2)
+            probs.add("malformed position in GNS", s.pos[badpos & keep])
+            keep &= ~badpos
+            qi, bm = _gns_quality(s.f(6))
+            probs.add("malformed mode in GNS", s.pos[bm & keep & ~badpos])
+            keep &= ~bm
+            fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+            nsat, bs = _num(s.f(7))
+            hdop, bh = _num(s.f(8))
+            alt, ba = _num(s.f(9))
+            sep, bsep = _num(s.f(10))
+            for bad, fld in ((bs, "satellites"), (bh, "HDOP"), (ba, "altitude"),
+                             (bsep, "geoid separation")):
+                probs.add(f"malformed {fld} in GNS (field ignored)", s.pos[bad & keep])
+            stats["alt_without_geoid_sep"] += int((fix & keep & np.isfinite(alt) & np.isnan(sep)).sum())
+            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
+                     alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
+                     q=np.where(fix, qi, 0).astype(np.float64),
+                     nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
+                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan))
+        elif kind == _GLL:
+            status = s.f(6)
+            lat, lon, res, badpos = _position(s, 1)
+            badpos &= status == b"A"
+            probs.add("malformed position in GLL", s.pos[badpos & keep])
+            keep &= ~badpos
+            mq = _mode_quality(s.f(7))
+            probs.add("malformed mode in GLL (field ignored)", s.pos[(mq < 0) & keep])
+            mq[mq < 0] = 1
+            fix = ((status == b"A") & (mq > 0) & np.isfinite(lat) & np.isfinite(lon)
+                   & ~((lat == 0) & (lon == 0)))
+            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
+                     q=np.where(fix, mq, 0).astype(np.float64))
         elif kind == _RMC:
             status = s.f(2)
-            lat, _, b1 = _lat_lon(s.f(3), s.f(4), b"N", b"S", 90.0)
-            lon, _, b2 = _lat_lon(s.f(5), s.f(6), b"E", b"W", 180.0)
-            badpos = (b1 | b2) & (status == b"A")
+            lat, lon, res, badpos = _position(s, 3)
+            badpos &= status == b"A"
             probs.add("malformed position in RMC", s.pos[badpos & keep])
             keep &= ~badpos
             mode = s.f(12)
-            mq = np.array([_MODE_QUALITY.get(m, -1) for m in mode.tolist()], np.int64)
+            mq = _mode_quality(mode)
             probs.add("malformed mode in RMC (field ignored)", s.pos[(mq < 0) & keep])
             mq[mq < 0] = 1
             valid = status == b"A"
@@ -551,7 +657,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             probs.add("malformed course in RMC (field ignored)", s.pos[bc & keep])
             days, bd = _rmc_date(s.f(9))
             probs.add("malformed date in RMC (field ignored)", s.pos[bd & keep])
-            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan),
+            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
                      q=np.where(fix, mq, 0).astype(np.float64),
                      speed=np.where(valid & (spd >= 0), spd * KNOT_MPS, np.nan),
                      course=np.where(valid & (crs >= 0) & (crs <= 360), crs % 360.0, np.nan),
@@ -644,10 +750,14 @@ def _assign_epochs(parsed: dict[int, dict[str, np.ndarray]]) -> np.ndarray | Non
     return ts[new]
 
 
-def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int) -> dict[str, np.ndarray]:
+def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int,
+                  position_from: str = "rank") -> dict[str, np.ndarray]:
     """One value per epoch and field: the last non-empty in file order, by the module's rules.
 
-    ``row``: the epoch has a GGA or an RMC (the epochs that become fixes).
+    ``row``: the epoch has a position sentence (GGA, GNS, RMC, GLL: the epochs that become
+    fixes).  ``disagree``: its position sentences disagree (:func:`_disagreements`).
+    ``position_from``: ``"rank"`` (the position of the most informative kind) or ``"last"``
+    (of the last position sentence with a fix, in file order: what gpsd reports).
     """
     def field(kinds_fields: list[tuple[int, str]]) -> np.ndarray:
         out = np.full(n_ep, np.nan)
@@ -656,30 +766,75 @@ def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int) -> dict[s
                 _last_per_epoch(out, parsed[kind]["ep"], parsed[kind][fld])
         return out
 
-    has = {k: np.zeros(n_ep, bool) for k in (_GGA, _RMC)}
-    for k, mask in has.items():
-        if k in parsed:
-            mask[parsed[k]["ep"]] = True
-    e = {f: np.full(n_ep, np.nan) for f in ("lat", "lon", "alt")}
+    # position and quality: from the most informative position sentence kind the epoch has
+    # (even without a fix: a GGA's quality 0 is not overridden by an RMC's 'A')
+    row = np.zeros(n_ep, bool)
+    taken = np.zeros(n_ep, bool)
+    e = {f: np.full(n_ep, np.nan) for f in ("lat", "lon", "alt", "res")}
     e["q"] = np.zeros(n_ep)
-    # position and quality: GGA where the epoch has one (even without a fix), else RMC
-    for kind, src_mask in ((_RMC, ~has[_GGA]), (_GGA, has[_GGA])):
+    for kind in _POSITION_RANK:
         if kind not in parsed:
             continue
         g = parsed[kind]
-        use = np.isfinite(g["lat"]) & src_mask[g["ep"]]
-        for f in ("lat", "lon", "q") + (("alt",) if kind == _GGA else ()):
+        has = np.zeros(n_ep, bool)
+        has[g["ep"]] = True
+        use = np.isfinite(g["lat"]) & ~taken[g["ep"]]
+        for f in ("lat", "lon", "q", "res") + (("alt",) if "alt" in g else ()):
             _last_per_epoch(e[f], g["ep"], g[f], use)
-    e["nsat"] = field([(_GGA, "nsat")])
-    e["hdop"] = field([(_GSA, "hdop"), (_GGA, "hdop")])  # GGA's HDOP wins
+        taken |= has
+    row = taken
+    if position_from == "last":
+        kinds = [k for k in _POSITION_RANK if k in parsed]
+        cat = {f: np.concatenate([parsed[k][f] for k in kinds])
+               for f in ("ep", "pos", "lat", "lon", "q", "res")}
+        o = np.argsort(cat["pos"], kind="stable")
+        fix = np.isfinite(cat["lat"][o])
+        for f in ("lat", "lon", "q", "res"):
+            _last_per_epoch(e[f], cat["ep"][o], cat[f][o], fix)
+    elif position_from != "rank":
+        raise ValueError(f"position_from must be 'rank' or 'last', not {position_from!r}")
+    e["disagree"] = _disagreements(parsed, e, n_ep)
+    e["nsat"] = field([(_GNS, "nsat"), (_GGA, "nsat")])  # GGA wins
+    e["hdop"] = field([(_GSA, "hdop"), (_GNS, "hdop"), (_GGA, "hdop")])  # GGA's HDOP wins
     e["pdop"] = field([(_GSA, "pdop")])
     e["vdop"] = field([(_GSA, "vdop")])
     e["sig_n"] = field([(_GST, "sig_n")])
     e["sig_e"] = field([(_GST, "sig_e")])
     e["speed"] = field([(_VTG, "speed"), (_RMC, "speed")])  # RMC wins
     e["course"] = field([(_VTG, "course"), (_RMC, "course")])
-    e["row"] = has[_GGA] | has[_RMC]
+    e["row"] = row
     return e
+
+
+def _disagreements(parsed: dict[int, dict[str, np.ndarray]], e: dict[str, np.ndarray],
+                   n_ep: int) -> np.ndarray:
+    """Mask of epochs where a position sentence's fix differs from the one taken; refines it.
+
+    Differs: by more than :data:`_DISAGREE_DEG` in latitude or longitude, and by more than
+    one unit of the last digit printed by either (an RMC with 4 decimals of minutes
+    beside a GGA with 7 is the same fix, rounded).  Among the sentences that agree with
+    the one taken and are printed as finely, the last in file order gives ``e['lat']`` /
+    ``e['lon']`` (what gpsd reports for such an epoch: receivers that round GGA and
+    truncate GLL differ by one digit).
+    """
+    kinds = [k for k in _POSITION_RANK if k in parsed]
+    out = np.zeros(n_ep, bool)
+    if not kinds:
+        return out
+    cat = {f: np.concatenate([parsed[k][f] for k in kinds]) for f in ("ep", "pos", "lat", "lon",
+                                                                       "res")}
+    m = np.isfinite(cat["lat"])
+    order = np.argsort(cat["pos"][m], kind="stable")
+    ep, lat, lon, res = (cat[f][m][order] for f in ("ep", "lat", "lon", "res"))
+    ref_ok = np.isfinite(e["lat"][ep])
+    tol = np.maximum(_DISAGREE_DEG, np.fmax(res, e["res"][ep]) * 1.0001)
+    with np.errstate(invalid="ignore"):
+        d = ((np.abs(lat - e["lat"][ep]) > tol) | (np.abs(lon - e["lon"][ep]) > tol)) & ref_ok
+    out[ep[d]] = True
+    same = ref_ok & ~d & (res <= e["res"][ep] * 1.0001)
+    _last_per_epoch(e["lat"], ep, lat, same)
+    _last_per_epoch(e["lon"], ep, lon, same)
+    return out
 
 
 def _epoch_days(parsed: dict[int, dict[str, np.ndarray]], epoch_sod: np.ndarray,
@@ -713,7 +868,7 @@ def _epoch_days(parsed: dict[int, dict[str, np.ndarray]], epoch_sod: np.ndarray,
 
 
 def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None = None,
-               strict: bool = False) -> tuple[GnssFixes, SkipReport, dict]:
+               strict: bool = False, position_from: str = "rank") -> tuple[GnssFixes, SkipReport, dict]:
     """Parse NMEA text (whole file content as bytes).
 
     Returns fixes (one row per receiver epoch, in file order), the skipped-line
@@ -721,6 +876,9 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     (``sentences``, ``talkers``, ``lines``, ``epochs``, ``dates``, ``date_source``,
     ``warnings``, ...).  ``date`` is used only when the log holds no RMC/ZDA date.
     ``strict`` raises :class:`ParseError` at the first bad line instead of skipping it.
+    ``position_from``: which position an epoch whose sentences disagree takes: ``"rank"``
+    (GGA, then GNS, RMC, GLL: the most informative) or ``"last"`` (the last in file order,
+    as gpsd does).
     Raises :class:`InputError` for empty, UTF-16 or binary input and
     :class:`NoDataError` when no epoch with a time (and a date) can be built.
     """
@@ -729,8 +887,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         date = date.date()
     if len(data) == 0:
         raise InputError(name, "empty file (expected NMEA 0183 text lines like $GPGGA,...*hh)")
-    if _utf16_kind(data[:4096]) is not None:
-        raise InputError(name, _UTF16_HINT)
+    data, encoding = _decode(data)
     # NUL padding: drop it (line numbers count line ends only, so they do not move)
     buf = data.replace(b"\x00", b"") if b"\x00" in data else data
     if not buf.strip():
@@ -767,11 +924,12 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     report = _report(probs, name, lines, strict, buf)
     epoch_sod = _assign_epochs(parsed)
     if epoch_sod is None:
-        what = ("GGA/RMC/GSA/VTG/GST/ZDA sentence with a valid checksum" if not parsed
-                else "GGA or RMC sentence with a time of day")
+        what = ("GGA/GNS/RMC/GLL/GSA/VTG/GST/ZDA sentence with a valid checksum" if not parsed
+                else "GGA, GNS, RMC or GLL sentence with a time of day")
         raise NoDataError(name, f"no {what} ({_summary(report)})")
-    e = _merge_epochs(parsed, len(epoch_sod))
+    e = _merge_epochs(parsed, len(epoch_sod), position_from)
     row = e.pop("row")
+    disagree = e.pop("disagree")
     day, meta["date_source"] = _epoch_days(parsed, epoch_sod, date)
     if day is None:
         if (e["q"][row] > 0).any():
@@ -780,7 +938,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         raise NoDataError(name, "no fix and no date in the log (only no-fix epochs without "
                                 "RMC/ZDA dates)")
     if not row.any():
-        raise NoDataError(name, f"no GGA or RMC sentence with a time of day ({_summary(report)})")
+        raise NoDataError(name, f"no GGA, GNS, RMC or GLL sentence with a time of day ({_summary(report)})")
     r = {f: v[row] for f, v in e.items()}
     t_us = day[row].astype(np.int64) * _US_PER_DAY + epoch_sod[row]
     fixes = GnssFixes(
@@ -791,6 +949,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         sigma_n_m=r["sig_n"], speed_mps=r["speed"], course_deg=r["course"])
     meta["epochs"] = len(fixes)
     meta["epochs_without_gga_rmc"] = int((~row).sum())
+    meta["position_disagreements"] = int(disagree[row].sum())
     udays = np.unique(day[row])
     dates = [datetime.date(1970, 1, 1) + datetime.timedelta(days=int(d)) for d in udays]
     meta["dates"] = [d.isoformat() for d in dates]
@@ -810,7 +969,51 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         meta["warnings"].append(
             f"{name}: {meta['alt_without_geoid_sep']} GGA fixes have no geoid separation: "
             "their alt_m is above mean sea level, not the ellipsoid")
+    notes = []
+    if encoding is not None:
+        meta["encoding"] = encoding
+        notes.append(f"text encoding {encoding}: decoded (NMEA is ASCII; save as UTF-8 to skip this)")
+    if meta["position_disagreements"]:
+        notes.append(
+            f"{meta['position_disagreements']} epochs whose sentences disagree on the position "
+            f"(> {_DISAGREE_DEG:g} deg): took "
+            + ("GGA, then GNS, then RMC, then GLL" if position_from == "rank"
+               else "the last sentence of each epoch"))
+    if notes:
+        meta["notes"] = notes
     return fixes, report, meta
+
+
+def _decode(data: bytes) -> tuple[bytes, str | None]:
+    """Bytes as ASCII-compatible text, and the encoding decoded (None: ASCII/UTF-8).
+
+    UTF-16 (BOM, or NULs in every other byte) is decoded to ASCII with ``?`` for what is
+    not ASCII, so line numbers stay; Latin-1 needs no decoding (every byte is one
+    character and NMEA uses only ASCII), it is only named.  Binary noise (control bytes,
+    0x80-0x9F) is neither: the parser skips and counts it.
+    """
+    kind = _utf16_kind(data[:4096])
+    if kind is not None:
+        bom = data[:2] in (b"\xff\xfe", b"\xfe\xff")
+        text = data[2:] if bom else data
+        text = text.decode("utf-16-le" if kind == "le" else "utf-16-be", errors="replace")
+        how = "byte-order mark" if bom else "no byte-order mark, told by its NUL bytes"
+        return text.encode("ascii", errors="replace"), f"UTF-16-{kind.upper()} ({how})"
+    arr = np.frombuffer(data, np.uint8)
+    if len(arr) == 0 or int(arr.max()) < 128:
+        return data, None
+    try:
+        data.decode("utf-8")
+        return data, None
+    except UnicodeDecodeError:
+        pass
+    high = arr[arr >= 128]
+    c1 = int(np.count_nonzero(high < 0xA0))
+    ctrl = int(np.count_nonzero((arr < 32) & (arr != 9) & (arr != 10) & (arr != 13)))
+    # Latin-1 text uses the letters 0xA0-0xFF; binary bytes spread over C0/C1 controls too
+    if c1 + ctrl <= 0.05 * len(high):
+        return data, "Latin-1 (ISO 8859-1)"
+    return data, None
 
 
 #: What strict mode says was expected, by the start of a skip reason.
@@ -855,7 +1058,8 @@ def _summary(report: SkipReport) -> str:
     return "skipped: " + "; ".join(parts)
 
 
-def read_nmea(path: str | Path, *, date: datetime.date | None = None) -> Drive:
+def read_nmea(path: str | Path, *, date: datetime.date | None = None,
+              position_from: str = "rank") -> Drive:
     """Read an NMEA file (``'-'`` = standard input bytes) into a :class:`Drive`.
 
     The drive has ``gnss``, ``skipped``, ``sources=[Source(path, sha256, ('gnss',))]``
@@ -869,7 +1073,7 @@ def read_nmea(path: str | Path, *, date: datetime.date | None = None) -> Drive:
             data = Path(path).read_bytes()
     except OSError as err:
         raise InputError(name, f"cannot read: {err.strerror or err}") from err
-    fixes, report, meta = parse_nmea(data, name=name, date=date)
+    fixes, report, meta = parse_nmea(data, name=name, date=date, position_from=position_from)
     sha = hashlib.sha256(data).hexdigest()
     return Drive(gnss=fixes, skipped=report, sources=[Source(name, sha, ("gnss",))],
                  meta=meta)

@@ -2,8 +2,8 @@
 
 :func:`sniff` decides by content, not by file name: the MCAP magic, the Parquet
 magic, NMEA sentences with valid checksums, else a delimited text table with a
-header row.  Empty, binary and UTF-16 files are an :class:`InputError` naming
-the file.
+header row.  Empty and binary files, and UTF-16 files other than NMEA, are an
+:class:`InputError` naming the file.
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ def _head(path: str | Path) -> bytes:
 
 
 def sniff(path: str | Path) -> str:
-    """``"mcap"``, ``"nmea"``, ``"csv"`` or ``"parquet"``, by the file's first bytes."""
+    """``"mcap"``, ``"nmea"``, ``"rtklib"``, ``"csv"`` or ``"parquet"``, by the file's first
+    bytes (and a ``.pos`` name for an RTKLIB solution without a header)."""
     from .nmea import looks_like_nmea
 
     head = _head(path)
@@ -45,9 +46,13 @@ def sniff(path: str | Path) -> str:
         return "mcap"
     if head.startswith(PARQUET_MAGIC):
         return "parquet"
+    from .rtklib import looks_like_rtklib
+
+    if looks_like_rtklib(head) or (Path(path).suffix.lower() == ".pos" and b"$" not in head[:4096]):
+        return "rtklib"  # an RTKLIB .pos solution (a .pos of NMEA sentences is NMEA)
     problem = text_problem(head)
-    if problem and problem.startswith("UTF-16"):
-        raise InputError(path, problem)
+    if problem and problem.startswith("UTF-16") and not looks_like_nmea(head):
+        raise InputError(path, problem)  # UTF-16 NMEA is decoded by the NMEA reader
     if looks_like_nmea(head) or _nmea_after_noise(head, looks_like_nmea):
         return "nmea"
     if problem:
@@ -98,8 +103,12 @@ def _read_log(path: str | Path, *, role: str, topics: dict[str, str] | None,
         from .nmea import read_nmea
 
         return read_nmea(path, date=date)
+    if kind == "rtklib":
+        from .rtklib import read_rtklib
+
+        return read_rtklib(path)
     raise UsageError(f"{path}: a {kind.upper()} file cannot be the {role}; "
-                     "expected an MCAP or NMEA log")
+                     "expected an MCAP, NMEA or RTKLIB .pos log")
 
 
 def _only(drive: Drive, stream: str) -> Drive:

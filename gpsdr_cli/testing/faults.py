@@ -1024,6 +1024,46 @@ def _standstill_long(duration_s: float, gnss: bool) -> Callable[[Any, Any], Case
     return make
 
 
+def rtklib_pos(drive: Drive) -> bytes:
+    """The drive's GNSS fixes as an RTKLIB ``.pos`` solution (llh form, GPST, Q 5 single;
+    no-fix epochs left out, as RTKLIB writes no line without a solution)."""
+    g = drive.gnss
+    lines = ["% program   : gpsdr fault suite (RTKLIB .pos layout)",
+             ("% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:single,"
+             "6:ppp,ns=# of satellites)"),
+             ("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)"
+             "   sde(m)   sdu(m)  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio")]
+    ok = g.valid if g is not None else np.zeros(0, bool)
+    for i in np.flatnonzero(ok):
+        gpst = pd.Timestamp(int(g.t_ns[i]) + 18 * NS_PER_S, unit="ns")  # GPST - UTC since 2017
+        alt = g.alt_m[i] if np.isfinite(g.alt_m[i]) else 0.0
+        lines.append(f"{gpst.strftime('%Y/%m/%d %H:%M:%S.%f')[:-3]}  {g.lat_deg[i]:13.9f}  "
+                     f"{g.lon_deg[i]:13.9f} {alt:10.4f}   5  {max(int(g.n_sats[i]), 4):2d}"
+                     "   1.2000   1.0000   2.5000   0.1000   0.2000   0.3000   0.00    0.0")
+    return ("\n".join(lines) + "\n").encode()
+
+
+def _pos_case(fault: Callable[[bytes], bytes]) -> Callable[[Any, Any], CaseInputs]:
+    """The GNSS given as an RTKLIB .pos (``--gps rover.pos``), damaged by ``fault``."""
+    def make(sim: Any, out_dir: Any) -> CaseInputs:
+        import pathlib
+
+        paths = _files(sim, out_dir)
+        pos = pathlib.Path(out_dir) / "rover.pos"
+        pos.write_bytes(fault(rtklib_pos(sim.drive)))
+        return CaseInputs(sim=sim, args=["--gps", str(pos), "--gyro", str(paths["gyro.csv"]),
+                                         "--odo", str(paths["odo.csv"])])
+    return make
+
+
+def _utf16(data: bytes, *, bom: bool = True, big_endian: bool = False) -> bytes:
+    """Text re-encoded as UTF-16 (little-endian with a byte-order mark by default)."""
+    text = data.decode("latin-1")
+    if bom:
+        return text.encode("utf-16-be" if big_endian else "utf-16")  # "utf-16": BOM + LE
+    return text.encode("utf-16-be" if big_endian else "utf-16-le")
+
+
 def _mcap_case(fault: Callable[[bytes], bytes]) -> Callable[[Any, Any], CaseInputs]:
     return _file_case("drive.mcap", fault, mcap=True)
 
@@ -1110,6 +1150,16 @@ CATALOGUE: tuple[FaultCase, ...] = (
     FaultCase("nmea_all_garbage", "the NMEA file is 64 kB of random bytes", "error",
               _file_case("gps.nmea", lambda b: np.random.default_rng(12).integers(
                   0, 256, 65536, dtype=np.uint8).tobytes())),
+    FaultCase("nmea_utf16", "the NMEA log saved as UTF-16 (little-endian, BOM)", "track",
+              _file_case("gps.nmea", _utf16)),
+    FaultCase("nmea_utf16_be_nobom", "the NMEA log as UTF-16 big-endian without a BOM", "track",
+              _file_case("gps.nmea", lambda b: _utf16(b, bom=False, big_endian=True))),
+    FaultCase("pos_clean", "the GNSS as an RTKLIB .pos (llh, GPST)", "track",
+              _pos_case(lambda b: b)),
+    FaultCase("pos_corrupt", "RTKLIB .pos with 300 random bytes overwritten", "track",
+              _pos_case(lambda b: corrupt(b, 300, seed=13, start_frac=0.1, end_frac=0.9))),
+    FaultCase("pos_truncated_head", "RTKLIB .pos cut inside its header", "error",
+              _pos_case(lambda b: b[:150])),
 )
 
 CASES: dict[str, FaultCase] = {c.name: c for c in CATALOGUE}

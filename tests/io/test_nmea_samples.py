@@ -162,7 +162,7 @@ def test_bad_field_with_valid_checksum_blanks_the_field() -> None:
 
 
 def test_startup_empty_fields_no_time() -> None:
-    with pytest.raises(NoDataError, match="no GGA or RMC sentence with a time"):
+    with pytest.raises(NoDataError, match="no GGA, GNS, RMC or GLL sentence with a time"):
         read_nmea(DATA / "pygpsdata-nmeastartup.log")
 
 
