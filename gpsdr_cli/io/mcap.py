@@ -24,13 +24,8 @@ MCAP log times instead (and a zero stamp always falls back to the log time).
 When several channels of one kind exist, the one with the most usable messages
 is used and the others are listed in ``meta["mcap"]``.
 
-Why the container is walked here instead of with ``mcap.reader``: the library
-builds a Python object per record (~330 k records/s before any decoding, short
-of the 300 k msg/s target once decoding is added), and on a truncated or
-damaged file it raises without handing over what it already read.  The walk
-below reads the records linearly (the MCAP spec's record framing: opcode u8,
-length u64), decompresses chunks (zstd, lz4), checks their CRC, and on damage
-keeps everything before it, with a warning and a :class:`SkipReport` entry.
+The container walk is :mod:`gpsdr_cli.io.mcap_walk` (damage keeps what was read
+before it); protobuf's wire format is :mod:`gpsdr_cli.io.protobuf`.
 
 Speed from ``twist.linear.x`` assumes a body-frame twist.  Some GNSS drivers
 (u-blox ``/fix_velocity``) publish the velocity in a navigation frame (ENU),
@@ -47,6 +42,7 @@ rates vary, which makes the flag sloppy metadata: then they are kept, with a
 warning).
 """
 
+
 from __future__ import annotations
 
 import dataclasses
@@ -58,25 +54,18 @@ import math
 import mmap
 import os
 import struct
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numba
 import numpy as np
 
 from ..conventions import FIX_DGPS, FIX_GPS, FIX_NONE, NS_PER_S
 from ..errors import InputError, NoDataError, UsageError
-from . import ros2_fast
+from . import protobuf, ros2_fast
 from .drive import Drive, GnssFixes, Odometry, SkipReport, Source, YawRates
-from .readers import MCAP_MAGIC as MAGIC  # there: sniffing must not import this module
-
-#: Larger declared chunks are taken as damage (writers use ~1-4 MB chunks).
-_MAX_CHUNK_BYTES = 1 << 31
-
-_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
-_OP_DATA_END = 0x0F
+from .formats import MCAP_MAGIC as MAGIC
+from .mcap_walk import Walker
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
@@ -95,10 +84,6 @@ _MOVING_MPS = 0.5
 _LATERAL_SHARE = 0.3
 #: an ENU velocity message belongs to the fix stamped within this (u-blox: the same stamp)
 _VELOCITY_MATCH_NS = 100_000_000
-
-
-class _Damage(Exception):
-    """The container is damaged at this point; keep what was read before."""
 
 
 @dataclass
@@ -124,302 +109,29 @@ class _Channel:
         self.cols.setdefault(name, []).append(values)
 
 
-# --------------------------------------------------------------------------- container walk
-
-_SCAN_PROBLEMS = {
-    1: "{n} stray bytes at offset {at}, too few for a record header",
-    2: "record at offset {at} runs past the end (truncated?)",
-    3: "message record at offset {at} shorter than its header",
-    4: "opcode 0x00 (zeroed bytes) at offset {at}",
-}
+def _new_channel(cid: int, topic: str, encoding: str, schema_name: str, schema_encoding: str,
+                 schema_data: bytes) -> _Channel:
+    return _Channel(cid, topic, encoding, schema_name, schema_encoding, schema_data,
+                    _LAYOUTS.get(schema_name))
 
 
-@numba.njit(cache=True)
-def _scan_pass(buf: np.ndarray, start: int, end: int, stop_at_data_end: bool, fill: bool,
-               ops: np.ndarray, body: np.ndarray, length: np.ndarray, ch: np.ndarray,
-               lt: np.ndarray):  # pragma: no cover
-    k = 0
-    p = start
-    status = 0
-    while p < end:
-        if p + 9 > end:
-            status = 1
-            break
-        op = buf[p]
-        ln = np.uint64(0)
-        for i in range(8):
-            ln |= np.uint64(buf[p + 1 + i]) << np.uint64(8 * i)
-        if ln > np.uint64(end - p - 9):
-            status = 2
-            break
-        if op == 0:
-            status = 4
-            break
-        n = np.int64(ln)
-        if op == 5 and n < 22:
-            status = 3
-            break
-        if fill:
-            if op == 5:
-                q = p + 9
-                ch[k] = np.int64(buf[q]) | (np.int64(buf[q + 1]) << 8)
-                t = np.uint64(0)
-                for i in range(8):
-                    t |= np.uint64(buf[q + 6 + i]) << np.uint64(8 * i)
-                lt[k] = np.int64(t)
-            ops[k] = op
-            body[k] = p + 9
-            length[k] = n
-        k += 1
-        p += 9 + n
-        if stop_at_data_end and (op == 0x0F or op == 0x02):
-            break
-    return k, status, p
+# --------------------------------------------------------------------------- decoding
 
+class _Decoder:
+    """Decodes the messages of the channels gpsdr reads into their :class:`_Channel`."""
 
-def _scan_records(buf: np.ndarray, start: int, end: int, stop_at_data_end: bool):
-    """Frame the records of buf[start:end] (MCAP: opcode u8, length u64 LE, body).
-
-    Returns per record: opcode, body offset, body length, and for messages the
-    channel id and log time; then a status (0 ok, else a key of _SCAN_PROBLEMS)
-    and the offset where the scan stopped.  Compiled, in two passes (count, then
-    fill exactly sized arrays): this is the one loop that touches every record,
-    and Python spends ~0.6 us per record on it.
-    """
-    none = np.zeros(0, np.int64)
-    k, _, _ = _scan_pass(buf, start, end, stop_at_data_end, False, np.zeros(0, np.uint8),
-                         none, none, none, none)
-    ops = np.empty(k, np.uint8)
-    body = np.empty(k, np.int64)
-    length = np.empty(k, np.int64)
-    ch = np.zeros(k, np.int64)
-    lt = np.zeros(k, np.int64)
-    k, status, p = _scan_pass(buf, start, end, stop_at_data_end, True, ops, body, length, ch, lt)
-    return ops, body, length, ch, lt, status, p
-
-
-class _Walker:
-    """Linear walk over the MCAP records; decodes wanted channels chunk by chunk."""
-
-    def __init__(self, path: str, data: bytes, wanted: dict[str, str | None],
-                 use_log_time: bool) -> None:
+    def __init__(self, path: str, wanted: dict[str, str | None]) -> None:
         self.path = path
-        self.data = data
         self.wanted = wanted
-        self.use_log_time = use_log_time
-        self.schemas: dict[int, tuple[str, str, bytes]] = {}
-        self.channels: dict[int, _Channel] = {}
-        self.damage: list[str] = []
-        self.skipped = SkipReport()
-        self.n_chunks = 0
-        self.n_messages = 0
-        self.reached_data_end = False
-        self.has_summary = False
-        #: From a CRC-checked summary: chunk record offset -> channel ids in it; per-channel counts.
-        self.chunk_channels: dict[int, frozenset[int]] = {}
-        self.stat_counts: dict[int, int] = {}
-        self.wanted_ids: set[int] = set()
-        self.n_chunks_skipped = 0
 
-    # records --------------------------------------------------------------
-    def _string(self, buf: bytes, pos: int, end: int) -> tuple[str, int]:
-        if pos + 4 > end:
-            raise _Damage("string length runs past its record")
-        n = _U32.unpack_from(buf, pos)[0]
-        if pos + 4 + n > end:
-            raise _Damage("string runs past its record")
-        try:
-            return buf[pos + 4:pos + 4 + n].decode("utf-8"), pos + 4 + n
-        except UnicodeDecodeError as err:
-            raise _Damage("string is not UTF-8") from err
+    def on_messages(self, chan: _Channel, buf: bytes, npbuf: np.ndarray, lt: np.ndarray,
+                    off: np.ndarray, sz: np.ndarray) -> None:
+        """One batch of one channel's messages: log times and data byte ranges in buf."""
+        chan.n_msgs += len(off)
+        if self.is_wanted(chan):
+            self._decode(chan, buf, npbuf, lt, off, sz)
 
-    def _schema(self, buf: bytes, pos: int, end: int) -> None:
-        if pos + 2 > end:
-            raise _Damage("schema record too short")
-        sid = _U16.unpack_from(buf, pos)[0]
-        name, p = self._string(buf, pos + 2, end)
-        enc, p = self._string(buf, p, end)
-        if p + 4 > end:
-            raise _Damage("schema record too short")
-        n = _U32.unpack_from(buf, p)[0]
-        if p + 4 + n > end:
-            raise _Damage("schema data runs past its record")
-        self.schemas.setdefault(sid, (name, enc, bytes(buf[p + 4:p + 4 + n])))
-
-    def _channel(self, buf: bytes, pos: int, end: int) -> None:
-        if pos + 4 > end:
-            raise _Damage("channel record too short")
-        cid, sid = struct.unpack_from("<HH", buf, pos)
-        topic, p = self._string(buf, pos + 4, end)
-        enc, p = self._string(buf, p, end)
-        if cid in self.channels:
-            return
-        name, s_enc, s_data = self.schemas.get(sid, ("", "", b""))
-        self.channels[cid] = _Channel(cid, topic, enc, name, s_enc, s_data, _LAYOUTS.get(name))
-
-    def _records(self, buf: bytes, start: int, end: int, in_chunk: bool) -> None:
-        """Walk the records of buf[start:end]: the compiled scan frames them, Python
-        handles the few non-message records in order, messages are decoded in batches."""
-        arr = np.frombuffer(buf, np.uint8)
-        ops, body, length, ch, lt, status, where = _scan_records(arr, start, end, not in_chunk)
-        special = np.flatnonzero(ops != _OP_MESSAGE).tolist()
-        seg = 0
-        for k in [*special, len(ops)]:
-            if k > seg:
-                self._flush(buf, arr, ch[seg:k], lt[seg:k], body[seg:k] + 22, length[seg:k] - 22)
-            if k == len(ops):
-                break
-            op, pos = int(ops[k]), int(body[k])
-            nxt = pos + int(length[k])
-            if op == _OP_SCHEMA:
-                self._schema(buf, pos, nxt)
-            elif op == _OP_CHANNEL:
-                self._channel(buf, pos, nxt)
-            elif op == _OP_CHUNK and not in_chunk:
-                inside = self.chunk_channels.get(pos - 9)
-                if inside and not inside & self.wanted_ids:
-                    self.n_chunks += 1
-                    self.n_chunks_skipped += 1  # the index says: nothing gpsdr reads in there
-                else:
-                    self._chunk(buf, pos, nxt)
-            elif op == _OP_DATA_END and not in_chunk:
-                self.reached_data_end = True
-            seg = k + 1
-        if status:
-            raise _Damage(_SCAN_PROBLEMS[status].format(n=end - where, at=where))
-
-    def _chunk(self, buf: bytes, pos: int, end: int) -> None:
-        self.n_chunks += 1
-        if pos + 28 > end:
-            raise _Damage("chunk record too short")
-        usize = _U64.unpack_from(buf, pos + 16)[0]
-        crc = _U32.unpack_from(buf, pos + 24)[0]
-        compression, p = self._string(buf, pos + 28, end)
-        if p + 8 > end:
-            raise _Damage("chunk record too short")
-        n = _U64.unpack_from(buf, p)[0]
-        if p + 8 + n > end:
-            raise _Damage("chunk records run past the chunk")
-        raw = buf[p + 8:p + 8 + n]
-        where = f"{self.path}: chunk {self.n_chunks}"
-        import lz4.frame
-        import zstandard
-
-        if usize > _MAX_CHUNK_BYTES:
-            self._bad_chunk(where, f"claims {usize} uncompressed bytes")
-            return
-        try:
-            # Output bounded by the chunk's declared size: a damaged header cannot make
-            # the decompressor allocate more.
-            if compression == "":
-                records = bytes(raw)
-            elif compression == "zstd":
-                declared = zstandard.frame_content_size(raw)
-                if declared not in (-1, usize):
-                    raise ValueError(f"zstd frame says {declared} bytes, chunk says {usize}")
-                records = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
-            elif compression == "lz4":
-                records = lz4.frame.LZ4FrameDecompressor().decompress(raw, max_length=usize + 1)
-            else:
-                self.skipped.add(f"MCAP chunk with unsupported compression {compression!r}", where)
-                return
-        except (zstandard.ZstdError, RuntimeError, ValueError, OSError, MemoryError,
-                OverflowError) as err:
-            self._bad_chunk(where, f"cannot decompress ({compression}): {err}")
-            return
-        if len(records) != usize:
-            self._bad_chunk(where, f"decompressed to {len(records)} bytes, header says {usize}")
-            return
-        if crc and zlib.crc32(records) != crc:
-            self._bad_chunk(where, "CRC mismatch (corrupt chunk)")
-            return
-        try:
-            self._records(records, 0, len(records), in_chunk=True)
-        except _Damage as err:
-            self._bad_chunk(where, str(err))
-
-    def _bad_chunk(self, where: str, why: str) -> None:
-        self.skipped.add("MCAP chunk damaged (its messages lost)", where)
-        self.damage.append(f"{where}: {why}; skipped")
-
-    def _read_summary(self) -> None:
-        """Channels and the chunk index from the summary section, if its CRC checks.
-
-        Lets the walk skip chunks holding only channels gpsdr does not read (camera,
-        lidar): no decompression for them.  Any doubt (no summary, no CRC, a bad
-        CRC, an index without message indexes) leaves every chunk to be read."""
-        data = self.data
-        n = len(data)
-        if n < 8 + 37 + 8 or data[-8:] != MAGIC or data[n - 37] != _OP_FOOTER:
-            return
-        start = _U64.unpack_from(data, n - 28)[0]
-        crc = _U32.unpack_from(data, n - 12)[0]
-        if not (crc and 8 <= start <= n - 37) or zlib.crc32(data[start:n - 12]) != crc:
-            return
-        arr = np.frombuffer(data, np.uint8)
-        ops, body, length, _, _, status, _ = _scan_records(arr, start, n - 37, False)
-        if status:
-            return
-        chunks: dict[int, frozenset[int]] = {}
-        try:
-            for op, pos, ln in zip(ops.tolist(), body.tolist(), length.tolist()):
-                end = pos + ln
-                if op == _OP_SCHEMA:
-                    self._schema(data, pos, end)
-                elif op == _OP_CHANNEL:
-                    self._channel(data, pos, end)
-                elif op == 0x08:  # ChunkIndex: start, end times; chunk offset, length; map
-                    offset = _U64.unpack_from(data, pos + 16)[0]
-                    nbytes = _U32.unpack_from(data, pos + 32)[0]
-                    ids = [_U16.unpack_from(data, pos + 36 + 10 * i)[0] for i in range(nbytes // 10)]
-                    chunks[offset] = frozenset(ids)
-                elif op == 0x0B:  # Statistics: ... channel_message_counts map at +42
-                    nbytes = _U32.unpack_from(data, pos + 42)[0]
-                    for i in range(nbytes // 10):
-                        cid, cnt = struct.unpack_from("<HQ", data, pos + 46 + 10 * i)
-                        self.stat_counts[cid] = cnt
-        except (_Damage, struct.error):
-            return
-        self.chunk_channels = chunks
-        self.wanted_ids = {cid for cid, c in self.channels.items() if self._wanted(c)}
-
-    def walk(self) -> None:
-        data = self.data
-        self._read_summary()
-        try:
-            self._records(data, len(MAGIC), len(data), in_chunk=False)
-        except _Damage as err:
-            self.damage.append(f"{self.path}: {err}; read up to there")
-            self.skipped.add("MCAP truncated or damaged (rest of file unread)", self.path)
-            return
-        if not self.reached_data_end:
-            self.damage.append(f"{self.path}: ends without a data-end record (truncated?); "
-                               "read up to the end")
-            self.skipped.add("MCAP truncated or damaged (rest of file unread)", self.path)
-        elif len(data) >= 8 + 29 + 8 and data[-8:] == MAGIC and data[-37] == _OP_FOOTER:
-            # Footer: opcode, length, summary_start u64, summary_offset_start u64, crc u32; magic.
-            self.has_summary = _U64.unpack_from(data, len(data) - 28)[0] != 0
-        else:
-            self.damage.append(f"{self.path}: summary or footer truncated (no closing magic); "
-                               "every data record was read")
-
-    # decoding --------------------------------------------------------------
-    def _flush(self, buf: bytes, npbuf: np.ndarray, ch: np.ndarray, lt: np.ndarray,
-               off: np.ndarray, sz: np.ndarray) -> None:
-        self.n_messages += len(ch)
-        for cid in np.unique(ch):
-            chan = self.channels.get(int(cid))
-            sel = ch == cid
-            if chan is None:
-                self.skipped.add("MCAP message on an undeclared channel", f"{self.path}: channel {cid}",
-                                 int(sel.sum()))
-                continue
-            chan.n_msgs += int(sel.sum())
-            if not self._wanted(chan):
-                continue
-            self._decode(chan, buf, npbuf, lt[sel], off[sel], sz[sel])
-
-    def _wanted(self, chan: _Channel) -> bool:
+    def is_wanted(self, chan: _Channel) -> bool:
         if chan.layout is None:
             return False
         topic = self.wanted.get(KIND_OF_LAYOUT[chan.layout])
@@ -493,7 +205,9 @@ class _Walker:
                 return _extract(chan.layout, json.loads(raw))
             if enc == "protobuf" and chan.layout == "locationfix":
                 if chan.pb_numbers is None:
-                    chan.pb_numbers = _pb_numbers(chan.schema_data)
+                    chan.pb_numbers = protobuf.field_numbers(
+                        chan.schema_data, "LocationFix", ("latitude", "longitude")
+                    ) or dict(_LOCFIX_NUMBERS)
                 return _extract("locationfix", _pb_location_fix(raw, chan.pb_numbers))
         except (struct.error, IndexError, KeyError, TypeError, ValueError, AttributeError,
                 OverflowError, UnicodeDecodeError, RecursionError) as err:
@@ -599,77 +313,9 @@ def _extract(layout: str | None, msg: Any) -> dict[str, Any]:
     return out
 
 
-def _varint(buf: bytes, pos: int) -> tuple[int, int]:
-    value = shift = 0
-    while True:
-        b = buf[pos]
-        pos += 1
-        value |= (b & 0x7F) << shift
-        if not b & 0x80:
-            return value, pos
-        shift += 7
-        if shift > 63:
-            raise ValueError("varint longer than 10 bytes")
-
-
-def _pb_fields(buf: bytes) -> list[tuple[int, int, Any]]:
-    """Protobuf wire format: (field number, wire type, value) with value an int
-    (varint), bytes (length-delimited, fixed64, fixed32)."""
-    out: list[tuple[int, int, Any]] = []
-    pos, end = 0, len(buf)
-    while pos < end:
-        key, pos = _varint(buf, pos)
-        num, wt = key >> 3, key & 7
-        if wt == 0:
-            value, pos = _varint(buf, pos)
-        elif wt in (1, 5):
-            n = 8 if wt == 1 else 4
-            if pos + n > end:
-                raise ValueError("truncated fixed-width field")
-            value, pos = buf[pos:pos + n], pos + n
-        elif wt == 2:
-            n, pos = _varint(buf, pos)
-            if pos + n > end:
-                raise ValueError("truncated length-delimited field")
-            value, pos = buf[pos:pos + n], pos + n
-        else:
-            raise ValueError(f"unsupported wire type {wt}")
-        out.append((num, wt, value))
-    return out
-
-
-#: foxglove.LocationFix field numbers (foxglove schemas), used when the channel's
 #: schema carries no readable FileDescriptorSet.
 _LOCFIX_NUMBERS = {"latitude": 1, "longitude": 2, "altitude": 3, "position_covariance": 4,
                    "position_covariance_type": 5, "timestamp": 6}
-
-
-def _pb_numbers(descriptor_set: bytes, message: str = "LocationFix") -> dict[str, int]:
-    """Field numbers by name of ``message`` in a FileDescriptorSet (schema data of a
-    protobuf MCAP channel): FileDescriptorSet.file = 1, FileDescriptorProto.message_type
-    = 4, DescriptorProto.name = 1 / field = 2, FieldDescriptorProto.name = 1 / number = 3.
-    Falls back to the published foxglove numbers when the descriptor is unreadable."""
-    try:
-        for num, wt, file in _pb_fields(descriptor_set):
-            if num != 1 or wt != 2:
-                continue
-            for n2, w2, msg in _pb_fields(file):
-                if n2 != 4 or w2 != 2:
-                    continue
-                fields = _pb_fields(msg)
-                if not any(n == 1 and v == message.encode() for n, _, v in fields):
-                    continue
-                numbers = {}
-                for n3, w3, fdesc in fields:
-                    if n3 == 2 and w3 == 2:
-                        f = {n: v for n, _, v in _pb_fields(fdesc)}
-                        if 1 in f and 3 in f:
-                            numbers[bytes(f[1]).decode("utf-8", "replace")] = int(f[3])
-                if {"latitude", "longitude"} <= numbers.keys():
-                    return numbers
-    except (ValueError, IndexError, TypeError):
-        pass
-    return dict(_LOCFIX_NUMBERS)
 
 
 def _pb_location_fix(buf: bytes, numbers: dict[str, int] | None = None) -> dict[str, Any]:
@@ -680,7 +326,7 @@ def _pb_location_fix(buf: bytes, numbers: dict[str, int] | None = None) -> dict[
     out: dict[str, Any] = {"latitude": None, "longitude": None, "altitude": 0.0,
                            "position_covariance": [], "position_covariance_type": 0,
                            "timestamp": {"sec": 0, "nsec": 0}}
-    for num, wt, value in _pb_fields(buf):
+    for num, wt, value in protobuf.fields(buf):
         name = by_num.get(num)
         if name in ("latitude", "longitude", "altitude") and wt == 1:
             out[name] = struct.unpack("<d", value)[0]
@@ -693,7 +339,7 @@ def _pb_location_fix(buf: bytes, numbers: dict[str, int] | None = None) -> dict[
             out[name] = value
         elif name == "timestamp" and wt == 2:
             ts = {"sec": 0, "nsec": 0}
-            for k, w, v in _pb_fields(value):
+            for k, w, v in protobuf.fields(value):
                 if w == 0 and k in (1, 2):
                     v = v - (1 << 64) if v >= 1 << 63 else v  # int64/int32 two's complement
                     ts["sec" if k == 1 else "nsec"] = v
@@ -904,7 +550,9 @@ def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log
         if kind not in ("gnss", "gyro", "odo"):
             raise UsageError(f"topic override for {kind!r}: expected gnss, gyro or odo")
     wanted = {k: topics.get(k) for k in ("gnss", "gyro", "odo")}
-    walker = _Walker(path_s, data, wanted, use_log_time)
+    decoder = _Decoder(path_s, wanted)
+    walker = Walker(path_s, data, make_channel=_new_channel, wanted=decoder.is_wanted,
+                    on_messages=decoder.on_messages)
     walker.walk()
     skipped = walker.skipped
     warnings = list(walker.damage)

@@ -19,12 +19,8 @@ from ..conventions import NS_PER_S
 from ..errors import InputError, MissingDateError, NoDataError, UsageError
 from .csv import _parse_header, read_gyro_csv, read_odo_csv, text_problem
 from .drive import Drive
+from .formats import MCAP_MAGIC, PARQUET_MAGIC  # magics only: a reader is imported per format
 
-#: The MCAP file magic (mcap.py's MAGIC; that module imports numba and the mcap library,
-#: 0.15-0.3 s, so it is imported only when a file is MCAP)
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-
-PARQUET_MAGIC = b"PAR1"
 _HEAD_BYTES = 65536
 
 
