@@ -19,7 +19,13 @@ from ..conventions import NS_PER_S
 from ..errors import InputError, MissingDateError, NoDataError, UsageError
 from .csv import _parse_header, read_gyro_csv, read_odo_csv, text_problem
 from .drive import Drive
-from .formats import MCAP_MAGIC, PARQUET_MAGIC  # magics only: a reader is imported per format
+from .formats import (  # magics only: a reader is imported per format
+    MCAP_MAGIC,
+    PARQUET_MAGIC,
+    ROSBAG1_MAGIC,
+    SQLITE_MAGIC,
+    UBX_SYNC,
+)
 
 _HEAD_BYTES = 65536
 
@@ -31,9 +37,12 @@ def _head(path: str | Path) -> bytes:
 
 
 def sniff(path: str | Path) -> str:
-    """``"mcap"``, ``"nmea"``, ``"csv"`` or ``"parquet"``, by the file's first bytes."""
+    """``"mcap"``, ``"ubx"``, ``"rosbag"``, ``"nmea"``, ``"csv"`` or ``"parquet"``, by the
+    file's first bytes (a ROS 2 bag may be a folder)."""
     from .nmea import looks_like_nmea
 
+    if Path(path).is_dir() and _is_rosbag2_dir(Path(path)):
+        return "rosbag"
     head = _head(path)
     if not head:
         raise InputError(path, "empty file")
@@ -41,6 +50,10 @@ def sniff(path: str | Path) -> str:
         return "mcap"
     if head.startswith(PARQUET_MAGIC):
         return "parquet"
+    if head.startswith((ROSBAG1_MAGIC, SQLITE_MAGIC)):
+        return "rosbag"
+    if _looks_like_ubx(path, head):
+        return "ubx"
     problem = text_problem(head)
     if problem and problem.startswith("UTF-16"):
         raise InputError(path, problem)
@@ -56,6 +69,21 @@ def sniff(path: str | Path) -> str:
         return "csv"
     raise InputError(path, f"unrecognised format (first line {first[:60]!r}); "
                      "expected MCAP, NMEA, CSV with a header row, or Parquet", line=1)
+
+
+def _looks_like_ubx(path: str | Path, head: bytes) -> bool:
+    """UBX frames with valid checksums (two, or one in a ``.ubx`` file or a short head),
+    alone or among NMEA lines."""
+    from .ubx import count_frames
+
+    if UBX_SYNC not in head:
+        return False
+    n = count_frames(head)
+    return n >= 2 or (n == 1 and (str(path).lower().endswith(".ubx") or len(head) < 4096))
+
+
+def _is_rosbag2_dir(path: Path) -> bool:
+    return (path / "metadata.yaml").is_file() or any(path.glob("*.db3"))
 
 
 def _nmea_after_noise(head: bytes, looks_like_nmea) -> bool:
@@ -84,18 +112,42 @@ def sha256_file(path: str | Path) -> str:
 
 
 def _read_log(path: str | Path, *, role: str, topics: dict[str, str] | None,
-              date: dt.date | None, use_log_time: bool) -> Drive:
+              date: dt.date | None, use_log_time: bool, params: Params | None = None) -> Drive:
     kind = sniff(path)
     if kind == "mcap":
         from .mcap import read_mcap
 
         return read_mcap(path, topics=topics, use_log_time=use_log_time, date=date)
+    if kind == "ubx":
+        from .ubx import read_ubx
+
+        return read_ubx(path, date=date, ticks_per_m=_ticks_per_m(params))
+    if kind == "rosbag":
+        from .rosbag import read_rosbag
+
+        return read_rosbag(path, topics=topics, use_log_time=use_log_time, date=date)
     if kind == "nmea":
         from .nmea import read_nmea
 
         return read_nmea(path, date=date)
     raise UsageError(f"{path}: a {kind.upper()} file cannot be the {role}; "
-                     "expected an MCAP or NMEA log")
+                     "expected an MCAP, UBX, ROS bag or NMEA log")
+
+
+def read_log(path: str | Path, *, params: Params | None = None,
+             topics: dict[str, str] | None = None, date: dt.date | None = None,
+             use_log_time: bool = False) -> Drive:
+    """One log of any kind that holds a drive's streams (MCAP, UBX, ROS bag, NMEA)."""
+    return _read_log(path, role="LOG", topics=topics, date=date, use_log_time=use_log_time,
+                     params=params)
+
+
+def _ticks_per_m(params: Params | None) -> float:
+    """``[odo] ticks_per_m``: UBX wheel ticks are read with the CSV odometer's option."""
+    try:
+        return float(params["odo"].get("ticks_per_m", 0.0)) if params is not None else 0.0
+    except (KeyError, TypeError, ValueError):
+        return 0.0
 
 
 def _only(drive: Drive, stream: str) -> Drive:
@@ -195,7 +247,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
 
                 return read_nmea("-", date=day)
             return _only(_read_log(gps, role="GNSS input (--gps)", topics=topics, date=day,
-                                   use_log_time=use_log_time), "gnss")
+                                   use_log_time=use_log_time, params=params), "gnss")
 
         try:
             part = read_gps(date)
@@ -212,7 +264,8 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
     for part in dr_parts:
         add(part)
     if log is not None:
-        add(_read_log(log, role="LOG", topics=topics, date=date, use_log_time=use_log_time))
+        add(_read_log(log, role="LOG", topics=topics, date=date, use_log_time=use_log_time,
+                      params=params))
     if drive.gnss is None and drive.gyro is None and drive.odo is None:
         names = ", ".join(str(p) for p in (log, gps, gyro, odo) if p is not None)
         raise NoDataError(names, "no GNSS, gyro or odometer data")
