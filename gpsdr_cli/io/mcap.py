@@ -7,6 +7,8 @@ gnss       ``sensor_msgs/msg/NavSatFix``, ``foxglove.LocationFix`` (JSON or
            protobuf), ``nmea_msgs/msg/Sentence`` (fed to :func:`parse_nmea`)
 gyro       ``sensor_msgs/msg/Imu``: ``angular_velocity.z``, rad/s, CCW-positive
            (REP-103 z up), the charter's sign
+accel      the same Imu's ``linear_acceleration.x`` (m/s^2, x forward), unless its
+           covariance[0] is -1 or every value is exactly 0 (the field left unset)
 odo        ``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``),
            ``geometry_msgs/msg/TwistStamped`` and ``TwistWithCovarianceStamped``
            (``twist.linear.x``), forward speed in m/s
@@ -63,7 +65,7 @@ import numpy as np
 from ..conventions import FIX_DGPS, FIX_GPS, FIX_NONE, NS_PER_S
 from ..errors import InputError, NoDataError, UsageError
 from . import protobuf, ros2_fast
-from .drive import Drive, GnssFixes, Odometry, SkipReport, Source, YawRates
+from .drive import Drive, ForwardAccel, GnssFixes, Odometry, SkipReport, Source, YawRates
 from .formats import MCAP_MAGIC as MAGIC
 from .mcap_walk import Walker
 
@@ -301,6 +303,9 @@ def _extract(layout: str | None, msg: Any) -> dict[str, Any]:
         out["wz"] = _f(_get(msg, "angular_velocity.z"))
         cov = list(_get(msg, "angular_velocity_covariance", default=[]) or [])
         out["wz_cov0"] = _f(cov[0]) if cov else 0.0
+        out["ax"] = _f(_get(msg, "linear_acceleration.x", default=0.0))
+        acov = list(_get(msg, "linear_acceleration_covariance", default=[]) or [])
+        out["ax_cov0"] = _f(acov[0]) if acov else 0.0
     elif layout in ("twist", "twistcov", "odometry"):
         path = "twist.linear" if layout == "twist" else "twist.twist.linear"
         out["vx"] = _f(_get(msg, f"{path}.x"))
@@ -530,47 +535,35 @@ def _map_file(path: str | Path) -> mmap.mmap | bytes:
         raise InputError(path, f"cannot read: {getattr(err, 'strerror', None) or err}") from err
 
 
-def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log_time: bool = False,
-              date: dt.date | None = None) -> Drive:
-    """Read GNSS, gyro and odometer streams from an MCAP file (see the module docstring).
-
-    ``topics`` maps a stream (``gnss``, ``gyro``, ``odo``) to the topic to use for
-    it instead of the schema-based choice.  ``date`` is the UTC date for NMEA
-    sentences without one (default: the date of the first message stamp).
-    """
-    path_s = str(path)
-    data = _map_file(path)
-    if not len(data):
-        raise InputError(path_s, "empty file, expected an MCAP log")
-    if data[:8] != MAGIC:
-        raise InputError(path_s, f"not an MCAP file (starts with {data[:8]!r}, expected the "
-                         "MCAP magic \\x89MCAP0\\r\\n)")
+def check_topics(path: str, topics: dict[str, str] | None) -> tuple[dict[str, str], dict[str, str | None]]:
+    """The non-empty topic overrides, validated, and the wanted topic per stream."""
     topics = {k: v for k, v in (topics or {}).items() if v}
     for kind in topics:
         if kind not in ("gnss", "gyro", "odo"):
             raise UsageError(f"topic override for {kind!r}: expected gnss, gyro or odo")
-    wanted = {k: topics.get(k) for k in ("gnss", "gyro", "odo")}
-    decoder = _Decoder(path_s, wanted)
-    walker = Walker(path_s, data, make_channel=_new_channel, wanted=decoder.is_wanted,
-                    on_messages=decoder.on_messages)
-    walker.walk()
-    skipped = walker.skipped
-    warnings = list(walker.damage)
-    meta: dict[str, Any] = {}
-    channels = {c.topic: c for c in walker.channels.values()}
+    return topics, {k: topics.get(k) for k in ("gnss", "gyro", "odo")}
+
+
+def drive_from_channels(path_s: str, sha256: str, channels: list[_Channel], *,
+                        topics: dict[str, str], wanted: dict[str, str | None],
+                        use_log_time: bool, date: dt.date | None, skipped: SkipReport,
+                        warnings: list[str], meta: dict[str, Any]) -> Drive:
+    """The schema/topic rules over decoded channels (an MCAP's or a ROS bag's): pick one
+    channel per stream, build the streams, fill ``meta`` (``channels`` not included)."""
+    by_topic = {c.topic: c for c in channels}
     for kind, topic in topics.items():
-        chan = channels.get(topic)
+        chan = by_topic.get(topic)
         if chan is None:
             raise UsageError(f"{path_s}: no topic {topic!r} for {kind}; topics in the file: "
-                             f"{', '.join(sorted(channels)) or '(none)'}")
+                             f"{', '.join(sorted(by_topic)) or '(none)'}")
         if chan.layout is None or KIND_OF_LAYOUT[chan.layout] != kind:
             raise UsageError(f"{path_s}: topic {topic!r} has schema {chan.schema_name!r}, "
                              f"which gpsdr cannot read as {kind}")
-    drive = Drive(skipped=skipped, sources=[Source(path_s, hashlib.sha256(data).hexdigest())])
+    drive = Drive(skipped=skipped, sources=[Source(path_s, sha256)])
     chosen: dict[str, str] = {}
     alternatives: dict[str, list[str]] = {}
     for kind in ("gnss", "gyro", "odo"):
-        cands = [c for c in walker.channels.values()
+        cands = [c for c in channels
                  if c.layout is not None and KIND_OF_LAYOUT[c.layout] == kind
                  and (wanted[kind] is None or c.topic == wanted[kind])]
         if kind == "odo" and wanted["odo"] is None and drive.gnss is not None:
@@ -602,29 +595,76 @@ def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log
         if len(stream):
             setattr(drive, kind, stream)
             chosen[kind] = best.topic
-    drive.sources[0].streams = tuple(chosen)
+            if kind == "gyro":
+                drive.accel = _accel(best, use_log_time)
+    drive.sources[0].streams = tuple(chosen) + (("accel",) if drive.accel is not None else ())
+    meta["chosen"] = chosen
+    if alternatives:
+        meta["alternatives"] = alternatives
+    if warnings:
+        drive.meta["warnings"] = warnings
+    if not chosen:
+        found = ", ".join(f"{c.topic} ({c.schema_name or 'no schema'})" for c in channels[:8])
+        found = (found + (f" and {len(channels) - 8} more" if len(channels) > 8 else "")
+                 ) or "no channels"
+        damage = f"; {warnings[0]}" if warnings else ""
+        raise NoDataError(path_s, f"no readable GNSS, gyro or odometer messages (found: "
+                          f"{found}){damage}")
+    return drive
+
+
+def _accel(chan: _Channel, use_log_time: bool) -> ForwardAccel | None:
+    """``linear_acceleration.x`` of the Imu channel chosen for the gyro (REP-103: x
+    forward), unless its covariance[0] is -1 (no data) or every value is exactly zero
+    (a driver that leaves the field unset)."""
+    ax = _cat(chan, "ax", np.float64)
+    if not len(ax):
+        return None
+    t_ns, _ = _times(chan, use_log_time)
+    keep = (_cat(chan, "ax_cov0", np.float64) != -1.0) & np.isfinite(ax)
+    if not keep.any() or not np.any(ax[keep] != 0.0):
+        return None
+    return ForwardAccel(t_ns=t_ns[keep], accel_mps2=ax[keep])
+
+
+def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log_time: bool = False,
+              date: dt.date | None = None) -> Drive:
+    """Read GNSS, gyro and odometer streams from an MCAP file (see the module docstring).
+
+    ``topics`` maps a stream (``gnss``, ``gyro``, ``odo``) to the topic to use for
+    it instead of the schema-based choice.  ``date`` is the UTC date for NMEA
+    sentences without one (default: the date of the first message stamp).
+    """
+    path_s = str(path)
+    data = _map_file(path)
+    if not len(data):
+        raise InputError(path_s, "empty file, expected an MCAP log")
+    if data[:8] != MAGIC:
+        raise InputError(path_s, f"not an MCAP file (starts with {data[:8]!r}, expected the "
+                         "MCAP magic \\x89MCAP0\\r\\n)")
+    topics, wanted = check_topics(path_s, topics)
+    decoder = _Decoder(path_s, wanted)
+    walker = Walker(path_s, data, make_channel=_new_channel, wanted=decoder.is_wanted,
+                    on_messages=decoder.on_messages)
+    walker.walk()
+    meta: dict[str, Any] = {}
+
     def count(c: _Channel) -> int:  # channels in skipped chunks: the summary's statistics
         if walker.n_chunks_skipped and c.id not in walker.wanted_ids:
             return walker.stat_counts.get(c.id, c.n_msgs)
         return c.n_msgs
 
+    chans = list(walker.channels.values())
     meta["channels"] = [{"topic": c.topic, "schema": c.schema_name, "encoding": c.encoding,
-                         "messages": count(c)} for c in walker.channels.values()]
-    meta["chosen"] = chosen
-    if alternatives:
-        meta["alternatives"] = alternatives
+                         "messages": count(c)} for c in chans]
     meta["messages"] = walker.n_messages
     meta["chunks"] = walker.n_chunks
     if walker.n_chunks_skipped:
         meta["chunks_skipped"] = walker.n_chunks_skipped  # held only channels not read
     meta["indexed"] = walker.has_summary
+    drive = drive_from_channels(path_s, hashlib.sha256(data).hexdigest(), chans,
+                                topics=topics, wanted=wanted, use_log_time=use_log_time,
+                                date=date, skipped=walker.skipped, warnings=list(walker.damage),
+                                meta=meta)
     drive.meta["mcap"] = meta
-    if warnings:
-        drive.meta["warnings"] = warnings
-    if not chosen:
-        chans = list(walker.channels.values())
-        found = ", ".join(f"{c.topic} ({c.schema_name or 'no schema'})" for c in chans[:8])
-        found = (found + (f" and {len(chans) - 8} more" if len(chans) > 8 else "")) or "no channels"
-        damage = f"; {warnings[0]}" if warnings else ""
-        raise NoDataError(path_s, f"no readable GNSS, gyro or odometer messages (found: {found}){damage}")
     return drive
