@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -50,28 +51,140 @@ def _sqlite_files(path: Path) -> list[Path]:
     return files if ok else []
 
 
-def _query_sqlite(files: list[Path], ids: dict[str, int], raw: dict[int, list[bytes]],
-                  log: dict[int, list[int]]) -> None:
-    """The wanted topics' (log time, data) rows straight from rosbag2's ``messages`` table:
-    one query per file instead of a Python step per message through rosbags."""
+def _read_ros1(path: Path, decoder: mcap._Decoder, skipped: SkipReport, meta: dict[str, Any],
+               path_s: str) -> list[mcap._Channel] | None:
+    """A ROS 1 bag's channels, the wanted ones decoded, by the compiled record scan
+    (:mod:`gpsdr_cli.io.rosbag1_walk`); None when the bag needs rosbags' reader."""
+    import mmap
+
+    from . import rosbag1_walk
+
+    with open(path, "rb") as f:
+        data = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+    channels: dict[int, mcap._Channel] = {}
+    pending = []
+    try:
+        for records, conn, t_ns, off, size in rosbag1_walk.walk(data):
+            for q in np.flatnonzero(conn < 0).tolist():  # connection records
+                cid, topic, msgtype = rosbag1_walk.connection(records, int(t_ns[q]), int(off[q]),
+                                                              int(size[q]))
+                if cid not in channels:
+                    # ROS 1 type names (pkg/Type) map like the ROS 2 spelling
+                    channels[cid] = mcap._new_channel(cid, topic, "ros1", msgtype, "", b"")
+            msg = conn >= 0
+            if msg.any():
+                pending.append((records, conn[msg], t_ns[msg], off[msg], size[msg]))
+    except rosbag1_walk.Unsupported:
+        return None
+    except (ValueError, KeyError, OSError, EOFError, RuntimeError, struct.error) as err:
+        skipped.add("ROS bag damaged (rest of it unread)", path_s)
+        meta.setdefault("damage", []).append(str(err))
+    for records, conn, t_ns, off, size in pending:
+        npbuf = np.frombuffer(records, np.uint8)
+        for cid in np.unique(conn).tolist():
+            chan = channels.get(cid)
+            sel = conn == cid
+            if chan is None:
+                skipped.add("ROS bag message on an undeclared connection", f"{path_s}: conn {cid}",
+                            int(sel.sum()))
+                continue
+            decoder.on_messages(chan, records, npbuf, t_ns[sel], off[sel], size[sel])
+    meta["storage"] = "ROS 1 chunks (compiled record scan)"
+    return list(channels.values())
+
+
+def _compressed(path: Path) -> bool:
+    """A ROS 2 bag folder whose metadata.yaml names a compression mode."""
+    import re
+
+    meta = path / "metadata.yaml" if path.is_dir() else None
+    if meta is None or not meta.is_file():
+        return False
+    m = re.search(r"compression_mode:\s*['\"]?(\w*)", meta.read_text("utf-8", "replace"))
+    return bool(m and m.group(1) and m.group(1).lower() != "none")
+
+
+def _read_sqlite(files: list[Path], decoder: mcap._Decoder) -> list[mcap._Channel]:
+    """A ROS 2 SQLite bag's channels from its ``topics`` table, the wanted ones decoded
+    from one query on ``messages`` per topic (rosbags would take a Python step per
+    message)."""
     import sqlite3
 
+    channels: dict[str, mcap._Channel] = {}
     for f in files:
         con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
         try:
-            tid = {i: ids[name] for i, name in con.execute("SELECT id, name FROM topics")
-                   if name in ids}
-            if not tid:
-                continue
-            marks = ",".join("?" * len(tid))
-            rows = con.execute(f"SELECT topic_id, timestamp, data FROM messages "
-                               f"WHERE topic_id IN ({marks})", tuple(tid)).fetchall()
-            for db_id, t, data in rows:
-                cid = tid[db_id]
-                log[cid].append(t)
-                raw[cid].append(data)
+            counts = dict(con.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
+            for tid, name, msgtype, fmt in con.execute(
+                    "SELECT id, name, type, serialization_format FROM topics ORDER BY id"):
+                chan = channels.get(name)
+                if chan is None:
+                    enc = "cdr" if fmt in ("cdr", "") else str(fmt)
+                    chan = channels[name] = mcap._new_channel(len(channels) + 1, name, enc,
+                                                              msgtype, "", b"")
+                if not decoder.is_wanted(chan):
+                    chan.n_msgs += int(counts.get(tid, 0))
+                    continue
+                rows = con.execute("SELECT timestamp, data FROM messages WHERE topic_id = ? "
+                                   "ORDER BY id", (tid,)).fetchall()
+                if not rows:
+                    continue
+                t_ns, blobs = zip(*rows)
+                sizes = np.fromiter(map(len, blobs), np.int64, len(blobs))
+                buf = b"".join(blobs)
+                off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+                decoder.on_messages(chan, buf, np.frombuffer(buf, np.uint8) if buf else
+                                    np.zeros(1, np.uint8), np.array(t_ns, np.int64), off, sizes)
         finally:
             con.close()
+    return list(channels.values())
+
+
+def _read_rosbags(path: Path, ros1: bool, decoder: mcap._Decoder, skipped: SkipReport,
+                  meta: dict[str, Any], path_s: str, errors: tuple) -> list[mcap._Channel]:
+    """Any bag rosbags opens (compressed ROS 2 bags, MCAP storage, other chunk codecs)."""
+    if ros1:
+        from rosbags.rosbag1 import Reader
+    else:
+        from rosbags.rosbag2 import Reader
+    try:
+        reader = Reader(path)
+        reader.open()
+    except errors as err:
+        raise InputError(path_s, f"cannot open as a ROS bag: {type(err).__name__}: {err} "
+                         "(a ROS 1 bag cut short needs `rosbag reindex`)") from err
+    try:
+        enc = "ros1" if ros1 else "cdr"
+        channels = [mcap._new_channel(c.id, c.topic, enc, c.msgtype, "", b"")
+                    for c in reader.connections]
+        by_id = {c.id: c for c in channels}
+        want = {c.id for c in channels if decoder.is_wanted(c)}
+        for conn in reader.connections:
+            if conn.id not in want:
+                by_id[conn.id].n_msgs = int(conn.msgcount)
+        raw: dict[int, list[bytes]] = {cid: [] for cid in want}
+        log: dict[int, list[int]] = {cid: [] for cid in want}
+        try:
+            for conn, t, data in reader.messages(
+                    connections=[c for c in reader.connections if c.id in want]):
+                raw[conn.id].append(bytes(data))
+                log[conn.id].append(t)
+        except errors as err:  # damage past the index: keep what was read
+            skipped.add("ROS bag damaged (rest of it unread)", path_s)
+            meta.setdefault("damage", []).append(f"{type(err).__name__}: {err}")
+    finally:
+        reader.close()
+    for cid in want:
+        msgs = raw[cid]
+        if not msgs:
+            continue
+        sizes = np.fromiter(map(len, msgs), np.int64, len(msgs))
+        buf = b"".join(msgs)
+        off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        decoder.on_messages(by_id[cid], buf, np.frombuffer(buf, np.uint8), np.asarray(
+            log[cid], np.int64), off, sizes)
+    meta["storage"] = "rosbags reader"
+    return channels
 
 
 def _sha256(path: Path) -> str:
@@ -93,62 +206,29 @@ def read_rosbag(path: str | Path, *, topics: dict[str, str] | None = None,
         raise InputError(path_s, "no such file or folder")
     topics, wanted = mcap.check_topics(path_s, topics)
     decoder = mcap._Decoder(path_s, wanted)
-    _DAMAGE = _damage_errors()
+    errors = _damage_errors()
     skipped = SkipReport()
     meta: dict[str, Any] = {}
     ros1 = p.is_file() and p.open("rb").read(len(ROSBAG1_MAGIC)) == ROSBAG1_MAGIC
-    try:
-        if ros1:
-            from rosbags.rosbag1 import Reader
-        else:
-            from rosbags.rosbag2 import Reader
-        reader = Reader(p)
-        reader.open()
-    except _DAMAGE as err:
-        raise InputError(path_s, f"cannot open as a ROS bag: {type(err).__name__}: {err} "
-                         "(a ROS 1 bag cut short needs `rosbag reindex`)") from err
-    try:
-        channels: list[mcap._Channel] = []
-        for conn in reader.connections:
-            enc = "ros1" if ros1 else "cdr"
-            chan = mcap._new_channel(conn.id, conn.topic, enc, conn.msgtype, "", b"")
-            channels.append(chan)
-        want = [c for c in channels if decoder.is_wanted(c)]
-        by_id = {c.id: c for c in want}
-        conns = [conn for conn in reader.connections if conn.id in by_id]
-        raw: dict[int, list[bytes]] = {c.id: [] for c in want}
-        log: dict[int, list[int]] = {c.id: [] for c in want}
-        dbs = [] if ros1 or reader.compression_mode else _sqlite_files(p)
-        try:
-            if dbs:
+    channels = None
+    if ros1:
+        channels = _read_ros1(p, decoder, skipped, meta, path_s)
+    else:
+        dbs = [] if _compressed(p) else _sqlite_files(p)
+        if dbs:
+            try:
+                channels = _read_sqlite(dbs, decoder)
                 meta["storage"] = "sqlite3 (queried directly)"
-                _query_sqlite(dbs, {c.topic: c.id for c in want}, raw, log)
-            else:
-                for conn, t, data in reader.messages(connections=conns):
-                    raw[conn.id].append(bytes(data))
-                    log[conn.id].append(t)
-        except _DAMAGE as err:  # damage past the index: keep what was read
-            skipped.add("ROS bag damaged (rest of it unread)", path_s)
-            meta.setdefault("damage", []).append(f"{type(err).__name__}: {err}")
-        for chan in channels:
-            conn_count = next(c.msgcount for c in reader.connections if c.id == chan.id)
-            if chan.id not in by_id:
-                chan.n_msgs = int(conn_count)
-                continue
-            msgs = raw[chan.id]
-            if not msgs:
-                continue
-            sizes = np.fromiter((len(m) for m in msgs), np.int64, len(msgs))
-            buf = b"".join(msgs)
-            off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-            npbuf = np.frombuffer(buf, np.uint8) if buf else np.zeros(1, np.uint8)
-            decoder.on_messages(chan, buf, npbuf, np.asarray(log[chan.id], np.int64), off, sizes)
-        meta["channels"] = [{"topic": c.topic, "schema": c.schema_name, "encoding": c.encoding,
-                             "messages": c.n_msgs} for c in channels]
-        meta["format"] = "ROS 1 bag" if ros1 else "ROS 2 bag"
-        meta["messages"] = int(sum(c.n_msgs for c in channels))
-    finally:
-        reader.close()
+            except errors as err:
+                raise InputError(path_s, f"cannot read as a ROS 2 SQLite bag: "
+                                 f"{type(err).__name__}: {err}") from err
+    if channels is None:
+        decoder = mcap._Decoder(path_s, wanted)
+        channels = _read_rosbags(p, ros1, decoder, skipped, meta, path_s, errors)
+    meta["channels"] = [{"topic": c.topic, "schema": c.schema_name, "encoding": c.encoding,
+                         "messages": c.n_msgs} for c in channels]
+    meta["format"] = "ROS 1 bag" if ros1 else "ROS 2 bag"
+    meta["messages"] = int(sum(c.n_msgs for c in channels))
     warnings = [f"{path_s}: {d}; read up to there" for d in meta.get("damage", [])]
     drive = mcap.drive_from_channels(path_s, _sha256(p), channels, topics=topics, wanted=wanted,
                                      use_log_time=use_log_time, date=date, skipped=skipped,

@@ -139,3 +139,22 @@ def test_no_readable_topic(tmp_path: Path) -> None:
     with pytest.raises(NoDataError, match="/chatter"):
         read_rosbag(p)
     shutil.rmtree(p)
+
+
+def test_ros1_bag_cut_short_keeps_the_whole_chunks_before_the_cut(tmp_path: Path) -> None:
+    from gpsdr_cli.simulate import simulate_drive
+    from gpsdr_cli.testing.bags import write_rosbag
+
+    sim = simulate_drive("open_sky", seed=2, duration_s=60.0)
+    bag = write_rosbag(sim.drive, tmp_path / "full.bag", ros1=True)
+    full = read_rosbag(bag)
+    assert len(full.gyro) == len(sim.drive.gyro)
+    assert np.max(np.abs(full.gyro.yaw_rate_radps - sim.drive.gyro.yaw_rate_radps)) < VALUE_TOL
+    cut = tmp_path / "cut.bag"
+    data = bag.read_bytes()
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    d = read_rosbag(cut)  # no index: rosbags refuses it; the record walk keeps what is whole
+    assert d.skipped.counts["ROS bag damaged (rest of it unread)"] == 1
+    n = len(d.gyro)
+    assert 0.2 * len(full.gyro) < n < 0.7 * len(full.gyro)
+    assert np.array_equal(d.gyro.t_ns, full.gyro.t_ns[:n])
