@@ -255,3 +255,54 @@ def test_struct_layout_matches_interface_description() -> None:
     frame = esf_meas(7, [(16, -1)])
     (word,) = struct.unpack_from("<I", frame, 6 + 8)
     assert word >> 24 == 16 and word & 0xFFFFFF == 0xFFFFFF
+
+
+REAL_MIXED = Path(__file__).resolve().parents[1] / "data" / "nmea" / "pygpsdata-mixed.log"
+GGA_RESOLUTION_DEG = 1e-6  # GGA's 1e-5 minutes is 1.7e-7 deg
+
+
+def test_real_mixed_ubx_nmea_log_from_pynmeagps() -> None:
+    """A u-blox receiver's log (pynmeagps tests, BSD-3-Clause; tests/data/nmea/ATTRIBUTION.tsv):
+    NAV-PVT and NAV-SAT frames among GGA/GSA/GSV lines."""
+    assert sniff(REAL_MIXED) == "ubx"
+    d = read_ubx(REAL_MIXED)  # no --date needed: NAV-PVT carries it (read_nmea alone refuses)
+    with open(REAL_MIXED, "rb") as f:
+        ref = [m for _, m in UBXReader(f, protfilter=7) if getattr(m, "identity", "") == "NAV-PVT"]
+    assert len(ref) == 2 and len(d.gnss) == 2
+    for i, m in enumerate(ref):
+        t = int(dt.datetime(m.year, m.month, m.day, m.hour, m.min, m.second,
+                            tzinfo=dt.UTC).timestamp()) * 10**9 + m.nano
+        assert d.gnss.t_ns[i] == t
+        assert d.gnss.lat_deg[i] == pytest.approx(m.lat, abs=LAT_TOL_DEG)
+        assert d.gnss.lon_deg[i] == pytest.approx(m.lon, abs=LAT_TOL_DEG)
+        assert d.gnss.sigma_e_m[i] == pytest.approx(m.hAcc / 1000 / math.sqrt(2), abs=SIGMA_TOL_M)
+        assert d.gnss.n_sats[i] == m.numSV and d.gnss.fix_quality[i] == 1
+    # the same epochs from the NMEA lines, dated by the UBX: positions agree
+    from gpsdr_cli import config
+
+    nmea = read_drive(REAL_MIXED, params=config.defaults())
+    assert d.meta["ubx"]["nmea"]["sentences"]["GGA"] == 2
+    from gpsdr_cli.io.nmea import read_nmea
+
+    g = read_nmea(REAL_MIXED, date=dt.date(2021, 3, 7)).gnss
+    assert np.max(np.abs(g.lat_deg - d.gnss.lat_deg)) < GGA_RESOLUTION_DEG
+    assert np.max(np.abs(g.lon_deg - d.gnss.lon_deg)) < GGA_RESOLUTION_DEG
+    assert np.max(np.abs(g.t_ns - d.gnss.t_ns)) < 1_000_000  # NAV-PVT is 0.13 ms before the second
+    assert nmea.gnss is not None
+
+
+def test_esf_raw_gyro_and_accel() -> None:
+    events = _pvts(11)
+    for k in range(50):  # ESF-RAW: 4 reserved bytes, then (data word, sTtag) pairs
+        t = T0 + k * 40_000_000
+        tag = (t // 10**6 + 77) & 0xFFFFFFFF  # the 32-bit ms counter wraps every 49.7 days
+        words = [((14 << 24) | 5, tag), ((5 << 24) | ((-4096) & 0xFFFFFF), tag),
+                 ((16 << 24) | 2048, tag)]
+        payload = b"\0" * 4 + b"".join(struct.pack("<II", w, s) for w, s in words)
+        events.append((t, UBXMessage("ESF", "ESF-RAW", 0, payload=payload).serialize()))
+    events.sort(key=lambda e: e[0])
+    d = _one(b"".join(e[1] for e in events))
+    assert len(d.gyro) == 50 and len(d.accel) == 50
+    assert np.allclose(d.gyro.yaw_rate_radps, math.radians(1.0), atol=1e-12)  # -1 deg/s z down
+    assert np.allclose(d.accel.accel_mps2, 2.0, atol=1e-12)
+    assert np.max(np.abs(d.gyro.t_ns - (T0 + np.arange(50) * 40_000_000))) <= 20_000_000
