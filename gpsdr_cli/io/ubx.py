@@ -48,8 +48,8 @@ What pyubx2 does and what is hand-written, and why: pyubx2 (the maintained
 UBX library) parses about 2 k messages/s here, a Python object per message,
 two orders of magnitude short of the 200 k messages/s an hour-long F9R log at
 100 Hz needs.  So the frames are found and checksummed by a compiled scan
-(:func:`_scan`: sync bytes, length, the 8-bit Fletcher checksum, resynchronising
-two bytes on after a bad frame), and NAV-PVT / NAV-DOP / NAV-HPPOSLLH payloads
+(:func:`_scan`: sync bytes, length, the 8-bit Fletcher checksum from running
+sums, resynchronising two bytes on after a bad frame), and NAV-PVT / NAV-DOP / NAV-HPPOSLLH payloads
 are decoded as numpy structured arrays whose field names, types and offsets are
 built from pyubx2's own message definitions (``UBX_PAYLOADS_GET``), so no
 offset is typed by hand; the ESF data words (24-bit field, 6-bit type) are
@@ -94,10 +94,38 @@ _STATUS = {1: "UBX frame with a bad checksum (skipped)",
 
 # --------------------------------------------------------------------------- frames
 
+#: UBX message classes (NAV RXM INF ACK CFG UPD MON AID TIM ESF MGA LOG SEC HNR NAV2 and
+#: the NMEA/PUBX classes F0/F1): a sync pair followed by another class byte is not a frame.
+_CLASSES = np.zeros(256, np.bool_)
+_CLASSES[[0x01, 0x02, 0x04, 0x05, 0x06, 0x09, 0x0A, 0x0B, 0x0D, 0x10, 0x13, 0x21, 0x27, 0x28,
+          0x29, 0xF0, 0xF1]] = True
+#: Longer declared payloads are not frames (the longest u-blox outputs, RXM-RAWX / NAV-SAT /
+#: MON-SPAN, stay below this); bounds the checksum work a false sync pair can cost.
+_MAX_PAYLOAD = 8192
+
+
+@numba.njit(cache=True)
+def _prefix_sums(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    """Running sums mod 256 of the bytes (c1) and of c1 (c2), so that the Fletcher checksum
+    of any byte range is O(1): a false sync pair with a long declared length costs nothing."""
+    n = len(buf)
+    c1 = np.zeros(n + 1, np.uint8)
+    c2 = np.zeros(n + 1, np.uint8)
+    a = np.uint8(0)
+    b = np.uint8(0)
+    for i in range(n):
+        a = np.uint8(a + buf[i])
+        b = np.uint8(b + a)
+        c1[i + 1] = a
+        c2[i + 1] = b
+    return c1, c2
+
+
 @numba.njit(cache=True)
 def _scan_pass(buf: np.ndarray, fill: bool, start: np.ndarray, cls: np.ndarray,
                mid: np.ndarray, length: np.ndarray, bad_at: np.ndarray, bad_kind: np.ndarray,
-               text: np.ndarray):  # pragma: no cover
+               text: np.ndarray, classes: np.ndarray, max_payload: int, c1: np.ndarray,
+               c2: np.ndarray):  # pragma: no cover
     n = len(buf)
     k = 0
     nb = 0
@@ -115,15 +143,18 @@ def _scan_pass(buf: np.ndarray, fill: bool, start: np.ndarray, cls: np.ndarray,
             nb += 1
             break
         ln = np.int64(buf[p + 4]) | (np.int64(buf[p + 5]) << 8)
+        if not classes[buf[p + 2]] or ln > max_payload:
+            p += 1  # not a frame: two bytes that happen to equal the sync pair
+            continue
         end = p + 8 + ln
         if end > n:
             kind = 2
         else:
-            a = 0
-            b = 0
-            for i in range(p + 2, p + 6 + ln):
-                a = (a + buf[i]) & 0xFF
-                b = (b + a) & 0xFF
+            # Fletcher over bytes [s, e): A = c1[e] - c1[s], B = c2[e] - c2[s] - (e - s) c1[s]
+            s0 = p + 2
+            e0 = p + 6 + ln
+            a = (np.int64(c1[e0]) - np.int64(c1[s0])) & 0xFF
+            b = (np.int64(c2[e0]) - np.int64(c2[s0]) - (e0 - s0) * np.int64(c1[s0])) & 0xFF
             kind = 0 if (a == buf[end - 2] and b == buf[end - 1]) else 1
         if kind == 0:
             if fill:
@@ -136,13 +167,14 @@ def _scan_pass(buf: np.ndarray, fill: bool, start: np.ndarray, cls: np.ndarray,
             k += 1
             p = end
             continue
-        # A damaged frame: its bytes up to the next '$' (an NMEA line) are not text.
+        # A damaged frame: its bytes up to the next '$' (an NMEA line) or the next sync
+        # byte (where the scan goes on; this bounds the work to one pass) are not text.
         if fill:
             bad_at[nb] = p
             bad_kind[nb] = kind
             stop = min(end, n)
             for i in range(p, stop):
-                if i > p + 1 and buf[i] == 0x24:
+                if i > p + 1 and (buf[i] == 0x24 or buf[i] == 0xB5):
                     break
                 text[i] = 0
         nb += 1
@@ -156,14 +188,16 @@ def _scan(buf: np.ndarray) -> dict[str, np.ndarray]:
     one; and the mask of bytes outside every frame (the NMEA text).  Two compiled passes
     (count, then fill exactly sized arrays)."""
     z = np.zeros(0, np.int64)
+    c1, c2 = _prefix_sums(buf)
     k, nb = _scan_pass(buf, False, z, np.zeros(0, np.uint8), np.zeros(0, np.uint8), z, z,
-                       np.zeros(0, np.uint8), np.zeros(0, np.uint8))
+                       np.zeros(0, np.uint8), np.zeros(0, np.uint8), _CLASSES, _MAX_PAYLOAD,
+                       c1, c2)
     out = {"start": np.empty(k, np.int64), "cls": np.empty(k, np.uint8),
            "id": np.empty(k, np.uint8), "length": np.empty(k, np.int64),
            "bad_at": np.empty(nb, np.int64), "bad_kind": np.empty(nb, np.uint8),
            "text": np.ones(len(buf), np.uint8)}
     _scan_pass(buf, True, out["start"], out["cls"], out["id"], out["length"], out["bad_at"],
-               out["bad_kind"], out["text"])
+               out["bad_kind"], out["text"], _CLASSES, _MAX_PAYLOAD, c1, c2)
     return out
 
 
