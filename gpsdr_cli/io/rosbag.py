@@ -47,10 +47,12 @@ def _damage_errors() -> tuple[type[BaseException], ...]:
     import sqlite3
     import struct
 
+    import apsw
     from rosbags.rosbag1 import ReaderError as Reader1Error
     from rosbags.rosbag2 import ReaderError as Reader2Error
 
-    return (Reader1Error, Reader2Error, sqlite3.Error, OSError, struct.error, ValueError,
+    return (Reader1Error, Reader2Error, sqlite3.Error, apsw.Error, OSError, struct.error,
+            ValueError,
             KeyError, IndexError, EOFError)
 
 
@@ -118,15 +120,18 @@ def _read_sqlite(files: list[Path], decoder: mcap._Decoder) -> list[mcap._Channe
     """A ROS 2 SQLite bag's channels from its ``topics`` table, the wanted ones decoded
     from one query on ``messages`` per topic (rosbags would take a Python step per
     message)."""
-    import sqlite3
+    # apsw (SQLite's own Python binding, which rosbags uses) fetches rows about twice as
+    # fast as the standard library's sqlite3
+    import apsw
 
     channels: dict[str, mcap._Channel] = {}
     for f in files:
-        con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
+        con = apsw.Connection(str(f), flags=apsw.SQLITE_OPEN_READONLY)
         try:
             counts = dict(con.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
-            for tid, name, msgtype, fmt in con.execute(
-                    "SELECT id, name, type, serialization_format FROM topics ORDER BY id"):
+            topics = list(con.execute(
+                "SELECT id, name, type, serialization_format FROM topics ORDER BY id"))
+            for tid, name, msgtype, fmt in topics:
                 chan = channels.get(name)
                 if chan is None:
                     enc = "cdr" if fmt in ("cdr", "") else str(fmt)
@@ -228,7 +233,7 @@ def read_rosbag(path: str | Path, *, topics: dict[str, str] | None = None,
         if dbs:
             try:
                 channels = _read_sqlite(dbs, decoder)
-                meta["storage"] = "sqlite3 (queried directly)"
+                meta["storage"] = "SQLite (queried directly)"
             except errors as err:
                 raise InputError(path_s, f"cannot read as a ROS 2 SQLite bag: "
                                  f"{type(err).__name__}: {err}") from err
