@@ -4,7 +4,9 @@ Channels are found by schema name (overridable by topic):
 
 =========  ====================================================================
 gnss       ``sensor_msgs/msg/NavSatFix``, ``foxglove.LocationFix`` (JSON or
-           protobuf), ``nmea_msgs/msg/Sentence`` (fed to :func:`parse_nmea`)
+           protobuf), ``nmea_msgs/msg/Sentence`` (fed to :func:`parse_nmea`),
+           ``ublox_msgs/msg/NavPVT`` (the UBX reader's NAV-PVT rules; times from
+           its UTC fields)
 gyro       ``sensor_msgs/msg/Imu``: ``angular_velocity.z``, rad/s, CCW-positive
            (REP-103 z up), the charter's sign
 accel      the same Imu's ``linear_acceleration.x`` (m/s^2, x forward), unless its
@@ -75,10 +77,15 @@ _U64 = struct.Struct("<Q")
 
 #: Which stream each layout feeds.
 KIND_OF_LAYOUT = {"navsatfix": "gnss", "locationfix": "gnss", "sentence": "gnss",
-                  "imu": "gyro", "twist": "odo", "twistcov": "odo", "odometry": "odo"}
+                  "navpvt": "gnss", "imu": "gyro", "twist": "odo", "twistcov": "odo",
+                  "odometry": "odo"}
 _LAYOUTS = dict(ros2_fast.LAYOUTS)
 _LAYOUTS["foxglove.LocationFix"] = "locationfix"
 _LAYOUTS["foxglove_msgs/msg/LocationFix"] = "locationfix"
+# ublox_msgs/NavPVT (the ROS u-blox driver): the UBX NAV-PVT fields in UBX order, each
+# naturally aligned, so its CDR body (and ROS 1 body) is the UBX payload byte for byte.
+_LAYOUTS["ublox_msgs/msg/NavPVT"] = "navpvt"
+_LAYOUTS["ublox_msgs/NavPVT"] = "navpvt"
 
 #: Navigation-frame twist detection: moving faster than this, m/s ...
 _MOVING_MPS = 0.5
@@ -106,6 +113,9 @@ class _Channel:
     first_undecodable: str = ""
     generic: Any = None  # cached generic decoder, False when unavailable
     pb_numbers: dict[str, int] | None = None  # protobuf field numbers by name
+    #: ublox_msgs/NavPVT: fixes decoded per batch by the UBX reader, and what it skipped
+    fixes: list[GnssFixes] = field(default_factory=list)
+    fix_skips: SkipReport = field(default_factory=SkipReport)
 
     def add(self, name: str, values: Any) -> None:
         self.cols.setdefault(name, []).append(values)
@@ -145,6 +155,9 @@ class _Decoder:
         assert layout is not None
         enc = chan.encoding.lower()
         rest = np.arange(len(off))
+        if layout == "navpvt":
+            self._decode_navpvt(chan, npbuf, lt, off, sz, enc)
+            return
         if enc in ("cdr", "ros1") and layout != "locationfix":
             fields, ok = ros2_fast.decode(layout, npbuf, off, sz, ros1=enc == "ros1")
             if ok.any():
@@ -184,6 +197,33 @@ class _Decoder:
                 chan.texts.append(rec.pop("text"))
             for name, value in rec.items():
                 chan.scalars.setdefault(name, []).append(value)
+
+    def _decode_navpvt(self, chan: _Channel, npbuf: np.ndarray, lt: np.ndarray, off: np.ndarray,
+                       sz: np.ndarray, enc: str) -> None:
+        """ublox_msgs/NavPVT through the UBX reader's NAV-PVT table: the body (after CDR's
+        4-byte encapsulation header) is the UBX payload; times are its UTC fields."""
+        from . import ubx
+
+        base = 4 if enc == "cdr" else 0
+        ok = sz >= base + ubx._PVT_MIN
+        if enc == "cdr":
+            head = npbuf[np.where(ok, off, 0)[:, None] + np.arange(2)]
+            ok &= (head[:, 0] == 0) & (head[:, 1] == 1)
+        elif enc != "ros1":
+            ok[:] = False
+        bad = int((~ok).sum())
+        if bad:
+            chan.n_undecodable += bad
+            chan.first_undecodable = chan.first_undecodable or (
+                f"{self.path}: {chan.topic}: NavPVT message too short or not little-endian CDR")
+        if not ok.any():
+            return
+        n = int(ok.sum())
+        frames = {"cls": np.full(n, ubx._NAV, np.uint8), "id": np.full(n, ubx._PVT, np.uint8),
+                  "length": sz[ok] - base, "start": off[ok] + base - 6}
+        fixes = ubx._nav_fixes(npbuf, frames, f"{self.path}: {chan.topic}", chan.fix_skips)[0]
+        chan.fixes.append(fixes)
+        chan.add("log_ns", lt[ok])
 
     def _extract_one(self, chan: _Channel, msg: Any) -> dict[str, Any] | None:
         try:
@@ -419,6 +459,12 @@ class _NoStream(Exception):
 
 def _build(kind: str, chan: _Channel, *, path: str, use_log_time: bool, date: dt.date | None,
            skipped: SkipReport, meta: dict, warnings: list[str]) -> Any:
+    if chan.layout == "navpvt":  # no header: its times are its own UTC fields
+        skipped.merge(chan.fix_skips)
+        if chan.n_undecodable:
+            skipped.add(f"undecodable {chan.schema_name} message", chan.first_undecodable,
+                        chan.n_undecodable)
+        return _concat_fixes(chan.fixes)
     t_ns, n_zero = _times(chan, use_log_time)
     where = f"{path}: {chan.topic}"
     if n_zero:
@@ -429,6 +475,7 @@ def _build(kind: str, chan: _Channel, *, path: str, use_log_time: bool, date: dt
     if kind == "gnss":
         if chan.layout == "sentence":
             return _gnss_from_sentences(chan, t_ns, date, path, skipped, meta)
+
         return _gnss_from_fixes(chan, t_ns, skipped, where)
     if kind == "gyro":
         wz = _cat(chan, "wz", np.float64)
@@ -511,7 +558,16 @@ def _imu_absent(chan: _Channel) -> np.ndarray:
     return declared
 
 
+def _concat_fixes(parts: list[GnssFixes]) -> GnssFixes:
+    if not parts:
+        return GnssFixes.empty(0)
+    names = [f.name for f in dataclasses.fields(GnssFixes)]
+    return GnssFixes(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in names})
+
+
 def _usable(kind: str, chan: _Channel) -> int:
+    if chan.layout == "navpvt":
+        return sum(len(f) for f in chan.fixes)
     if kind == "gyro":
         return int((~_imu_absent(chan)).sum())
     if chan.layout == "sentence":

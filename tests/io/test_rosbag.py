@@ -158,3 +158,39 @@ def test_ros1_bag_cut_short_keeps_the_whole_chunks_before_the_cut(tmp_path: Path
     n = len(d.gyro)
     assert 0.2 * len(full.gyro) < n < 0.7 * len(full.gyro)
     assert np.array_equal(d.gyro.t_ns, full.gyro.t_ns[:n])
+
+
+def test_ublox_msgs_navpvt_topic_as_gnss(tmp_path: Path) -> None:
+    """ublox_msgs/NavPVT (ROS u-blox driver): the CDR body is the UBX NAV-PVT payload."""
+    from rosbags.rosbag2 import Writer
+
+    from gpsdr_cli.testing.ubx_log import nav_pvt
+
+    msgdef = ("uint32 i_tow\nuint16 year\nuint8 month\nuint8 day\nuint8 hour\nuint8 min\n"
+              "uint8 sec\nuint8 valid\nuint32 t_acc\nint32 nano\nuint8 fix_type\nuint8 flags\n"
+              "uint8 flags2\nuint8 num_sv\nint32 lon\nint32 lat\nint32 height\nint32 h_msl\n"
+              "uint32 h_acc\nuint32 v_acc\nint32 vel_n\nint32 vel_e\nint32 vel_d\nint32 g_speed\n"
+              "int32 heading\nuint32 s_acc\nuint32 head_acc\nuint16 p_dop\nuint8[6] reserved1\n"
+              "int32 head_veh\nint16 mag_dec\nuint16 mag_acc\n")
+    from rosbags.typesys import get_types_from_msg
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    ts.register(get_types_from_msg(msgdef, "ublox_msgs/msg/NavPVT"))
+    p = tmp_path / "pvt"
+    w = Writer(p, version=9)
+    w.open()
+    c = w.add_connection("/ublox/navpvt", "ublox_msgs/msg/NavPVT", typestore=ts)
+    for i in range(5):
+        t = T0 + i * 200_000_000
+        payload = nav_pvt(t, lat=54.3 + i * 1e-6, lon=18.6, quality=4 if i else 5, h_acc_m=0.014)[6:-2]
+        raw = b"\x00\x01\x00\x00" + payload
+        msg = ts.deserialize_cdr(raw, "ublox_msgs/msg/NavPVT")  # rosbags agrees on the layout
+        assert (msg.lat, msg.year, msg.h_acc) == (round((54.3 + i * 1e-6) * 1e7), 2026, 14)
+        w.write(c, t + 3_000_000, raw)
+    w.close()
+    d = read_rosbag(p)
+    g = d.gnss
+    assert np.array_equal(g.t_ns, T0 + np.arange(5) * 200_000_000)  # UTC fields, not log time
+    assert np.max(np.abs(g.lat_deg - (54.3 + np.arange(5) * 1e-6))) < 1e-9
+    assert g.fix_quality.tolist() == [5, 4, 4, 4, 4]
+    assert np.allclose(g.sigma_e_m, 0.014 / np.sqrt(2), atol=1e-9)
