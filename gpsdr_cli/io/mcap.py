@@ -96,7 +96,7 @@ _VELOCITY_MATCH_NS = 100_000_000
 
 
 @dataclass
-class _Channel:
+class Channel:
     id: int
     topic: str
     encoding: str
@@ -121,35 +121,35 @@ class _Channel:
         self.cols.setdefault(name, []).append(values)
 
 
-def _new_channel(cid: int, topic: str, encoding: str, schema_name: str, schema_encoding: str,
-                 schema_data: bytes) -> _Channel:
-    return _Channel(cid, topic, encoding, schema_name, schema_encoding, schema_data,
+def new_channel(cid: int, topic: str, encoding: str, schema_name: str, schema_encoding: str,
+                 schema_data: bytes) -> Channel:
+    return Channel(cid, topic, encoding, schema_name, schema_encoding, schema_data,
                     _LAYOUTS.get(schema_name))
 
 
 # --------------------------------------------------------------------------- decoding
 
-class _Decoder:
-    """Decodes the messages of the channels gpsdr reads into their :class:`_Channel`."""
+class Decoder:
+    """Decodes the messages of the channels gpsdr reads into their :class:`Channel`."""
 
     def __init__(self, path: str, wanted: dict[str, str | None]) -> None:
         self.path = path
         self.wanted = wanted
 
-    def on_messages(self, chan: _Channel, buf: bytes, npbuf: np.ndarray, lt: np.ndarray,
+    def on_messages(self, chan: Channel, buf: bytes, npbuf: np.ndarray, lt: np.ndarray,
                     off: np.ndarray, sz: np.ndarray) -> None:
         """One batch of one channel's messages: log times and data byte ranges in buf."""
         chan.n_msgs += len(off)
         if self.is_wanted(chan):
             self._decode(chan, buf, npbuf, lt, off, sz)
 
-    def is_wanted(self, chan: _Channel) -> bool:
+    def is_wanted(self, chan: Channel) -> bool:
         if chan.layout is None:
             return False
         topic = self.wanted.get(KIND_OF_LAYOUT[chan.layout])
         return topic is None or topic == chan.topic
 
-    def _decode(self, chan: _Channel, buf: bytes, npbuf: np.ndarray, lt: np.ndarray,
+    def _decode(self, chan: Channel, buf: bytes, npbuf: np.ndarray, lt: np.ndarray,
                 off: np.ndarray, sz: np.ndarray) -> None:
         layout = chan.layout
         assert layout is not None
@@ -198,14 +198,14 @@ class _Decoder:
             for name, value in rec.items():
                 chan.scalars.setdefault(name, []).append(value)
 
-    def _decode_navpvt(self, chan: _Channel, npbuf: np.ndarray, lt: np.ndarray, off: np.ndarray,
+    def _decode_navpvt(self, chan: Channel, npbuf: np.ndarray, lt: np.ndarray, off: np.ndarray,
                        sz: np.ndarray, enc: str) -> None:
         """ublox_msgs/NavPVT through the UBX reader's NAV-PVT table: the body (after CDR's
         4-byte encapsulation header) is the UBX payload; times are its UTC fields."""
         from . import ubx
 
         base = 4 if enc == "cdr" else 0
-        ok = sz >= base + ubx._PVT_MIN
+        ok = sz >= base + ubx.PVT_MIN
         if enc == "cdr":
             head = npbuf[np.where(ok, off, 0)[:, None] + np.arange(2)]
             ok &= (head[:, 0] == 0) & (head[:, 1] == 1)
@@ -219,13 +219,13 @@ class _Decoder:
         if not ok.any():
             return
         n = int(ok.sum())
-        frames = {"cls": np.full(n, ubx._NAV, np.uint8), "id": np.full(n, ubx._PVT, np.uint8),
+        frames = {"cls": np.full(n, ubx.CLASS_NAV, np.uint8), "id": np.full(n, ubx.ID_PVT, np.uint8),
                   "length": sz[ok] - base, "start": off[ok] + base - 6}
-        fixes = ubx._nav_fixes(npbuf, frames, f"{self.path}: {chan.topic}", chan.fix_skips)[0]
+        fixes = ubx.nav_fixes(npbuf, frames, f"{self.path}: {chan.topic}", chan.fix_skips)[0]
         chan.fixes.append(fixes)
         chan.add("log_ns", lt[ok])
 
-    def _extract_one(self, chan: _Channel, msg: Any) -> dict[str, Any] | None:
+    def _extract_one(self, chan: Channel, msg: Any) -> dict[str, Any] | None:
         try:
             return _extract(chan.layout, msg)
         except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as err:
@@ -233,7 +233,7 @@ class _Decoder:
                 f"{self.path}: {chan.topic} message {chan.n_msgs}: {type(err).__name__}: {err}")
         return None
 
-    def _decode_one(self, chan: _Channel, raw: bytes) -> dict[str, Any] | None:
+    def _decode_one(self, chan: Channel, raw: bytes) -> dict[str, Any] | None:
         """One message by the generic route (CDR generic decoder, JSON, protobuf), or None."""
         enc = chan.encoding.lower()
         try:
@@ -258,7 +258,7 @@ class _Decoder:
         return None
 
 
-def _generic_decoder(chan: _Channel) -> Any:
+def _generic_decoder(chan: Channel) -> Any:
     """mcap_ros2's dynamic decoder for the channel's schema, or False if there is none."""
     if chan.schema_encoding != "ros2msg":
         return False
@@ -394,7 +394,7 @@ def _pb_location_fix(buf: bytes, numbers: dict[str, int] | None = None) -> dict[
 
 # --------------------------------------------------------------------------- streams
 
-def _cat(chan: _Channel, name: str, dtype: Any) -> np.ndarray:
+def _cat(chan: Channel, name: str, dtype: Any) -> np.ndarray:
     """A field's values: fast-path arrays, then generic-route scalars (the same order for
     every field of a channel, so rows stay aligned)."""
     parts = list(chan.cols.get(name, []))
@@ -405,7 +405,7 @@ def _cat(chan: _Channel, name: str, dtype: Any) -> np.ndarray:
     return np.concatenate(parts).astype(dtype, copy=False)
 
 
-def _times(chan: _Channel, use_log_time: bool) -> tuple[np.ndarray, int]:
+def _times(chan: Channel, use_log_time: bool) -> tuple[np.ndarray, int]:
     """Header stamps (or log times); a zero stamp falls back to the log time."""
     log = _cat(chan, "log_ns", np.int64)
     if use_log_time:
@@ -415,7 +415,7 @@ def _times(chan: _Channel, use_log_time: bool) -> tuple[np.ndarray, int]:
     return np.where(zero, log, stamp), int(zero.sum())
 
 
-def _gnss_from_fixes(chan: _Channel, t_ns: np.ndarray, skipped: SkipReport, where: str) -> GnssFixes:
+def _gnss_from_fixes(chan: Channel, t_ns: np.ndarray, skipped: SkipReport, where: str) -> GnssFixes:
     lat = _cat(chan, "lat", np.float64)
     lon = _cat(chan, "lon", np.float64)
     status = _cat(chan, "status", np.int64)
@@ -439,7 +439,7 @@ def _gnss_from_fixes(chan: _Channel, t_ns: np.ndarray, skipped: SkipReport, wher
     return g
 
 
-def _gnss_from_sentences(chan: _Channel, t_ns: np.ndarray, date: dt.date | None, path: str,
+def _gnss_from_sentences(chan: Channel, t_ns: np.ndarray, date: dt.date | None, path: str,
                          skipped: SkipReport, meta: dict) -> GnssFixes:
     from .nmea import parse_nmea
 
@@ -457,7 +457,7 @@ class _NoStream(Exception):
     pass
 
 
-def _build(kind: str, chan: _Channel, *, path: str, use_log_time: bool, date: dt.date | None,
+def _build(kind: str, chan: Channel, *, path: str, use_log_time: bool, date: dt.date | None,
            skipped: SkipReport, meta: dict, warnings: list[str]) -> Any:
     if chan.layout == "navpvt":  # no header: its times are its own UTC fields
         skipped.merge(chan.fix_skips)
@@ -506,7 +506,7 @@ def _build(kind: str, chan: _Channel, *, path: str, use_log_time: bool, date: dt
     return Odometry(t_ns=t_ns[~bad], speed_mps=speed[~bad])
 
 
-def _navigation_frame(chan: _Channel) -> bool:
+def _navigation_frame(chan: Channel) -> bool:
     """A twist channel whose linear velocity is in a navigation frame (ENU, as u-blox
     ``/fix_velocity``) rather than the body frame: a large lateral (y) share while moving."""
     if chan.layout is None or KIND_OF_LAYOUT[chan.layout] != "odo":
@@ -519,7 +519,7 @@ def _navigation_frame(chan: _Channel) -> bool:
                 and np.median(np.abs(vy[moving]) / norm[moving]) > _LATERAL_SHARE)
 
 
-def _attach_velocity(gnss: GnssFixes, chan: _Channel, use_log_time: bool) -> tuple[GnssFixes, int]:
+def _attach_velocity(gnss: GnssFixes, chan: Channel, use_log_time: bool) -> tuple[GnssFixes, int]:
     """The fixes with speed (m/s) and course (deg clockwise from north) from an ENU twist
     channel (x east, y north), matched to the nearest message within
     :data:`_VELOCITY_MATCH_NS`; fixes that already carry a speed keep it.  Returns the
@@ -547,7 +547,7 @@ def _attach_velocity(gnss: GnssFixes, chan: _Channel, use_log_time: bool) -> tup
     return dataclasses.replace(gnss, speed_mps=speed, course_deg=course), int(take.sum())
 
 
-def _imu_absent(chan: _Channel) -> np.ndarray:
+def _imu_absent(chan: Channel) -> np.ndarray:
     """Imu messages without angular velocity: covariance[0] = -1 (sensor_msgs/Imu: "no
     data"), unless the channel's z rates do vary under that flag (then it is sloppy
     driver metadata, not missing data, and the rates are kept)."""
@@ -565,7 +565,7 @@ def _concat_fixes(parts: list[GnssFixes]) -> GnssFixes:
     return GnssFixes(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in names})
 
 
-def _usable(kind: str, chan: _Channel) -> int:
+def _usable(kind: str, chan: Channel) -> int:
     if chan.layout == "navpvt":
         return sum(len(f) for f in chan.fixes)
     if kind == "gyro":
@@ -600,7 +600,7 @@ def check_topics(path: str, topics: dict[str, str] | None) -> tuple[dict[str, st
     return topics, {k: topics.get(k) for k in ("gnss", "gyro", "odo")}
 
 
-def drive_from_channels(path_s: str, sha256: str, channels: list[_Channel], *,
+def drive_from_channels(path_s: str, sha256: str, channels: list[Channel], *,
                         topics: dict[str, str], wanted: dict[str, str | None],
                         use_log_time: bool, date: dt.date | None, skipped: SkipReport,
                         warnings: list[str], meta: dict[str, Any]) -> Drive:
@@ -669,7 +669,7 @@ def drive_from_channels(path_s: str, sha256: str, channels: list[_Channel], *,
     return drive
 
 
-def _accel(chan: _Channel, use_log_time: bool) -> ForwardAccel | None:
+def _accel(chan: Channel, use_log_time: bool) -> ForwardAccel | None:
     """``linear_acceleration.x`` of the Imu channel chosen for the gyro (REP-103: x
     forward), unless its covariance[0] is -1 (no data) or every value is exactly zero
     (a driver that leaves the field unset)."""
@@ -699,13 +699,13 @@ def read_mcap(path: str | Path, *, topics: dict[str, str] | None = None, use_log
         raise InputError(path_s, f"not an MCAP file (starts with {data[:8]!r}, expected the "
                          "MCAP magic \\x89MCAP0\\r\\n)")
     topics, wanted = check_topics(path_s, topics)
-    decoder = _Decoder(path_s, wanted)
-    walker = Walker(path_s, data, make_channel=_new_channel, wanted=decoder.is_wanted,
+    decoder = Decoder(path_s, wanted)
+    walker = Walker(path_s, data, make_channel=new_channel, wanted=decoder.is_wanted,
                     on_messages=decoder.on_messages)
     walker.walk()
     meta: dict[str, Any] = {}
 
-    def count(c: _Channel) -> int:  # channels in skipped chunks: the summary's statistics
+    def count(c: Channel) -> int:  # channels in skipped chunks: the summary's statistics
         if walker.n_chunks_skipped and c.id not in walker.wanted_ids:
             return walker.stat_counts.get(c.id, c.n_msgs)
         return c.n_msgs

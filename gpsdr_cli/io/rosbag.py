@@ -63,8 +63,8 @@ def _sqlite_files(path: Path) -> list[Path]:
     return files if ok else []
 
 
-def _read_ros1(path: Path, decoder: mcap._Decoder, skipped: SkipReport, meta: dict[str, Any],
-               path_s: str) -> list[mcap._Channel] | None:
+def _read_ros1(path: Path, decoder: mcap.Decoder, skipped: SkipReport, meta: dict[str, Any],
+               path_s: str) -> list[mcap.Channel] | None:
     """A ROS 1 bag's channels, the wanted ones decoded, by the compiled record scan
     (:mod:`gpsdr_cli.io.rosbag1_walk`); None when the bag needs rosbags' reader."""
     import mmap
@@ -73,7 +73,7 @@ def _read_ros1(path: Path, decoder: mcap._Decoder, skipped: SkipReport, meta: di
 
     with open(path, "rb") as f:
         data = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-    channels: dict[int, mcap._Channel] = {}
+    channels: dict[int, mcap.Channel] = {}
     pending = []
     try:
         for records, conn, t_ns, off, size in rosbag1_walk.walk(data):
@@ -82,7 +82,7 @@ def _read_ros1(path: Path, decoder: mcap._Decoder, skipped: SkipReport, meta: di
                                                               int(size[q]))
                 if cid not in channels:
                     # ROS 1 type names (pkg/Type) map like the ROS 2 spelling
-                    channels[cid] = mcap._new_channel(cid, topic, "ros1", msgtype, "", b"")
+                    channels[cid] = mcap.new_channel(cid, topic, "ros1", msgtype, "", b"")
             msg = conn >= 0
             if msg.any():
                 pending.append((records, conn[msg], t_ns[msg], off[msg], size[msg]))
@@ -116,7 +116,7 @@ def _compressed(path: Path) -> bool:
     return bool(m and m.group(1) and m.group(1).lower() != "none")
 
 
-def _read_sqlite(files: list[Path], decoder: mcap._Decoder) -> list[mcap._Channel]:
+def _read_sqlite(files: list[Path], decoder: mcap.Decoder) -> list[mcap.Channel]:
     """A ROS 2 SQLite bag's channels from its ``topics`` table, the wanted ones decoded
     from one query on ``messages`` per topic (rosbags would take a Python step per
     message)."""
@@ -124,7 +124,7 @@ def _read_sqlite(files: list[Path], decoder: mcap._Decoder) -> list[mcap._Channe
     # fast as the standard library's sqlite3
     import apsw
 
-    channels: dict[str, mcap._Channel] = {}
+    channels: dict[str, mcap.Channel] = {}
     for f in files:
         con = apsw.Connection(str(f), flags=apsw.SQLITE_OPEN_READONLY)
         try:
@@ -135,7 +135,7 @@ def _read_sqlite(files: list[Path], decoder: mcap._Decoder) -> list[mcap._Channe
                 chan = channels.get(name)
                 if chan is None:
                     enc = "cdr" if fmt in ("cdr", "") else str(fmt)
-                    chan = channels[name] = mcap._new_channel(len(channels) + 1, name, enc,
+                    chan = channels[name] = mcap.new_channel(len(channels) + 1, name, enc,
                                                               msgtype, "", b"")
                 if not decoder.is_wanted(chan):
                     chan.n_msgs += int(counts.get(tid, 0))
@@ -155,8 +155,8 @@ def _read_sqlite(files: list[Path], decoder: mcap._Decoder) -> list[mcap._Channe
     return list(channels.values())
 
 
-def _read_rosbags(path: Path, ros1: bool, decoder: mcap._Decoder, skipped: SkipReport,
-                  meta: dict[str, Any], path_s: str, errors: tuple) -> list[mcap._Channel]:
+def _read_rosbags(path: Path, ros1: bool, decoder: mcap.Decoder, skipped: SkipReport,
+                  meta: dict[str, Any], path_s: str, errors: tuple) -> list[mcap.Channel]:
     """Any bag rosbags opens (compressed ROS 2 bags, MCAP storage, other chunk codecs)."""
     if ros1:
         from rosbags.rosbag1 import Reader
@@ -170,7 +170,7 @@ def _read_rosbags(path: Path, ros1: bool, decoder: mcap._Decoder, skipped: SkipR
                          "(a ROS 1 bag cut short needs `rosbag reindex`)") from err
     try:
         enc = "ros1" if ros1 else "cdr"
-        channels = [mcap._new_channel(c.id, c.topic, enc, c.msgtype, "", b"")
+        channels = [mcap.new_channel(c.id, c.topic, enc, c.msgtype, "", b"")
                     for c in reader.connections]
         by_id = {c.id: c for c in channels}
         want = {c.id for c in channels if decoder.is_wanted(c)}
@@ -220,7 +220,7 @@ def read_rosbag(path: str | Path, *, topics: dict[str, str] | None = None,
     if not p.exists():
         raise InputError(path_s, "no such file or folder")
     topics, wanted = mcap.check_topics(path_s, topics)
-    decoder = mcap._Decoder(path_s, wanted)
+    decoder = mcap.Decoder(path_s, wanted)
     errors = _damage_errors()
     skipped = SkipReport()
     meta: dict[str, Any] = {}
@@ -238,7 +238,7 @@ def read_rosbag(path: str | Path, *, topics: dict[str, str] | None = None,
                 raise InputError(path_s, f"cannot read as a ROS 2 SQLite bag: "
                                  f"{type(err).__name__}: {err}") from err
     if channels is None:
-        decoder = mcap._Decoder(path_s, wanted)
+        decoder = mcap.Decoder(path_s, wanted)
         channels = _read_rosbags(p, ros1, decoder, skipped, meta, path_s, errors)
     meta["channels"] = [{"topic": c.topic, "schema": c.schema_name, "encoding": c.encoding,
                          "messages": c.n_msgs} for c in channels]

@@ -74,11 +74,11 @@ from ..errors import InputError, MissingDateError, NoDataError
 from .drive import Drive, ForwardAccel, GnssFixes, Odometry, SkipReport, Source, YawRates
 from .formats import UBX_SYNC
 
-_NAV, _ESF = 0x01, 0x10
-_PVT, _DOP, _HPPOSLLH = 0x07, 0x04, 0x14
+CLASS_NAV, CLASS_ESF = 0x01, 0x10
+ID_PVT, _DOP, _HPPOSLLH = 0x07, 0x04, 0x14
 _MEAS, _RAW = 0x02, 0x03
 #: NAV-PVT up to pDOP (the u-blox 7 length); M8/F9 send 92 bytes.
-_PVT_MIN = 84
+PVT_MIN = 84
 
 #: ESF data types (interface description, "ESF data types").
 T_GYRO_Z, T_WHEEL_RL, T_WHEEL_RR, T_SINGLE_TICK, T_SPEED, T_ACCEL_X = 5, 8, 9, 10, 11, 16
@@ -287,16 +287,16 @@ def _days_from_civil(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- NAV
 
-def _nav_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: SkipReport
+def nav_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: SkipReport
                ) -> tuple[GnssFixes, np.ndarray, np.ndarray, np.ndarray, dict]:
     """Fixes from NAV-PVT (+ NAV-DOP, NAV-HPPOSLLH); also every NAV-PVT's frame start,
     UTC (ns, 0 when not valid) and iTOW, for the ESF time mapping."""
     cls, mid, length, start = fr["cls"], fr["id"], fr["length"], fr["start"]
-    sel = (cls == _NAV) & (mid == _PVT)
-    short = sel & (length < _PVT_MIN)
-    skipped.add(f"UBX NAV-PVT shorter than {_PVT_MIN} bytes", path, int(short.sum()))
+    sel = (cls == CLASS_NAV) & (mid == ID_PVT)
+    short = sel & (length < PVT_MIN)
+    skipped.add(f"UBX NAV-PVT shorter than {PVT_MIN} bytes", path, int(short.sum()))
     sel &= ~short
-    pvt = _table(buf, start[sel], "NAV-PVT", _PVT_MIN)
+    pvt = _table(buf, start[sel], "NAV-PVT", PVT_MIN)
     n = len(pvt)
     y, mo, d = (pvt[f].astype(np.int64) for f in ("year", "month", "day"))
     h, mi, s = (pvt[f].astype(np.int64) for f in ("hour", "min", "second"))
@@ -354,7 +354,7 @@ def _nav_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: S
     itow_ok = itow[ok]
     counts = {"nav_pvt": n, "nav_dop": 0, "nav_hpposllh": 0}
 
-    dsel = (cls == _NAV) & (mid == _DOP) & (length >= 18)
+    dsel = (cls == CLASS_NAV) & (mid == _DOP) & (length >= 18)
     if dsel.any() and len(g):
         dop = _table(buf, start[dsel], "NAV-DOP", 18)
         counts["nav_dop"] = len(dop)
@@ -362,7 +362,7 @@ def _nav_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: S
         g.hdop = np.where(found, dop["hDOP"][j] * 0.01, np.nan)
         g.vdop = np.where(found, dop["vDOP"][j] * 0.01, np.nan)
         g.pdop = np.where(np.isnan(g.pdop) & found, dop["pDOP"][j] * 0.01, g.pdop)
-    hsel = (cls == _NAV) & (mid == _HPPOSLLH) & (length >= 36)
+    hsel = (cls == CLASS_NAV) & (mid == _HPPOSLLH) & (length >= 36)
     if hsel.any() and len(g):
         hp = _table(buf, start[hsel], "NAV-HPPOSLLH", 36)
         counts["nav_hpposllh"] = len(hp)
@@ -401,7 +401,7 @@ def _esf_words(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: S
     24-bit field, source 0 MEAS / 1 RAW)."""
     cls, mid, length, start = fr["cls"], fr["id"], fr["length"], fr["start"]
     parts = []
-    meas = (cls == _ESF) & (mid == _MEAS) & (length >= 8)
+    meas = (cls == CLASS_ESF) & (mid == _MEAS) & (length >= 8)
     if meas.any():
         st, ln = start[meas], length[meas]
         p = st + 6
@@ -418,7 +418,7 @@ def _esf_words(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: S
         word = _u32(buf, p[rep] + 8 + 4 * k)
         parts.append((st[rep], tag[rep], (word >> 24) & 0x3F, word & 0xFFFFFF,
                       np.zeros(len(rep), np.int8)))
-    raw = (cls == _ESF) & (mid == _RAW) & (length >= 12)
+    raw = (cls == CLASS_ESF) & (mid == _RAW) & (length >= 12)
     if raw.any():
         st, ln = start[raw], length[raw]
         p = st + 6
@@ -581,7 +581,7 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
     meta: dict[str, Any] = {"frames": len(fr["start"]), "bad_frames": len(fr["bad_at"])}
     ids, counts = np.unique(fr["cls"].astype(np.int64) * 256 + fr["id"], return_counts=True)
     meta["messages"] = {f"{i >> 8:02X}-{i & 0xFF:02X}": int(c) for i, c in zip(ids, counts)}
-    gnss, pvt_start, pvt_t, _, nav_counts = _nav_fixes(buf, fr, name, skipped)
+    gnss, pvt_start, pvt_t, _, nav_counts = nav_fixes(buf, fr, name, skipped)
     meta.update(nav_counts)
     gyro, odo, accel = _esf_streams(buf, fr, pvt_start, pvt_t, ticks_per_m, name, skipped,
                                     warnings, meta)
