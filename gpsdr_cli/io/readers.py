@@ -1,8 +1,9 @@
 """Which reader a file needs, and one call that reads a whole drive.
 
 :func:`sniff` decides by content, not by file name: the MCAP magic, the Parquet
-magic, NMEA sentences with valid checksums, else a delimited text table with a
-header row.  Empty, binary and UTF-16 files are an :class:`InputError` naming
+magic, the ROS 1 bag and SQLite magics (or a ROS 2 bag folder), checksum-valid UBX
+frames (alone or among NMEA lines), NMEA sentences with valid checksums, else a
+delimited text table with a header row.  Empty, binary and UTF-16 files are an :class:`InputError` naming
 the file.
 """
 
@@ -204,7 +205,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
                gyro: str | Path | None = None, odo: str | Path | None = None, params: Params,
                topics: dict[str, str] | None = None, date: dt.date | None = None,
                use_log_time: bool = False) -> Drive:
-    """Read a drive from a LOG (MCAP or NMEA) and/or separate GNSS, gyro and odometer files.
+    """Read a drive from a LOG (MCAP, UBX, ROS bag or NMEA) and/or separate GNSS, gyro and odometer files.
 
     Streams from ``gps``/``gyro``/``odo`` take precedence over the same stream in
     ``log``; the rest of ``log`` merges in (:meth:`Drive.merge`).  ``gps = '-'``
@@ -212,7 +213,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
     (options from ``params["gyro"]``/``params["odo"]``) or an MCAP.
     """
     if log is None and gps is None and gyro is None and odo is None:
-        raise UsageError("no input: give a LOG (MCAP or NMEA) or --gps/--gyro/--odo files")
+        raise UsageError("no input: give a LOG (MCAP, UBX, ROS bag or NMEA) or --gps/--gyro/--odo files")
     share_heap_with_arrow()
     drive = Drive()
     warnings: list[str] = []
