@@ -616,6 +616,9 @@ def describe_drive(drive: Drive, params: Params) -> dict[str, Any]:
     if drive.odo is not None and len(drive.odo):
         desc["streams"].append(_stream_row("odo", drive.odo.t_ns))
         desc["odo"] = {"speed_mps": _distribution(drive.odo.speed_mps)}
+    if drive.accel is not None and len(drive.accel):
+        desc["streams"].append(_stream_row("accel", drive.accel.t_ns))
+        desc["accel"] = {"accel_mps2": _distribution(drive.accel.accel_mps2)}
     desc["skipped"] = {r: {"count": int(c), "first": drive.skipped.first.get(r, "")}
                        for r, c in sorted(drive.skipped.counts.items())}
     desc["notes"] = list(drive.meta.get("notes", [])) + list(drive.meta.get("warnings", []))
@@ -643,6 +646,11 @@ def describe_log(path: str, params: Params, *, topics: dict[str, str] | None = N
         from .io.mcap import read_mcap
 
         drive = read_mcap(path, topics=topics, use_log_time=use_log_time, date=date)
+    elif kind in ("ubx", "rosbag"):
+        from .io.readers import read_log
+
+        drive = read_log(path, topics=topics, date=date, use_log_time=use_log_time,
+                         params=params)
     elif kind == "nmea":
         from .io.nmea import read_nmea
 

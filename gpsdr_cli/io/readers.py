@@ -1,9 +1,10 @@
 """Which reader a file needs, and one call that reads a whole drive.
 
 :func:`sniff` decides by content, not by file name: the MCAP magic, the Parquet
-magic, NMEA sentences with valid checksums, else a delimited text table with a
-header row.  Empty and binary files, and UTF-16 files other than NMEA, are an
-:class:`InputError` naming the file.
+magic, the ROS 1 bag and SQLite magics (or a ROS 2 bag folder), checksum-valid UBX
+frames (alone or among NMEA lines), an RTKLIB .pos header, NMEA sentences with valid
+checksums, else a delimited text table with a header row.  Empty and binary files, and
+UTF-16 files other than NMEA, are an :class:`InputError` naming the file.
 """
 
 from __future__ import annotations
@@ -19,12 +20,14 @@ from ..conventions import NS_PER_S
 from ..errors import InputError, MissingDateError, NoDataError, UsageError
 from .csv import _parse_header, read_gyro_csv, read_odo_csv, text_problem
 from .drive import Drive
+from .formats import (  # magics only: a reader is imported per format
+    MCAP_MAGIC,
+    PARQUET_MAGIC,
+    ROSBAG1_MAGIC,
+    SQLITE_MAGIC,
+    UBX_SYNC,
+)
 
-#: The MCAP file magic (mcap.py's MAGIC; that module imports numba and the mcap library,
-#: 0.15-0.3 s, so it is imported only when a file is MCAP)
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-
-PARQUET_MAGIC = b"PAR1"
 _HEAD_BYTES = 65536
 
 
@@ -35,10 +38,13 @@ def _head(path: str | Path) -> bytes:
 
 
 def sniff(path: str | Path) -> str:
-    """``"mcap"``, ``"nmea"``, ``"rtklib"``, ``"csv"`` or ``"parquet"``, by the file's first
-    bytes (and a ``.pos`` name for an RTKLIB solution without a header)."""
+    """``"mcap"``, ``"ubx"``, ``"rosbag"``, ``"nmea"``, ``"rtklib"``, ``"csv"`` or
+    ``"parquet"``, by the file's first bytes (a ROS 2 bag may be a folder; a ``.pos`` name
+    for an RTKLIB solution without a header)."""
     from .nmea import looks_like_nmea
 
+    if Path(path).is_dir() and _is_rosbag2_dir(Path(path)):
+        return "rosbag"
     head = _head(path)
     if not head:
         raise InputError(path, "empty file")
@@ -46,6 +52,10 @@ def sniff(path: str | Path) -> str:
         return "mcap"
     if head.startswith(PARQUET_MAGIC):
         return "parquet"
+    if head.startswith((ROSBAG1_MAGIC, SQLITE_MAGIC)):
+        return "rosbag"
+    if _looks_like_ubx(path, head):
+        return "ubx"
     from .rtklib import looks_like_rtklib
 
     if looks_like_rtklib(head) or (Path(path).suffix.lower() == ".pos" and b"$" not in head[:4096]):
@@ -65,6 +75,21 @@ def sniff(path: str | Path) -> str:
         return "csv"
     raise InputError(path, f"unrecognised format (first line {first[:60]!r}); "
                      "expected MCAP, NMEA, CSV with a header row, or Parquet", line=1)
+
+
+def _looks_like_ubx(path: str | Path, head: bytes) -> bool:
+    """UBX frames with valid checksums (two, or one in a ``.ubx`` file or a short head),
+    alone or among NMEA lines."""
+    from .ubx import count_frames
+
+    if UBX_SYNC not in head:
+        return False
+    n = count_frames(head)
+    return n >= 2 or (n == 1 and (str(path).lower().endswith(".ubx") or len(head) < 4096))
+
+
+def _is_rosbag2_dir(path: Path) -> bool:
+    return (path / "metadata.yaml").is_file() or any(path.glob("*.db3"))
 
 
 def _nmea_after_noise(head: bytes, looks_like_nmea) -> bool:
@@ -93,12 +118,20 @@ def sha256_file(path: str | Path) -> str:
 
 
 def _read_log(path: str | Path, *, role: str, topics: dict[str, str] | None,
-              date: dt.date | None, use_log_time: bool) -> Drive:
+              date: dt.date | None, use_log_time: bool, params: Params | None = None) -> Drive:
     kind = sniff(path)
     if kind == "mcap":
         from .mcap import read_mcap
 
         return read_mcap(path, topics=topics, use_log_time=use_log_time, date=date)
+    if kind == "ubx":
+        from .ubx import read_ubx
+
+        return read_ubx(path, date=date, ticks_per_m=_ticks_per_m(params))
+    if kind == "rosbag":
+        from .rosbag import read_rosbag
+
+        return read_rosbag(path, topics=topics, use_log_time=use_log_time, date=date)
     if kind == "nmea":
         from .nmea import read_nmea
 
@@ -108,7 +141,23 @@ def _read_log(path: str | Path, *, role: str, topics: dict[str, str] | None,
 
         return read_rtklib(path)
     raise UsageError(f"{path}: a {kind.upper()} file cannot be the {role}; "
-                     "expected an MCAP, NMEA or RTKLIB .pos log")
+                     "expected an MCAP, UBX, ROS bag, NMEA or RTKLIB .pos log")
+
+
+def read_log(path: str | Path, *, params: Params | None = None,
+             topics: dict[str, str] | None = None, date: dt.date | None = None,
+             use_log_time: bool = False) -> Drive:
+    """One log of any kind that holds a drive's streams (MCAP, UBX, ROS bag, NMEA)."""
+    return _read_log(path, role="LOG", topics=topics, date=date, use_log_time=use_log_time,
+                     params=params)
+
+
+def _ticks_per_m(params: Params | None) -> float:
+    """``[odo] ticks_per_m``: UBX wheel ticks are read with the CSV odometer's option."""
+    try:
+        return float(params["odo"].get("ticks_per_m", 0.0)) if params is not None else 0.0
+    except (KeyError, TypeError, ValueError):
+        return 0.0
 
 
 def _only(drive: Drive, stream: str) -> Drive:
@@ -165,7 +214,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
                gyro: str | Path | None = None, odo: str | Path | None = None, params: Params,
                topics: dict[str, str] | None = None, date: dt.date | None = None,
                use_log_time: bool = False) -> Drive:
-    """Read a drive from a LOG (MCAP or NMEA) and/or separate GNSS, gyro and odometer files.
+    """Read a drive from a LOG (MCAP, UBX, ROS bag or NMEA) and/or separate GNSS, gyro and odometer files.
 
     Streams from ``gps``/``gyro``/``odo`` take precedence over the same stream in
     ``log``; the rest of ``log`` merges in (:meth:`Drive.merge`).  ``gps = '-'``
@@ -173,7 +222,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
     (options from ``params["gyro"]``/``params["odo"]``) or an MCAP.
     """
     if log is None and gps is None and gyro is None and odo is None:
-        raise UsageError("no input: give a LOG (MCAP or NMEA) or --gps/--gyro/--odo files")
+        raise UsageError("no input: give a LOG (MCAP, UBX, ROS bag or NMEA) or --gps/--gyro/--odo files")
     share_heap_with_arrow()
     drive = Drive()
     warnings: list[str] = []
@@ -208,7 +257,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
 
                 return read_nmea("-", date=day)
             return _only(_read_log(gps, role="GNSS input (--gps)", topics=topics, date=day,
-                                   use_log_time=use_log_time), "gnss")
+                                   use_log_time=use_log_time, params=params), "gnss")
 
         try:
             part = read_gps(date)
@@ -225,7 +274,8 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
     for part in dr_parts:
         add(part)
     if log is not None:
-        add(_read_log(log, role="LOG", topics=topics, date=date, use_log_time=use_log_time))
+        add(_read_log(log, role="LOG", topics=topics, date=date, use_log_time=use_log_time,
+                      params=params))
     if drive.gnss is None and drive.gyro is None and drive.odo is None:
         names = ", ".join(str(p) for p in (log, gps, gyro, odo) if p is not None)
         raise NoDataError(names, "no GNSS, gyro or odometer data")

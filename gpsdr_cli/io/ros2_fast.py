@@ -133,7 +133,8 @@ def decode(layout: str, buf: np.ndarray, off: np.ndarray, size: np.ndarray, *, r
     and the mask of messages decoded here.  Fields: ``stamp_ns`` always; then
     navsatfix: ``status``, ``lat``, ``lon``, ``alt``, ``cov_e``, ``cov_n`` (the
     covariance diagonal's east and north terms, m^2), ``cov_type``; imu: ``wz``
-    (angular_velocity.z, rad/s), ``wz_cov0`` (angular_velocity_covariance[0]);
+    (angular_velocity.z, rad/s), ``wz_cov0`` (angular_velocity_covariance[0]), ``ax``
+    (linear_acceleration.x, m/s^2), ``ax_cov0`` (linear_acceleration_covariance[0]);
     twist/twistcov/odometry: ``vx``, ``vy`` (twist.linear, m/s); sentence:
     ``text_off``, ``text_len`` (the sentence bytes in ``buf``, NUL excluded).
     ``ros1``: the ROS 1 serialisation (same field order, no encapsulation
@@ -158,6 +159,8 @@ def decode(layout: str, buf: np.ndarray, off: np.ndarray, size: np.ndarray, *, r
         b.need(q_av + 24 + 72 + 24 + 72)
         out["wz"] = b.f64(q_av + 16)
         out["wz_cov0"] = b.f64(q_av + 24)
+        out["ax"] = b.f64(q_av + 96)              # linear_acceleration.x
+        out["ax_cov0"] = b.f64(q_av + 120)        # linear_acceleration_covariance[0]
     elif layout in ("twist", "twistcov", "odometry"):
         if layout == "odometry":
             q = b.string_end(q)                   # child_frame_id
@@ -255,7 +258,7 @@ def encode(layout: str, stamp_ns: int, frame_id: str = "", *, ros1: bool = False
            **f: float | str | bytes) -> bytes:
     """Serialise one message of ``layout`` (the inverse of :func:`decode`), for tests,
     benchmarks and simulated logs.  Keywords: navsatfix ``status, service, lat, lon,
-    alt, cov (9 floats), cov_type``; imu ``wz, wz_cov0``; twist/twistcov/odometry
+    alt, cov (9 floats), cov_type``; imu ``wz, wz_cov0, ax``; twist/twistcov/odometry
     ``vx, vy``, odometry ``child_frame_id``; sentence ``text``.  ``ros1``: ROS 1
     serialisation (``seq`` = 0)."""
     w = _CdrWriter(ros1)
@@ -275,7 +278,7 @@ def encode(layout: str, stamp_ns: int, frame_id: str = "", *, ros1: bool = False
         w.put("9d", *(0.0,) * 9)
         w.put("3d", 0.0, 0.0, float(f["wz"]))
         w.put("9d", float(f.get("wz_cov0", 0.0)), *(0.0,) * 8)
-        w.put("3d", 0.0, 0.0, 9.81)
+        w.put("3d", float(f.get("ax", 0.0)), 0.0, 9.81)
         w.put("9d", *(0.0,) * 9)
     elif layout in ("twist", "twistcov", "odometry"):
         if layout == "odometry":

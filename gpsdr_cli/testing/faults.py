@@ -1068,6 +1068,37 @@ def _mcap_case(fault: Callable[[bytes], bytes]) -> Callable[[Any, Any], CaseInpu
     return _file_case("drive.mcap", fault, mcap=True)
 
 
+def _ubx_case(fault: Callable[[bytes], bytes]) -> Callable[[Any, Any], CaseInputs]:
+    """The drive as an F9R-like UBX log (NAV-PVT, ESF-MEAS gyro and speed), then damaged."""
+    def make(sim: Any, out_dir: Any) -> CaseInputs:
+        import pathlib
+
+        from .ubx_log import ubx_log
+
+        out = pathlib.Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        p = out / "drive.ubx"
+        p.write_bytes(fault(ubx_log(sim.drive)))
+        return CaseInputs(sim=sim, args=[str(p)])
+    return make
+
+
+def _bag_case(fault: Callable[[bytes], bytes]) -> Callable[[Any, Any], CaseInputs]:
+    """The drive as a ROS 2 SQLite bag, its .db3 file then damaged."""
+    def make(sim: Any, out_dir: Any) -> CaseInputs:
+        import pathlib
+
+        from .bags import write_rosbag
+
+        out = pathlib.Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        bag = write_rosbag(sim.drive, out / "drive_bag")
+        db = next(bag.glob("*.db3"))
+        db.write_bytes(fault(db.read_bytes()))
+        return CaseInputs(sim=sim, args=[str(bag)])
+    return make
+
+
 CATALOGUE: tuple[FaultCase, ...] = (
     FaultCase("clean", "no fault (baseline)", "track", _drive_case(lambda d: d)),
     FaultCase("outage_10s", "GNSS outage 10 s at ~20 m/s (fix quality 0)", "track",
@@ -1143,6 +1174,12 @@ CATALOGUE: tuple[FaultCase, ...] = (
     FaultCase("mcap_corrupt", "200 random bytes overwritten in the middle of the MCAP", "either",
               _mcap_case(lambda b: corrupt(b, 200, seed=8, start_frac=0.3, end_frac=0.7))),
     FaultCase("mcap_empty", "MCAP of 0 bytes", "error", _mcap_case(lambda b: b"")),
+    FaultCase("ubx_clean", "the same drive as a UBX log (NAV-PVT, ESF-MEAS)", "track",
+              _ubx_case(lambda b: b)),
+    FaultCase("ubx_trunc_60", "UBX log cut at 60 % (inside a frame)", "either",
+              _ubx_case(lambda b: truncate(b, 0.6))),
+    FaultCase("bag_corrupt", "ROS 2 bag: 4 kB of its .db3 overwritten at 40 %", "either",
+              _bag_case(lambda b: corrupt(b, 4096, seed=13, start_frac=0.4, end_frac=0.45))),
     FaultCase("nmea_garbage_lines", "50 binary garbage lines between NMEA sentences", "track",
               _file_case("gps.nmea", lambda b: insert_garbage(b, 50, seed=9, inside_lines=False))),
     FaultCase("nmea_garbage_inline", "50 binary chunks inside NMEA lines", "track",
