@@ -250,3 +250,106 @@ def test_oracle_params_fkf_regimes_from_least_and_most_multipath():
     assert (p["fkf"]["gnss_err_sd_m"], p["fkf"]["gnss_err_tau_s"], p["fkf"]["gnss_err_dist_m"]) == (0.4, 120.0, 300.0)
     assert (p["fkf"]["gnss_err_obstructed_sd_m"], p["fkf"]["gnss_err_obstructed_tau_s"],
             p["fkf"]["gnss_err_obstructed_dist_m"]) == (4.0, 60.0, 50.0)
+
+
+# --------------------------------------------------------------------------- newer scenarios
+
+#: the older scenarios' drives (seed 1, 120 s) as they were before the newer scenarios came:
+#: their generators' draws must not change (the benchmark figures rest on them)
+OLD_DRIVES = {
+    "open_sky": (48.77604300917892, 0.0),
+    "urban_canyon": (50.114025480777265, 7.754439088193602),
+    "stop_and_go": (48.13567924276877, 0.0),
+    "one_hour": (52.517912111013395, 8.004439088193603),
+}
+
+
+@pytest.mark.parametrize("scenario", sorted(OLD_DRIVES))
+def test_older_scenarios_unchanged(scenario):
+    sim = simulate_drive(scenario, seed=1, duration_s=120.0)
+    lat_last, odo_last = OLD_DRIVES[scenario]
+    assert sim.drive.gnss.lat_deg[-1] == pytest.approx(lat_last, abs=1e-12)  # deg
+    assert sim.drive.odo.speed_mps[-1] == pytest.approx(odo_last, abs=1e-12)  # m/s
+    assert sim.drive.gyro.yaw_rate_radps[-1] == pytest.approx(-0.0032410218687095533, abs=1e-15)
+    assert sim.drive.accel is None
+
+
+def _fix_errors(sim):
+    """Per fix: east and north error against the truth (m)."""
+    g = sim.drive.gnss
+    e, n = sim.frame.forward(g.lat_deg, g.lon_deg)
+    t = sim.truth["t_ns"].to_numpy()
+    return e - np.interp(g.t_ns, t, sim.truth["e"]), n - np.interp(g.t_ns, t, sim.truth["n"])
+
+
+@pytest.fixture(scope="module")
+def nlos():
+    return simulate_drive("urban_nlos", seed=2)
+
+
+def test_urban_nlos_steps(nlos):
+    g, ge, nz = nlos.drive.gnss, nlos.gnss_errors, nlos.noise
+    steps = nz["nlos_steps"]
+    assert len(steps) >= 10
+    mags = np.array([s["magnitude_m"] for s in steps])
+    durs = np.array([s["duration_s"] for s in steps])
+    assert mags.min() >= 10.0 and mags.max() <= 80.0          # m
+    assert durs.min() >= 5.0 and durs.max() <= 60.0           # s
+    assert 1.5 <= nz["nlos_steps_per_canyon_min"] <= 4.0      # several per minute in canyons
+    assert 0.3 <= nz["nlos_fix_share"] <= 0.8
+    # the step's plateau is its magnitude: recorded bias at the step's middle fixes (1 mm)
+    for sid, s in enumerate(steps):
+        k = np.flatnonzero(ge["nlos_step"].to_numpy() == sid)
+        mid = k[len(k) // 2]
+        assert np.hypot(ge["nlos_bias_e"][mid], ge["nlos_bias_n"][mid]) == pytest.approx(
+            s["magnitude_m"], abs=1e-3)
+        # inside a canyon section and not beyond it
+        assert ge["canyon"].to_numpy()[k].all()
+    # most steps lie across the street
+    assert np.mean([s["across_street"] for s in steps]) > 0.5
+    # the fixes' error is the step: within 3 m of bias + drift on every NLOS fix
+    de, dn = _fix_errors(nlos)
+    on = ge["nlos"].to_numpy() & g.valid
+    base_e = de - ge["nlos_e"].to_numpy()
+    base_n = dn - ge["nlos_n"].to_numpy()
+    assert np.sqrt(np.mean(base_e[on] ** 2 + base_n[on] ** 2)) < 3.0
+    err = np.hypot(de, dn)
+    assert np.median(err[on]) > 15.0  # m: NLOS fixes are tens of metres off
+    # consistent among themselves: fix-to-fix error changes on the plateau stay small
+    plateau = on & (np.hypot(ge["nlos_bias_e"], ge["nlos_bias_n"]).to_numpy()
+                    >= 0.999 * np.array([0.0] + [s["magnitude_m"] for s in steps])[
+                        ge["nlos_step"].to_numpy() + 1])
+    both = plateau[1:] & plateau[:-1] & (np.diff(ge["nlos_step"].to_numpy()) == 0)
+    jumps = np.hypot(np.diff(de), np.diff(dn))[both]
+    assert np.percentile(jumps, 99) < 5.0  # m, against 10-80 m steps
+    # the receiver reports nothing of it: HDOP 0.6-1.3, GST 0.5-3 m, quality 1
+    ok = g.valid
+    assert np.nanmin(g.hdop[ok]) >= 0.6 and np.nanmax(g.hdop[ok]) <= 1.3
+    assert np.nanmin(g.sigma_e_m[ok]) >= 0.5 and np.nanmax(g.sigma_e_m[ok]) <= 3.0
+    assert set(np.unique(g.fix_quality[ok])) == {1}
+    # open sky between canyons: ordinary errors (metres at most)
+    open_sky = ok & ~ge["canyon"].to_numpy()
+    assert open_sky.sum() > 300
+    assert np.sqrt(np.mean(err[open_sky] ** 2)) < 3.0
+
+
+def test_urban_nlos_oracle_drops_nlos_fixes(nlos):
+    od = oracle_drive(nlos)
+    on = nlos.gnss_errors["nlos"].to_numpy()
+    assert not od.gnss.valid[on].any()
+    assert od.gnss.valid[~on].sum() == nlos.drive.gnss.valid[~on].sum()
+    de, dn = _fix_errors(type(nlos)(**{**nlos.__dict__, "drive": od}))
+    ok = od.gnss.valid
+    assert np.sqrt(np.mean(de[ok] ** 2 + dn[ok] ** 2)) < 3.0  # m: what is left is honest
+
+
+def test_urban_nlos_written_as_quality_1(tmp_path):
+    from gpsdr_cli.io.nmea import read_nmea
+
+    sim = simulate_drive("urban_nlos", seed=3, duration_s=120.0)
+    paths = write_drive(sim, tmp_path, mcap=False)
+    back = read_nmea(paths["gps.nmea"]).gnss
+    ok = sim.drive.gnss.valid
+    assert set(np.unique(back.fix_quality[back.valid])) == {1}
+    np.testing.assert_allclose(back.hdop[back.valid], sim.drive.gnss.hdop[ok], atol=0.005)
+    np.testing.assert_allclose(back.sigma_e_m[back.valid], sim.drive.gnss.sigma_e_m[ok], atol=5e-4)
