@@ -1266,8 +1266,10 @@ def _stamp(t_ns: int, frame_id: str) -> dict:
 def write_mcap(drive: Drive, path: str | Path) -> Path:
     """ROS 2 CDR MCAP (zstd chunks): /gnss/fix NavSatFix, /gnss/fix_velocity
     TwistWithCovarianceStamped (the receiver's Doppler velocity in ENU, x east, y north, as
-    the u-blox driver publishes it; only where the fix has a speed and course), /imu Imu,
-    /vehicle/twist TwistStamped (the wheel speed, body frame)."""
+    the u-blox driver publishes it; only where the fix has a speed and course), /imu Imu
+    (linear_acceleration.x: the forward accelerometer when sampled with the gyro, else 0
+    with covariance[0] = -1, "not given"), /vehicle/twist TwistStamped (the wheel speed,
+    body frame; none without an odometer)."""
     from mcap_ros2.writer import Writer
 
     path = Path(path)
@@ -1279,6 +1281,8 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
     events.sort()
     zero9 = [0.0] * 9
     gyro_var = math.radians(0.1) ** 2
+    acc_x = _imu_accel(drive)  # in the Imu message when sampled with the gyro
+    acc_cov = [ACCEL_NOISE_SD_MPS2 ** 2] + [0.0] * 8 if acc_x is not None else [-1.0] + zero9[1:]
     with path.open("wb") as fh:
         w = Writer(fh)
         s_fix = w.register_msgdef("sensor_msgs/msg/NavSatFix", MSGDEF_NAVSATFIX)
@@ -1316,8 +1320,9 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
                        "orientation_covariance": [-1.0] + [0.0] * 8,
                        "angular_velocity": {"x": 0.0, "y": 0.0, "z": float(y.yaw_rate_radps[i])},
                        "angular_velocity_covariance": [0.0] * 8 + [gyro_var],
-                       "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 0.0},
-                       "linear_acceleration_covariance": [-1.0] + zero9[1:]}
+                       "linear_acceleration": {"x": 0.0 if acc_x is None else float(acc_x[i]),
+                                               "y": 0.0, "z": 0.0},
+                       "linear_acceleration_covariance": acc_cov}
                 w.write_message("/imu", s_imu, msg, log_time=t, publish_time=t)
             else:
                 msg = {"header": _stamp(t, "base_link"),
@@ -1326,6 +1331,15 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
                 w.write_message("/vehicle/twist", s_tw, msg, log_time=t, publish_time=t)
         w.finish()
     return path
+
+
+def _imu_accel(drive: Drive) -> np.ndarray | None:
+    """The forward acceleration (m/s^2) per gyro sample when the accelerometer shares the
+    gyro's stamps (one IMU), else None."""
+    a, y = drive.accel, drive.gyro
+    if a is None or y is None or len(a) != len(y) or not np.array_equal(a.t_ns, y.t_ns):
+        return None
+    return a.accel_mps2
 
 
 def _posix(t_ns: int) -> str:
@@ -1348,18 +1362,33 @@ def write_drive(sim: SimDrive, out_dir: str | Path, *, truth_rate_hz: float = 20
                 mcap: bool = True) -> dict[str, Path]:
     """Write the drive's logs and truth into ``out_dir`` (created if missing).
 
-    Files: gps.nmea, gyro.csv (t,yaw_rate), odo.csv (t,speed), drive.mcap,
-    truth.csv (t,lat,lon,alt,heading at ``truth_rate_hz``), noise.json.
-    ``t`` is UTC POSIX seconds.
+    Files: gps.nmea, gyro.csv (t,yaw_rate[,acc_x]), odo.csv (t,speed; not for a drive
+    without an odometer), drive.mcap, truth.csv (t,lat,lon,alt,heading at
+    ``truth_rate_hz``), noise.json.  ``t`` is UTC POSIX seconds.  A forward accelerometer
+    sampled with the gyro (one IMU) is gyro.csv's ``acc_x`` column (m/s^2, positive
+    forward), as a logged IMU row carries both; sampled apart it goes to accel.csv (t,acc_x).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = sim.drive
-    paths = {name: out / name for name in
-             ("gps.nmea", "gyro.csv", "odo.csv", "drive.mcap", "truth.csv", "noise.json")}
+    names = ["gps.nmea", "gyro.csv", "odo.csv", "drive.mcap", "truth.csv", "noise.json"]
+    if d.odo is None:
+        names.remove("odo.csv")
+    together = _imu_accel(d) is not None
+    if d.accel is not None and not together:
+        names.append("accel.csv")
+    paths = {name: out / name for name in names}
     paths["gps.nmea"].write_text("".join(nmea_lines(d.gnss)), encoding="ascii", newline="")
-    _write_csv(paths["gyro.csv"], "t,yaw_rate", d.gyro.t_ns, [d.gyro.yaw_rate_radps], ["{:.7f}"])
-    _write_csv(paths["odo.csv"], "t,speed", d.odo.t_ns, [d.odo.speed_mps], ["{:.6f}"])
+    if together:
+        _write_csv(paths["gyro.csv"], "t,yaw_rate,acc_x", d.gyro.t_ns,
+                   [d.gyro.yaw_rate_radps, d.accel.accel_mps2], ["{:.7f}", "{:.6f}"])
+    else:
+        _write_csv(paths["gyro.csv"], "t,yaw_rate", d.gyro.t_ns, [d.gyro.yaw_rate_radps],
+                   ["{:.7f}"])
+    if d.accel is not None and not together:
+        _write_csv(paths["accel.csv"], "t,acc_x", d.accel.t_ns, [d.accel.accel_mps2], ["{:.6f}"])
+    if d.odo is not None:
+        _write_csv(paths["odo.csv"], "t,speed", d.odo.t_ns, [d.odo.speed_mps], ["{:.6f}"])
     step = max(1, round(TRUTH_RATE_HZ / truth_rate_hz))
     tr = sim.truth.iloc[::step]
     _write_csv(paths["truth.csv"], "t,lat,lon,alt,heading", tr["t_ns"].to_numpy(),

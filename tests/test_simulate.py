@@ -353,3 +353,139 @@ def test_urban_nlos_written_as_quality_1(tmp_path):
     assert set(np.unique(back.fix_quality[back.valid])) == {1}
     np.testing.assert_allclose(back.hdop[back.valid], sim.drive.gnss.hdop[ok], atol=0.005)
     np.testing.assert_allclose(back.sigma_e_m[back.valid], sim.drive.gnss.sigma_e_m[ok], atol=5e-4)
+
+
+@pytest.fixture(scope="module")
+def rtk():
+    return simulate_drive("rtk", seed=1)
+
+
+def test_rtk_qualities_sigmas_and_errors(rtk):
+    g, ge, nz = rtk.drive.gnss, rtk.gnss_errors, rtk.noise
+    assert rtk.drive.odo is None
+    assert np.all(np.diff(g.t_ns) == NS_PER_S // 4)  # 4 Hz
+    assert np.all(np.diff(rtk.drive.gyro.t_ns) == NS_PER_S // 100)  # 100 Hz gyro
+    ok = g.valid
+    assert ok.all()
+    q = g.fix_quality
+    false = ge["false_fix"].to_numpy()
+    fixed = (q == 4) & ~false
+    flt = q == 5
+    assert set(np.unique(q)) == {4, 5}
+    assert 0.6 <= fixed.mean() <= 0.9 and 0.08 <= flt.mean() <= 0.35
+    assert 0.01 <= false.mean() <= 0.15
+    # fixed: GST 1-2.5 cm, and the error is of that size (per-axis RMS within 20 %)
+    assert g.sigma_e_m[fixed].min() >= 0.01 and g.sigma_e_m[fixed].max() <= 0.025
+    de, dn = _fix_errors(rtk)
+    z = np.concatenate([de[fixed] / g.sigma_e_m[fixed], dn[fixed] / g.sigma_n_m[fixed]])
+    assert abs(np.sqrt(np.mean(z**2)) - 1.0) < 0.2
+    assert np.max(np.hypot(de[fixed], dn[fixed])) < 0.15  # m
+    # float: 0.1-0.5 m, errors of that size
+    assert g.sigma_e_m[flt].min() >= 0.1 - 1e-12 and g.sigma_e_m[flt].max() <= 0.5
+    zf = np.concatenate([de[flt] / g.sigma_e_m[flt], dn[flt] / g.sigma_n_m[flt]])
+    assert abs(np.sqrt(np.mean(zf**2)) - 1.0) < 0.3
+    # false fixes: quality 4 reported at cm, the position off by 0.2-1 m for 5-30 s
+    assert np.all(q[false] == 4)
+    assert g.sigma_e_m[false].max() <= 0.025
+    ff = nz["rtk_false_fixes"]
+    assert 2 <= len(ff) <= 5
+    rel = (g.t_ns - g.t_ns[0]) / NS_PER_S
+    for f in ff:
+        assert 0.2 <= f["jump_m"] <= 1.0 and 5.0 <= f["duration_s"] <= 30.0
+        sel = (rel >= f["start_s"]) & (rel < f["start_s"] + f["duration_s"])
+        off = np.hypot(de[sel], dn[sel])
+        assert abs(np.median(off) - f["jump_m"]) < 0.06  # m: the jump plus cm noise
+        assert np.all(q[sel] == 4)
+
+
+def test_rtk_has_a_parked_stretch(rtk):
+    v = rtk.truth["speed"].to_numpy()
+    stopped = v < 1e-3
+    d = np.diff(np.concatenate(([0], stopped.astype(np.int8), [0])))
+    lengths = (np.flatnonzero(d == -1) - np.flatnonzero(d == 1)) * 0.01
+    assert lengths.max() >= 119.0  # s
+
+
+def test_rtk_oracle_drops_false_fixes_and_lowers_the_floor(rtk):
+    od = oracle_drive(rtk)
+    false = rtk.gnss_errors["false_fix"].to_numpy()
+    assert not od.gnss.valid[false].any() and od.gnss.valid[~false].all()
+    p = oracle_params(rtk.noise, defaults())
+    assert p["gnss"]["sigma_min_m"] <= 0.01
+
+
+@pytest.fixture(scope="module")
+def no_odo():
+    return simulate_drive("no_odometer", seed=2)
+
+
+def test_no_odometer_outages_while_braking_and_accelerating(no_odo):
+    g, nz, tr = no_odo.drive.gnss, no_odo.noise, no_odo.truth
+    assert no_odo.drive.odo is None
+    outs = nz["brake_outages"]
+    assert len(outs) >= 6
+    assert {o["kind"] for o in outs} == {"braking", "accelerating"}
+    rel_fix = (g.t_ns - g.t_ns[0]) / NS_PER_S
+    t = (tr["t_ns"].to_numpy() - tr["t_ns"].iloc[0]) / NS_PER_S
+    v = tr["speed"].to_numpy()
+    acc = np.gradient(v, 0.01)
+    for o in outs:
+        assert o["duration_s"] == 15.0
+        inside = (rel_fix >= o["start_s"]) & (rel_fix < o["start_s"] + 15.0)
+        assert inside.sum() == 60 and not g.valid[inside].any()  # 15 s at 4 Hz
+        m = (t >= o["start_s"]) & (t < o["start_s"] + 15.0)
+        # the car brakes to a standstill / drives off from one inside the window (m/s)
+        assert v[m].min() < 0.05 and v[m].max() > 5.0
+        if o["kind"] == "braking":
+            assert acc[m].min() < -1.0  # m/s^2
+            assert v[m][0] > 5.0
+        else:
+            assert acc[m].max() > 1.0
+            assert v[m][0] < 0.05 and v[m][-1] > 5.0
+    # outside the windows: RTK fixed throughout
+    out = np.zeros(len(g), bool)
+    for o in outs:
+        out |= (rel_fix >= o["start_s"]) & (rel_fix < o["start_s"] + 15.0)
+    assert g.valid[~out].all() and np.all(g.fix_quality[~out] == 4)
+
+
+def test_no_odometer_accelerometer_model(no_odo):
+    a, tr, nz = no_odo.drive.accel, no_odo.truth, no_odo.noise
+    np.testing.assert_array_equal(a.t_ns, no_odo.drive.gyro.t_ns)
+    f = tr["accel_fwd"].to_numpy()
+    pitch = np.radians(tr["pitch_deg"].to_numpy())
+    assert 3.0 < np.degrees(np.max(np.abs(pitch))) < 6.0  # grades of 5-10 %
+    # f = d(road speed)/dt + g sin(pitch): standing on a slope it reads g sin(pitch) ...
+    v = tr["speed"].to_numpy()
+    still = np.convolve(v < 1e-9, np.ones(5), "same") == 5
+    assert still.sum() > 500 and np.max(np.abs(pitch[still])) > np.radians(0.5)
+    np.testing.assert_allclose(f[still], 9.80665 * np.sin(pitch[still]), atol=1e-9)
+    # ... and f minus gravity integrates to the road speed (horizontal speed / cos(pitch))
+    v_road = v / np.cos(pitch)
+    dv = np.concatenate(([0.0], np.cumsum(0.5 * np.diff(np.arange(len(v)) * 0.01)
+                                          * ((f - 9.80665 * np.sin(pitch))[1:]
+                                             + (f - 9.80665 * np.sin(pitch))[:-1]))))
+    assert np.max(np.abs(v_road[0] + dv - v_road)) < 0.05  # m/s over the 10-min drive
+    resid = a.accel_mps2 - (1 + nz["accel_scale_error"]) * f
+    assert abs(np.std(np.diff(resid)) / np.sqrt(2) / nz["accel_noise_sd_mps2"] - 1.0) < 0.05
+    assert abs(np.mean(resid[:500]) - nz["accel_bias_initial_mps2"]) < 0.01  # m/s^2
+
+
+def test_write_drive_without_odometer_with_accel(tmp_path, no_odo):
+    from gpsdr_cli.io.csv import read_gyro_csv
+
+    paths = write_drive(no_odo, tmp_path)
+    assert "odo.csv" not in paths and not (tmp_path / "odo.csv").exists()
+    assert paths["gyro.csv"].read_text().splitlines()[0] == "t,yaw_rate,acc_x"
+    back = read_gyro_csv(paths["gyro.csv"], defaults()["gyro"])
+    np.testing.assert_array_equal(back.accel.t_ns, no_odo.drive.accel.t_ns)
+    # written with 6 decimals: parsed back within 1e-6 m/s^2
+    assert np.max(np.abs(back.accel.accel_mps2 - no_odo.drive.accel.accel_mps2)) <= 1e-6
+    np.testing.assert_allclose(back.gyro.yaw_rate_radps, no_odo.drive.gyro.yaw_rate_radps, atol=1e-7)
+    assert "accel" in back.sources[0].streams
+
+    from mcap_ros2.reader import read_ros2_messages
+
+    imu = [m.ros_msg for m in read_ros2_messages(str(paths["drive.mcap"]), topics=["/imu"])]
+    acc = np.array([m.linear_acceleration.x for m in imu])
+    np.testing.assert_allclose(acc, no_odo.drive.accel.accel_mps2, atol=1e-12)
