@@ -489,3 +489,46 @@ def test_write_drive_without_odometer_with_accel(tmp_path, no_odo):
     imu = [m.ros_msg for m in read_ros2_messages(str(paths["drive.mcap"]), topics=["/imu"])]
     acc = np.array([m.linear_acceleration.x for m in imu])
     np.testing.assert_allclose(acc, no_odo.drive.accel.accel_mps2, atol=1e-12)
+
+
+def test_accel_onto_epochs_and_fuse_option(tmp_path, no_odo):
+    """The accelerometer reaches the epochs from gyro.csv's acc_x column and from --accel."""
+    from click.testing import CliRunner
+
+    from gpsdr_cli.align import build_epochs
+    from gpsdr_cli.cli.main import cli
+    from gpsdr_cli.io.readers import read_drive
+
+    sim = simulate_drive("no_odometer", seed=2, duration_s=60.0)
+    paths = write_drive(sim, tmp_path, mcap=False)
+    p = defaults()
+    drive = read_drive(gps=paths["gps.nmea"], gyro=paths["gyro.csv"], params=p)
+    ep = build_epochs(drive, sim.frame, p)
+    np.testing.assert_array_equal(ep.has_accel, ep.has_gyro)  # one IMU: same stamps
+    a = sim.drive.accel
+    k = np.searchsorted(ep.t_ns, a.t_ns)
+    assert np.max(np.abs(ep.accel_mps2[k] - a.accel_mps2)) <= 1e-6  # m/s^2
+    assert np.all(np.isnan(ep.accel_mps2[~ep.has_accel]))
+    # a separate t,acc_x file, shifted by 5 ms: its own epochs, NaN at the gyro's
+    acc = tmp_path / "accel.csv"
+    with acc.open("w") as fh:
+        fh.write("t,acc_x\n")
+        for t, x in zip(a.t_ns + 5_000_000, a.accel_mps2, strict=True):
+            fh.write(f"{t // NS_PER_S}.{t % NS_PER_S:09d},{x:.6f}\n")
+    drive2 = read_drive(gps=paths["gps.nmea"], gyro=paths["gyro.csv"], accel=acc, params=p)
+    ep2 = build_epochs(drive2, sim.frame, p)
+    assert ep2.has_accel.sum() == len(a) and not (ep2.has_accel & ep2.has_gyro).any()
+    k2 = np.searchsorted(ep2.t_ns, a.t_ns + 5_000_000)
+    assert np.max(np.abs(ep2.accel_mps2[k2] - a.accel_mps2)) <= 1e-6
+    assert any("accel" in s.streams and s.path == str(acc) for s in drive2.sources)
+    # epochs built without the accelerometer: False / NaN
+    drive.accel = None
+    ep3 = build_epochs(drive, sim.frame, p)
+    assert not ep3.has_accel.any() and np.all(np.isnan(ep3.accel_mps2))
+    # the CLI option
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,ax\n1715673600.0,0.1\n")
+    r = CliRunner().invoke(cli, ["fuse", "--gps", str(paths["gps.nmea"]), "--gyro",
+                                 str(paths["gyro.csv"]), "--accel", str(bad), "-o",
+                                 str(tmp_path / "t.parquet")])
+    assert r.exit_code != 0 and "bad.csv" in r.output and "acc_x" in r.output
