@@ -406,10 +406,15 @@ def test_rtk_has_a_parked_stretch(rtk):
     assert lengths.max() >= 119.0  # s
 
 
-def test_rtk_oracle_drops_false_fixes_and_lowers_the_floor(rtk):
+def test_rtk_oracle_knows_false_fixes_and_lowers_the_floor(rtk):
     od = oracle_drive(rtk)
     false = rtk.gnss_errors["false_fix"].to_numpy()
-    assert not od.gnss.valid[false].any() and od.gnss.valid[~false].all()
+    assert od.gnss.valid.all()
+    # a false fix's oracle sigma holds its jump: per axis |jump| / sqrt(2) at least
+    jump = np.hypot(rtk.gnss_errors["jump_e"], rtk.gnss_errors["jump_n"]).to_numpy()
+    assert np.all(od.gnss.sigma_e_m[false] >= jump[false] / np.sqrt(2) - 1e-12)
+    assert np.all(od.gnss.sigma_e_m[false] >= 0.14)  # m, against 1-2.5 cm reported
+    assert np.all(od.gnss.sigma_e_m[~false] <= 0.5 + 1e-12)
     p = oracle_params(rtk.noise, defaults())
     assert p["gnss"]["sigma_min_m"] <= 0.01
 
