@@ -670,20 +670,27 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
 # --------------------------------------------------------------------------- error models of
 # the newer scenarios (urban_nlos, rtk, no_odometer), applied to the fixes of :func:`_gnss`
 
-#: NLOS steps: plateau size (m, log-uniform), duration (s, log-uniform), the clean gap
-#: between two steps of a canyon (s, uniform), on/off ramp (s, uniform: the receiver's own
-#: filter smooths the jump), drift (random walk, m per sqrt(s) per axis), share of steps
-#: across the street (toward a facade), their spread about the perpendicular (deg)
+#: NLOS steps: plateau size (m, log-uniform), duration (s, log-uniform), the chance that
+#: the next step follows directly (the error moves from one reflection to the next without
+#: a clean fix between), else the clean gap before it (s, uniform), on/off ramp (s, uniform,
+#: at most a third of the step: the receiver's own filter smooths the jump), drift (random
+#: walk, m per sqrt(s) per axis), share of steps across the street (toward a facade) and
+#: their spread about the perpendicular (deg)
 NLOS_STEP_M = (10.0, 80.0)
 NLOS_DURATION_S = (5.0, 60.0)
-NLOS_GAP_S = (0.0, 8.0)
-NLOS_RAMP_S = (0.2, 1.0)
+NLOS_CHAIN_P = 0.5
+NLOS_GAP_S = (1.0, 6.0)
+NLOS_RAMP_S = (1.0, 4.0)
 NLOS_DRIFT_M_PER_SQRT_S = 0.25
 NLOS_ACROSS_SHARE = 0.7
 NLOS_ACROSS_SPREAD_DEG = 20.0
+#: the receiver's Doppler velocity in a step: reflected signals shift it too, a bias per step
+#: and axis (m/s, 1 sigma) plus white noise (m/s per axis)
+NLOS_VEL_BIAS_SD_MPS = 1.0
+NLOS_VEL_WHITE_SD_MPS = 0.3
 #: canyon and open-sky sections along the route (m, uniform); the drive starts in the open
-CANYON_M = (400.0, 1200.0)
-OPEN_M = (150.0, 400.0)
+CANYON_M = (500.0, 1500.0)
+OPEN_M = (150.0, 300.0)
 #: what the receiver reports in this scenario, whatever the error: HDOP and GST sigma ranges
 NLOS_HDOP = (0.6, 1.3)
 NLOS_GST_M = (0.5, 3.0)
@@ -746,13 +753,16 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
     """Canyon sections with NLOS steps on top of the open-sky errors of ``fixes``.
 
     Along the route, open-sky sections of ``OPEN_M`` alternate with canyon sections of
-    ``CANYON_M``.  In a canyon, steps follow each other after clean gaps of ``NLOS_GAP_S``:
+    ``CANYON_M``.  In a canyon, steps follow each other, directly (``NLOS_CHAIN_P``: the
+    bias moves from one step's to the next's) or after a clean gap of ``NLOS_GAP_S``:
     each a bias of ``NLOS_STEP_M`` metres (log-uniform) held for ``NLOS_DURATION_S``
     seconds (log-uniform, cut at the canyon's end, never shorter than 5 s), ramped on and
     off over ``NLOS_RAMP_S``, pointing across the street (perpendicular to the heading,
     either side, +-20 deg) in 70 % of steps and anywhere in the rest, plus a random-walk
     drift.  So the fixes of a step agree with each other to the white noise and the drift:
-    a gate on one fix's innovation sees no jump after the first.  The receiver reports HDOP
+    a gate on one fix's innovation sees no jump after the first.  The reported velocity
+    (RMC speed and course) gets a bias of ``NLOS_VEL_BIAS_SD_MPS`` per step and axis and
+    white noise of ``NLOS_VEL_WHITE_SD_MPS`` during the step.  The receiver reports HDOP
     in ``NLOS_HDOP`` and GST sigmas in ``NLOS_GST_M`` whatever the error.
     """
     t_fix = fixes.t_ns
@@ -774,6 +784,7 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
         canyon |= (s_fix >= a) & (s_fix < b)
     bias = np.zeros((m, 2))
     drift = np.zeros((m, 2))
+    vel_err = np.zeros((m, 2))
     step_id = np.full(m, -1, np.int32)
     gst_factor = np.ones(m)
     steps: list[dict] = []
@@ -782,14 +793,18 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
     for i0, i1 in zip(starts, ends, strict=True):
         t_end_canyon = rel[i1 - 1]
         t = rel[i0]
+        chained = False               # this step starts where the previous one stands
+        prev_vec = np.zeros(2)
         while True:
-            t_on = t + float(rng.uniform(*NLOS_GAP_S))
+            t_on = t if chained else t + float(rng.uniform(*NLOS_GAP_S))
             left = t_end_canyon - t_on
             if left < NLOS_DURATION_S[0]:
                 break
             dur = min(_loguniform(rng, NLOS_DURATION_S), left)
             mag = _loguniform(rng, NLOS_STEP_M)
-            ramp_on, ramp_off = (float(rng.uniform(*NLOS_RAMP_S)) for _ in range(2))
+            ramp_on, ramp_off = (min(float(rng.uniform(*NLOS_RAMP_S)), dur / 3.0)
+                                 for _ in range(2))
+            next_chained = bool(rng.random() < NLOS_CHAIN_P)
             k_on = int(np.searchsorted(rel, t_on))
             across = bool(rng.random() < NLOS_ACROSS_SHARE)
             if across:
@@ -800,20 +815,28 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
                 ang = float(rng.uniform(0.0, 2 * math.pi))
             sel = (rel >= t_on) & (rel < t_on + dur)
             tk = rel[sel] - t_on
+            vec = mag * np.array([math.sin(ang), math.cos(ang)])
+            w_on = np.clip(tk / ramp_on, 0.0, 1.0)[:, None]
+            w_off = (np.ones(len(tk)) if next_chained
+                     else np.clip((dur - tk) / ramp_off, 0.0, 1.0))[:, None]
+            start = prev_vec if chained else np.zeros(2)
+            bias[sel] = (start * (1.0 - w_on) + vec * w_on) * w_off
             prof = np.clip(np.minimum(tk / ramp_on, (dur - tk) / ramp_off), 0.0, 1.0)
-            direction = np.array([math.sin(ang), math.cos(ang)])
-            bias[sel] = mag * prof[:, None] * direction
             dtk = np.diff(np.concatenate(([0.0], tk)))
             walk = np.cumsum(rng.standard_normal((len(tk), 2)) * NLOS_DRIFT_M_PER_SQRT_S
                              * np.sqrt(dtk)[:, None], axis=0)
             drift[sel] = walk * prof[:, None]
+            v_bias = rng.normal(0.0, NLOS_VEL_BIAS_SD_MPS, 2)
+            vel_err[sel] = (v_bias * prof[:, None]
+                            + rng.standard_normal((len(tk), 2)) * NLOS_VEL_WHITE_SD_MPS)
             sid = len(steps)
             step_id[sel] = sid
             gst_factor[sel] = float(rng.uniform(1.0, 2.0))
             steps.append({"start_s": float(t_on), "duration_s": float(dur), "magnitude_m": mag,
                           "direction_deg": float(np.degrees(ang) % 360.0), "across_street": across,
-                          "ramp_on_s": ramp_on, "ramp_off_s": ramp_off})
+                          "from_previous": chained, "ramp_on_s": ramp_on, "ramp_off_s": ramp_off})
             t = t_on + dur
+            chained, prev_vec = next_chained, vec
     valid = fixes.valid
     e_fix, n_fix = frame.forward(fixes.lat_deg, fixes.lon_deg)
     nlos_e = bias[:, 0] + drift[:, 0]
@@ -821,8 +844,17 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
     hdop = np.clip(fixes.hdop, *NLOS_HDOP)
     vdop = np.sqrt(np.maximum(fixes.pdop**2 - hdop**2, 0.01))
     sigma = np.clip(gerr["reported_sd_m"].to_numpy() * gst_factor, *NLOS_GST_M)
+    crs = np.radians(fixes.course_deg)
+    moving = np.isfinite(crs)  # the receiver gives no course below 0.2 m/s: ~0 there
+    ve = np.where(moving, fixes.speed_mps * np.sin(np.where(moving, crs, 0.0)), 0.0) + vel_err[:, 0]
+    vn = np.where(moving, fixes.speed_mps * np.cos(np.where(moving, crs, 0.0)), 0.0) + vel_err[:, 1]
+    in_step = step_id >= 0
+    speed = np.where(in_step, np.hypot(ve, vn), fixes.speed_mps)
+    course = np.where(in_step, np.where(speed > 0.2, np.mod(np.degrees(np.arctan2(ve, vn)), 360.0),
+                                        np.nan), fixes.course_deg)
     out = _replace_positions(fixes, frame, e_fix + nlos_e, n_fix + nlos_n, hdop=hdop, vdop=vdop,
-                             sigma_e_m=sigma, sigma_n_m=sigma.copy())
+                             sigma_e_m=sigma, sigma_n_m=sigma.copy(), speed_mps=speed,
+                             course_deg=course)
     gerr = gerr.copy()
     gerr["env"] = np.where(canyon, "urban", gerr["env"].to_numpy())
     gerr["hdop"] = hdop
@@ -832,15 +864,19 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
     gerr["nlos_step"] = step_id
     gerr["nlos_e"], gerr["nlos_n"] = nlos_e, nlos_n
     gerr["nlos_bias_e"], gerr["nlos_bias_n"] = bias[:, 0], bias[:, 1]
+    gerr["nlos_vel_e"], gerr["nlos_vel_n"] = vel_err[:, 0] * in_step, vel_err[:, 1] * in_step
     canyon_s = float(np.sum(canyon) / max(_fixes_rate(t_fix), 1e-9))
     noise = {
         "gnss_model": "nlos",
         "nlos_note": "canyon sections: NLOS steps (bias held, ramped on/off, plus a random-walk "
                      "drift) on top of the open-sky errors; HDOP and GST sigma do not show them",
         "nlos_step_m": list(NLOS_STEP_M), "nlos_duration_s": list(NLOS_DURATION_S),
-        "nlos_gap_s": list(NLOS_GAP_S), "nlos_ramp_s": list(NLOS_RAMP_S),
+        "nlos_chain_p": NLOS_CHAIN_P, "nlos_gap_s": list(NLOS_GAP_S),
+        "nlos_ramp_s": list(NLOS_RAMP_S),
         "nlos_drift_m_per_sqrt_s": NLOS_DRIFT_M_PER_SQRT_S,
         "nlos_across_share": NLOS_ACROSS_SHARE, "nlos_hdop": list(NLOS_HDOP),
+        "nlos_velocity_bias_sd_mps": NLOS_VEL_BIAS_SD_MPS,
+        "nlos_velocity_white_sd_mps": NLOS_VEL_WHITE_SD_MPS,
         "nlos_gst_m": list(NLOS_GST_M),
         "canyon_sections_m": [[a, b] for a, b in sections],
         "canyon_s": canyon_s,

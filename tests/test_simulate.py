@@ -327,6 +327,14 @@ def test_urban_nlos_steps(nlos):
     assert np.nanmin(g.hdop[ok]) >= 0.6 and np.nanmax(g.hdop[ok]) <= 1.3
     assert np.nanmin(g.sigma_e_m[ok]) >= 0.5 and np.nanmax(g.sigma_e_m[ok]) <= 3.0
     assert set(np.unique(g.fix_quality[ok])) == {1}
+    # the Doppler velocity is off in a step (1 m/s bias per step and axis), honest elsewhere
+    t = nlos.truth["t_ns"].to_numpy()
+    moving = ok & np.isfinite(g.course_deg)
+    ve = g.speed_mps * np.sin(np.radians(g.course_deg)) - np.interp(g.t_ns, t, nlos.truth["v_e"])
+    vn = g.speed_mps * np.cos(np.radians(g.course_deg)) - np.interp(g.t_ns, t, nlos.truth["v_n"])
+    v_err = np.hypot(ve, vn)
+    assert 0.7 < np.sqrt(np.mean(v_err[moving & on] ** 2)) < 2.5   # m/s
+    assert np.sqrt(np.mean(v_err[moving & ~on] ** 2)) < 0.15      # m/s
     # open sky between canyons: ordinary errors (metres at most)
     open_sky = ok & ~ge["canyon"].to_numpy()
     assert open_sky.sum() > 300
