@@ -62,7 +62,10 @@ others; ``real_data_targets``):
 * no_odometer (RTK-fixed fixes, gyro and forward accelerometer, 15-s outages while braking
   and accelerating): the end error of the 15-s outages (13-17 s from the last fix), median
   over the seeds' outages, <= 25 m forward, <= 10 m with the accelerometer (the same figure
-  while no filter reads it), <= 0.5 m smoothed.
+  while no filter reads it), <= 0.5 m smoothed.  Two dead-reckoning baselines run beside the
+  filters (informational rows, ``hold_baselines``): the last fix's speed held with the gyro's
+  heading, and that speed plus the integrated accelerometer less its bias and gravity as
+  measured over the last 5 s of fixes (no slope model).
 
 Positions only (``--no-positions-only`` skips them): the shipped filters on open_sky,
 urban_canyon, tunnels and stop_and_go with the fixes' speed and course removed, as a
@@ -283,6 +286,9 @@ def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_
     if positions and scenario in POSITIONS_ONLY_SCENARIOS:
         runs += [(n + POSITIONS_ONLY, n, None, False) for n in names]
     pos_drive = positions_only(sim.drive) if positions else None
+    if scenario == NO_ODO:
+        rows += [Row(label, name, extra={"outage_end_m": ends})
+                 for name, ends in hold_baselines(sim).items() if ends]
     for base, name, overrides, with_oracle in runs:
         for smooth in smooth_modes:
             method = base + (" + RTS" if smooth else "")
@@ -343,6 +349,62 @@ def rtk_fixed_deviation(sim, track: pd.DataFrame, frame, *, include_false: bool 
     var = track["sigma_e"].to_numpy() ** 2 + track["sigma_n"].to_numpy() ** 2
     ok &= np.isfinite(d2) & np.isfinite(var)
     return float(d2[ok].sum()), float(var[ok].sum()), int(ok.sum())
+
+
+#: no_odometer's dead-reckoning baselines (rows of the table, not filters)
+HOLD = "hold: last fix's speed, gyro heading (baseline)"
+HOLD_ACCEL = "hold + accelerometer speed (baseline)"
+#: the accelerometer baseline's bias-plus-gravity estimate: the last seconds of fixes
+ACCEL_FIT_S = 5.0
+
+
+def hold_baselines(sim) -> dict[str, list[float]]:
+    """End errors (m, against the truth) of no_odometer's 15-s outages dead-reckoned from the
+    last fix: its position and course, the gyro's yaw rate as measured (d(psi)/dt =
+    -yaw_rate; standing, the last course before the stop), and either the last fix's speed held (``HOLD``) or that speed plus the
+    integral of the forward accelerometer less its mean bias-plus-gravity over the last
+    ``ACCEL_FIT_S`` of fixes (reading minus the fixes' speed slope; ``HOLD_ACCEL``; speed
+    floored at 0).  Each outage ends at the last gyro sample before the next fix."""
+    g, y, a, tr = sim.drive.gnss, sim.drive.gyro, sim.drive.accel, sim.truth
+    ok = g.valid & np.isfinite(g.speed_mps)
+    tf = g.t_ns[ok]
+    fe, fn = sim.frame.forward(g.lat_deg[ok], g.lon_deg[ok])
+    spd, crs = g.speed_mps[ok], np.radians(g.course_deg[ok])
+    out: dict[str, list[float]] = {HOLD: [], HOLD_ACCEL: []}
+    t0 = int(tr["t_ns"].iloc[0])
+    for o in sim.noise.get("brake_outages", []):
+        start = t0 + int(o["start_s"] * 1e9)
+        k = int(np.searchsorted(tf, start)) - 1
+        known = np.flatnonzero(np.isfinite(crs[:k + 1]))  # standing: the course before the stop
+        if k < 0 or k + 1 >= len(tf) or not len(known):
+            continue
+        crs_k = crs[known[-1]]
+        t_end = tf[k + 1]
+        sel = (y.t_ns > tf[k]) & (y.t_ns < t_end)
+        t = np.concatenate(([tf[k]], y.t_ns[sel])).astype(np.int64)
+        dt = np.diff(t) / 1e9
+        w = y.yaw_rate_radps[sel]
+        psi = crs_k - np.cumsum(w * dt)
+        fit = (tf > tf[k] - ACCEL_FIT_S * 1e9) & (tf <= tf[k])
+        speeds = {HOLD: np.full(len(dt), spd[k])}
+        if a is not None and fit.sum() >= 3:
+            slope = np.polyfit((tf[fit] - tf[k]) / 1e9, spd[fit], 1)[0]
+            am = (a.t_ns > tf[k] - ACCEL_FIT_S * 1e9) & (a.t_ns <= tf[k])
+            b = float(np.mean(a.accel_mps2[am])) - slope
+            acc = np.interp(t[1:], a.t_ns, a.accel_mps2) - b
+            v = np.empty(len(dt))
+            vk = spd[k]
+            for i in range(len(dt)):  # floored at 0: a braking car stops, it does not reverse
+                vk = max(vk + acc[i] * dt[i], 0.0)
+                v[i] = vk
+            speeds[HOLD_ACCEL] = v
+        te = np.interp(t[-1], tr["t_ns"], tr["e"])
+        tn = np.interp(t[-1], tr["t_ns"], tr["n"])
+        for name, v in speeds.items():
+            e = fe[k] + np.sum(v * np.sin(psi) * dt)
+            n = fn[k] + np.sum(v * np.cos(psi) * dt)
+            out[name].append(float(np.hypot(e - te, n - tn)))
+    return out
 
 
 def scenario_extras(scenario: str, sim, track: pd.DataFrame, frame, stats: pd.DataFrame) -> dict:
@@ -627,8 +689,14 @@ def real_data_targets(rows: list[Row]) -> list[Target]:
         out.append(Target(target, drive, measured, "PASS" if ok else "MISS", True,
                           "" if ok else short))
 
+    for r in rows:  # the dead-reckoning baselines: informational
+        if scenario_of(r) == NO_ODO and "(baseline)" in r.method and r.extra.get("outage_end_m"):
+            ends = np.array(r.extra["outage_end_m"], float)
+            out.append(Target(f"{r.method}: 15-s outage end error", r.drive,
+                              f"median {np.median(ends):.2f} m over {len(ends)} outages", "-",
+                              False))
     shipped = [r for r in rows if not r.method.startswith("GNSS only") and not _is_paper(r.method)
-               and _finite(r.rmse_m)]
+               and _finite(r.rmse_m) and "(baseline)" not in r.method]
     for drive in dict.fromkeys(r.drive for r in shipped if scenario_of(r) == NLOS):
         gnss = _gnss_of(Row(drive, ""), by)
         runs = [r for r in shipped if r.drive == drive]
