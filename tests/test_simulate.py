@@ -545,3 +545,21 @@ def test_accel_onto_epochs_and_fuse_option(tmp_path, no_odo):
                                  str(paths["gyro.csv"]), "--accel", str(bad), "-o",
                                  str(tmp_path / "t.parquet")])
     assert r.exit_code != 0 and "bad.csv" in r.output and "acc_x" in r.output
+
+
+def test_cli_simulate_rtk_without_odometer(tmp_path):
+    from click.testing import CliRunner
+
+    from gpsdr_cli.cli.main import cli
+    from gpsdr_cli.io.nmea import read_nmea
+
+    r = CliRunner().invoke(cli, ["simulate", "-o", str(tmp_path), "--scenario", "rtk",
+                                 "--seed", "1", "--duration", "60"])
+    assert r.exit_code == 0, r.output
+    assert not (tmp_path / "odo.csv").exists() and (tmp_path / "drive.mcap").exists()
+    assert (tmp_path / "gyro.csv").read_text().splitlines()[0] == "t,yaw_rate"  # no accelerometer
+    g = read_nmea(tmp_path / "gps.nmea").gnss
+    assert set(np.unique(g.fix_quality)) <= {4, 5}
+    assert np.all(np.diff(g.t_ns) == NS_PER_S // 4)
+    fixed = g.fix_quality == 4
+    assert np.nanmax(g.sigma_e_m[fixed]) <= 0.025 + 5e-4  # m: GST written to the millimetre
