@@ -49,6 +49,10 @@ class Epochs:
       records (NaN elsewhere); ``gnss_speed_mps``, ``gnss_course_rad`` (clockwise
       from north) where the receiver gave them.
     DR: ``yaw_rate_radps`` (CCW-positive), ``odo_speed_mps``; NaN where absent.
+    ``accel_mps2``: forward specific force (m/s^2, positive forward, gravity on a slope
+    included) at the accelerometer's records, on the gyro's clock (``[time]
+    gyro_offset_s``: one IMU), NaN elsewhere; ``has_accel`` marks them.  Both default to
+    "none" (False / NaN) for code that builds epochs without them.
     ``dt_s[k]`` = t[k] - t[k-1] in seconds (``dt_s[0] = 0``).
     ``gnss_outage``: the epoch lies in a gap between usable fixes longer than
     ``gap_s`` (also before the first / after the last fix when that stretch is).
@@ -70,6 +74,15 @@ class Epochs:
     odo_speed_mps: np.ndarray
     gnss_outage: np.ndarray
     gap_s: float
+    has_accel: np.ndarray | None = None
+    accel_mps2: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        n = len(self.t_ns)
+        if self.has_accel is None:
+            self.has_accel = np.zeros(n, bool)
+        if self.accel_mps2 is None:
+            self.accel_mps2 = np.full(n, np.nan)
 
     def __len__(self) -> int:
         return len(self.t_ns)
@@ -357,6 +370,14 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
         odo_t, odo_v = odo_t[~flicker], odo_v[~flicker]
         parts.append(odo_t)
 
+    accel_t = np.zeros(0, np.int64)
+    if drive.accel is not None and len(drive.accel):
+        a = drive.accel
+        keep = _clean_stream(drive, "accel", a.t_ns, np.isfinite(a.accel_mps2))
+        accel_t = a.t_ns[keep] + np.int64(round(tp["gyro_offset_s"] * NS_PER_S))
+        accel_v = a.accel_mps2[keep]
+        parts.append(accel_t)
+
     t = sorted_unique(np.concatenate(parts)) if parts else np.zeros(0, np.int64)
     n_ep = len(t)
 
@@ -382,6 +403,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     yaw = scatter(gyro_t, gyro_v) if len(gyro_t) else nan.copy()
     has_odo = scatter(odo_t, np.ones(len(odo_t), bool), False).astype(bool)
     odo = scatter(odo_t, odo_v) if len(odo_t) else nan.copy()
+    has_accel = scatter(accel_t, np.ones(len(accel_t), bool), False).astype(bool)
+    accel = scatter(accel_t, accel_v) if len(accel_t) else nan.copy()
 
     dt = np.zeros(n_ep)
     if n_ep > 1:
@@ -395,7 +418,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     return Epochs(t_ns=t, dt_s=dt, has_gnss=has_gnss, gnss_e=gnss_e, gnss_n=gnss_n,
                   gnss_sd_e=sd_e, gnss_sd_n=sd_n, pdop=pdop, gnss_speed_mps=gspeed,
                   gnss_course_rad=gcourse, has_gyro=has_gyro, yaw_rate_radps=yaw,
-                  has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s)
+                  has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s,
+                  has_accel=has_accel, accel_mps2=accel)
 
 
 def sorted_unique(t: np.ndarray) -> np.ndarray:

@@ -62,9 +62,10 @@ from .config import DEFAULTS, Params
 from .conventions import FIX_GPS, FIX_NONE, NS_PER_S
 from .errors import UsageError
 from .geodesy import LocalFrame
-from .io.drive import Drive, GnssFixes, Odometry, Source, YawRates
+from .io.drive import Drive, ForwardAccel, GnssFixes, Odometry, Source, YawRates
 
-SCENARIOS: tuple[str, ...] = ("open_sky", "urban_canyon", "tunnels", "stop_and_go", "one_hour")
+SCENARIOS: tuple[str, ...] = ("open_sky", "urban_canyon", "tunnels", "stop_and_go", "one_hour",
+                              "urban_nlos", "rtk", "no_odometer")
 
 TRUTH_RATE_HZ = 100
 DT_S = 1.0 / TRUTH_RATE_HZ
@@ -88,6 +89,17 @@ class _Scenario:
     origin: tuple[float, float, float]  # lat deg, lon deg, ellipsoidal height m
     env: str | None            # one environment for the whole drive, or None: by route kind
     short_dropouts: bool = False
+    #: the receiver's error model on top of the environment's: "gm" (white + Gauss-Markov
+    #: multipath only), "nlos" (canyon sections with NLOS steps), "rtk" (fixed / float /
+    #: false fixes), "rtk_fixed" (RTK fixed throughout)
+    gnss_model: str = "gm"
+    gnss_rate_hz: float | None = None   # the scenario's fix rate (None: simulate_drive's default)
+    odometer: bool = True
+    accel: bool = False                 # a forward accelerometer beside the gyro
+    stop_p: float | None = None         # city route: chance of a stop line per block (None: 0.25)
+    park_s: float = 0.0                 # > 0: one stop of this many seconds (a parked stretch)
+    hills: bool = False                 # a rolling slope profile (the accelerometer feels g sin(pitch))
+    brake_outages: bool = False         # 15-s GNSS outages while braking and accelerating
 
 
 _SCENARIOS: dict[str, _Scenario] = {
@@ -96,6 +108,12 @@ _SCENARIOS: dict[str, _Scenario] = {
     "tunnels": _Scenario("highway", 600.0, (48.7758, 9.1829, 300.0), "open"),
     "stop_and_go": _Scenario("stop_and_go", 900.0, (48.1372, 11.5756, 520.0), "suburban"),
     "one_hour": _Scenario("mixed", 3600.0, (52.5200, 13.4050, 40.0), None, True),
+    "urban_nlos": _Scenario("city", 600.0, (35.6895, 139.6917, 40.0), "open", gnss_model="nlos"),
+    "rtk": _Scenario("city", 600.0, (52.2297, 21.0122, 110.0), "open", gnss_model="rtk",
+                     gnss_rate_hz=4.0, odometer=False, park_s=120.0),
+    "no_odometer": _Scenario("city", 600.0, (47.3769, 8.5417, 410.0), "open",
+                             gnss_model="rtk_fixed", gnss_rate_hz=4.0, odometer=False, accel=True,
+                             stop_p=0.45, hills=True, brake_outages=True),
 }
 
 #: route kind code per distance grid point -> environment
@@ -125,9 +143,11 @@ class SimDrive:
 
 # --------------------------------------------------------------------------- route
 
-def _pieces_city(rng: np.random.Generator, length_m: float, long_stops: bool
+def _pieces_city(rng: np.random.Generator, length_m: float, long_stops: bool,
+                 stop_p: float | None = None
                  ) -> tuple[list[tuple[float, float, float]], list[tuple[float, float]], float]:
-    """City blocks: straights, 90-degree corners at intersections, traffic lights."""
+    """City blocks: straights, 90-degree corners at intersections, traffic lights (a stop
+    line after a block with chance ``stop_p``; default 0.25, 0.3 with ``long_stops``)."""
     pieces: list[tuple[float, float, float]] = [(30.0, 0.0, 0.0)]
     stops: list[tuple[float, float]] = []
     s = 30.0
@@ -135,7 +155,7 @@ def _pieces_city(rng: np.random.Generator, length_m: float, long_stops: bool
         L = float(rng.uniform(80.0, 250.0))
         pieces.append((L, 0.0, 0.0))
         s += L
-        if rng.random() < (0.3 if long_stops else 0.25):
+        if rng.random() < (stop_p if stop_p is not None else 0.3 if long_stops else 0.25):
             dwell = float(rng.uniform(120.0, 240.0)) if long_stops and rng.random() < 0.5 \
                 else float(rng.uniform(8.0, 35.0))
             stops.append((s - 3.0, dwell))
@@ -314,7 +334,7 @@ def _route(sc: _Scenario, rng: np.random.Generator, duration_s: float) -> dict:
         kinds = [0] * len(pieces)
     elif sc.route in ("city", "stop_and_go"):
         pieces, stops, v_cruise = _pieces_city(rng, 14.0 * duration_s + 1000.0,
-                                               sc.route == "stop_and_go")
+                                               sc.route == "stop_and_go", sc.stop_p)
         kinds = [1] * len(pieces)
     else:  # mixed: alternate city (urban), suburban and open-road blocks
         pieces, stops, kinds = [], [], []
@@ -339,6 +359,8 @@ def _route(sc: _Scenario, rng: np.random.Generator, duration_s: float) -> dict:
 def _vehicle(sc: _Scenario, rng: np.random.Generator, duration_s: float
              ) -> tuple[dict[str, np.ndarray], dict]:
     route = _route(sc, rng, duration_s)
+    if sc.park_s > 0:
+        route["stops"] = _with_parking(route["stops"], sc.park_s)
     ds = 0.5
     s_grid, kappa, kind = _grid(route["pieces"], route["kinds"], ds)
     v_cap = np.full(len(s_grid), route["v_cruise"])
@@ -357,6 +379,19 @@ def _vehicle(sc: _Scenario, rng: np.random.Generator, duration_s: float
                                  1.5, a_brake, 2.0)
     return {"v": v, "psidot": psidot, "s": s, "kind": kind[np.minimum(
         (s / ds).astype(np.int64), len(kind) - 1)]}, route
+
+
+def _with_parking(stops: list[tuple[float, float]], dwell_s: float,
+                  after_m: float = 1500.0) -> list[tuple[float, float]]:
+    """The stops with the first one beyond ``after_m`` metres held ``dwell_s`` seconds (a
+    parked stretch; added at ``after_m`` when the route has no stop there)."""
+    out = sorted(stops)
+    later = [i for i, (s, _) in enumerate(out) if s >= after_m]
+    if later:
+        out[later[0]] = (out[later[0]][0], float(dwell_s))
+    else:
+        out.append((after_m, float(dwell_s)))
+    return sorted(out)
 
 
 def _cumtrapz(y: np.ndarray, dt: float, y0: float = 0.0) -> np.ndarray:
@@ -388,18 +423,20 @@ def _gauss_markov(rng: np.random.Generator, n: int, dt: float, tau: np.ndarray |
 
 
 def simulate_drive(scenario: str = "urban_canyon", seed: int = 0, duration_s: float | None = None,
-                   *, gnss_rate_hz: float = 5.0, gyro_rate_hz: float = 100.0,
+                   *, gnss_rate_hz: float | None = None, gyro_rate_hz: float = 100.0,
                    odo_rate_hz: float = 100.0, gnss_stamp_offset_s: float = 0.0) -> SimDrive:
     """Simulate one drive of ``scenario`` with random generator ``seed``.
 
     ``duration_s`` defaults to the scenario's length (600 s; stop_and_go 900 s;
-    one_hour 3600 s).  ``gnss_rate_hz`` 1-10 Hz; gyro and odometer rates must
-    divide 100 Hz.  ``gnss_stamp_offset_s``: each fix holds the true position at
+    one_hour 3600 s).  ``gnss_rate_hz`` 0.5-20 Hz (default: the scenario's, 5 Hz; rtk and
+    no_odometer 4 Hz); gyro, accelerometer and odometer rates must divide 100 Hz.  ``gnss_stamp_offset_s``: each fix holds the true position at
     ``stamp + offset`` (> 0: fixes ahead of their stamps, as in comma2k19).
     Same arguments, same drive (bit for bit).
     """
     if scenario not in _SCENARIOS:
         raise UsageError(f"unknown scenario {scenario!r}; choose one of {', '.join(SCENARIOS)}")
+    if gnss_rate_hz is None:
+        gnss_rate_hz = _SCENARIOS[scenario].gnss_rate_hz or 5.0
     if not 0.5 <= gnss_rate_hz <= 20.0:
         raise UsageError(f"gnss_rate_hz = {gnss_rate_hz}: expected 0.5 to 20 Hz")
     for name, rate in (("gyro_rate_hz", gyro_rate_hz), ("odo_rate_hz", odo_rate_hz)):
@@ -413,6 +450,9 @@ def simulate_drive(scenario: str = "urban_canyon", seed: int = 0, duration_s: fl
     rng = np.random.default_rng(seed)
     rng_route, rng_gnss, rng_gyro, rng_odo = (np.random.default_rng(s)
                                               for s in rng.spawn(4))
+    # the new scenarios' extra error models draw from generators of their own (spawned
+    # after the four above): the older scenarios' drives stay bit for bit what they were
+    rng_model, rng_accel = (np.random.default_rng(s) for s in rng.spawn(2))
 
     veh, route = _vehicle(sc, rng_route, dur)
     n = len(veh["v"])
@@ -428,12 +468,17 @@ def simulate_drive(scenario: str = "urban_canyon", seed: int = 0, duration_s: fl
     lat0, lon0, alt0 = sc.origin
     frame = LocalFrame.centred_on(lat0, lon0)
     lat, lon = frame.inverse(e, nn)
-    alt = alt0 + 3.0 * np.sin(veh["s"] / 1500.0)
+    if sc.hills:
+        alt, pitch, hills = _hills(rng_model, veh["s"], alt0)
+    else:
+        alt = alt0 + 3.0 * np.sin(veh["s"] / 1500.0)
     truth = pd.DataFrame({
         "t_ns": t_ns, "lat": lat, "lon": lon, "e": e, "n": nn, "v_e": v_e, "v_n": v_n,
         "speed": v, "heading_deg": np.mod(np.degrees(psi), 360.0), "yaw_rate": -psidot,
         "alt": alt,
     })
+    if sc.accel:
+        truth["pitch_deg"] = np.degrees(pitch) if sc.hills else 0.0
 
     # environment per truth step
     if sc.env is not None:
@@ -442,21 +487,48 @@ def simulate_drive(scenario: str = "urban_canyon", seed: int = 0, duration_s: fl
         env_idx = np.array([ENV_NAMES.index(_KIND_ENV[int(k)]) for k in range(3)],
                            np.int8)[veh["kind"]]
     outages = _outages(sc, route, veh["s"], dur, rng_gnss)
+    extra_noise: dict = {}
+    if sc.gnss_model not in ("gm", "nlos"):
+        outages = []  # the RTK drives: no bridges (their outages are the withheld windows)
+    if sc.brake_outages:
+        brake = _brake_outages(rng_model, v, dur)
+        outages = sorted(outages + [(t0, d) for t0, d, _ in brake])
+        extra_noise["brake_outages"] = [{"start_s": t0, "duration_s": d, "kind": kind}
+                                        for t0, d, kind in brake]
 
     gnss, gerr, gnss_noise = _gnss(rng_gnss, truth, frame, env_idx, outages, gnss_rate_hz,
                                    gnss_stamp_offset_s, sc.short_dropouts)
+    if sc.gnss_model == "nlos":
+        gnss, gerr, model_noise = _nlos(rng_model, gnss, gerr, truth, frame, veh["s"],
+                                        gnss_stamp_offset_s)
+    elif sc.gnss_model in ("rtk", "rtk_fixed"):
+        gnss, gerr, model_noise = _rtk(rng_model, gnss, gerr, truth, frame, gnss_stamp_offset_s,
+                                       faults=sc.gnss_model == "rtk")
+    else:
+        model_noise = {}
+    gnss_noise.update(model_noise)
     gyro, gyro_noise = _gyro(rng_gyro, truth, gyro_rate_hz)
-    odo, odo_noise = _odo(rng_odo, truth, odo_rate_hz)
+    odo, odo_noise = _odo(rng_odo, truth, odo_rate_hz) if sc.odometer else (None, {"odometer": False})
+    accel = None
+    if sc.accel:
+        accel, accel_noise, f_true = _accel(rng_accel, truth, np.radians(truth["pitch_deg"].to_numpy()),
+                                            gyro_rate_hz)
+        truth["accel_fwd"] = f_true
+        extra_noise.update(accel_noise)
+        if sc.hills:
+            extra_noise["hills"] = hills
 
     noise = {
         "scenario": scenario, "seed": int(seed), "duration_s": dur,
         "origin_lat_deg": lat0, "origin_lon_deg": lon0, "origin_alt_m": alt0,
         "start_utc": _dt.datetime.fromtimestamp(START_NS / NS_PER_S, _dt.UTC).isoformat(),
         "truth_rate_hz": TRUTH_RATE_HZ,
-        **gnss_noise, **gyro_noise, **odo_noise,
+        **gnss_noise, **gyro_noise, **odo_noise, **extra_noise,
     }
-    drive = Drive(gnss=gnss, gyro=gyro, odo=odo,
-                  sources=[Source(f"<simulated {scenario} seed {seed}>", "", ("gnss", "gyro", "odo"))],
+    streams = tuple(n for n, x in (("gnss", gnss), ("gyro", gyro), ("odo", odo), ("accel", accel))
+                    if x is not None)
+    drive = Drive(gnss=gnss, gyro=gyro, odo=odo, accel=accel,
+                  sources=[Source(f"<simulated {scenario} seed {seed}>", "", streams)],
                   meta={"simulated": scenario, "seed": int(seed)})
     return SimDrive(drive=drive, truth=truth, frame=frame, noise=noise, scenario=scenario,
                     seed=int(seed), gnss_errors=gerr)
@@ -595,6 +667,411 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
     return fixes, gerr, noise
 
 
+# --------------------------------------------------------------------------- error models of
+# the newer scenarios (urban_nlos, rtk, no_odometer), applied to the fixes of :func:`_gnss`
+
+#: NLOS steps: plateau size (m, log-uniform), duration (s, log-uniform), the chance that
+#: the next step follows directly (the error moves from one reflection to the next without
+#: a clean fix between), else the clean gap before it (s, uniform), on/off ramp (s, uniform,
+#: at most a third of the step: the receiver's own filter smooths the jump), drift (random
+#: walk, m per sqrt(s) per axis), share of steps across the street (toward a facade) and
+#: their spread about the perpendicular (deg)
+NLOS_STEP_M = (10.0, 80.0)
+NLOS_DURATION_S = (5.0, 60.0)
+NLOS_CHAIN_P = 0.5
+NLOS_GAP_S = (1.0, 6.0)
+NLOS_RAMP_S = (1.0, 4.0)
+NLOS_DRIFT_M_PER_SQRT_S = 0.25
+NLOS_ACROSS_SHARE = 0.7
+NLOS_ACROSS_SPREAD_DEG = 20.0
+#: the receiver's Doppler velocity in a step: reflected signals shift it too, a bias per step
+#: and axis (m/s, 1 sigma) plus white noise (m/s per axis)
+NLOS_VEL_BIAS_SD_MPS = 1.0
+NLOS_VEL_WHITE_SD_MPS = 0.3
+#: canyon and open-sky sections along the route (m, uniform); the drive starts in the open
+CANYON_M = (500.0, 1500.0)
+OPEN_M = (150.0, 300.0)
+#: what the receiver reports in this scenario, whatever the error: HDOP and GST sigma ranges
+NLOS_HDOP = (0.6, 1.3)
+NLOS_GST_M = (0.5, 3.0)
+
+#: RTK: reported (and true) 1-sigma per axis, fixed (m), float start and floor (m)
+RTK_FIXED_SD_M = (0.01, 0.025)
+RTK_FLOAT_SD_M = (0.1, 0.5)
+RTK_FLOAT_S = (10.0, 40.0)          # float stretch length, s
+RTK_FALSE_JUMP_M = (0.2, 1.0)       # a false fix's position jump
+RTK_FALSE_S = (5.0, 30.0)           # how long it stays off, s
+RTK_FIXED_TAU_S = 5.0               # correlation time of the fixed solution's error
+RTK_FLOAT_TAU_S = 10.0
+RTK_FLOAT_CONVERGE_S = 15.0         # float sigma decays from its start toward 0.1 m
+FIX_RTK, FIX_FLOAT = 4, 5
+
+#: 15-s GNSS outages around stops (no_odometer)
+BRAKE_OUTAGE_S = 15.0
+BRAKE_SPACING_S = 20.0              # fixes between two outages at least this long
+
+#: slope profile (no_odometer): sum of two sines, amplitude m and wavelength m (the second
+#: at 0.35 x the amplitude and 1/2.3 of the wavelength)
+HILL_AMP_M = (6.0, 12.0)
+HILL_WAVE_M = (900.0, 1500.0)
+GRAVITY_MPS2 = 9.80665
+
+#: forward accelerometer (consumer MEMS, road vibration included)
+ACCEL_NOISE_SD_MPS2 = 0.05          # white, per 100 Hz sample
+ACCEL_BIAS_SD_MPS2 = 0.1            # turn-on bias and its stationary wander (~10 mg)
+ACCEL_BIAS_TAU_S = 3600.0
+ACCEL_SCALE_SD = 0.01
+
+
+def _fix_truth(truth: pd.DataFrame, t_fix: np.ndarray, stamp_offset_s: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """True east, north (m) and altitude (m) at each fix stamp + offset."""
+    tt = (truth["t_ns"].to_numpy() - truth["t_ns"].iloc[0]) / NS_PER_S
+    tf = (t_fix - truth["t_ns"].iloc[0]) / NS_PER_S + stamp_offset_s
+    return (np.interp(tf, tt, truth["e"].to_numpy()), np.interp(tf, tt, truth["n"].to_numpy()),
+            np.interp(tf, tt, truth["alt"].to_numpy()))
+
+
+def _replace_positions(fixes: GnssFixes, frame: LocalFrame, e: np.ndarray, n: np.ndarray,
+                       **fields: np.ndarray) -> GnssFixes:
+    """``fixes`` at the local positions (e, n) m, with other fields replaced; no-fix epochs
+    stay NaN."""
+    nan_if = np.where(fixes.valid, 1.0, np.nan)
+    lat, lon = frame.inverse(e, n)
+    out = {**fixes.__dict__, "lat_deg": lat * nan_if, "lon_deg": lon * nan_if}
+    out.update({k: v * nan_if if v.dtype.kind == "f" else v for k, v in fields.items()})
+    return GnssFixes(**out)
+
+
+def _loguniform(rng: np.random.Generator, lo_hi: tuple[float, float]) -> float:
+    return float(math.exp(rng.uniform(math.log(lo_hi[0]), math.log(lo_hi[1]))))
+
+
+def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth: pd.DataFrame,
+          frame: LocalFrame, s_path: np.ndarray, stamp_offset_s: float
+          ) -> tuple[GnssFixes, pd.DataFrame, dict]:
+    """Canyon sections with NLOS steps on top of the open-sky errors of ``fixes``.
+
+    Along the route, open-sky sections of ``OPEN_M`` alternate with canyon sections of
+    ``CANYON_M``.  In a canyon, steps follow each other, directly (``NLOS_CHAIN_P``: the
+    bias moves from one step's to the next's) or after a clean gap of ``NLOS_GAP_S``:
+    each a bias of ``NLOS_STEP_M`` metres (log-uniform) held for ``NLOS_DURATION_S``
+    seconds (log-uniform, cut at the canyon's end, never shorter than 5 s), ramped on and
+    off over ``NLOS_RAMP_S``, pointing across the street (perpendicular to the heading,
+    either side, +-20 deg) in 70 % of steps and anywhere in the rest, plus a random-walk
+    drift.  So the fixes of a step agree with each other to the white noise and the drift:
+    a gate on one fix's innovation sees no jump after the first.  The reported velocity
+    (RMC speed and course) gets a bias of ``NLOS_VEL_BIAS_SD_MPS`` per step and axis and
+    white noise of ``NLOS_VEL_WHITE_SD_MPS`` during the step.  The receiver reports HDOP
+    in ``NLOS_HDOP`` and GST sigmas in ``NLOS_GST_M`` whatever the error.
+    """
+    t_fix = fixes.t_ns
+    m = len(t_fix)
+    t0 = int(truth["t_ns"].iloc[0])
+    rel = (t_fix - t0) / NS_PER_S
+    tt = (truth["t_ns"].to_numpy() - t0) / NS_PER_S
+    s_fix = np.interp(rel, tt, s_path)
+    heading = np.interp(rel, tt, np.unwrap(np.radians(truth["heading_deg"].to_numpy())))
+    # sections along the route (m)
+    sections: list[tuple[float, float]] = []
+    s = float(rng.uniform(*OPEN_M))
+    while s < s_path[-1]:
+        length = float(rng.uniform(*CANYON_M))
+        sections.append((s, s + length))
+        s += length + float(rng.uniform(*OPEN_M))
+    canyon = np.zeros(m, bool)
+    for a, b in sections:
+        canyon |= (s_fix >= a) & (s_fix < b)
+    bias = np.zeros((m, 2))
+    drift = np.zeros((m, 2))
+    vel_err = np.zeros((m, 2))
+    step_id = np.full(m, -1, np.int32)
+    gst_factor = np.ones(m)
+    steps: list[dict] = []
+    d = np.diff(np.concatenate(([0], canyon.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)  # ends exclusive
+    for i0, i1 in zip(starts, ends, strict=True):
+        t_end_canyon = rel[i1 - 1]
+        t = rel[i0]
+        chained = False               # this step starts where the previous one stands
+        prev_vec = np.zeros(2)
+        while True:
+            t_on = t if chained else t + float(rng.uniform(*NLOS_GAP_S))
+            left = t_end_canyon - t_on
+            if left < NLOS_DURATION_S[0]:
+                break
+            dur = min(_loguniform(rng, NLOS_DURATION_S), left)
+            mag = _loguniform(rng, NLOS_STEP_M)
+            ramp_on, ramp_off = (min(float(rng.uniform(*NLOS_RAMP_S)), dur / 3.0)
+                                 for _ in range(2))
+            next_chained = bool(rng.random() < NLOS_CHAIN_P)
+            k_on = int(np.searchsorted(rel, t_on))
+            across = bool(rng.random() < NLOS_ACROSS_SHARE)
+            if across:
+                side = 1.0 if rng.random() < 0.5 else -1.0
+                ang = float(heading[min(k_on, m - 1)] + side * math.pi / 2
+                            + math.radians(rng.normal(0.0, NLOS_ACROSS_SPREAD_DEG)))
+            else:
+                ang = float(rng.uniform(0.0, 2 * math.pi))
+            sel = (rel >= t_on) & (rel < t_on + dur)
+            tk = rel[sel] - t_on
+            vec = mag * np.array([math.sin(ang), math.cos(ang)])
+            w_on = np.clip(tk / ramp_on, 0.0, 1.0)[:, None]
+            w_off = (np.ones(len(tk)) if next_chained
+                     else np.clip((dur - tk) / ramp_off, 0.0, 1.0))[:, None]
+            start = prev_vec if chained else np.zeros(2)
+            bias[sel] = (start * (1.0 - w_on) + vec * w_on) * w_off
+            prof = np.clip(np.minimum(tk / ramp_on, (dur - tk) / ramp_off), 0.0, 1.0)
+            dtk = np.diff(np.concatenate(([0.0], tk)))
+            walk = np.cumsum(rng.standard_normal((len(tk), 2)) * NLOS_DRIFT_M_PER_SQRT_S
+                             * np.sqrt(dtk)[:, None], axis=0)
+            drift[sel] = walk * prof[:, None]
+            v_bias = rng.normal(0.0, NLOS_VEL_BIAS_SD_MPS, 2)
+            vel_err[sel] = (v_bias * prof[:, None]
+                            + rng.standard_normal((len(tk), 2)) * NLOS_VEL_WHITE_SD_MPS)
+            sid = len(steps)
+            step_id[sel] = sid
+            gst_factor[sel] = float(rng.uniform(1.0, 2.0))
+            steps.append({"start_s": float(t_on), "duration_s": float(dur), "magnitude_m": mag,
+                          "direction_deg": float(np.degrees(ang) % 360.0), "across_street": across,
+                          "from_previous": chained, "ramp_on_s": ramp_on, "ramp_off_s": ramp_off})
+            t = t_on + dur
+            chained, prev_vec = next_chained, vec
+    valid = fixes.valid
+    e_fix, n_fix = frame.forward(fixes.lat_deg, fixes.lon_deg)
+    nlos_e = bias[:, 0] + drift[:, 0]
+    nlos_n = bias[:, 1] + drift[:, 1]
+    hdop = np.clip(fixes.hdop, *NLOS_HDOP)
+    vdop = np.sqrt(np.maximum(fixes.pdop**2 - hdop**2, 0.01))
+    sigma = np.clip(gerr["reported_sd_m"].to_numpy() * gst_factor, *NLOS_GST_M)
+    crs = np.radians(fixes.course_deg)
+    moving = np.isfinite(crs)  # the receiver gives no course below 0.2 m/s: ~0 there
+    ve = np.where(moving, fixes.speed_mps * np.sin(np.where(moving, crs, 0.0)), 0.0) + vel_err[:, 0]
+    vn = np.where(moving, fixes.speed_mps * np.cos(np.where(moving, crs, 0.0)), 0.0) + vel_err[:, 1]
+    in_step = step_id >= 0
+    speed = np.where(in_step, np.hypot(ve, vn), fixes.speed_mps)
+    course = np.where(in_step, np.where(speed > 0.2, np.mod(np.degrees(np.arctan2(ve, vn)), 360.0),
+                                        np.nan), fixes.course_deg)
+    out = _replace_positions(fixes, frame, e_fix + nlos_e, n_fix + nlos_n, hdop=hdop, vdop=vdop,
+                             sigma_e_m=sigma, sigma_n_m=sigma.copy(), speed_mps=speed,
+                             course_deg=course)
+    gerr = gerr.copy()
+    gerr["env"] = np.where(canyon, "urban", gerr["env"].to_numpy())
+    gerr["hdop"] = hdop
+    gerr["reported_sd_m"] = sigma
+    gerr["canyon"] = canyon
+    gerr["nlos"] = (step_id >= 0) & valid
+    gerr["nlos_step"] = step_id
+    gerr["nlos_e"], gerr["nlos_n"] = nlos_e, nlos_n
+    gerr["nlos_bias_e"], gerr["nlos_bias_n"] = bias[:, 0], bias[:, 1]
+    gerr["nlos_vel_e"], gerr["nlos_vel_n"] = vel_err[:, 0] * in_step, vel_err[:, 1] * in_step
+    canyon_s = float(np.sum(canyon) / max(_fixes_rate(t_fix), 1e-9))
+    noise = {
+        "gnss_model": "nlos",
+        "nlos_note": "canyon sections: NLOS steps (bias held, ramped on/off, plus a random-walk "
+                     "drift) on top of the open-sky errors; HDOP and GST sigma do not show them",
+        "nlos_step_m": list(NLOS_STEP_M), "nlos_duration_s": list(NLOS_DURATION_S),
+        "nlos_chain_p": NLOS_CHAIN_P, "nlos_gap_s": list(NLOS_GAP_S),
+        "nlos_ramp_s": list(NLOS_RAMP_S),
+        "nlos_drift_m_per_sqrt_s": NLOS_DRIFT_M_PER_SQRT_S,
+        "nlos_across_share": NLOS_ACROSS_SHARE, "nlos_hdop": list(NLOS_HDOP),
+        "nlos_velocity_bias_sd_mps": NLOS_VEL_BIAS_SD_MPS,
+        "nlos_velocity_white_sd_mps": NLOS_VEL_WHITE_SD_MPS,
+        "nlos_gst_m": list(NLOS_GST_M),
+        "canyon_sections_m": [[a, b] for a, b in sections],
+        "canyon_s": canyon_s,
+        "nlos_steps": steps,
+        "nlos_steps_per_canyon_min": 60.0 * len(steps) / canyon_s if canyon_s > 0 else 0.0,
+        "nlos_fix_share": float(np.mean(gerr["nlos"][valid])) if valid.any() else 0.0,
+    }
+    return out, gerr, noise
+
+
+def _fixes_rate(t_ns: np.ndarray) -> float:
+    """Fix rate (Hz) of evenly stamped epochs."""
+    return NS_PER_S / float(np.median(np.diff(t_ns))) if len(t_ns) > 1 else 1.0
+
+
+def _rtk(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth: pd.DataFrame,
+         frame: LocalFrame, stamp_offset_s: float, *, faults: bool
+         ) -> tuple[GnssFixes, pd.DataFrame, dict]:
+    """An RTK receiver's fixes in place of ``fixes``' errors (same epochs, same outages).
+
+    Fixed epochs (GGA quality 4): a reported sigma per axis wandering in
+    ``RTK_FIXED_SD_M`` (log-normal Gauss-Markov, 60 s) and an error of that size (a
+    Gauss-Markov part of 5 s and a white part, each half the variance).  With
+    ``faults``: float stretches (quality 5) of ``RTK_FLOAT_S`` whose sigma starts in 0.3-0.5
+    m and converges toward 0.1 m (``RTK_FLOAT_CONVERGE_S``), the error again of the reported
+    size; and false fixes right after some of them: quality 4 reported at centimetres while
+    the position is off by a constant ``RTK_FALSE_JUMP_M`` for ``RTK_FALSE_S`` seconds.
+    """
+    t_fix = fixes.t_ns
+    m = len(t_fix)
+    rate = _fixes_rate(t_fix)
+    dt = 1.0 / rate
+    rel = (t_fix - t_fix[0]) / NS_PER_S
+    dur = float(rel[-1]) if m else 0.0
+    valid = fixes.valid
+    lo, hi = RTK_FIXED_SD_M
+    sd_fixed = np.clip(math.sqrt(lo * hi) * np.exp(_gauss_markov(rng, m, dt, 60.0, 0.25)), lo, hi)
+    gm_fixed = _gauss_markov(rng, m, dt, RTK_FIXED_TAU_S, 1.0, (2,))
+    gm_float = _gauss_markov(rng, m, dt, RTK_FLOAT_TAU_S, 1.0, (2,))
+    white_unit = rng.standard_normal((m, 2))
+    alt_unit = rng.standard_normal(m)
+    quality = np.full(m, FIX_RTK, np.int8)
+    sd = sd_fixed.copy()
+    jump = np.zeros((m, 2))
+    false_fix = np.zeros(m, bool)
+    floats: list[dict] = []
+    falses: list[dict] = []
+    if faults and dur > 60.0:
+        n_false = max(2, round(dur / 200.0))
+        n_float = n_false + max(1, round(dur / 300.0))
+        # float stretches at distinct places, each with room for a false fix after it
+        slot = (dur - 30.0) / n_float
+        order = rng.permutation(n_float)
+        for j in range(n_float):
+            length = float(rng.uniform(*RTK_FLOAT_S))
+            t_on = 20.0 + j * slot + float(rng.uniform(0.0, max(slot - length - 35.0, 0.0)))
+            sel = (rel >= t_on) & (rel < t_on + length)
+            sd0 = float(rng.uniform(0.3, RTK_FLOAT_SD_M[1]))
+            sd_f = np.maximum(sd0 * np.exp(-(rel[sel] - t_on) / RTK_FLOAT_CONVERGE_S),
+                              RTK_FLOAT_SD_M[0])
+            quality[sel] = FIX_FLOAT
+            sd[sel] = sd_f
+            floats.append({"start_s": t_on, "duration_s": length, "sigma_start_m": sd0})
+            if order[j] < n_false:  # this float stretch resolves to a wrong fix
+                f_on = t_on + length
+                f_len = float(rng.uniform(*RTK_FALSE_S))
+                mag = float(rng.uniform(*RTK_FALSE_JUMP_M))
+                ang = float(rng.uniform(0.0, 2 * math.pi))
+                fsel = (rel >= f_on) & (rel < f_on + f_len)
+                jump[fsel] = mag * np.array([math.sin(ang), math.cos(ang)])
+                false_fix[fsel] = True
+                falses.append({"start_s": f_on, "duration_s": f_len, "jump_m": mag,
+                               "direction_deg": math.degrees(ang)})
+    is_float = quality == FIX_FLOAT
+    # per axis: half the variance correlated, half white (fixed); float: 0.64 / 0.36
+    w_gm = np.where(is_float, 0.8, math.sqrt(0.5))
+    w_wh = np.where(is_float, 0.6, math.sqrt(0.5))
+    gm = np.where(is_float[:, None], gm_float, gm_fixed) * (w_gm * sd)[:, None]
+    white = white_unit * (w_wh * sd)[:, None]
+    err = gm + white + jump
+    e_true, n_true, alt_true = _fix_truth(truth, t_fix, stamp_offset_s)
+    q = np.where(valid, quality, fixes.fix_quality).astype(np.int8)
+    out = _replace_positions(fixes, frame, e_true + err[:, 0], n_true + err[:, 1],
+                             alt_m=alt_true + 1.6 * sd * alt_unit, fix_quality=q,
+                             sigma_e_m=sd, sigma_n_m=sd.copy())
+    gerr = gerr.copy()
+    gerr["white_e"], gerr["white_n"] = white[:, 0], white[:, 1]
+    gerr["multipath_e"], gerr["multipath_n"] = gm[:, 0], gm[:, 1]
+    gerr["jump_e"], gerr["jump_n"] = jump[:, 0], jump[:, 1]
+    gerr["outlier"] = false_fix & valid
+    gerr["false_fix"] = false_fix & valid
+    gerr["fix_quality"] = q
+    # a false fix's true sigma per axis holds its jump (|jump| / sqrt 2): what an oracle knows
+    jump_sd = np.hypot(jump[:, 0], jump[:, 1]) / math.sqrt(2.0)
+    gerr["white_sd_m"] = np.hypot(w_wh * sd, jump_sd)
+    gerr["true_sd_m"] = np.hypot(sd * np.sqrt(w_gm**2 + w_wh**2), jump_sd)
+    gerr["reported_sd_m"] = sd
+    ok_fixed = valid & ~is_float
+    envs = {"rtk_fixed": {"multipath_sd_m": float(math.sqrt(0.5) * np.sqrt(np.mean(sd[ok_fixed] ** 2)))
+                          if ok_fixed.any() else 0.0,
+                          "multipath_tau_s": RTK_FIXED_TAU_S},
+            "rtk_float": {"multipath_sd_m": float(0.8 * np.sqrt(np.mean(sd[valid & is_float] ** 2)))
+                          if (valid & is_float).any() else 0.0,
+                          "multipath_tau_s": RTK_FLOAT_TAU_S}}
+    for env in envs.values():
+        env.update(pdop_mean=1.5, pdop_log_sd=0.12, gst_multipath_share=1.0, outlier_prob=0.0,
+                   dropout_prob=0.0, multipath_decorrelation_m=1.0e6)
+    if not (valid & is_float).any():
+        del envs["rtk_float"]
+    n_valid = max(int(valid.sum()), 1)
+    noise = {
+        "gnss_model": "rtk" if faults else "rtk_fixed",
+        "rtk_note": "quality 4 fixed (sigma 1-2.5 cm, error of that size), 5 float (0.1-0.5 m); "
+                    "false fixes: quality 4 at cm while the position is off by jump_m",
+        "gnss_environments": envs,
+        "multipath_sd_m": float(np.sqrt(np.mean((w_gm * sd)[valid] ** 2))) if valid.any() else 0.0,
+        "multipath_tau_s": RTK_FIXED_TAU_S,
+        "gnss_true_sd_rms_m": float(np.sqrt(np.mean((sd**2)[valid]))) if valid.any() else 0.0,
+        "gnss_sigma_min_m": float(lo) / 2.0,
+        "rtk_fixed_sd_m": list(RTK_FIXED_SD_M), "rtk_float_sd_m": list(RTK_FLOAT_SD_M),
+        "rtk_float_stretches": floats, "rtk_false_fixes": falses,
+        "rtk_fixed_share": float(np.sum(valid & (quality == FIX_RTK) & ~false_fix)) / n_valid,
+        "rtk_float_share": float(np.sum(valid & is_float)) / n_valid,
+        "rtk_false_share": float(np.sum(valid & false_fix)) / n_valid,
+        "outlier_epochs": int((false_fix & valid).sum()),
+    }
+    return out, gerr, noise
+
+
+def _brake_outages(rng: np.random.Generator, v: np.ndarray, dur: float
+                   ) -> list[tuple[float, float, str]]:
+    """15-s GNSS outages around the stops of the truth speed ``v`` (100 Hz): "braking" ends
+    1-3 s after the car comes to rest, "accelerating" starts 0-2 s before it drives off;
+    alternating, at least ``BRAKE_SPACING_S`` of fixes between two and none in the first 30 s."""
+    stopped = v < 1e-3
+    d = np.diff(np.concatenate(([0], stopped.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)  # ends: first moving step
+    out: list[tuple[float, float, str]] = []
+    last_end = 30.0 - BRAKE_SPACING_S
+    kind_next = 0
+    for i0, i1 in zip(starts, ends, strict=True):
+        if i0 == 0 or i1 >= len(v):
+            continue  # the standstill at the start or the end of the drive
+        t_rest, t_off = i0 * DT_S, i1 * DT_S
+        cands = [("braking", t_rest + float(rng.uniform(1.0, 3.0)) - BRAKE_OUTAGE_S),
+                 ("accelerating", t_off - float(rng.uniform(0.0, 2.0)))]
+        if kind_next == 1:
+            cands.reverse()
+        for kind, t0 in cands:
+            if t0 >= last_end + BRAKE_SPACING_S and t0 + BRAKE_OUTAGE_S < dur - 10.0:
+                out.append((float(t0), BRAKE_OUTAGE_S, kind))
+                last_end = t0 + BRAKE_OUTAGE_S
+                kind_next = 1 - (("braking", "accelerating").index(kind))
+                break
+    return out
+
+
+def _hills(rng: np.random.Generator, s_path: np.ndarray, alt0: float
+           ) -> tuple[np.ndarray, np.ndarray, dict]:
+    """A rolling slope profile along the path length ``s_path`` (m, horizontal): altitude
+    (m) and pitch (rad, nose up positive) per truth step, and its description."""
+    amp = [float(rng.uniform(*HILL_AMP_M)) for _ in range(2)]
+    amp[1] *= 0.35  # a shorter, lower swell on the long hill: grades up to ~8 %
+    wave = [float(rng.uniform(*HILL_WAVE_M)), float(rng.uniform(*HILL_WAVE_M)) / 2.3]
+    phase = [float(rng.uniform(0.0, 2 * math.pi)) for _ in range(2)]
+    k = [2 * math.pi / w for w in wave]
+    alt = alt0 + sum(a * np.sin(kk * s_path + p) for a, kk, p in zip(amp, k, phase, strict=True))
+    grade = sum(a * kk * np.cos(kk * s_path + p) for a, kk, p in zip(amp, k, phase, strict=True))
+    pitch = np.arctan(grade)
+    return alt, pitch, {"amplitude_m": amp, "wavelength_m": wave,
+                        "max_grade_pct": float(100 * np.max(np.abs(grade)))}
+
+
+def _accel(rng: np.random.Generator, truth: pd.DataFrame, pitch: np.ndarray, rate_hz: float
+           ) -> tuple[ForwardAccel, dict, np.ndarray]:
+    """Forward accelerometer at the gyro's stamps: ``(1 + scale) f + bias(t) + white``, with
+    ``f = d(v_road)/dt + g sin(pitch)`` the true specific force along the car (m/s^2;
+    ``v_road = speed / cos(pitch)``, the truth's speed being horizontal).  Returns the stream,
+    its noise and ``f`` at every truth step."""
+    step = round(TRUTH_RATE_HZ / rate_hz)
+    v_road = truth["speed"].to_numpy() / np.cos(pitch)
+    f = np.gradient(v_road, DT_S) + GRAVITY_MPS2 * np.sin(pitch)
+    t = truth["t_ns"].to_numpy()[::step]
+    m = len(t)
+    scale = float(rng.normal(0.0, ACCEL_SCALE_SD))
+    bias = _gauss_markov(rng, m, step * DT_S, ACCEL_BIAS_TAU_S, ACCEL_BIAS_SD_MPS2)
+    meas = (1.0 + scale) * f[::step] + bias + rng.standard_normal(m) * ACCEL_NOISE_SD_MPS2
+    noise = {"accel_rate_hz": float(rate_hz), "accel_noise_sd_mps2": ACCEL_NOISE_SD_MPS2,
+             "accel_bias_sd_mps2": ACCEL_BIAS_SD_MPS2, "accel_bias_tau_s": ACCEL_BIAS_TAU_S,
+             "accel_bias_initial_mps2": float(bias[0]), "accel_scale_error": scale,
+             "accel_scale_sd": ACCEL_SCALE_SD,
+             "accel_note": "specific force along the car: d(road speed)/dt + g sin(pitch)"}
+    return ForwardAccel(t_ns=t, accel_mps2=meas), noise, f
+
+
 def _gyro(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tuple[YawRates, dict]:
     step = round(TRUTH_RATE_HZ / rate_hz)
     t = truth["t_ns"].to_numpy()[::step]
@@ -652,7 +1129,8 @@ def oracle_params(noise: dict, params: Params) -> Params:
     time constant and decorrelation distance of its environment with the largest
     multipath (the simulator's 1/tau = 1/tau_s + speed/distance is the model's);
     the PDOP regime factors become 1 (feed :func:`oracle_drive`'s fixes, whose
-    sigmas are the true ones).  Only keys that exist in the defaults are set.
+    sigmas are the true ones); the RTK scenarios lower ``[gnss] sigma_min_m`` below their
+    centimetre sigmas.  Only keys that exist in the defaults are set.
     """
     import copy
 
@@ -668,7 +1146,8 @@ def oracle_params(noise: dict, params: Params) -> Params:
         "odo": {"noise_sd_mps": noise.get("odo_effective_sd_mps"),
                 "scale_init_sd": noise.get("odo_scale_sd"),
                 "scale_rw_sd": 1e-5},
-        "gnss": {"k_good": 1.0, "k_medium": 1.0, "k_poor": 1.0},
+        "gnss": {"k_good": 1.0, "k_medium": 1.0, "k_poor": 1.0,
+                 "sigma_min_m": noise.get("gnss_sigma_min_m")},
         "fkf": {"gnss_err_sd_m": best.get("multipath_sd_m"),
                 "gnss_err_tau_s": best.get("multipath_tau_s"),
                 "gnss_err_dist_m": best.get("multipath_decorrelation_m"),
@@ -697,14 +1176,28 @@ def oracle_drive(sim: SimDrive, *, multipath_in_sigma: bool = True) -> Drive:
     False: white noise only, for filters that carry the multipath as Gauss-Markov
     states (fkf, fafkf, and ekf/aekf by default; told its sigma and correlation
     time by :func:`oracle_params`).
+
+    The oracle also knows which fixes lie: urban_nlos' NLOS fixes are taken out (quality
+    0, no position), as a receiver that flagged them would; rtk's false fixes stay, with
+    their jump in the true sigma (taking them out leaves 5-30 s gyro-only gaps without an
+    odometer, which the fixes' owner would not choose: seed 1, aekf 5.4 m RMSE).
     """
     g = sim.drive.gnss
     if g is None:
         raise UsageError(f"simulated drive {sim.scenario!r} has no GNSS stream")
     col = "true_sd_m" if multipath_in_sigma else "white_sd_m"
-    true_sd = sim.gnss_errors[col].to_numpy() * np.where(g.valid, 1.0, np.nan)
-    fixes = GnssFixes(**{**g.__dict__, "sigma_e_m": true_sd.copy(), "sigma_n_m": true_sd.copy()})
-    return Drive(gnss=fixes, gyro=sim.drive.gyro, odo=sim.drive.odo,
+    ge = sim.gnss_errors
+    lying = np.zeros(len(g), bool)
+    if "nlos" in ge:
+        lying |= ge["nlos"].to_numpy(bool)
+    keep = np.where(g.valid & ~lying, 1.0, np.nan)
+    true_sd = ge[col].to_numpy() * keep
+    fields = {**g.__dict__, "sigma_e_m": true_sd.copy(), "sigma_n_m": true_sd.copy()}
+    if lying.any():
+        fields.update(lat_deg=g.lat_deg * keep, lon_deg=g.lon_deg * keep, alt_m=g.alt_m * keep,
+                      fix_quality=np.where(lying, FIX_NONE, g.fix_quality).astype(g.fix_quality.dtype))
+    fixes = GnssFixes(**fields)
+    return Drive(gnss=fixes, gyro=sim.drive.gyro, odo=sim.drive.odo, accel=sim.drive.accel,
                  sources=list(sim.drive.sources), meta=dict(sim.drive.meta))
 
 
@@ -812,8 +1305,10 @@ def _stamp(t_ns: int, frame_id: str) -> dict:
 def write_mcap(drive: Drive, path: str | Path) -> Path:
     """ROS 2 CDR MCAP (zstd chunks): /gnss/fix NavSatFix, /gnss/fix_velocity
     TwistWithCovarianceStamped (the receiver's Doppler velocity in ENU, x east, y north, as
-    the u-blox driver publishes it; only where the fix has a speed and course), /imu Imu,
-    /vehicle/twist TwistStamped (the wheel speed, body frame)."""
+    the u-blox driver publishes it; only where the fix has a speed and course), /imu Imu
+    (linear_acceleration.x: the forward accelerometer when sampled with the gyro, else 0
+    with covariance[0] = -1, "not given"), /vehicle/twist TwistStamped (the wheel speed,
+    body frame; none without an odometer)."""
     from mcap_ros2.writer import Writer
 
     path = Path(path)
@@ -825,6 +1320,8 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
     events.sort()
     zero9 = [0.0] * 9
     gyro_var = math.radians(0.1) ** 2
+    acc_x = _imu_accel(drive)  # in the Imu message when sampled with the gyro
+    acc_cov = [ACCEL_NOISE_SD_MPS2 ** 2] + [0.0] * 8 if acc_x is not None else [-1.0] + zero9[1:]
     with path.open("wb") as fh:
         w = Writer(fh)
         s_fix = w.register_msgdef("sensor_msgs/msg/NavSatFix", MSGDEF_NAVSATFIX)
@@ -862,8 +1359,9 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
                        "orientation_covariance": [-1.0] + [0.0] * 8,
                        "angular_velocity": {"x": 0.0, "y": 0.0, "z": float(y.yaw_rate_radps[i])},
                        "angular_velocity_covariance": [0.0] * 8 + [gyro_var],
-                       "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 0.0},
-                       "linear_acceleration_covariance": [-1.0] + zero9[1:]}
+                       "linear_acceleration": {"x": 0.0 if acc_x is None else float(acc_x[i]),
+                                               "y": 0.0, "z": 0.0},
+                       "linear_acceleration_covariance": acc_cov}
                 w.write_message("/imu", s_imu, msg, log_time=t, publish_time=t)
             else:
                 msg = {"header": _stamp(t, "base_link"),
@@ -872,6 +1370,15 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
                 w.write_message("/vehicle/twist", s_tw, msg, log_time=t, publish_time=t)
         w.finish()
     return path
+
+
+def _imu_accel(drive: Drive) -> np.ndarray | None:
+    """The forward acceleration (m/s^2) per gyro sample when the accelerometer shares the
+    gyro's stamps (one IMU), else None."""
+    a, y = drive.accel, drive.gyro
+    if a is None or y is None or len(a) != len(y) or not np.array_equal(a.t_ns, y.t_ns):
+        return None
+    return a.accel_mps2
 
 
 def _posix(t_ns: int) -> str:
@@ -894,18 +1401,33 @@ def write_drive(sim: SimDrive, out_dir: str | Path, *, truth_rate_hz: float = 20
                 mcap: bool = True) -> dict[str, Path]:
     """Write the drive's logs and truth into ``out_dir`` (created if missing).
 
-    Files: gps.nmea, gyro.csv (t,yaw_rate), odo.csv (t,speed), drive.mcap,
-    truth.csv (t,lat,lon,alt,heading at ``truth_rate_hz``), noise.json.
-    ``t`` is UTC POSIX seconds.
+    Files: gps.nmea, gyro.csv (t,yaw_rate[,acc_x]), odo.csv (t,speed; not for a drive
+    without an odometer), drive.mcap, truth.csv (t,lat,lon,alt,heading at
+    ``truth_rate_hz``), noise.json.  ``t`` is UTC POSIX seconds.  A forward accelerometer
+    sampled with the gyro (one IMU) is gyro.csv's ``acc_x`` column (m/s^2, positive
+    forward), as a logged IMU row carries both; sampled apart it goes to accel.csv (t,acc_x).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = sim.drive
-    paths = {name: out / name for name in
-             ("gps.nmea", "gyro.csv", "odo.csv", "drive.mcap", "truth.csv", "noise.json")}
+    names = ["gps.nmea", "gyro.csv", "odo.csv", "drive.mcap", "truth.csv", "noise.json"]
+    if d.odo is None:
+        names.remove("odo.csv")
+    together = _imu_accel(d) is not None
+    if d.accel is not None and not together:
+        names.append("accel.csv")
+    paths = {name: out / name for name in names}
     paths["gps.nmea"].write_text("".join(nmea_lines(d.gnss)), encoding="ascii", newline="")
-    _write_csv(paths["gyro.csv"], "t,yaw_rate", d.gyro.t_ns, [d.gyro.yaw_rate_radps], ["{:.7f}"])
-    _write_csv(paths["odo.csv"], "t,speed", d.odo.t_ns, [d.odo.speed_mps], ["{:.6f}"])
+    if together:
+        _write_csv(paths["gyro.csv"], "t,yaw_rate,acc_x", d.gyro.t_ns,
+                   [d.gyro.yaw_rate_radps, d.accel.accel_mps2], ["{:.7f}", "{:.6f}"])
+    else:
+        _write_csv(paths["gyro.csv"], "t,yaw_rate", d.gyro.t_ns, [d.gyro.yaw_rate_radps],
+                   ["{:.7f}"])
+    if d.accel is not None and not together:
+        _write_csv(paths["accel.csv"], "t,acc_x", d.accel.t_ns, [d.accel.accel_mps2], ["{:.6f}"])
+    if d.odo is not None:
+        _write_csv(paths["odo.csv"], "t,speed", d.odo.t_ns, [d.odo.speed_mps], ["{:.6f}"])
     step = max(1, round(TRUTH_RATE_HZ / truth_rate_hz))
     tr = sim.truth.iloc[::step]
     _write_csv(paths["truth.csv"], "t,lat,lon,alt,heading", tr["t_ns"].to_numpy(),

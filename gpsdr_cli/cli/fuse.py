@@ -50,6 +50,9 @@ def stats_next_to(track: Path, fmt: str) -> Path:
 @click.option("--gps", type=str, metavar="G.nmea", help="NMEA 0183 log (or - for stdin).")
 @click.option("--gyro", type=str, metavar="Y.csv", help="Gyro CSV: t, yaw_rate.")
 @click.option("--odo", type=str, metavar="O.csv", help="Odometer CSV: t and speed|distance|ticks.")
+@click.option("--accel", type=str, metavar="ACC.csv",
+              help="Forward accelerometer CSV: t, acc_x (m/s^2, positive forward; the gyro's "
+                   "time options).  An acc_x column in the gyro CSV is read without it.")
 @filter_options
 @click.option("--reference", type=str, metavar="TRUTH.csv",
               help="Reference trajectory (CSV t,lat,lon[,alt], NMEA or a track Parquet): "
@@ -65,7 +68,7 @@ def stats_next_to(track: Path, fmt: str) -> Path:
 @frame_time_options
 @reader_options
 @common_options
-def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
+def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, accel: str | None,
          filter_name: str | None, smooth: bool | None, reference: str | None,
          output: str | None, stats_path: str | None, config_path: str | None,
          print_config: bool, fmt: str, date: Any, gnss_offset: str | float | None,
@@ -103,7 +106,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
     stdin_input = "-" in (log, gps)
     track_path, stats_out = _outputs(log or gps or gyro or odo or "-", output, stats_path, fmt,
                                      stdin_input)
-    inputs = [p for p in (log, gps, gyro, odo, reference) if p and p != "-"]
+    inputs = [p for p in (log, gps, gyro, odo, accel, reference) if p and p != "-"]
     for out in (track_path, stats_out):
         if out is not None and out != "-" and any(_same(out, p) for p in inputs):
             raise UsageError(f"{out}: refusing to overwrite an input file; give another -o/--stats")
@@ -125,7 +128,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
         show = _progress_wanted(quiet, [log, gps, gyro, odo])
         with _Stages(show) as stages:
             stages("reading inputs")
-            drive = _read(log, gps, gyro, odo, params, topics, date, log_time)
+            drive = _read(log, gps, gyro, odo, params, topics, date, log_time, accel)
             ref = None
             if reference:
                 from ..io.reference import read_reference
@@ -173,13 +176,14 @@ def _outputs(base: str, output: str | None, stats_path: str | None, fmt: str,
 
 
 def _read(log: str | None, gps: str | None, gyro: str | None, odo: str | None, params: Any,
-          topics: dict[str, str] | None, date: Any, log_time: bool) -> Any:
+          topics: dict[str, str] | None, date: Any, log_time: bool,
+          accel: str | None = None) -> Any:
     from ..io.readers import read_drive
 
     if log == "-":
         gps, log = "-", None
     return read_drive(log, gps=gps, gyro=gyro, odo=odo, params=params, topics=topics,
-                      date=date, use_log_time=log_time)
+                      date=date, use_log_time=log_time, accel=accel)
 
 
 def _progress_wanted(quiet: bool, paths: list[str | None]) -> bool:

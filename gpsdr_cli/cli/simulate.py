@@ -12,7 +12,7 @@ from .options import common_options
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
               metavar="DIR", help="Directory to write the drive into (created).")
 @click.option("--scenario", default="urban_canyon", show_default=True, metavar="NAME",
-              help="open_sky, urban_canyon, tunnels, stop_and_go, one_hour, ...")
+              help="open_sky, urban_canyon, tunnels, stop_and_go, one_hour, urban_nlos, rtk, no_odometer.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
 @click.option("--duration", "duration_s", type=float, default=None, metavar="SECONDS",
               help="Override the scenario's length.")

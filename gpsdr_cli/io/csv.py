@@ -1,10 +1,14 @@
-"""Gyro and odometer CSV readers.
+"""Gyro, odometer and forward-accelerometer CSV readers.
 
-Both files have a header row and one sample per line: a time column (UTC POSIX
+Each file has a header row and one sample per line: a time column (UTC POSIX
 seconds, or seconds relative to ``start_posix_s``) and one value column.  Units,
 signs and time base follow :mod:`gpsdr_cli.conventions`: the gyro is converted
 to rad/s positive counter-clockwise, the odometer (speed, distance per row or
-cumulative ticks) to a forward speed in m/s, times to int64 ns.
+cumulative ticks) to a forward speed in m/s, times to int64 ns.  A gyro CSV may
+carry a second value column ``acc_x``: the forward specific force in m/s^2
+(positive forward; an IMU row holds both), read into ``Drive.accel``; every row then
+needs both values.  A separate accelerometer CSV has ``t,acc_x``
+(:func:`read_accel_csv`) and shares the gyro's time options (one IMU clock).
 
 Why two paths: ``pyarrow.csv`` parses a clean file at tens of millions of rows
 per second, but it stops at the first non-numeric field and cannot say on which
@@ -32,7 +36,7 @@ import numpy as np
 
 from ..conventions import NS_PER_S
 from ..errors import ConfigError, InputError, NoDataError, UsageError
-from .drive import Drive, Odometry, SkipReport, Source, YawRates
+from .drive import Drive, ForwardAccel, Odometry, SkipReport, Source, YawRates
 
 #: Header detection and the text checks shared with :func:`gpsdr_cli.io.readers.sniff`.
 UTF8_BOM = b"\xef\xbb\xbf"
@@ -365,8 +369,11 @@ def read_gyro_csv(path: str | Path, opts: dict) -> Drive:
     sign = _choice(opts, "gyro", "sign", "ccw", ("ccw", "cw"))
     data = read_bytes(path)
     skipped = SkipReport()
-    t_ns, values, _, info = _read_table(path, data, t_column, [column],
-                                        ["gyro.t_column", "gyro.column"], skipped)
+    names, _, _ = _parse_header(path, data)
+    accel_column = ACCEL_COLUMN if ACCEL_COLUMN in names and ACCEL_COLUMN != column else ""
+    columns = [column, accel_column] if accel_column else [column]
+    t_ns, values, _, info = _read_table(path, data, t_column, columns,
+                                        ["gyro.t_column", "gyro.column", ACCEL_COLUMN], skipped)
     warnings: list[str] = []
     t_ns = _apply_time(path, t_ns, opts, "gyro", warnings)
     rate = values[column]
@@ -377,7 +384,38 @@ def read_gyro_csv(path: str | Path, opts: dict) -> Drive:
     _require_rows(path, t_ns, "gyro", info, skipped)
     info.update(units=units, sign=sign)
     stream = YawRates(t_ns=t_ns, yaw_rate_radps=np.ascontiguousarray(rate, np.float64))
-    return _drive(path, data, "gyro", stream, skipped, info, warnings)
+    drive = _drive(path, data, "gyro", stream, skipped, info, warnings)
+    if accel_column:
+        drive.accel = ForwardAccel(t_ns=t_ns.copy(), accel_mps2=np.ascontiguousarray(
+            values[accel_column], np.float64))
+        drive.sources[0].streams = ("gyro", "accel")
+        info["accel_column"] = accel_column
+    return drive
+
+
+#: the forward accelerometer's column, in a gyro CSV or an accelerometer CSV (m/s^2)
+ACCEL_COLUMN = "acc_x"
+
+
+def read_accel_csv(path: str | Path, opts: dict) -> Drive:
+    """Read a forward-accelerometer CSV (``t,acc_x``, m/s^2 positive forward; time options
+    from ``opts``, the gyro's section: one IMU clock) into ``Drive.accel``."""
+    t_column = str(_opt(opts, "t_column", "t"))
+    data = read_bytes(path)
+    names, _, _ = _parse_header(path, data)
+    if ACCEL_COLUMN not in names:
+        found = ", ".join(n for n in names if n) or "(none)"
+        raise InputError(path, f"no column {ACCEL_COLUMN!r} (columns found: {found}); expected "
+                         f"t,{ACCEL_COLUMN} with the forward acceleration in m/s^2", line=1)
+    skipped = SkipReport()
+    t_ns, values, _, info = _read_table(path, data, t_column, [ACCEL_COLUMN],
+                                        ["gyro.t_column", ACCEL_COLUMN], skipped)
+    warnings: list[str] = []
+    t_ns = _apply_time(path, t_ns, opts, "gyro", warnings)
+    _require_rows(path, t_ns, "accelerometer", info, skipped)
+    stream = ForwardAccel(t_ns=t_ns, accel_mps2=np.ascontiguousarray(values[ACCEL_COLUMN],
+                                                                     np.float64))
+    return _drive(path, data, "accel", stream, skipped, info, warnings)
 
 
 _ODO_KINDS = ("speed", "distance", "ticks")
@@ -455,7 +493,7 @@ def _require_rows(path: str | Path, t_ns: np.ndarray, what: str, info: dict,
                           f"{skipped.total} skipped; first: {_first_skip(skipped)})")
 
 
-def _drive(path: str | Path, data: bytes, name: str, stream: YawRates | Odometry,
+def _drive(path: str | Path, data: bytes, name: str, stream: YawRates | Odometry | ForwardAccel,
            skipped: SkipReport, info: dict, warnings: list[str]) -> Drive:
     """The reader's Drive: ``stream`` as ``drive.<name>``, its report, source and meta."""
     drive = Drive(skipped=skipped, sources=[_source(path, data, name)],

@@ -18,7 +18,7 @@ from pathlib import Path
 from ..config import Params
 from ..conventions import NS_PER_S
 from ..errors import InputError, MissingDateError, NoDataError, UsageError
-from .csv import _parse_header, read_gyro_csv, read_odo_csv, text_problem
+from .csv import _parse_header, read_accel_csv, read_gyro_csv, read_odo_csv, text_problem
 from .drive import Drive
 from .formats import (  # magics only: a reader is imported per format
     MCAP_MAGIC,
@@ -213,13 +213,16 @@ def _gps_dated_by(read_gps: Callable[[dt.date | None], Drive], dr_parts: list[Dr
 def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
                gyro: str | Path | None = None, odo: str | Path | None = None, params: Params,
                topics: dict[str, str] | None = None, date: dt.date | None = None,
-               use_log_time: bool = False) -> Drive:
-    """Read a drive from a LOG (MCAP, UBX, ROS bag or NMEA) and/or separate GNSS, gyro and odometer files.
+               use_log_time: bool = False, accel: str | Path | None = None) -> Drive:
+    """Read a drive from a LOG (MCAP, UBX, ROS bag or NMEA) and/or separate GNSS, gyro,
+    odometer and accelerometer files.
 
     Streams from ``gps``/``gyro``/``odo`` take precedence over the same stream in
     ``log``; the rest of ``log`` merges in (:meth:`Drive.merge`).  ``gps = '-'``
     reads NMEA from standard input.  A gyro or odometer file may be a CSV
-    (options from ``params["gyro"]``/``params["odo"]``) or an MCAP.
+    (options from ``params["gyro"]``/``params["odo"]``) or an MCAP.  ``accel``: a forward
+    accelerometer CSV (``t,acc_x``, m/s^2; the gyro's time options), taking precedence over
+    an ``acc_x`` column of the gyro CSV.
     """
     if log is None and gps is None and gyro is None and odo is None:
         raise UsageError("no input: give a LOG (MCAP, UBX, ROS bag or NMEA) or --gps/--gyro/--odo files")
@@ -229,7 +232,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
 
     def add(part: Drive) -> None:
         """Merge ``part``; its sources list only the streams actually taken from it."""
-        taken = tuple(s for s in ("gnss", "gyro", "odo")
+        taken = tuple(s for s in ("gnss", "gyro", "odo", "accel")
                       if getattr(drive, s) is None and getattr(part, s) is not None)
         for src in part.sources:
             src.streams = tuple(s for s in src.streams if s in taken) if src.streams else taken
@@ -250,6 +253,12 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
         else:
             part = reader(path, params[section])
         dr_parts.append(part)
+    if accel is not None:
+        part = read_accel_csv(accel, params["gyro"])
+        drive.accel = part.accel
+        warnings.extend(part.meta.get("warnings", []))
+        drive.skipped.merge(part.skipped)
+        drive.sources.extend(part.sources)
     if gps is not None:
         def read_gps(day: dt.date | None) -> Drive:
             if str(gps) == "-":
