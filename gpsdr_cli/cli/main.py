@@ -99,13 +99,14 @@ def cli() -> None:
 
 def _register() -> None:
     from .batch import batch
+    from .compare import compare
     from .fuse import fuse
     from .info import info
     from .plot import plot
     from .simulate import simulate
     from .stats import stats
 
-    for cmd in (fuse, info, stats, simulate, plot, batch):
+    for cmd in (fuse, info, stats, simulate, plot, batch, compare):
         cli.add_command(cmd)
 
 
