@@ -25,7 +25,7 @@
   var RAMP = ["#2c3e9e", "#2a6fb8", "#1f9bb5", "#2fb58f", "#7ac143", "#c9c31e", "#f2a516",
     "#ec6a1c", "#c5221f"];
   var N_BINS = RAMP.length;
-  var STATE_NAMES = ["fixes available", "GNSS fix used", "GNSS fix down-weighted", "GNSS fix rejected",
+  var STATE_NAMES = ["no fix", "GNSS fix used", "GNSS fix down-weighted", "GNSS fix rejected",
     "GNSS outage"];
   var layers = { basemap: false, reference: true, fixes: true, downweighted: true,
     rejected: true, outages: true, fused: true };
@@ -423,7 +423,7 @@
     if (L.quality) { lines.push("quality " + fmt(L.quality[i], 0) + " (1 best .. 6 worst)"); }
     if (L.sep) { lines.push("separation " + fmt(L.sep[i], 3, "m") + " (forward/backward)"); }
     if (L.err) { lines.push("error " + fmt(L.err[i], 3, "m") + " (against the reference)"); }
-    lines.push("GNSS: " + STATE_NAMES[L.state[i]]);
+    lines.push(L.state[i] === 4 ? "in a GNSS outage (dead reckoning)" : "GNSS fixes available");
     return lines.join("\n");
   }
   function setHover(h, cx, cy) {
@@ -699,9 +699,10 @@
   window.addEventListener("resize", function () { scheduleMap(); schedulePanels(); });
   if (hash.probe !== undefined) {
     var k = Math.min(Math.max(parseInt(hash.probe, 10) || 0, 0), NL - 1);
-    setHover({ kind: "line", i: k }, 100, 100);
+    var mr = mapCanvas.getBoundingClientRect();
+    setHover({ kind: "line", i: k }, mr.left + px(L.e[k]), mr.top + py(L.n[k]));
     var pr = document.getElementById("probe");
-    pr.textContent = tooltipText({ kind: "line", i: k }); pr.hidden = false;
+    pr.textContent = tooltipText({ kind: "line", i: k });
   }
   var ms = performance.now() - t0;
   statusEl.setAttribute("data-state", "done");
