@@ -232,3 +232,33 @@ def test_chromium_screenshot_shows_the_track(tmp_path, fused) -> None:
     orange = (np.abs(img - [246, 176, 107]).sum(axis=2) < 30).sum()
     blue = (np.abs(img - [31, 119, 180]).sum(axis=2) < 30).sum()
     assert orange > 200 and blue > 200  # pixels
+
+
+# ----------------------------------------------------------------------------- the command
+
+def test_gpsdr_plot_html_with_and_without_a_reference(gpsdr, tmp_path, fused) -> None:
+    from gpsdr_cli.io.parquet import write_table
+    from gpsdr_cli.pipeline import TRACK_UNITS
+    from gpsdr_cli.simulate import simulate_drive
+
+    track = tmp_path / "track.parquet"
+    write_table(fused.track, track, metadata=fused.metadata, units=TRACK_UNITS)
+    truth = simulate_drive("tunnels", seed=1, duration_s=150.0).truth
+    ref_csv = tmp_path / "truth.csv"
+    pd.DataFrame({"t": truth["t_ns"] / NS_PER_S, "lat": truth["lat"],
+                  "lon": truth["lon"]}).to_csv(ref_csv, index=False)
+    out = tmp_path / "report.html"
+    png = tmp_path / "report.png"
+    res = gpsdr(["plot", track, "--reference", ref_csv, "--html", out, "-o", png])
+    assert res.exit_code == 0, res.stderr
+    assert f"wrote {out}" in res.stderr and f"wrote {png}" in res.stderr
+    text = out.read_text(encoding="utf-8")
+    data = json.loads(re.search(r'id="gpsdr-data">(.*?)</script>', text, re.DOTALL).group(1))
+    rmse = float(fused.stats.loc[fused.stats["segment"] == "all", "rmse_m"].iloc[0])
+    assert f"RMSE {rmse:.2f} m" in data["stats_text"]  # the same figure as gpsdr fuse's
+    assert data["title"] == "aekf"  # from the track's metadata
+    noref = gpsdr(["plot", track, "--html", tmp_path / "noref.html", "-q"])
+    assert noref.exit_code == 0 and noref.stderr == ""
+    assert "no reference" in (tmp_path / "noref.html").read_text(encoding="utf-8")
+    neither = gpsdr(["plot", track])
+    assert neither.exit_code == 2 and "--html" in neither.stderr
