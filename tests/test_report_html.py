@@ -262,3 +262,48 @@ def test_gpsdr_plot_html_with_and_without_a_reference(gpsdr, tmp_path, fused) ->
     assert "no reference" in (tmp_path / "noref.html").read_text(encoding="utf-8")
     neither = gpsdr(["plot", track])
     assert neither.exit_code == 2 and "--html" in neither.stderr
+
+
+#: Appended to a copy of the page: real pointer events on the map and the first panel, and
+#: what the tooltip then says, into <pre id="selftest">.
+_EVENTS_JS = """<script>
+(function () {
+  var out = [], tip = document.getElementById("tooltip");
+  function move(el, x, y) {
+    el.dispatchEvent(new PointerEvent("pointermove", {clientX: x, clientY: y, bubbles: true}));
+  }
+  var panel = document.querySelector(".panel canvas"), r = panel.getBoundingClientRect();
+  move(panel, r.left + r.width / 2, r.top + r.height / 2);
+  out.push("panel:" + (tip.hidden ? "" : tip.textContent));
+  var map = document.getElementById("map"), m = map.getBoundingClientRect(), found = "";
+  for (var y = m.top + 5; y < m.bottom && !found; y += 6) {
+    for (var x = m.left + 5; x < m.right && !found; x += 6) {
+      move(map, x, y);
+      if (!tip.hidden) { found = tip.textContent; }
+    }
+  }
+  out.push("map:" + found);
+  var pre = document.createElement("pre"); pre.id = "selftest";
+  pre.textContent = out.join("\\n----\\n"); document.body.appendChild(pre);
+})();
+</script>
+</body>"""
+
+
+@needs_chromium
+def test_chromium_pointer_events_show_the_tooltip(tmp_path, fused) -> None:
+    out = rep.write_html_report(fused.track, tmp_path / "r.html", fused.reference_en)
+    page = tmp_path / "events.html"
+    page.write_text(out.read_text(encoding="utf-8").replace("</body>", _EVENTS_JS),
+                    encoding="utf-8")
+    run = browser.dump_dom(page)
+    assert run.status().get("data-state") == "done", browser.console_errors(run.stderr)
+    text = run.element_text("selftest")
+    panel, _, map_part = text.partition("----")
+    # the panel's cursor at mid-drive: the epoch's time and the panel's own series
+    assert "UTC" in panel and "speed" in panel and "fused error:" in panel
+    t_mid = pd.Timestamp(fused.track["time"].iloc[0]) + pd.Timedelta(
+        seconds=(fused.track["time"].iloc[-1] - fused.track["time"].iloc[0]).total_seconds() / 2)
+    assert t_mid.strftime("%H:%M:") in panel  # within the minute of the middle of the drive
+    # somewhere on the map the pointer finds the track or a fix
+    assert "speed" in map_part or "GNSS fix" in map_part
