@@ -21,7 +21,9 @@ What it shows (the same panels as the PNG report, :mod:`gpsdr_cli.plot`):
   * time panels (minutes since the start, outages shaded): horizontal error against
     the reference with the GNSS-only error and the filter's 3-sigma (without a
     reference: |GNSS - fused| and the 3-sigma, log scale); PDOP; the filter's 1-sigma
-    east and north; the forward/backward ``separation_m`` when the track has it.
+    east and north; the forward/backward ``separation_m`` when the track has it.  A linear
+    y axis follows the PNG's rule over the time range in view (spikes above twice the
+    99.5th percentile clip), recomputed by the script as the user zooms.
 
 Decimation keeps an hour at 100 Hz (360 k epochs) light: the line keeps one epoch
 per :func:`line_step_m` metres of path, every change of GNSS state or quality and
@@ -178,15 +180,6 @@ def _mercator_affine(e: np.ndarray, n: np.ndarray, lat: np.ndarray,
     return [float(v) for v in (*cx, *cy)]
 
 
-def _robust_top(values: list[np.ndarray]) -> float | None:
-    """The PNG report's rule: 1.15 x the 99.5th percentile when the maximum is over twice it."""
-    y = np.concatenate([v[np.isfinite(v)] for v in values]) if values else np.zeros(0)
-    if not len(y):
-        return None
-    top = float(np.percentile(y, 99.5))
-    return max(1.15 * top, 1.0) if top < 0.5 * float(y.max()) else None
-
-
 def report_data(track: pd.DataFrame, reference_en: pd.DataFrame | None = None, title: str = "",
                 *, pdop_good: float = 3.0, tiles_url: str = OSM_TILES,
                 tiles_attribution: str = OSM_ATTRIBUTION) -> dict[str, Any]:
@@ -301,7 +294,7 @@ def report_data(track: pd.DataFrame, reference_en: pd.DataFrame | None = None, t
                   "label": "filter 3-sigma (horizontal)"}
     if err is not None:
         panels.append({"id": "error", "title": f"horizontal error against the reference: {stats_text}",
-                       "ylabel": "m", "log": False, "ymax": _robust_top([err, gnss_dot]),
+                       "ylabel": "m", "log": False,
                        "items": [{"kind": "dots", "src": "gnss", "color": "#999999",
                                   "label": "GNSS-only error"},
                                  {"kind": "line", "src": "err", "color": "#1f77b4",
@@ -323,7 +316,7 @@ def report_data(track: pd.DataFrame, reference_en: pd.DataFrame | None = None, t
                               "label": "sigma north"}]})
     if separation is not None:
         panels.append({"id": "separation", "title": "forward/backward separation",
-                       "ylabel": "m", "log": False, "ymax": _robust_top([separation]),
+                       "ylabel": "m", "log": False,
                        "items": [{"kind": "line", "src": "sep", "color": "#8c564b",
                                   "label": "separation_m"}]})
 
