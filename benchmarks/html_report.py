@@ -1,6 +1,6 @@
 """How long the HTML report of a one-hour drive takes to open in headless Chromium.
 
-    python benchmarks/html_report.py [--runs 3] [--keep report.html]
+    python benchmarks/html_report.py [--runs 3] [--keep report.html] [--duration S]
 
 Simulates the ``one_hour`` scenario (100 Hz gyro: 360 k filter epochs), fuses it with
 aekf through the pipeline, writes the HTML report against the truth, then opens it
@@ -35,12 +35,14 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--keep", type=Path, default=None, help="also keep the report here")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="simulate this many seconds instead of the hour (a quick check)")
     args = ap.parse_args(argv)
     if browser.find_chromium() is None:
         print("chromium is not installed (Debian: apt-get install chromium)", file=sys.stderr)
         return 2
     t0 = time.perf_counter()
-    sim = simulate_drive("one_hour", seed=0)
+    sim = simulate_drive("one_hour", seed=0, duration_s=args.duration)
     params = config.defaults()
     res = fuse(sim.drive, params, sim.truth[["t_ns", "lat", "lon"]])
     t_fused = time.perf_counter() - t0
@@ -61,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
             walls.append(run.wall_s)
             draws.append(float(status["data-draw-ms"]) / 1000.0)
         size_mb = out.stat().st_size / 1e6
-    print(f"one_hour: {len(res.track)} epochs (simulate + fuse {t_fused:.1f} s); "
+    print(f"one_hour{'' if args.duration is None else f' ({args.duration:g} s)'}: "
+          f"{len(res.track)} epochs (simulate + fuse {t_fused:.1f} s); "
           f"report written in {t_write:.2f} s, {size_mb:.1f} MB")
     print(f"drawn: {status['data-line-points']} line points, {status['data-fixes']} fixes, "
           f"panels {status['data-panels']}")

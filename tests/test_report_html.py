@@ -307,3 +307,13 @@ def test_chromium_pointer_events_show_the_tooltip(tmp_path, fused) -> None:
     assert t_mid.strftime("%H:%M:") in panel  # within the minute of the middle of the drive
     # somewhere on the map the pointer finds the track or a fix
     assert "speed" in map_part or "GNSS fix" in map_part
+
+
+@needs_chromium
+def test_the_benchmark_script_runs(capsys) -> None:
+    from tests.conftest import load_benchmark
+
+    bench = load_benchmark("html_report")
+    assert bench.main(["--duration", "60", "--runs", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "6001 epochs" in out and "target <= 5 s: met" in out
