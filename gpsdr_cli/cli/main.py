@@ -77,6 +77,7 @@ def cli() -> None:
 
 def _register() -> None:
     from .batch import batch
+    from .compare import compare
     from .extract import extract
     from .fuse import fuse
     from .info import info
@@ -84,7 +85,7 @@ def _register() -> None:
     from .simulate import simulate
     from .stats import stats
 
-    for cmd in (fuse, info, stats, simulate, plot, batch, extract):
+    for cmd in (fuse, info, stats, simulate, plot, batch, extract, compare):
         cli.add_command(cmd)
 
 
