@@ -58,6 +58,9 @@ def stats_next_to(track: Path, fmt: str) -> Path:
               help="Track output (- = stdout).  Default: LOG.fused.parquet next to the log.")
 @click.option("--stats", "stats_path", type=str, metavar="STATS.parquet",
               help="Statistics output.  Default: next to the track, .stats.parquet.")
+@click.option("--lever-arm", "lever_arm", type=str, metavar="FWD,LEFT[,UP]",
+              help="Vehicle reference point to GNSS antenna, metres (forward, left, up); the "
+                   "track is reported at the reference point.  Default: [gnss] lever_arm_m.")
 @config_option
 @click.option("--print-config", is_flag=True,
               help="Print the effective parameters as TOML (a --config file) and exit.")
@@ -71,7 +74,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
          print_config: bool, fmt: str, date: Any, gnss_offset: str | float | None,
          epsg: int | None, topics: dict[str, str] | None, log_time: bool,
          gyro_units: str | None, gyro_sign: str | None, odo_kind: str | None,
-         ticks_per_m: float | None, quiet: bool) -> None:
+         ticks_per_m: float | None, lever_arm: str | None, quiet: bool) -> None:
     """Fuse one drive's GNSS, gyro and odometer logs into a track.
 
     LOG is an MCAP file (or an NMEA file; - reads NMEA from stdin).  Or give the
@@ -85,11 +88,16 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None,
       gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --filter fafkf --smooth \\
                  --reference truth.csv -o track.parquet
       cat gps.nmea | gpsdr fuse - -o - --format csv > track.csv
+      gpsdr fuse drive.mcap --lever-arm 1.5,0.3     # antenna 1.5 m ahead, 0.3 m left
       gpsdr fuse --print-config > params.toml
     """
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
                          gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
                          gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m)
+    if lever_arm is not None:
+        from ..lever_arm import parse_lever_arm
+
+        params["gnss"]["lever_arm_m"] = parse_lever_arm(lever_arm)
     if print_config:
         from .. import config
 
