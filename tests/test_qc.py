@@ -151,3 +151,50 @@ def test_quality_gnss_state() -> None:
     assert q[10:15].tolist() == [QC["outage_min_class"]] * 5
     assert q[40:80].tolist() == [6] * 40
     assert q[90] == QC["rejected_min_class"] and q[91] == 1
+
+
+def test_plot_and_stats_command_show_the_checks(open_sky: simulate.SimDrive, tmp_path, gpsdr) -> None:
+    from PIL import Image
+
+    from gpsdr_cli.io.parquet import write_table
+    from gpsdr_cli.plot import plot_report
+
+    res = pipeline.fuse(open_sky.drive, config.defaults())
+    path = tmp_path / "t.parquet"
+    write_table(res.track, path, metadata=res.metadata, units=pipeline.TRACK_UNITS)
+    png = plot_report(res.track, tmp_path / "r.png")
+    png_plain = plot_report(res.track.drop(columns=["separation_m"]), tmp_path / "p.png")
+    assert Image.open(png).size == Image.open(png_plain).size
+    assert png.stat().st_size > png_plain.stat().st_size  # one more panel drawn
+    out = gpsdr(["stats", str(path)])
+    assert out.exit_code == 0, out.output
+    assert "separation_rms_m" in out.output
+    q3 = 100.0 * float(np.mean(res.track["quality"] == 3))
+    assert f"3: {q3:.1f} %" in out.output
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+@pytest.mark.parametrize("name", ["ekf", "aekf", "fkf", "fafkf"])
+def test_every_filter_with_a_lead_in_and_a_tail(name: str, smooth: bool) -> None:
+    """Fixes start 20 s after the gyro and odometer and stop 20 s before them: the forward
+    pass dead-reckons the lead-in, the backward pass the tail (its own lead-in)."""
+    sim = simulate.simulate_drive("open_sky", seed=2, duration_s=180.0)
+    g = sim.drive.gnss
+    t0, t1 = int(sim.truth.t_ns.iloc[0]), int(sim.truth.t_ns.iloc[-1])
+    keep = (g.t_ns > t0 + 20 * 10**9) & (g.t_ns < t1 - 20 * 10**9)
+    gnss = dataclasses.replace(g, **{f.name: getattr(g, f.name)[keep] for f in dataclasses.fields(g)})
+    drive = dataclasses.replace(sim.drive, gnss=gnss)
+    p = config.defaults()
+    p["filter"]["name"] = name
+    p["filter"]["smooth"] = smooth
+    tr = pipeline.fuse(drive, p).track
+    sep = tr["separation_m"].to_numpy(float)
+    assert np.all(np.isfinite(sep))
+    inside = (tr["time"].astype("int64").to_numpy() > t0 + 25 * 10**9) & \
+             (tr["time"].astype("int64").to_numpy() < t1 - 25 * 10**9)
+    # open sky with fixes: the passes agree to within a few metres away from the ends
+    assert float(np.sqrt(np.mean(sep[inside] ** 2))) < 3.0
+    t = tr["time"].astype("int64").to_numpy()
+    ends = (t < gnss.t_ns[0]) | (t > gnss.t_ns[-1])      # dead reckoning before/after the fixes
+    assert ends.sum() > 1000
+    assert np.all(tr["quality"].to_numpy()[ends] >= config.defaults()["qc"]["outage_min_class"])
