@@ -242,6 +242,12 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
                    file=err)
     for note in res.drive_warnings:
         click.echo(f"warning: {note}", file=err)
+    every = res.stats[res.stats["segment"] == "all"]
+    if "separation_rms_m" in every and len(every) and str(every["separation_rms_m"].iloc[0]) != "<NA>":
+        row = every.iloc[0]
+        click.echo(f"forward/backward separation: RMS {float(row['separation_rms_m']):.2f} m, p95 "
+                   f"{float(row['separation_p95_m']):.2f} m, max {float(row['separation_max_m']):.2f} m",
+                   file=err)
     if reference:
         s = res.summary()
         if math.isnan(s["rmse_m"]):  # NaN: no epoch inside the reference's time span
