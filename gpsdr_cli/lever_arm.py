@@ -9,8 +9,12 @@ the forward unit vector ``(sin h, cos h)`` and the left unit vector ``(-cos h, s
     d_n = fwd cos h + left sin h
     p_ref = p_ant - (d_e, d_n)
 
-``up`` changes only the height; with no pitch or roll estimate its horizontal part
-(``up sin(pitch)``) is ignored.
+``up`` is accepted and recorded in the file metadata but moves nothing: the track is
+horizontal, and with no pitch or roll estimate the horizontal part of a vertical arm
+(``up sin(pitch)``) is unknown and ignored.
+
+The backward pass of :mod:`gpsdr_cli.qc` runs on the corrected fixes (those of the
+last forward pass), so its separation does not see the arm.
 
 How it enters the filters (honestly): not through their measurement model.  The
 kernels' GNSS row is ``h(x) = p``; instead the filter runs once on the fixes as
