@@ -71,6 +71,12 @@ def _coerce(default: Any, value: Any, where: str) -> Any:
             return float(value)
     elif isinstance(default, str) and isinstance(value, str):
         return value
+    elif isinstance(default, list):
+        # a list of floats (e.g. [gnss] lever_arm_m): 2 to len(default) numbers, padded with 0
+        if (isinstance(value, (list, tuple)) and 2 <= len(value) <= len(default)
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            return [float(v) for v in value] + [0.0] * (len(default) - len(value))
+        raise ConfigError(f"{where} = {value!r}: expected a list of 2 to {len(default)} numbers")
     raise ConfigError(f"{where} = {value!r}: expected {type(default).__name__}")
 
 
@@ -105,6 +111,8 @@ def _fmt(value: Any) -> str:
         if math.isnan(value):
             return "nan"
         return repr(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
     if isinstance(value, str):
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
     return str(value)

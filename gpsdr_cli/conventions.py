@@ -71,6 +71,14 @@ TRACK_EXTRA_COLUMNS: dict[str, str] = {
     "nis": "dimensionless, normalised innovation squared of the GNSS update (2 dof; null where none)",
 }
 
+#: Track Parquet: the forward/backward quality-check columns (gpsdr_cli.qc; docs/qc.md).
+QC_COLUMNS: dict[str, str] = {
+    "separation_m": "m, horizontal distance between the forward and an independent backward "
+                    "pass of the filter (null where not computed)",
+    "quality": "class 1 best .. 6 worst, from the horizontal sigma, the separation and the "
+               "GNSS state (docs/qc.md)",
+}
+
 #: Statistics Parquet columns (one row per filter x segment).
 STATS_COLUMNS: dict[str, str] = {
     "filter": "filter name",

@@ -34,6 +34,10 @@ Without a reference (and always)
     ``nis_in_95_share``: share of 2-dof GNSS updates whose NIS is inside the 95 %
     chi-square bound 5.991; ``gnss_separation_rmse_m``: RMS of |GNSS fix -
     fused position| at GNSS epochs.
+Quality checks (when the track has the columns, :mod:`gpsdr_cli.qc`)
+    ``separation_rms_m``, ``separation_p95_m``, ``separation_max_m``: RMS, 95th
+    percentile and largest forward/backward separation over the segment's epochs;
+    ``quality_<k>_share`` (k = 1 .. 6): share of the segment's epochs in class k.
 
 Every float column is pandas' nullable ``Float64``: a figure that cannot be
 computed (no reference, empty segment) is a null, which Parquet stores as null.
@@ -239,6 +243,9 @@ def error_statistics(track: pd.DataFrame, reference_en: pd.DataFrame | None, fil
     gn = track["gnss_n"].to_numpy(float) if "gnss_n" in track else np.full(m, np.nan)
     pdop_good = float(params["gnss"]["pdop_good"])
 
+    qsep = track["separation_m"].to_numpy(float) if "separation_m" in track else None
+    quality = track["quality"].to_numpy(np.int64) if "quality" in track else None
+
     errs = track_errors(track, reference_en) if reference_en is not None else None
     sep = np.hypot(ge - e, gn - n)
 
@@ -265,6 +272,7 @@ def error_statistics(track: pd.DataFrame, reference_en: pd.DataFrame | None, fil
         nis_m = nis_m[np.isfinite(nis_m)]
         row["nis_in_95_share"] = float(np.mean(nis_m <= CHI2_2DOF_95)) if len(nis_m) else np.nan
         row["gnss_separation_rmse_m"] = _rms(sep[mask])
+        row.update(qc_figures(qsep, quality, mask))
         rows.append(row)
 
     for k, (i0, i1) in enumerate(outage_runs(outage), start=1):
@@ -278,7 +286,7 @@ def error_statistics(track: pd.DataFrame, reference_en: pd.DataFrame | None, fil
         out["error_epochs"] = 0
     out["epochs"] = out["epochs"].astype("int64")
     out["error_epochs"] = out["error_epochs"].fillna(0).astype("int64")
-    for col in _FLOAT_COLUMNS:
+    for col in _FLOAT_COLUMNS + [c for c in QC_STATS_COLUMNS if c in out]:
         vals = np.array(pd.to_numeric(out[col], errors="coerce").to_numpy(dtype=float, na_value=np.nan))
         vals[~np.isfinite(vals)] = np.nan
         out[col] = pd.array(vals, dtype="Float64")  # NaN -> <NA>: a Parquet null
@@ -288,6 +296,34 @@ def error_statistics(track: pd.DataFrame, reference_en: pd.DataFrame | None, fil
         out[col] = out[col].astype("string")
     first = [c for c in STATS_COLUMNS if c in out]
     return out[first + [c for c in out.columns if c not in first]].reset_index(drop=True)
+
+
+#: Statistics columns of the quality checks (units for the Parquet field metadata).
+QC_STATS_COLUMNS: dict[str, str] = {
+    "separation_rms_m": "m, RMS of the forward/backward separation over the segment",
+    "separation_p95_m": "m, 95th percentile of the forward/backward separation",
+    "separation_max_m": "m, largest forward/backward separation",
+    **{f"quality_{k}_share": f"share of the segment's epochs in quality class {k} (1 best .. 6 worst)"
+       for k in range(1, 7)},
+}
+
+
+def qc_figures(separation_m: np.ndarray | None, quality: np.ndarray | None,
+               mask: np.ndarray) -> dict[str, float]:
+    """Separation RMS / p95 / max (m) and the share per quality class over ``mask``;
+    nothing for a column the track does not have."""
+    out: dict[str, float] = {}
+    if separation_m is not None:
+        s = separation_m[mask]
+        s = s[np.isfinite(s)]
+        out["separation_rms_m"] = _rms(s)
+        out["separation_p95_m"] = float(np.percentile(s, 95)) if len(s) else np.nan
+        out["separation_max_m"] = float(np.max(s)) if len(s) else np.nan
+    if quality is not None:
+        q = quality[mask]
+        for k in range(1, 7):
+            out[f"quality_{k}_share"] = float(np.mean(q == k)) if len(q) else np.nan
+    return out
 
 
 def _bool_col(track: pd.DataFrame, name: str, m: int) -> np.ndarray:
@@ -350,5 +386,16 @@ def _mixed_path_length(e: np.ndarray, n: np.ndarray, ref_e: np.ndarray, ref_n: n
     return float(np.sum(step)) if np.all(np.isfinite(step)) else np.nan
 
 
-__all__ = ["CHI2_2DOF_95", "SEGMENTS", "error_statistics", "gnss_only_errors",
-           "interpolate_reference", "outage_runs", "reference_en", "summarise", "track_errors"]
+__all__ = [
+    "CHI2_2DOF_95",
+    "QC_STATS_COLUMNS",
+    "SEGMENTS",
+    "error_statistics",
+    "gnss_only_errors",
+    "interpolate_reference",
+    "outage_runs",
+    "qc_figures",
+    "reference_en",
+    "summarise",
+    "track_errors",
+]

@@ -27,7 +27,7 @@ import pandas as pd
 
 from . import __version__, config
 from .config import Params
-from .conventions import NS_PER_S, STATS_COLUMNS, TRACK_COLUMNS, TRACK_EXTRA_COLUMNS
+from .conventions import NS_PER_S, QC_COLUMNS, STATS_COLUMNS, TRACK_COLUMNS, TRACK_EXTRA_COLUMNS
 from .errors import GpsdrError, InputError, NoDataError, UsageError
 from .geodesy import LocalFrame
 
@@ -38,10 +38,12 @@ if TYPE_CHECKING:
     from .io.reference import Reference
 
 #: Track columns that may hold nulls (everything else must be finite).
-NULLABLE_TRACK_COLUMNS = frozenset({"pdop", "gnss_e", "gnss_n", "nis"})
+NULLABLE_TRACK_COLUMNS = frozenset({"pdop", "gnss_e", "gnss_n", "nis", "separation_m"})
 
+#: Columns track_frame builds from the filter result.
+BASE_TRACK_UNITS: dict[str, str] = {**TRACK_COLUMNS, **TRACK_EXTRA_COLUMNS}
 #: Column -> "unit, meaning" for the track file's field metadata.
-TRACK_UNITS: dict[str, str] = {**TRACK_COLUMNS, **TRACK_EXTRA_COLUMNS}
+TRACK_UNITS: dict[str, str] = {**BASE_TRACK_UNITS, **QC_COLUMNS}
 
 Progress = Callable[[str], None]
 
@@ -172,7 +174,7 @@ def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame) -> pd.D
     # copy=False: one block per column, no consolidation into a 2-D float block.  A one-hour
     # track is 360 k rows x 19 columns; the consolidating copy cost ~55 MB of peak RSS and a
     # pass over memory (batch throughput is memory-bandwidth bound).
-    df = pd.DataFrame({name: cols[name] for name in TRACK_UNITS}, copy=False)
+    df = pd.DataFrame({name: cols[name] for name in BASE_TRACK_UNITS}, copy=False)
     if df["time"].dtype != "datetime64[ns, UTC]":
         df["time"] = df["time"].astype("datetime64[ns, UTC]")
     return df
@@ -364,7 +366,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
               ) -> tuple[Epochs, FilterResult, pd.DataFrame, Drive]:
     """(epochs, result, track, the drive as processed: its ``skipped`` and ``meta["warnings"]``
     say what aligning it dropped)."""
-    from . import filters, lead_in
+    from . import lever_arm
     from .align import build_epochs
 
     # build_epochs counts what it drops into the drive's SkipReport: work on a copy so
@@ -376,23 +378,55 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     if len(epochs) == 0:
         where = drive.sources[0].path if drive.sources else None
         raise NoDataError(where, "no GNSS, gyro or odometer record to process")
-    run = filters.get(params["filter"]["name"])
     if progress:
         progress(f"running {params['filter']['name']}"
                  + (" + RTS smoother" if params["filter"]["smooth"] else ""))
     if ready is not None:
         ready()  # e.g. a background compile of the kernels (gpsdr_cli.warmup) has finished
-    # the epochs before the first fix (gyro and odometer logged before the receiver had a
-    # fix): the filter starts at the fix, the lead-in is dead-reckoned back from it
-    k_fix, from_fix = lead_in.split(epochs)
-    result = run(from_fix, params)
-    if k_fix:
-        result = lead_in.backfill(epochs, k_fix, result)
+    arm = lever_arm.arm_of(params)
+    if arm is not None:
+        epochs, result = lever_arm.apply(epochs, params, arm, run_filter)
+    else:
+        result = run_filter(epochs, params)
     track = track_frame(epochs, result, frame)
     if work.gnss is not None and len(work.gnss):
         shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
         track["pdop"] = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
     return epochs, result, track, work
+
+
+def run_filter(epochs: Epochs, params: Params) -> FilterResult:
+    """The configured filter over ``epochs``: it starts at the first usable fix, and the
+    epochs before it (gyro and odometer logged before the receiver had a fix) are
+    dead-reckoned back from it (:mod:`gpsdr_cli.lead_in`)."""
+    from . import filters, lead_in
+
+    k_fix, from_fix = lead_in.split(epochs)
+    result = filters.get(params["filter"]["name"])(from_fix, params)
+    if k_fix:
+        result = lead_in.backfill(epochs, k_fix, result)
+    return result
+
+
+def add_qc_columns(track: pd.DataFrame, epochs: Epochs, result: FilterResult,
+                   params: Params, progress: Progress | None = None) -> pd.DataFrame:
+    """``separation_m`` (forward vs an independent backward pass, m; with ``[qc]
+    backward_pass``) and ``quality`` (int8, 1 best .. 6 worst) appended to ``track``
+    (:mod:`gpsdr_cli.qc`).  Both passes are unsmoothed: a smoothed track's own pass
+    has seen the backward data."""
+    from . import qc
+
+    if qc.qc_enabled(params):
+        if progress:
+            progress("backward pass")
+        raw = copy.deepcopy(params)
+        raw["filter"]["smooth"] = False
+        fwd = run_filter(epochs, raw) if params["filter"]["smooth"] else result
+        bwd = run_filter(qc.reverse_epochs(epochs), raw)
+        e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
+        track["separation_m"] = qc.separation(fwd.e, fwd.n, e_b, n_b)
+    track["quality"] = qc.track_quality(track, params["qc"])
+    return track
 
 
 def latest_gnss_pdop(epochs: Epochs, gnss_t_ns: np.ndarray) -> np.ndarray:
@@ -452,6 +486,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             offset_note = f"not estimated ({est.reason}); kept {offset_auto:+.3f} s"
     epochs, result, track, work = _run_once(drive, params, frame, progress, ready)
     skipped = work.skipped
+    track = add_qc_columns(track, epochs, result, params, progress)
 
     if progress:
         progress("statistics")
@@ -490,7 +525,9 @@ STATS_EXTRA_UNITS: dict[str, str] = {
 
 def stats_units(stats: pd.DataFrame) -> dict[str, str]:
     """Column -> "unit, meaning" for the statistics file's field metadata."""
-    known = {**STATS_COLUMNS, **STATS_EXTRA_UNITS}
+    from .evaluation import QC_STATS_COLUMNS
+
+    known = {**STATS_COLUMNS, **STATS_EXTRA_UNITS, **QC_STATS_COLUMNS}
     return {c: known[c] for c in stats.columns if c in known}
 
 
@@ -530,7 +567,7 @@ def prepare_track(track: pd.DataFrame, meta: dict[str, str], reference: Referenc
         if "gnss_e" in track and "gnss_n" in track:
             track["gnss_e"] = np.nan
             track["gnss_n"] = np.nan
-    for col, unit in TRACK_UNITS.items():
+    for col, unit in BASE_TRACK_UNITS.items():  # QC columns are not made up for an older file
         if col not in track.columns:
             track[col] = False if unit.startswith("bool") else np.nan
     ref_en = evaluation.reference_en(reference, frame) if reference is not None else None

@@ -14,7 +14,10 @@ Panels:
     when one is given (fused and GNSS-only), else the GNSS-minus-fused
     separation; both with the filter's horizontal 3-sigma envelope;
   * PDOP beneath, with the ``pdop_good`` line;
-  * the sigma envelope: the filter's 1-sigma east and north.
+  * the sigma envelope: the filter's 1-sigma east and north;
+  * when the track has ``separation_m`` (:mod:`gpsdr_cli.qc`): the forward/backward
+    separation against time, with its RMS and 95th percentile, beside the horizontal
+    1-sigma (the two figures the quality class grades).
 """
 
 from __future__ import annotations
@@ -68,11 +71,14 @@ def plot_report(track: pd.DataFrame, out_path: str | Path, reference_en: pd.Data
 
     fig = Figure(figsize=(14, 9), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
-    gs = fig.add_gridspec(3, 2, width_ratios=[1.05, 1.0], height_ratios=[1.5, 0.7, 0.8])
+    qsep = col("separation_m") if "separation_m" in track else None
+    heights = [1.5, 0.7, 0.8] + ([0.8] if qsep is not None else [])
+    gs = fig.add_gridspec(len(heights), 2, width_ratios=[1.05, 1.0], height_ratios=heights)
     ax_map = fig.add_subplot(gs[:, 0])
     ax_err = fig.add_subplot(gs[0, 1])
     ax_pdop = fig.add_subplot(gs[1, 1], sharex=ax_err)
     ax_sig = fig.add_subplot(gs[2, 1], sharex=ax_err)
+    ax_sep = fig.add_subplot(gs[3, 1], sharex=ax_err) if qsep is not None else None
 
     # --- map
     okg = np.isfinite(ge) & np.isfinite(gn)
@@ -160,7 +166,22 @@ def plot_report(track: pd.DataFrame, out_path: str | Path, reference_en: pd.Data
     if np.nanmax(np.concatenate([sig_e, sig_n, [0.0]])) > 0:
         ax_sig.set_yscale("log")
     ax_sig.set_ylabel("filter 1-sigma (m)")
-    ax_sig.set_xlabel("minutes since " + pd.Timestamp(int(t_ns[0]), unit="ns", tz="UTC")
+    ax_last = ax_sig
+    if ax_sep is not None and qsep is not None:
+        shade(ax_sep)
+        fin = qsep[np.isfinite(qsep)]
+        ax_sep.plot(t_min, qsep, "-", lw=0.9, color="tab:brown", label="forward/backward separation")
+        ax_sep.plot(t_min, sig_h, ":", lw=0.9, color="tab:blue", label="horizontal 1-sigma")
+        if len(fin):
+            ax_sep.set_title(f"separation: RMS {np.sqrt(np.mean(fin**2)):.2f} m, p95 "
+                             f"{np.percentile(fin, 95):.2f} m, max {fin.max():.2f} m", fontsize=10)
+        ax_sep.set_ylabel("separation (m)")
+        top = _robust_top(ax_sep)
+        ax_sep.set_ylim(0.0, top) if top else ax_sep.set_ylim(bottom=0.0)
+        ax_sep.grid(True, lw=0.3)
+        ax_sep.legend(loc="upper left", fontsize=8)
+        ax_last = ax_sep
+    ax_last.set_xlabel("minutes since " + pd.Timestamp(int(t_ns[0]), unit="ns", tz="UTC")
                       .strftime("%Y-%m-%d %H:%M:%S UTC"))
     ax_sig.grid(True, lw=0.3, which="both")
     ax_sig.legend(loc="upper left", fontsize=8)

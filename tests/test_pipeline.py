@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from gpsdr_cli import config
-from gpsdr_cli.conventions import TRACK_COLUMNS, TRACK_EXTRA_COLUMNS
+from gpsdr_cli.conventions import QC_COLUMNS, TRACK_COLUMNS, TRACK_EXTRA_COLUMNS
 from gpsdr_cli.errors import NoDataError
 from gpsdr_cli.filters import NAMES
 from gpsdr_cli.io.drive import Drive
@@ -56,7 +56,7 @@ def _available(name: str) -> bool:
 
 def test_track_has_the_contract_columns(result) -> None:
     track = result.track
-    assert list(track.columns) == list(TRACK_COLUMNS) + list(TRACK_EXTRA_COLUMNS)
+    assert list(track.columns) == list(TRACK_COLUMNS) + list(TRACK_EXTRA_COLUMNS) + list(QC_COLUMNS)
     assert str(track["time"].dtype) == "datetime64[ns, UTC]"
     assert track["gnss_used"].dtype == bool
     assert track["time"].is_monotonic_increasing and track["time"].is_unique

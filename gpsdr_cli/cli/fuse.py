@@ -61,6 +61,9 @@ def stats_next_to(track: Path, fmt: str) -> Path:
               help="Track output (- = stdout).  Default: LOG.fused.parquet next to the log.")
 @click.option("--stats", "stats_path", type=str, metavar="STATS.parquet",
               help="Statistics output.  Default: next to the track, .stats.parquet.")
+@click.option("--lever-arm", "lever_arm", type=str, metavar="FWD,LEFT[,UP]",
+              help="Vehicle reference point to GNSS antenna, metres (forward, left, up); the "
+                   "track is reported at the reference point.  Default: [gnss] lever_arm_m.")
 @config_option
 @click.option("--print-config", is_flag=True,
               help="Print the effective parameters as TOML (a --config file) and exit.")
@@ -74,7 +77,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
          print_config: bool, fmt: str, date: Any, gnss_offset: str | float | None,
          epsg: int | None, topics: dict[str, str] | None, log_time: bool,
          gyro_units: str | None, gyro_sign: str | None, odo_kind: str | None,
-         ticks_per_m: float | None, quiet: bool) -> None:
+         ticks_per_m: float | None, lever_arm: str | None, quiet: bool) -> None:
     """Fuse one drive's GNSS, gyro and odometer logs into a track.
 
     LOG is an MCAP file (or an NMEA file; - reads NMEA from stdin).  Or give the
@@ -88,11 +91,16 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
       gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --filter fafkf --smooth \\
                  --reference truth.csv -o track.parquet
       cat gps.nmea | gpsdr fuse - -o - --format csv > track.csv
+      gpsdr fuse drive.mcap --lever-arm 1.5,0.3     # antenna 1.5 m ahead, 0.3 m left
       gpsdr fuse --print-config > params.toml
     """
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
                          gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
                          gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m)
+    if lever_arm is not None:
+        from ..lever_arm import parse_lever_arm
+
+        params["gnss"]["lever_arm_m"] = parse_lever_arm(lever_arm)
     if print_config:
         from .. import config
 
@@ -238,6 +246,12 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
                    file=err)
     for note in res.drive_warnings:
         click.echo(f"warning: {note}", file=err)
+    every = res.stats[res.stats["segment"] == "all"]
+    if "separation_rms_m" in every and len(every) and str(every["separation_rms_m"].iloc[0]) != "<NA>":
+        row = every.iloc[0]
+        click.echo(f"forward/backward separation: RMS {float(row['separation_rms_m']):.2f} m, p95 "
+                   f"{float(row['separation_p95_m']):.2f} m, max {float(row['separation_max_m']):.2f} m",
+                   file=err)
     if reference:
         s = res.summary()
         if math.isnan(s["rmse_m"]):  # NaN: no epoch inside the reference's time span
