@@ -24,6 +24,7 @@ Examples:
   gpsdr fuse drive.mcap
   gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --reference truth.csv
   gpsdr info gps.nmea
+  gpsdr export drive.fused.parquet -o drive.gpx --every 1
   gpsdr batch 'logs/*' -o out/ --jobs 4
 """
 
@@ -99,13 +100,14 @@ def cli() -> None:
 
 def _register() -> None:
     from .batch import batch
+    from .export import export
     from .fuse import fuse
     from .info import info
     from .plot import plot
     from .simulate import simulate
     from .stats import stats
 
-    for cmd in (fuse, info, stats, simulate, plot, batch):
+    for cmd in (fuse, info, stats, simulate, plot, batch, export):
         cli.add_command(cmd)
 
 
