@@ -9,9 +9,10 @@ sqrt(sigma_e^2 + sigma_n^2)), ``speed`` (m/s), ``course`` (deg clockwise from no
 are left out.
 
 Written as text column by column rather than with gpxpy's object model, although gpxpy
-is a dependency: building and serialising 360 k ``GPXTrackPoint`` objects (a 100 Hz hour)
-took 12.6 s on the reference machine, over the 10 s an export may take; this writer
-takes about a second.  The output is read back with ``gpxpy.parse`` in the tests.
+is a dependency: building and serialising one ``GPXTrackPoint`` per row does not fit a
+100 Hz hour (360 k points) into the 10 s an export may take, this writer does
+(docs/decisions/0017-export-writers.md).  The output is read back with ``gpxpy.parse``
+in the tests.
 """
 
 from __future__ import annotations
