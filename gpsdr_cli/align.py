@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from .config import Params
-from .conventions import FIX_DR, NS_PER_S
+from .conventions import FIX_DR, FIX_FLOAT_RTK, FIX_RTK, NS_PER_S
 from .geodesy import LocalFrame
 from .io.drive import Drive, SkipReport
 
@@ -76,6 +76,8 @@ class Epochs:
     gap_s: float
     has_accel: np.ndarray | None = None
     accel_mps2: np.ndarray | None = None
+    #: share of the usable fixes that are RTK fixed (GGA quality 4)
+    rtk_fixed_share: float = 0.0
 
     def __post_init__(self) -> None:
         n = len(self.t_ns)
@@ -284,12 +286,22 @@ def _clean_stream(drive: Drive, name: str, t_ns: np.ndarray, finite: np.ndarray)
 
 
 def base_sigma(sigma_e: np.ndarray, sigma_n: np.ndarray, hdop: np.ndarray,
-               params: Params) -> tuple[np.ndarray, np.ndarray]:
-    """Base GNSS 1-sigma per axis (m): receiver sigmas, else HDOP x UERE, else the default."""
+               params: Params, quality: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Base GNSS 1-sigma per axis (m): receiver sigmas (GST, covariance, hAcc), else HDOP x
+    the UERE of the fix's quality, else that UERE alone.
+
+    The fix quality decides the UERE: RTK fixed (GGA 4) is a centimetre measurement, RTK
+    float (5) a decimetre one, every other fix metres (``[gnss] uere_rtk_fixed_m``,
+    ``uere_rtk_float_m``, ``uere_m``)."""
     g = params["gnss"]
-    from_hdop = hdop * g["uere_m"] / np.sqrt(2.0)  # HDOP x UERE is the horizontal radius
-    fallback = np.where(np.isfinite(from_hdop) & (hdop > 0), from_hdop,
-                        g["sigma_default_m"] / np.sqrt(2.0))
+    uere = np.full(len(hdop), float(g["uere_m"]))
+    if quality is not None:
+        q = np.asarray(quality)
+        uere = np.where(q == FIX_RTK, float(g["uere_rtk_fixed_m"]),
+                        np.where(q == FIX_FLOAT_RTK, float(g["uere_rtk_float_m"]), uere))
+    from_hdop = hdop * uere / np.sqrt(2.0)  # HDOP x UERE is the horizontal radius
+    default = np.where(uere < g["uere_m"], uere, g["sigma_default_m"])
+    fallback = np.where(np.isfinite(from_hdop) & (hdop > 0), from_hdop, default / np.sqrt(2.0))
     sd_e = np.where(np.isfinite(sigma_e) & (sigma_e > 0), sigma_e, fallback)
     sd_n = np.where(np.isfinite(sigma_n) & (sigma_n > 0), sigma_n, fallback)
     return np.maximum(sd_e, g["sigma_min_m"]), np.maximum(sd_n, g["sigma_min_m"])
@@ -333,6 +345,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
 
     gnss_t = np.zeros(0, np.int64)
     g_rec: dict[str, np.ndarray] = {}
+    rtk_share = 0.0
     if drive.gnss is not None and len(drive.gnss):
         g = drive.gnss
         keep = _clean_stream(drive, "gnss", g.t_ns, np.ones(len(g), bool))
@@ -346,7 +359,9 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
         else:
             e = n = np.full(len(keep), np.nan)
         usable &= np.isfinite(e) & np.isfinite(n)
-        sd_e, sd_n = base_sigma(g.sigma_e_m[keep], g.sigma_n_m[keep], g.hdop[keep], params)
+        sd_e, sd_n = base_sigma(g.sigma_e_m[keep], g.sigma_n_m[keep], g.hdop[keep], params,
+                                q)
+        rtk_share = float(np.count_nonzero(usable & (q == FIX_RTK))) / max(int(usable.sum()), 1)
         g_rec = {"usable": usable, "e": e, "n": n, "sd_e": sd_e, "sd_n": sd_n, "pdop": g.pdop[keep],
                      "speed": g.speed_mps[keep], "course": np.deg2rad(g.course_deg[keep])}
         parts.append(gnss_t)
@@ -419,7 +434,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                   gnss_sd_e=sd_e, gnss_sd_n=sd_n, pdop=pdop, gnss_speed_mps=gspeed,
                   gnss_course_rad=gcourse, has_gyro=has_gyro, yaw_rate_radps=yaw,
                   has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s,
-                  has_accel=has_accel, accel_mps2=accel)
+                  has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share)
 
 
 def sorted_unique(t: np.ndarray) -> np.ndarray:

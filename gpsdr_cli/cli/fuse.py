@@ -64,6 +64,9 @@ def stats_next_to(track: Path, fmt: str) -> Path:
 @click.option("--lever-arm", "lever_arm", type=str, metavar="FWD,LEFT[,UP]",
               help="Vehicle reference point to GNSS antenna, metres (forward, left, up); the "
                    "track is reported at the reference point.  Default: [gnss] lever_arm_m.")
+@click.option("--export", "export_path", type=str, metavar="OUT",
+              help="Also export the fused track (.gpx, .kml, .geojson, .csv, .mcap; "
+                   "see gpsdr export) after writing it.")
 @config_option
 @click.option("--print-config", is_flag=True,
               help="Print the effective parameters as TOML (a --config file) and exit.")
@@ -73,7 +76,8 @@ def stats_next_to(track: Path, fmt: str) -> Path:
 @common_options
 def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, accel: str | None,
          filter_name: str | None, smooth: bool | None, reference: str | None,
-         output: str | None, stats_path: str | None, config_path: str | None,
+         output: str | None, stats_path: str | None, export_path: str | None,
+         config_path: str | None,
          print_config: bool, fmt: str, date: Any, gnss_offset: str | float | None,
          epsg: int | None, topics: dict[str, str] | None, log_time: bool,
          gyro_units: str | None, gyro_sign: str | None, odo_kind: str | None,
@@ -92,6 +96,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
                  --reference truth.csv -o track.parquet
       cat gps.nmea | gpsdr fuse - -o - --format csv > track.csv
       gpsdr fuse drive.mcap --lever-arm 1.5,0.3     # antenna 1.5 m ahead, 0.3 m left
+      gpsdr fuse drive.mcap --export drive.gpx
       gpsdr fuse --print-config > params.toml
     """
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
@@ -111,14 +116,18 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
                                "(see gpsdr fuse --help)")
     if log is not None and gps is not None:
         raise click.UsageError("give either LOG or --gps, not both")
+    if export_path is not None:
+        from ..io.export import format_of
+
+        format_of(export_path)  # an unknown suffix fails before the work
     stdin_input = "-" in (log, gps)
     track_path, stats_out = _outputs(log or gps or gyro or odo or "-", output, stats_path, fmt,
                                      stdin_input)
     inputs = [p for p in (log, gps, gyro, odo, accel, reference) if p and p != "-"]
-    for out in (track_path, stats_out):
+    for out in (track_path, stats_out, export_path):
         if out is not None and out != "-" and any(_same(out, p) for p in inputs):
             raise UsageError(f"{out}: refusing to overwrite an input file; give another -o/--stats")
-    for out in (track_path, stats_out):  # fail before the work, and before writing anything
+    for out in (track_path, stats_out, export_path):  # fail before the work, and before writing anything
         if out is not None and out != "-" and not Path(out).resolve().parent.is_dir():
             from ..errors import InputError
 
@@ -155,6 +164,11 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
             if stats_out is not None:
                 write_table(res.stats, stats_out, metadata=res.metadata,
                             units=stats_units(res.stats), fmt=fmt)
+            if export_path is not None:
+                from ..io.export import ExportOptions, export_track
+
+                export_track(res.track, res.metadata, export_path,
+                             ExportOptions(name=f"gpsdr {res.metadata.get('filter')} track"))
     finally:
         if ahead is not None:
             ahead.cancel()  # failed before the filter: no orphan compiler

@@ -26,6 +26,7 @@ Examples:
   gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --reference truth.csv
   gpsdr info gps.nmea
   gpsdr extract gps.nmea gyro.csv odo.csv -o drive.parquet
+  gpsdr export drive.fused.parquet -o drive.gpx --every 1
   gpsdr batch 'logs/*' -o out/ --jobs 4
 """
 
@@ -78,6 +79,7 @@ def cli() -> None:
 def _register() -> None:
     from .batch import batch
     from .compare import compare
+    from .export import export
     from .extract import extract
     from .fuse import fuse
     from .info import info
@@ -85,7 +87,7 @@ def _register() -> None:
     from .simulate import simulate
     from .stats import stats
 
-    for cmd in (fuse, info, stats, simulate, plot, batch, extract, compare):
+    for cmd in (fuse, info, stats, simulate, plot, batch, extract, compare, export):
         cli.add_command(cmd)
 
 

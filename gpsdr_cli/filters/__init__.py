@@ -8,6 +8,7 @@ import, and ``gpsdr --help`` must stay fast).
 
 from __future__ import annotations
 
+import functools
 import importlib
 from collections.abc import Callable
 
@@ -31,7 +32,13 @@ NAMES: tuple[str, ...] = tuple(MODULES)
 
 def register(name: str) -> Callable[[RunFn], RunFn]:
     def deco(fn: RunFn) -> RunFn:
-        _REGISTRY[name] = fn
+        from .gnss_model import gnss_error_model
+
+        @functools.wraps(fn)
+        def run(epochs, params):  # every filter sees the same GNSS error model
+            return fn(*gnss_error_model(epochs, params))
+
+        _REGISTRY[name] = run
         return fn
     return deco
 
