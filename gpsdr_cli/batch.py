@@ -293,7 +293,7 @@ def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
                         str(track_p), str(stats_p), time.process_time() - c0)
         from .io.parquet import write_table
         from .io.readers import read_drive
-        from .pipeline import TRACK_UNITS, fuse, stats_units
+        from .pipeline import WRITTEN_TRACK_UNITS, fuse, stats_units
 
         drive = read_drive(spec.log, gps=spec.gps, gyro=spec.gyro, odo=spec.odo,
                            params=opts.params, topics=opts.topics, date=opts.date,
@@ -307,7 +307,7 @@ def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
         stats_p.parent.mkdir(parents=True, exist_ok=True)  # a worker on another machine
         meta = {**res.metadata, **opts.extra_meta, "drive": spec.name,
                 "batch.request": request_key(opts)}
-        write_table(res.track, track_p, metadata=meta, units=TRACK_UNITS, fmt=opts.fmt)
+        write_table(res.track, track_p, metadata=meta, units=WRITTEN_TRACK_UNITS, fmt=opts.fmt)
         write_table(res.stats, stats_p, metadata=meta, units=stats_units(res.stats), fmt=opts.fmt)
         return _row(spec, "ok", "", time.perf_counter() - t0, res.summary(),
                     str(track_p), str(stats_p), time.process_time() - c0)

@@ -36,7 +36,8 @@ from .options import (
 @reader_options
 @common_options
 def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
-          smooth: bool | None, config_path: str | None, fmt: str, force: bool,
+          smooth: str | None, odo_scale: str | None, gyro_bias: str | None,
+          config_path: str | None, fmt: str, force: bool,
           scheduler: str | None, gnss_offset: str | float | None, epsg: int | None,
           date: Any, topics: dict[str, str] | None, log_time: bool, gyro_units: str | None,
           gyro_sign: str | None, odo_kind: str | None, ticks_per_m: float | None,
@@ -53,6 +54,7 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
     \b
     Examples:
       gpsdr batch logs/ -o out/ --jobs 8 --filter fafkf --smooth
+      gpsdr batch logs/ -o out/ --smooth graph --odo-scale 1.012+-0.005
       gpsdr batch 'logs/**/*.mcap' -o out/
       gpsdr batch logs/ -o out/ --scheduler tcp://10.0.0.5:8786
       gpsdr batch 'drives/*/' -o out/ --gnss-offset auto --smooth
@@ -73,7 +75,8 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
 
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
                          gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
-                         gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m)
+                         gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m,
+                         odo_scale=odo_scale, gyro_bias=gyro_bias)
     specs = find_drives(target)
     if not specs:
         from ..errors import InputError
