@@ -184,6 +184,9 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         spd_k = np.hypot(np.nan_to_num(init.v_e), np.nan_to_num(init.v_n))[key_ep]
         span = 1.0 / (1.0 / tau + spd_k / max(float(gp["gnss_corr_dist_m"]), 1e-9))
         infl = np.sqrt(np.maximum(1.0, rate * span))
+        # carrier-phase fixes (centimetres) are white at the fix rate: no inflation
+        infl = np.where(np.hypot(sde, sdn) / math.sqrt(2.0) < float(gp["gnss_corr_min_sd_m"]),
+                        1.0, infl)
         sde = sde * infl
         sdn = sdn * infl
     gspd = np.asarray(epochs.gnss_speed_mps, float)[key_ep].copy()
