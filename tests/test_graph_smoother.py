@@ -44,7 +44,7 @@ def nlos_run():
 
 
 def test_nlos_graph_beats_fixes_and_rts(nlos_run) -> None:
-    sim, nl, (ep, rts, out, te, tn) = nlos_run
+    _sim, _nl, (ep, rts, out, te, tn) = nlos_run
     assert out.result is not None, out.message
     g = out.result
     f = ep.has_gnss
@@ -60,7 +60,7 @@ def test_nlos_graph_beats_fixes_and_rts(nlos_run) -> None:
 
 
 def test_nlos_fixes_are_downweighted(nlos_run) -> None:
-    sim, nl, (ep, rts, out, te, tn) = nlos_run
+    _sim, _nl, (ep, _rts, out, te, tn) = nlos_run
     w = out.gnss_weight
     f = ep.has_gnss
     err = np.hypot(ep.gnss_e - te, ep.gnss_n - tn)
@@ -74,7 +74,7 @@ def test_nlos_fixes_are_downweighted(nlos_run) -> None:
 
 
 def test_odometer_scale_is_estimated(nlos_run) -> None:
-    sim, nl, (ep, rts, out, te, tn) = nlos_run
+    sim, _nl, (_ep, _rts, out, _te, _tn) = nlos_run
     true_scale = 1.0 / (1.0 + sim.noise["odo_scale_error"])  # the odometer reads (1 + err) x
     assert abs(out.odo_scale - true_scale) < 0.005
 
@@ -90,7 +90,7 @@ def test_outage_end_error_small() -> None:
     g.lat_deg = np.where(gap, np.nan, g.lat_deg)
     g.lon_deg = np.where(gap, np.nan, g.lon_deg)
     g.fix_quality = np.where(gap, 0, g.fix_quality).astype(g.fix_quality.dtype)
-    ep, rts, out, te, tn = _run(sim, drive)
+    ep, _rts, out, te, tn = _run(sim, drive)
     assert out.result is not None, out.message
     r = out.result
     ts = (ep.t_ns - g.t_ns[0]) / 1e9
@@ -121,7 +121,7 @@ def test_rtk_fixes_followed_to_centimetres() -> None:
     g.sigma_e_m = np.where(ok, 0.02, np.nan)
     g.sigma_n_m = np.where(ok, 0.02, np.nan)
     g.fix_quality = np.where(ok, 4, 0).astype(g.fix_quality.dtype)
-    ep, rts, out, te, tn = _run(sim, drive)
+    ep, _rts, out, te, tn = _run(sim, drive)
     assert out.result is not None, out.message
     r = out.result
     k0 = int(np.argmax(ep.has_gnss))  # from the first fix (the lead-in is dead-reckoned)
