@@ -380,6 +380,10 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
                  "graph_fixes_downweighted": n_down,
                  "graph_odo_scale": float(np.mean(s_k)) if have_odo else math.nan,
                  "graph_gyro_bias_radps": float(np.mean(b_k)) if have_gyro else math.nan,
+                 "graph_odo_scale_sd": float(math.sqrt(max(s_var[-1], 0.0)))
+                 if have_odo else math.nan,
+                 "graph_gyro_bias_sd_radps": float(math.sqrt(max(b_var[-1], 0.0)))
+                 if have_gyro else math.nan,
                  "gnss_rejected": int(rejected.sum())})
     res = FilterResult(t_ns=np.asarray(epochs.t_ns, np.int64), e=e, n=nn, v_e=ve, v_n=vn,
                        var_e=var_e, var_n=var_n, cov_en=cov_en,

@@ -190,3 +190,33 @@ def test_cli_smooth_choices(tmp_path) -> None:
     res = runner.invoke(cli, ["fuse", str(log), "--smooth", "graph", "--odo-scale", "x",
                               "-o", str(tmp_path / "x.parquet")])
     assert res.exit_code != 0 and "--odo-scale" in res.output
+
+
+def test_batch_calibrates_per_vehicle(tmp_path) -> None:
+    """Two vehicles (folders), two drives each: the pooled odometer scale of each vehicle
+    within 0.005 of its truth, and the second pass fuses with it."""
+    from click.testing import CliRunner
+
+    from gpsdr_cli.batch import BatchOptions, calibrate_vehicles, find_drives
+    from gpsdr_cli.cli.main import cli
+    from gpsdr_cli.simulate import write_drive
+
+    truth = {}
+    for vehicle, seed in (("car_a", 11), ("car_b", 12)):
+        for k, dur in enumerate((100.0, 130.0)):
+            sim = simulate_drive("urban_canyon", seed=seed, duration_s=dur)
+            write_drive(sim, tmp_path / "fleet" / vehicle / f"drive{k}", mcap=False)
+            truth[vehicle] = 1.0 / (1.0 + sim.noise["odo_scale_error"])
+    specs = find_drives(str(tmp_path / "fleet"))
+    assert len(specs) == 4
+    cals = calibrate_vehicles(specs, BatchOptions(out_dir=str(tmp_path / "o"),
+                                                  params=config.defaults()))
+    assert len(cals) == 2
+    for vehicle, cal in cals.items():
+        name = vehicle.rsplit("/", 1)[-1]
+        assert cal.drives == 2
+        assert abs(cal.odo_scale - truth[name]) < 0.005, (name, cal)
+    res = CliRunner().invoke(cli, ["batch", str(tmp_path / "fleet"), "-o", str(tmp_path / "out"),
+                                   "--jobs", "1", "--calibrate-per-vehicle", "-q"])
+    assert res.exit_code == 0, res.output
+    assert len(list((tmp_path / "out").rglob("*.fused.parquet"))) == 4
