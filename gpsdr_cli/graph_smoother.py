@@ -152,9 +152,15 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     max_spd = float(params["odo"]["max_speed_mps"])
     yaw_raw = np.asarray(epochs.yaw_rate_radps, float)
     odo_raw = np.asarray(epochs.odo_speed_mps, float)
+    yaw_bad = ~(np.abs(np.nan_to_num(yaw_raw)) <= max_rate)
+    # a clipping gyro: many readings exactly at the drive's largest magnitude are not rates
+    mag = np.abs(np.where(np.isfinite(yaw_raw) & ~yaw_bad, yaw_raw, 0.0))
+    if len(mag) and mag.max() > 0:
+        at_max = mag >= mag.max()
+        if at_max.sum() >= int(params["gyro"]["saturation_min_count"]):
+            yaw_bad |= at_max
     yaw, gyro_ok = _ffill_ok(t_s, np.asarray(epochs.has_gyro, bool), yaw_raw,
-                             float(gp["sensor_max_age_s"]),
-                             bad=~(np.abs(np.nan_to_num(yaw_raw)) <= max_rate))
+                             float(gp["sensor_max_age_s"]), bad=yaw_bad)
     odo, odo_ok = _ffill_ok(t_s, np.asarray(epochs.has_odo, bool), odo_raw,
                             float(gp["sensor_max_age_s"]),
                             bad=~((np.nan_to_num(odo_raw, nan=-1.0) >= 0) & (odo_raw <= max_spd)))
