@@ -2,6 +2,7 @@
 and without NLOS steps (``gpsdr_cli.testing.nlos``), started from aekf + RTS.
 
     .venv/bin/python benchmarks/graph_sweep.py                       # the default settings
+    .venv/bin/python benchmarks/graph_sweep.py --true-scale-sd 0.005  # + the true odometer scale
     .venv/bin/python benchmarks/graph_sweep.py --seeds 1,2 \\
         '{"kernel": "gauss"}' '{"kernel_scale": 1.0}' '{"kernel": "huber", "kernel_scale": 1.0}'
 
@@ -37,6 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("overrides", nargs="*", default=["{}"])
     ap.add_argument("--seeds", default="1")
     ap.add_argument("--duration", type=float, default=300.0)
+    ap.add_argument("--true-scale-sd", type=float, default=0.0,
+                    help="also give the graph the true odometer scale as prior with this sigma")
     args = ap.parse_args(argv)
     print("| settings | seed | drive | fixes m | aekf + RTS m | graph m | iterations |")
     print("|---|---|---|---|---|---|---|")
@@ -54,7 +57,12 @@ def main(argv: list[str] | None = None) -> int:
             f = ep.has_gnss
             fix = _rms(np.hypot(ep.gnss_e[f] - te[f], ep.gnss_n[f] - tn[f]))
             rts_m = _rms(np.hypot(rts.e - te, rts.n - tn))
-            for text in args.overrides:
+            runs = list(args.overrides)
+            if args.true_scale_sd > 0:
+                true_s = 1.0 / (1.0 + sim.noise["odo_scale_error"])
+                runs.append(json.dumps({"odo_scale": round(true_s, 6),
+                                        "odo_scale_sd": args.true_scale_sd}))
+            for text in runs:
                 q = copy.deepcopy(p)
                 q["graph"].update(json.loads(text))
                 out = smooth_graph(ep, rts, q)

@@ -220,3 +220,20 @@ def test_batch_calibrates_per_vehicle(tmp_path) -> None:
                                    "--jobs", "1", "--calibrate-per-vehicle", "-q"])
     assert res.exit_code == 0, res.output
     assert len(list((tmp_path / "out").rglob("*.fused.parquet"))) == 4
+
+
+@pytest.mark.parametrize("case", ["gyro_saturation", "jump_100m", "no_gyro", "no_dr",
+                                  "outage_60s", "standstill_30min"])
+def test_fault_cases_with_the_graph(case: str, tmp_path, monkeypatch) -> None:
+    """The fault suite's contract and accuracy bounds (faults.accuracy_problems: RMSE per
+    fault, 100 m jumps rejected, < 1 m drift over a 30-min stop) with [filter] smoother = graph
+    (a failed solve would keep the RTS track: none is allowed here)."""
+    from gpsdr_cli.testing import faults as F
+
+    monkeypatch.setitem(config.DEFAULTS["filter"], "smoother", "graph")
+    c = F.CASES[case]
+    inputs, out = F.run_case(c, "aekf", tmp_path, F.base_sim())
+    assert F.outcome_problems(out, c.expect) == []
+    assert "graph smoother:" not in (out.stderr or "")
+    problems = [p for p in F.accuracy_problems(c, inputs, out) if "no growth" not in p]
+    assert problems == []
