@@ -71,6 +71,12 @@ TRACK_EXTRA_COLUMNS: dict[str, str] = {
     "nis": "dimensionless, normalised innovation squared of the GNSS update (2 dof; null where none)",
 }
 
+#: Track Parquet: columns only the graph smoother (``--smooth graph``) writes.
+GRAPH_TRACK_COLUMNS: dict[str, str] = {
+    "gnss_weight": "dimensionless, robust weight of the GNSS fix in the graph smoother (1: full "
+                   "weight; null where no fix)",
+}
+
 #: Statistics Parquet columns (one row per filter x segment).
 STATS_COLUMNS: dict[str, str] = {
     "filter": "filter name",

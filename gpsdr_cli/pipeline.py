@@ -27,7 +27,13 @@ import pandas as pd
 
 from . import __version__, config
 from .config import Params
-from .conventions import NS_PER_S, STATS_COLUMNS, TRACK_COLUMNS, TRACK_EXTRA_COLUMNS
+from .conventions import (
+    GRAPH_TRACK_COLUMNS,
+    NS_PER_S,
+    STATS_COLUMNS,
+    TRACK_COLUMNS,
+    TRACK_EXTRA_COLUMNS,
+)
 from .errors import GpsdrError, InputError, NoDataError, UsageError
 from .geodesy import LocalFrame
 
@@ -43,10 +49,7 @@ NULLABLE_TRACK_COLUMNS = frozenset({"pdop", "gnss_e", "gnss_n", "nis", "gnss_wei
 #: Column -> "unit, meaning" for the track file's field metadata.
 TRACK_UNITS: dict[str, str] = {**TRACK_COLUMNS, **TRACK_EXTRA_COLUMNS}
 #: ... and for the columns only the graph smoother writes.
-GRAPH_TRACK_UNITS: dict[str, str] = {
-    "gnss_weight": "dimensionless, robust weight of the GNSS fix in the graph smoother (1: full "
-                   "weight; null where no fix)",
-}
+GRAPH_TRACK_UNITS: dict[str, str] = dict(GRAPH_TRACK_COLUMNS)
 #: What the writers label: every column a track may carry.
 WRITTEN_TRACK_UNITS: dict[str, str] = {**TRACK_UNITS, **GRAPH_TRACK_UNITS}
 SMOOTHERS = ("rts", "graph", "none")
