@@ -187,6 +187,11 @@ def test_cli_smooth_choices(tmp_path) -> None:
 
         meta = {k.decode(): v.decode() for k, v in pq.read_schema(out).metadata.items()}
         assert meta["smoother"] == smoother
+    # a bare --smooth before the LOG argument is still RTS (it was a flag)
+    out = tmp_path / "bare.parquet"
+    res = runner.invoke(cli, ["fuse", "--smooth", str(log), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "gnss_weight" not in pd.read_parquet(out).columns
     res = runner.invoke(cli, ["fuse", str(log), "--smooth", "graph", "--odo-scale", "x",
                               "-o", str(tmp_path / "x.parquet")])
     assert res.exit_code != 0 and "--odo-scale" in res.output

@@ -9,6 +9,7 @@ from typing import Any, Self
 import click
 
 from .options import (
+    SmoothCommand,
     common_options,
     config_option,
     filter_options,
@@ -19,7 +20,7 @@ from .options import (
 )
 
 
-@click.command()
+@click.command(cls=SmoothCommand)
 @click.argument("target", metavar="DIR_OR_GLOB")
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
               metavar="OUT_DIR", help="Where each drive's track and stats go (created).")

@@ -12,6 +12,7 @@ import click
 from ..errors import UsageError
 from .options import (
     STATE,
+    SmoothCommand,
     common_options,
     config_option,
     filter_options,
@@ -45,7 +46,7 @@ def stats_next_to(track: Path, fmt: str) -> Path:
     return track.with_name(f"{stem}.stats.{'parquet' if fmt == 'parquet' else 'csv'}")
 
 
-@click.command()
+@click.command(cls=SmoothCommand)
 @click.argument("log", required=False, metavar="[LOG]")
 @click.option("--gps", type=str, metavar="G.nmea", help="NMEA 0183 log (or - for stdin).")
 @click.option("--gyro", type=str, metavar="Y.csv", help="Gyro CSV: t, yaw_rate.")

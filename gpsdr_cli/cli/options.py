@@ -51,6 +51,26 @@ def config_option(fn: F) -> F:
                              "(see `gpsdr fuse --print-config`).")(fn)
 
 
+SMOOTH_CHOICES = ("rts", "graph", "none")
+
+
+class SmoothCommand(click.Command):
+    """A command whose ``--smooth`` takes an optional value: a bare ``--smooth`` (followed by
+    anything that is not rts, graph or none, e.g. the LOG argument) means ``--smooth=rts``,
+    as it did when ``--smooth`` was a flag."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        out: list[str] = []
+        for i, a in enumerate(args):
+            if a == "--":
+                out.extend(args[i:])
+                break
+            if a == "--smooth" and (i + 1 >= len(args) or args[i + 1] not in SMOOTH_CHOICES):
+                a = "--smooth=rts"
+            out.append(a)
+        return super().parse_args(ctx, out)
+
+
 def _keep_no_smooth(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     # --no-smooth (handled first when given) must not be overwritten by an absent --smooth
     return ctx.params.get("smooth") if value is None else value
@@ -74,7 +94,7 @@ def filter_options(fn: F) -> F:
                            "e.g. 1.012+-0.005.")(fn)
     fn = click.option("--no-smooth", is_flag=True, expose_value=False, callback=_no_smooth,
                       help="No smoother: the forward filter's track.")(fn)
-    fn = click.option("--smooth", type=click.Choice(("rts", "graph", "none")), is_flag=False,
+    fn = click.option("--smooth", type=click.Choice(SMOOTH_CHOICES), is_flag=False,
                       flag_value="rts", default=None, callback=_keep_no_smooth,
                       help="After the forward filter: rts (the default of a bare --smooth), "
                            "graph (robust batch smoother: down-weights NLOS fixes) or none "
