@@ -12,6 +12,11 @@ and the oracle (the same filter told the true noise: ``simulate.oracle_params`` 
     .venv/bin/python benchmarks/accuracy.py --scenarios urban_nlos,rtk,no_odometer --no-comma \
         --out /tmp/lying.md                                 # the receivers that lie (~15 min)
 
+Smoothing modes: forward, ``+ RTS`` and ``+ graph`` (the robust batch smoother,
+``[filter] smoother = "graph"``; ``--no-graph`` skips it; no oracle for it).  Scenario
+``urban_nlos``: urban_canyon with NLOS steps of 10-80 m lasting 5-60 s added to its fixes
+while the reported sigma stays 1.5 m (``gpsdr_cli.testing.nlos.add_nlos``).
+
 Figures per run: RMSE, CEP95, max horizontal error against the truth (m), and the
 60-s-outage drift: the error at the end of each GNSS outage of 50-70 s as % of the
 distance driven in it (mean over such outages; "-" when the drive has none).
@@ -128,6 +133,8 @@ POSITIONS_ONLY = " (positions only)"
 POSITIONS_ONLY_SCENARIOS = ("open_sky", "urban_canyon", "tunnels", "stop_and_go")
 #: the scenario the issue sets the comparative and the GNSS-reduction targets for
 URBAN = "urban_canyon"
+#: the urban canyon with non-line-of-sight steps of 10-80 m for 5-60 s on its fixes
+NLOS = "urban_nlos"
 #: the comparative targets: (check, what it measures, adaptive method, baseline method,
 #: figure compared (RMSE or the mean squared error), reduction needed)
 COMPARISONS = [
@@ -208,11 +215,13 @@ def scenario_of(row: Row) -> str:
     return row.drive.split(" ")[0]
 
 
-def params_for(name: str, smooth: bool, overrides: dict | None = None) -> dict:
-    """Default parameters for filter ``name`` (+ RTS), with config overrides {section: {key: value}}."""
+def params_for(name: str, smooth: bool | str, overrides: dict | None = None) -> dict:
+    """Default parameters for filter ``name`` (+ RTS when ``smooth`` is True, + the graph smoother
+    when it is ``"graph"``), with config overrides {section: {key: value}}."""
     p = config.defaults()
     p["filter"]["name"] = name
-    p["filter"]["smooth"] = smooth
+    p["filter"]["smooth"] = bool(smooth)
+    p["filter"]["smoother"] = "graph" if smooth == "graph" else ("rts" if smooth else "none")
     for section, values in (overrides or {}).items():
         for key, value in values.items():
             if key not in p[section]:
@@ -270,10 +279,23 @@ def figures(track: pd.DataFrame, ref: pd.DataFrame, name: str, params: dict) -> 
     return f
 
 
-def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_modes: list[bool],
-              oracle: bool, keep: dict, seed: int, paper: bool = True,
-              positions: bool = True) -> list[Row]:
-    sim = simulate_drive(scenario, seed=seed, duration_s=duration_s)
+def mode_label(smooth: bool | str) -> str:
+    """The method suffix of a smoothing mode."""
+    return " + graph" if smooth == "graph" else (" + RTS" if smooth else "")
+
+
+def bench_sim(scenario: str, names: list[str], duration_s: float | None,
+              smooth_modes: list[bool | str], oracle: bool, keep: dict, seed: int,
+              paper: bool = True, positions: bool = True) -> list[Row]:
+    nlos = scenario == NLOS
+    if nlos:  # the urban canyon with NLOS steps on its fixes (gpsdr_cli.testing.nlos)
+        from gpsdr_cli.testing.nlos import add_nlos
+
+        sim = simulate_drive(URBAN, seed=seed, duration_s=duration_s)
+        sim.drive = add_nlos(sim, seed).drive
+        oracle = paper = positions = False
+    else:
+        sim = simulate_drive(scenario, seed=seed, duration_s=duration_s)
     label = f"{scenario} (seed {seed}, {sim.truth['t_ns'].size / 100 / 60:.0f} min)"
     rows: list[Row] = []
     truth_ll = sim.truth[["t_ns", "lat", "lon"]]
@@ -292,7 +314,7 @@ def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_
                  for name, ends in hold_baselines(sim).items() if ends]
     for base, name, overrides, with_oracle in runs:
         for smooth in smooth_modes:
-            method = base + (" + RTS" if smooth else "")
+            method = base + mode_label(smooth)
             row = Row(label, method)
             try:
                 p = params_for(name, smooth, overrides)
@@ -309,7 +331,7 @@ def bench_sim(scenario: str, names: list[str], duration_s: float | None, smooth_
                 keep[(scenario, method)] = (track, ref)
                 row.rmse_m, row.cep95_m, row.max_m = f["rmse_m"], f["cep95_m"], f["max_m"]
                 row.mse_m2, row.drift60_pct, row.seconds = f["mse_m2"], f["drift60_pct"], secs
-                if with_oracle:
+                if with_oracle and smooth != "graph":
                     po = oracle_params(sim.noise, p)
                     states = name in ("fkf", "fafkf") or bool(p["aekf"]["gnss_err_states"])
                     otrack, _, _, _, _ = run_filter(odrive_gm if states else odrive, po)
@@ -474,7 +496,7 @@ def bench_comma(names: list[str], smooth_modes: list[bool], keep: dict) -> list[
             for smooth in smooth_modes:
                 p = params_for(name, smooth)
                 p["time"]["gnss_offset_s"] = 0.0 if auto else offset
-                method = name + (" + RTS" if smooth else "")
+                method = name + mode_label(smooth)
                 row = Row(label, method, offset=key)
                 try:
                     track, frame, secs, used_s, how = run_filter(copy.deepcopy(drive), p, auto)
@@ -790,11 +812,12 @@ def targets_markdown(tgts: list[Target]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    ap.add_argument("--scenarios", default=",".join((*SCENARIOS, NLOS)))
     ap.add_argument("--filters", default="")
     ap.add_argument("--quick", action="store_true", help="3-minute drives, no one_hour, no oracle")
     ap.add_argument("--no-comma", action="store_true")
     ap.add_argument("--no-smooth", action="store_true")
+    ap.add_argument("--no-graph", action="store_true", help="skip the graph smoother's column")
     ap.add_argument("--no-oracle", action="store_true")
     ap.add_argument("--no-paper", action="store_true",
                     help="skip the seeds' plain baselines (ekf/aekf Fang et al., fkf/fafkf Tang et al.)")
@@ -810,7 +833,9 @@ def main(argv: list[str] | None = None) -> int:
     scen = [s for s in args.scenarios.split(",") if s]
     if args.quick:
         scen = [s for s in scen if s != "one_hour"]
-    smooth_modes = [False] if args.no_smooth else [False, True]
+    smooth_modes: list[bool | str] = [False] if args.no_smooth else [False, True]
+    if not args.no_graph:
+        smooth_modes.append("graph")
     keep: dict = {}
     rows: list[Row] = []
     t0 = time.perf_counter()

@@ -31,6 +31,7 @@ made with the same parameters is skipped unless ``force``.
 from __future__ import annotations
 
 import glob
+import math
 import os
 import time
 import traceback
@@ -293,7 +294,7 @@ def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
                         str(track_p), str(stats_p), time.process_time() - c0)
         from .io.parquet import write_table
         from .io.readers import read_drive
-        from .pipeline import TRACK_UNITS, fuse, stats_units
+        from .pipeline import WRITTEN_TRACK_UNITS, fuse, stats_units
 
         drive = read_drive(spec.log, gps=spec.gps, gyro=spec.gyro, odo=spec.odo,
                            params=opts.params, topics=opts.topics, date=opts.date,
@@ -307,7 +308,7 @@ def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
         stats_p.parent.mkdir(parents=True, exist_ok=True)  # a worker on another machine
         meta = {**res.metadata, **opts.extra_meta, "drive": spec.name,
                 "batch.request": request_key(opts)}
-        write_table(res.track, track_p, metadata=meta, units=TRACK_UNITS, fmt=opts.fmt)
+        write_table(res.track, track_p, metadata=meta, units=WRITTEN_TRACK_UNITS, fmt=opts.fmt)
         write_table(res.stats, stats_p, metadata=meta, units=stats_units(res.stats), fmt=opts.fmt)
         return _row(spec, "ok", "", time.perf_counter() - t0, res.summary(),
                     str(track_p), str(stats_p), time.process_time() - c0)
@@ -585,3 +586,113 @@ def report_frame(rows: list[dict[str, Any]]) -> Any:
 
 def spec_dict(spec: DriveSpec) -> dict[str, Any]:
     return asdict(spec)
+
+
+# --------------------------------------------------------------------------- vehicle calibration
+
+@dataclass
+class VehicleCalibration:
+    """One vehicle's odometer scale and gyro bias pooled over its drives (inverse-variance
+    means of each drive's graph estimate); NaN where no drive had the sensor."""
+
+    vehicle: str
+    drives: int
+    odo_scale: float = math.nan
+    odo_scale_sd: float = math.nan
+    gyro_bias_radps: float = math.nan
+    gyro_bias_sd_radps: float = math.nan
+
+
+def vehicle_key(spec: DriveSpec, manifest: dict[str, str] | None = None) -> str:
+    """The vehicle a drive belongs to: its row in ``manifest`` (drive name -> vehicle), else
+    the folder its inputs are in (an MCAP's folder; a drive folder's parent)."""
+    if manifest is not None and spec.name in manifest:
+        return manifest[spec.name]
+    first = Path(spec.inputs[0]) if spec.inputs else Path(spec.name)
+    folder = first.parent
+    if spec.log is None:  # a folder drive: the vehicle is the folder holding drive folders
+        folder = folder.parent
+    return str(folder)
+
+
+def read_manifest(path: str, column: str) -> dict[str, str]:
+    """``drive -> vehicle`` from a CSV with a ``drive`` column (the drive's name in the report)
+    and the vehicle ``column``."""
+    import csv
+
+    from .errors import InputError
+
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except OSError as err:
+        raise InputError(path, f"cannot read the manifest: {err.strerror}") from err
+    if not rows or "drive" not in rows[0] or column not in rows[0]:
+        raise InputError(path, f"line 1: the manifest needs columns drive and {column}")
+    return {r["drive"]: r[column] for r in rows if r.get("drive")}
+
+
+def _pool(values: list[tuple[float, float]]) -> tuple[float, float]:
+    """Inverse-variance mean and its sigma of (value, sd) pairs (finite ones only)."""
+    ok = [(v, s) for v, s in values if math.isfinite(v) and math.isfinite(s) and s > 0]
+    if not ok:
+        return math.nan, math.nan
+    w = [1.0 / (s * s) for _, s in ok]
+    mean = sum(wi * v for wi, (v, _) in zip(w, ok, strict=True)) / sum(w)
+    return mean, math.sqrt(1.0 / sum(w))
+
+
+def calibrate_vehicles(specs: list[DriveSpec], opts: BatchOptions,
+                       manifest: dict[str, str] | None = None) -> dict[str, VehicleCalibration]:
+    """Each drive through the graph smoother without calibration priors; its odometer scale
+    and gyro bias estimates pooled per vehicle.  A drive that fails is left out."""
+    import copy
+
+    from .errors import GpsdrError
+    from .io.readers import read_drive
+    from .pipeline import fuse
+
+    params = copy.deepcopy(opts.params)
+    params["filter"]["smoother"] = "graph"
+    params["filter"]["smooth"] = True
+    params["graph"]["odo_scale"] = math.nan
+    params["graph"]["gyro_bias_radps"] = math.nan
+    per: dict[str, list[tuple[tuple[float, float], tuple[float, float]]]] = {}
+    for spec in specs:
+        try:
+            drive = read_drive(spec.log, gps=spec.gps, gyro=spec.gyro, odo=spec.odo,
+                               params=params, topics=opts.topics, date=opts.date,
+                               use_log_time=opts.use_log_time)
+            res = fuse(drive, params, None)
+        except GpsdrError:
+            continue
+        info = res.result.info
+        if info.get("smoothing") != "graph":
+            continue
+        per.setdefault(vehicle_key(spec, manifest), []).append((
+            (float(info.get("graph_odo_scale", math.nan)),
+             float(info.get("graph_odo_scale_sd", math.nan))),
+            (float(info.get("graph_gyro_bias_radps", math.nan)),
+             float(info.get("graph_gyro_bias_sd_radps", math.nan)))))
+    out: dict[str, VehicleCalibration] = {}
+    for vehicle, rows in per.items():
+        s, s_sd = _pool([r[0] for r in rows])
+        b, b_sd = _pool([r[1] for r in rows])
+        out[vehicle] = VehicleCalibration(vehicle, len(rows), s, s_sd, b, b_sd)
+    return out
+
+
+def with_calibration(params: Params, cal: VehicleCalibration, min_sd_scale: float = 0.002,
+                     min_sd_bias: float = 0.0002) -> Params:
+    """``params`` with the vehicle's calibration as the graph's priors (sigmas floored: the
+    pooled sigma of many drives is optimistic about what varies between them)."""
+    import copy
+
+    p = copy.deepcopy(params)
+    if math.isfinite(cal.odo_scale):
+        p["graph"]["odo_scale"] = cal.odo_scale
+        p["graph"]["odo_scale_sd"] = max(cal.odo_scale_sd, min_sd_scale)
+    if math.isfinite(cal.gyro_bias_radps):
+        p["graph"]["gyro_bias_radps"] = cal.gyro_bias_radps
+        p["graph"]["gyro_bias_sd_radps"] = max(cal.gyro_bias_sd_radps, min_sd_bias)
+    return p

@@ -60,22 +60,21 @@ _FIGURES = ("rmse_m", "mean_m", "cep50_m", "cep95_m", "max_m", "nis_in_95_share"
             "gnss_separation_rmse_m")
 
 
-def smoother_names(params: Params) -> tuple[str, ...] | None:
-    """The smoothers ``--smooth`` accepts, or None when ``[filter] smooth`` names them
-    itself (a string parameter: the pipeline checks the value)."""
-    return ("none", "rts") if isinstance(params["filter"]["smooth"], bool) else None
+def smoother_names(params: Params) -> tuple[str, ...]:
+    """The smoothers ``--smooth`` accepts (``[filter] smoother``'s values)."""
+    from .pipeline import SMOOTHERS
+
+    return tuple(SMOOTHERS)
 
 
 def with_smoother(params: Params, smoother: str) -> Params:
-    """A copy of ``params`` running ``smoother`` (``none``, ``rts``, ...)."""
-    p = copy.deepcopy(params)
+    """A copy of ``params`` running ``smoother`` (``none``, ``rts``, ``graph``)."""
     names = smoother_names(params)
-    if names is None:
-        p["filter"]["smooth"] = smoother
-        return p
     if smoother not in names:
         raise UsageError(f"--smooth {smoother}: unknown smoother; choose from {', '.join(names)}")
-    p["filter"]["smooth"] = smoother == "rts"
+    p = copy.deepcopy(params)
+    p["filter"]["smoother"] = smoother
+    p["filter"]["smooth"] = smoother != "none"
     return p
 
 

@@ -79,6 +79,12 @@ QC_COLUMNS: dict[str, str] = {
                "GNSS state (docs/qc.md)",
 }
 
+#: Track Parquet: columns only the graph smoother (``--smooth graph``) writes.
+GRAPH_TRACK_COLUMNS: dict[str, str] = {
+    "gnss_weight": "dimensionless, robust weight of the GNSS fix in the graph smoother (1: full "
+                   "weight; null where no fix)",
+}
+
 #: Statistics Parquet columns (one row per filter x segment).
 STATS_COLUMNS: dict[str, str] = {
     "filter": "filter name",

@@ -27,7 +27,14 @@ import pandas as pd
 
 from . import __version__, config
 from .config import Params
-from .conventions import NS_PER_S, QC_COLUMNS, STATS_COLUMNS, TRACK_COLUMNS, TRACK_EXTRA_COLUMNS
+from .conventions import (
+    GRAPH_TRACK_COLUMNS,
+    NS_PER_S,
+    QC_COLUMNS,
+    STATS_COLUMNS,
+    TRACK_COLUMNS,
+    TRACK_EXTRA_COLUMNS,
+)
 from .errors import GpsdrError, InputError, NoDataError, UsageError
 from .geodesy import LocalFrame
 
@@ -38,12 +45,30 @@ if TYPE_CHECKING:
     from .io.reference import Reference
 
 #: Track columns that may hold nulls (everything else must be finite).
-NULLABLE_TRACK_COLUMNS = frozenset({"pdop", "gnss_e", "gnss_n", "nis", "separation_m"})
+NULLABLE_TRACK_COLUMNS = frozenset({"pdop", "gnss_e", "gnss_n", "nis", "separation_m",
+                                    "gnss_weight"})
 
 #: Columns track_frame builds from the filter result.
 BASE_TRACK_UNITS: dict[str, str] = {**TRACK_COLUMNS, **TRACK_EXTRA_COLUMNS}
 #: Column -> "unit, meaning" for the track file's field metadata.
 TRACK_UNITS: dict[str, str] = {**BASE_TRACK_UNITS, **QC_COLUMNS}
+#: ... and for the columns only the graph smoother writes.
+GRAPH_TRACK_UNITS: dict[str, str] = dict(GRAPH_TRACK_COLUMNS)
+#: What the writers label: every column a track may carry.
+WRITTEN_TRACK_UNITS: dict[str, str] = {**TRACK_UNITS, **GRAPH_TRACK_UNITS}
+SMOOTHERS = ("rts", "graph", "none")
+
+
+def smoother_of(params: Params) -> str:
+    """The stage after the filter: ``[filter] smoother`` when set, else ``rts`` if the older
+    boolean ``[filter] smooth`` is true, else ``none``."""
+    name = str(params["filter"].get("smoother", "")).strip().lower()
+    if name:
+        if name not in SMOOTHERS:
+            raise UsageError(f"[filter] smoother = {name!r}: expected one of "
+                             f"{', '.join(SMOOTHERS)}")
+        return name
+    return "rts" if params["filter"]["smooth"] else "none"
 
 Progress = Callable[[str], None]
 
@@ -241,7 +266,10 @@ def build_metadata(drive: Drive, params: Params, frame: LocalFrame, epochs: Epoc
         "gpsdr.version": __version__,
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "filter": str(params["filter"]["name"]),
-        "smoothed": "true" if params["filter"]["smooth"] else "false",
+        "smoothed": "true" if smoother_of(params) != "none" else "false",
+        # what ran: a graph solve that failed leaves the RTS track
+        "smoother": "graph" if result.info.get("smoothing") == "graph" else
+        ("none" if smoother_of(params) == "none" else "rts"),
         "params_toml": config.to_toml(params),
     }
     meta.update({f"param.{k}": v for k, v in config.flat(params).items()})
@@ -378,17 +406,40 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     if len(epochs) == 0:
         where = drive.sources[0].path if drive.sources else None
         raise NoDataError(where, "no GNSS, gyro or odometer record to process")
+    smoother = smoother_of(params)
     if progress:
         progress(f"running {params['filter']['name']}"
-                 + (" + RTS smoother" if params["filter"]["smooth"] else ""))
+                 + {"rts": " + RTS smoother", "graph": " + RTS, then the graph smoother",
+                    "none": ""}[smoother])
     if ready is not None:
         ready()  # e.g. a background compile of the kernels (gpsdr_cli.warmup) has finished
-    arm = lever_arm.arm_of(params)
+    # the filters read the boolean; the graph starts from the RTS solution
+    fparams = params
+    if bool(params["filter"]["smooth"]) != (smoother != "none"):
+        fparams = copy.deepcopy(params)
+        fparams["filter"]["smooth"] = smoother != "none"
+    arm = lever_arm.arm_of(fparams)
     if arm is not None:
-        epochs, result = lever_arm.apply(epochs, params, arm, run_filter)
+        epochs, result = lever_arm.apply(epochs, fparams, arm, run_filter)
     else:
-        result = run_filter(epochs, params)
+        result = run_filter(epochs, fparams)
+    weight = None
+    if smoother == "graph":
+        from .graph_smoother import smooth_graph
+
+        if progress:
+            progress("graph smoother")
+        outcome = smooth_graph(epochs, result, params)
+        if outcome.result is not None:
+            result = outcome.result
+            weight = outcome.gnss_weight
+        else:
+            result.info["graph_failed"] = outcome.message
+            work.meta.setdefault("warnings", []).append(
+                f"graph smoother: {outcome.message}; the track is the RTS smoother's")
     track = track_frame(epochs, result, frame)
+    if weight is not None:
+        track["gnss_weight"] = weight
     if work.gnss is not None and len(work.gnss):
         shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
         track["pdop"] = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
@@ -421,7 +472,7 @@ def add_qc_columns(track: pd.DataFrame, epochs: Epochs, result: FilterResult,
             progress("backward pass")
         raw = copy.deepcopy(params)
         raw["filter"]["smooth"] = False
-        fwd = run_filter(epochs, raw) if params["filter"]["smooth"] else result
+        fwd = run_filter(epochs, raw) if smoother_of(params) != "none" else result
         bwd = run_filter(qc.reverse_epochs(epochs), raw)
         e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
         track["separation_m"] = qc.separation(fwd.e, fwd.n, e_b, n_b)
@@ -474,6 +525,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
         # would otherwise read as GNSS latency (ekf +0.19 s vs +0.12 s smoothed on comma2k19).
         probe = copy.deepcopy(params)
         probe["filter"]["smooth"] = True
+        probe["filter"]["smoother"] = "rts"
         _, _, probe_track, _ = _run_once(drive, probe, frame, progress, ready)
         est = estimate_gnss_offset(probe_track)
         offset_auto = float(params["time"]["gnss_offset_s"])

@@ -127,10 +127,19 @@ def warm_up(params: Params, *, auto_gnss_offset: bool = False) -> None:
     smooths = {bool(params["filter"]["smooth"])}
     if auto_gnss_offset:
         smooths.add(True)
+    from .pipeline import smoother_of
+
+    graph = smoother_of(params) == "graph"
+    if graph:
+        smooths.add(True)
     for smooth in sorted(smooths):
         p = copy.deepcopy(params)
         p["filter"]["smooth"] = smooth
-        run(epochs, p)
+        result = run(epochs, p)
+        if graph and smooth:
+            from .graph_smoother import smooth_graph
+
+            smooth_graph(epochs, result, p)
 
 
 def cache_is_fresh(params: Params, *, auto_gnss_offset: bool = False) -> bool:
@@ -144,6 +153,8 @@ def cache_is_fresh(params: Params, *, auto_gnss_offset: bool = False) -> bool:
     mods = list(KERNEL_MODULES.get(name, ()))
     if params["filter"]["smooth"] or auto_gnss_offset:
         mods += SMOOTHING_MODULES.get(name, ())
+    if str(params["filter"].get("smoother", "")) == "graph":
+        mods.append("graph_kernels.py")
     root = Path(__file__).resolve().parent
     user_dir = os.environ.get("NUMBA_CACHE_DIR")
     for rel in mods:

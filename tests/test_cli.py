@@ -63,7 +63,7 @@ def test_print_config_round_trips(gpsdr, tmp_path: Path) -> None:
     cfg = tmp_path / "p.toml"
     cfg.write_text(result.stdout)
     params = config.load(cfg)
-    assert params["filter"] == {"name": "fkf", "smooth": True}
+    assert params["filter"] == {"name": "fkf", "smooth": True, "smoother": "rts"}
     assert params["time"]["gnss_offset_s"] == 0.1
     assert params["frame"]["epsg"] == 32610
     again = gpsdr(["fuse", "--print-config", "--config", cfg])

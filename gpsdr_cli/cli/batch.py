@@ -9,6 +9,7 @@ from typing import Any, Self
 import click
 
 from .options import (
+    SmoothCommand,
     common_options,
     config_option,
     filter_options,
@@ -19,7 +20,7 @@ from .options import (
 )
 
 
-@click.command()
+@click.command(cls=SmoothCommand)
 @click.argument("target", metavar="DIR_OR_GLOB")
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
               metavar="OUT_DIR", help="Where each drive's track and stats go (created).")
@@ -32,12 +33,24 @@ from .options import (
               help="Process every drive, also those whose outputs are up to date.")
 @click.option("--scheduler", metavar="tcp://HOST:PORT",
               help="Run on a dask.distributed cluster instead of local processes.")
+@click.option("--calibrate-per-vehicle", "calibrate", is_flag=False, flag_value="folder",
+              default=None, metavar="folder|COLUMN",
+              help="First estimate each vehicle's odometer scale and gyro bias over all its "
+                   "drives (graph smoother, pooled by inverse variance), then fuse every drive "
+                   "with the graph smoother and that calibration as its prior.  Vehicles are "
+                   "told apart by folder (default) or by COLUMN of --manifest.")
+@click.option("--manifest", type=click.Path(dir_okay=False, exists=True), default=None,
+              metavar="DRIVES.csv", help="CSV with a drive column (the drive names of the "
+                                          "report) and the vehicle column of "
+                                          "--calibrate-per-vehicle COLUMN.")
 @frame_time_options
 @reader_options
 @common_options
 def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
-          smooth: bool | None, config_path: str | None, fmt: str, force: bool,
-          scheduler: str | None, gnss_offset: str | float | None, epsg: int | None,
+          smooth: str | None, odo_scale: str | None, gyro_bias: str | None,
+          config_path: str | None, fmt: str, force: bool,
+          scheduler: str | None, calibrate: str | None, manifest: str | None,
+          gnss_offset: str | float | None, epsg: int | None,
           date: Any, topics: dict[str, str] | None, log_time: bool, gyro_units: str | None,
           gyro_sign: str | None, odo_kind: str | None, ticks_per_m: float | None,
           quiet: bool) -> None:
@@ -53,6 +66,9 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
     \b
     Examples:
       gpsdr batch logs/ -o out/ --jobs 8 --filter fafkf --smooth
+      gpsdr batch logs/ -o out/ --smooth graph --odo-scale 1.012+-0.005
+      gpsdr batch fleet/ -o out/ --calibrate-per-vehicle          # fleet/<vehicle>/<drive>
+      gpsdr batch logs/ -o out/ --calibrate-per-vehicle car --manifest drives.csv
       gpsdr batch 'logs/**/*.mcap' -o out/
       gpsdr batch logs/ -o out/ --scheduler tcp://10.0.0.5:8786
       gpsdr batch 'drives/*/' -o out/ --gnss-offset auto --smooth
@@ -73,7 +89,8 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
 
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
                          gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
-                         gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m)
+                         gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m,
+                         odo_scale=odo_scale, gyro_bias=gyro_bias)
     specs = find_drives(target)
     if not specs:
         from ..errors import InputError
@@ -85,13 +102,47 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
                         auto_gnss_offset=gnss_offset == "auto", topics=topics, date=date,
                         use_log_time=log_time)
     n_jobs = jobs or os.cpu_count() or 1
+    groups = [(opts, specs)]
+    if calibrate is not None:
+        import dataclasses
 
+        from ..batch import calibrate_vehicles, read_manifest, vehicle_key, with_calibration
+
+        table = None
+        if calibrate != "folder":
+            if manifest is None:
+                raise click.UsageError(f"--calibrate-per-vehicle {calibrate}: give --manifest "
+                                       "DRIVES.csv with that column")
+            table = read_manifest(manifest, calibrate)
+        opts.params["filter"]["smoother"] = "graph"
+        opts.params["filter"]["smooth"] = True
+        cals = calibrate_vehicles(specs, opts, table)
+        by_vehicle: dict[str, list[Any]] = {}
+        for spec in specs:
+            by_vehicle.setdefault(vehicle_key(spec, table), []).append(spec)
+        groups = []
+        for vehicle, members in by_vehicle.items():
+            cal = cals.get(vehicle)
+            p = with_calibration(opts.params, cal) if cal is not None else opts.params
+            groups.append((dataclasses.replace(opts, params=p, extra_meta={
+                **opts.extra_meta, "vehicle": vehicle,
+                "vehicle_calibration": repr(cal) if cal is not None else "none"}), members))
+            if not quiet:
+                click.echo(f"vehicle {vehicle}: " + (
+                    f"{cal.drives} drives, odometer scale {cal.odo_scale:.5f} +- "
+                    f"{cal.odo_scale_sd:.5f}, gyro bias {cal.gyro_bias_radps:+.6f} +- "
+                    f"{cal.gyro_bias_sd_radps:.6f} rad/s" if cal is not None
+                    else "no calibration (no drive solved)"), err=True)
+
+    rows = []
     with _Bar(len(specs), quiet) as bar:
-        if scheduler:
-            bar.start()
-            rows = run_dask(specs, opts, scheduler, on_done=bar.advance)
-        else:  # the bar's refresh thread starts once the workers are forked (run_local)
-            rows = run_local(specs, opts, n_jobs, on_done=bar.advance, on_ready=bar.start)
+        for g_opts, g_specs in groups:
+            if scheduler:
+                bar.start()
+                rows += run_dask(g_specs, g_opts, scheduler, on_done=bar.advance)
+            else:  # the bar's refresh thread starts once the workers are forked (run_local)
+                rows += run_local(g_specs, g_opts, n_jobs, on_done=bar.advance,
+                                  on_ready=bar.start)
     report = report_frame(rows)
     write_table(report, Path(out_dir) / REPORT_NAME,
                 metadata={"target": target, "filter": str(params["filter"]["name"])},

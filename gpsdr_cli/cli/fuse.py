@@ -12,6 +12,7 @@ import click
 from ..errors import UsageError
 from .options import (
     STATE,
+    SmoothCommand,
     common_options,
     config_option,
     filter_options,
@@ -45,7 +46,7 @@ def stats_next_to(track: Path, fmt: str) -> Path:
     return track.with_name(f"{stem}.stats.{'parquet' if fmt == 'parquet' else 'csv'}")
 
 
-@click.command()
+@click.command(cls=SmoothCommand)
 @click.argument("log", required=False, metavar="[LOG]")
 @click.option("--gps", type=str, metavar="G.nmea", help="NMEA 0183 log (or - for stdin).")
 @click.option("--gyro", type=str, metavar="Y.csv", help="Gyro CSV: t, yaw_rate.")
@@ -75,7 +76,8 @@ def stats_next_to(track: Path, fmt: str) -> Path:
 @reader_options
 @common_options
 def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, accel: str | None,
-         filter_name: str | None, smooth: bool | None, reference: str | None,
+         filter_name: str | None, smooth: str | None, odo_scale: str | None,
+         gyro_bias: str | None, reference: str | None,
          output: str | None, stats_path: str | None, export_path: str | None,
          config_path: str | None,
          print_config: bool, fmt: str, date: Any, gnss_offset: str | float | None,
@@ -94,6 +96,8 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
       gpsdr fuse drive.mcap
       gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --filter fafkf --smooth \\
                  --reference truth.csv -o track.parquet
+      gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --smooth graph \\
+                 --odo-scale 1.012+-0.005
       cat gps.nmea | gpsdr fuse - -o - --format csv > track.csv
       gpsdr fuse drive.mcap --lever-arm 1.5,0.3     # antenna 1.5 m ahead, 0.3 m left
       gpsdr fuse drive.mcap --export drive.gpx
@@ -101,7 +105,8 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
     """
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
                          gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
-                         gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m)
+                         gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m,
+                         odo_scale=odo_scale, gyro_bias=gyro_bias)
     if lever_arm is not None:
         from ..lever_arm import parse_lever_arm
 
@@ -151,7 +156,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
                 from ..io.reference import read_reference
 
                 ref = read_reference(reference)
-            from ..pipeline import TRACK_UNITS, stats_units
+            from ..pipeline import WRITTEN_TRACK_UNITS, stats_units
             from ..pipeline import fuse as run_fuse
 
             res = run_fuse(drive, params, ref, auto_gnss_offset=gnss_offset == "auto",
@@ -160,7 +165,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
             from ..io.parquet import write_table
 
             # the track first: if it cannot be written, an existing statistics file stays as is
-            write_table(res.track, track_path, metadata=res.metadata, units=TRACK_UNITS, fmt=fmt)
+            write_table(res.track, track_path, metadata=res.metadata, units=WRITTEN_TRACK_UNITS, fmt=fmt)
             if stats_out is not None:
                 write_table(res.stats, stats_out, metadata=res.metadata,
                             units=stats_units(res.stats), fmt=fmt)
@@ -251,7 +256,10 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
     info = res.metadata
     err = sys.stderr
     where = "stdout" if track_path == "-" else track_path
-    click.echo(f"{info['filter']}{' + RTS' if info.get('smoothed') == 'true' else ''}: "
+    tag = {"rts": " + RTS", "graph": " + graph"}.get(info.get("smoother", ""), "")
+    if "smoother" not in info and info.get("smoothed") == "true":
+        tag = " + RTS"
+    click.echo(f"{info['filter']}{tag}: "
                f"{len(res.track)} epochs, {info['gnss_used']} GNSS fixes used, "
                f"{info['skipped_total']} input records skipped -> {where}"
                + (f", {stats_out}" if stats_out else ""), file=err)

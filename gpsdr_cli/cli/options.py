@@ -51,11 +51,54 @@ def config_option(fn: F) -> F:
                              "(see `gpsdr fuse --print-config`).")(fn)
 
 
+SMOOTH_CHOICES = ("rts", "graph", "none")
+
+
+class SmoothCommand(click.Command):
+    """A command whose ``--smooth`` takes an optional value: a bare ``--smooth`` (followed by
+    anything that is not rts, graph or none, e.g. the LOG argument) means ``--smooth=rts``,
+    as it did when ``--smooth`` was a flag."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        out: list[str] = []
+        for i, a in enumerate(args):
+            if a == "--":
+                out.extend(args[i:])
+                break
+            if a == "--smooth" and (i + 1 >= len(args) or args[i + 1] not in SMOOTH_CHOICES):
+                a = "--smooth=rts"
+            out.append(a)
+        return super().parse_args(ctx, out)
+
+
+def _keep_no_smooth(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    # --no-smooth (handled first when given) must not be overwritten by an absent --smooth
+    return ctx.params.get("smooth") if value is None else value
+
+
+def _no_smooth(ctx: click.Context, param: click.Parameter, value: bool) -> None:
+    if value:
+        ctx.params["smooth"] = "none"
+
+
 def filter_options(fn: F) -> F:
-    """--filter and --smooth/--no-smooth (default: from the parameters)."""
-    fn = click.option("--smooth/--no-smooth", default=None,
-                      help="Run the RTS smoother over the forward filter "
-                           "(default: [filter] smooth).")(fn)
+    """--filter, --smooth [rts|graph|none], --no-smooth and the calibration priors
+    --odo-scale / --gyro-bias (default: from the parameters)."""
+    fn = click.option("--gyro-bias", "gyro_bias", type=str, default=None, metavar="RADPS[+-SD]",
+                      help="Graph smoother: known gyro bias (rad/s, in the yaw rate's sign), "
+                           "optionally with its sigma (default SD: [graph] gyro_bias_sd_radps), "
+                           "e.g. 0.002+-0.0005.")(fn)
+    fn = click.option("--odo-scale", "odo_scale", type=str, default=None, metavar="SCALE[+-SD]",
+                      help="Graph smoother: known odometer scale (true speed = SCALE x reading), "
+                           "optionally with its sigma (default SD: [graph] odo_scale_sd), "
+                           "e.g. 1.012+-0.005.")(fn)
+    fn = click.option("--no-smooth", is_flag=True, expose_value=False, callback=_no_smooth,
+                      help="No smoother: the forward filter's track.")(fn)
+    fn = click.option("--smooth", type=click.Choice(SMOOTH_CHOICES), is_flag=False,
+                      flag_value="rts", default=None, callback=_keep_no_smooth,
+                      help="After the forward filter: rts (the default of a bare --smooth), "
+                           "graph (robust batch smoother: down-weights NLOS fixes) or none "
+                           "(default: [filter] smoother).")(fn)
     fn = click.option("--filter", "filter_name", type=click.Choice(FILTER_NAMES),
                       default=None, help="Filter to run (default: [filter] name, aekf).")(fn)
     return fn
@@ -133,10 +176,11 @@ def frame_time_options(fn: F) -> F:
 
 
 def make_params(config_path: str | None = None, *, filter_name: str | None = None,
-                smooth: bool | None = None, gnss_offset: str | float | None = None,
+                smooth: str | bool | None = None, gnss_offset: str | float | None = None,
                 epsg: int | None = None, gyro_units: str | None = None,
                 gyro_sign: str | None = None, odo_kind: str | None = None,
-                ticks_per_m: float | None = None) -> Any:
+                ticks_per_m: float | None = None, odo_scale: str | None = None,
+                gyro_bias: str | None = None) -> Any:
     """Defaults, then the --config file, then the command-line options (last wins)."""
     from .. import config
 
@@ -148,7 +192,23 @@ def make_params(config_path: str | None = None, *, filter_name: str | None = Non
             overrides.setdefault(section, {})[key] = value
 
     put("filter", "name", filter_name)
-    put("filter", "smooth", smooth)
+    if isinstance(smooth, bool):
+        smooth = "rts" if smooth else "none"
+    if smooth is not None:
+        put("filter", "smoother", smooth)
+        put("filter", "smooth", smooth != "none")
+    if odo_scale is not None or gyro_bias is not None:
+        from ..graph_smoother import parse_prior
+
+        base = params["graph"]
+        if odo_scale is not None:
+            v, sd = parse_prior(odo_scale, base["odo_scale_sd"], "--odo-scale")
+            put("graph", "odo_scale", v)
+            put("graph", "odo_scale_sd", sd)
+        if gyro_bias is not None:
+            v, sd = parse_prior(gyro_bias, base["gyro_bias_sd_radps"], "--gyro-bias")
+            put("graph", "gyro_bias_radps", v)
+            put("graph", "gyro_bias_sd_radps", sd)
     if isinstance(gnss_offset, float):
         put("time", "gnss_offset_s", gnss_offset)
     put("frame", "epsg", epsg)

@@ -62,6 +62,10 @@ def plot(track: str, reference: str | None, output: str | None, html_out: str | 
 
 
 def default_title(meta: dict[str, str]) -> str:
-    """``aekf``, ``aekf + RTS`` for a smoothed track, from the track file's metadata."""
+    """``aekf``, ``aekf + RTS`` or ``aekf + graph`` for a smoothed track, from the track
+    file's metadata (files without ``smoother``: ``smoothed`` = true means RTS)."""
     name = meta.get("filter", "")
-    return f"{name} + RTS" if name and meta.get("smoothed") == "true" else name
+    if not name:
+        return name
+    kind = meta.get("smoother") or ("rts" if meta.get("smoothed") == "true" else "none")
+    return name + {"rts": " + RTS", "graph": " + graph"}.get(kind, "")

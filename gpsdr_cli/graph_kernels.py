@@ -1,0 +1,473 @@
+"""Compiled parts of the batch smoother (:mod:`gpsdr_cli.graph_smoother`): residuals and
+Jacobians of every factor assembled into the banded normal equations, the selected
+inversion of the banded Cholesky factor, and the interpolation from keyframes to epochs.
+
+Layout: keyframe ``i`` owns the six unknowns ``6 i + (E, N, PSI, V, B, S)``: east and north
+(m, local frame), heading psi (rad, clockwise from north, unwrapped), speed v (m/s),
+gyro bias b (rad/s, in the yaw rate's sign: ``d(psi)/dt = -(yaw_rate - b)``) and odometer
+scale s (true speed = s x odometer speed).  Every factor links keyframe i to i + 1 at most,
+so the information matrix is banded with ``BAND = 11`` super-diagonals, stored in LAPACK's
+upper form (``ab[BAND + r - c, c] = H[r, c]`` for r <= c), as
+``scipy.linalg.solveh_banded`` / ``cholesky_banded`` take it.
+
+Per epoch step (epoch j-1 -> j, length dt): the speed is ``s_i x odo[j-1]`` where the
+odometer is fresh (``odo_ok``), else the speed state interpolated linearly between the
+keyframes; the heading turns by ``-(yaw_rate[j-1] - b_i) dt`` where the gyro is fresh
+(``gyro_ok``), else not at all (a heading random walk covers it).  Position uses the
+heading at the middle of the step.  Written by hand (numba): the factors are specific to
+our epoch layout, and a generic factor-graph library with Python-side custom factors costs
+milliseconds per factor (see the module docstring of graph_smoother).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+N_X = 6
+E, N, PSI, V, B, S = 0, 1, 2, 3, 4, 5
+BAND = 2 * N_X - 1
+
+# kernel ids
+K_GAUSS, K_HUBER, K_CAUCHY = 0, 1, 2
+
+# per-interval noise table columns (frozen between relinearisations of the noise)
+Q_AE, Q_AN, Q_NN, Q_PSI = 0, 1, 2, 3   # position covariance (ee, en, nn) and heading variance
+N_Q = 4
+
+# parameter vector
+P_SD_ODO, P_Q_DIST, P_POS_FLOOR, P_HEAD_RW, P_GYRO_SCALE, P_NOGYRO_RW, P_ACC_SD = range(7)
+P_BIAS_RW, P_SCALE_RW, P_ZARU_SD, P_VTIE_SD, P_GSPEED_SD, P_GCOURSE_MIN, P_MAX_STEP = range(7, 14)
+P_GYRO_SD, P_STOP_SPEED = 14, 15  # P_GYRO_SD: rad/s x sqrt(sample interval), per sqrt(s)
+N_P = 16
+
+
+@njit(cache=True)
+def wrap(a: float) -> float:
+    """Angle to (-pi, pi]."""
+    return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+
+
+@njit(cache=True)
+def robust_weight(r2: float, kernel: int, c: float) -> float:
+    """IRLS weight of a squared normalised residual r2 (rho'(r2) in the r2 form)."""
+    if kernel == K_CAUCHY:
+        return 1.0 / (1.0 + r2 / (c * c))
+    if kernel == K_HUBER:
+        r = math.sqrt(r2)
+        return 1.0 if r <= c else c / r
+    return 1.0
+
+
+@njit(cache=True)
+def robust_cost(r2: float, kernel: int, c: float) -> float:
+    """rho(r2): 2 x the negative log-likelihood up to a constant (r2 for the Gaussian)."""
+    if kernel == K_CAUCHY:
+        return c * c * math.log1p(r2 / (c * c))
+    if kernel == K_HUBER:
+        r = math.sqrt(r2)
+        return r2 if r <= c else 2.0 * c * r - c * c
+    return r2
+
+
+@njit(cache=True)
+def _add_block(ab, g, base, J, r, m, ncol, w):
+    """H += w J^T J and g += w J^T r for rows J[:m, :ncol] on unknowns base .. base+ncol-1."""
+    for a in range(ncol):
+        ra = base + a
+        ga = 0.0
+        for k in range(m):
+            ga += J[k, a] * r[k]
+        g[ra] += w * ga
+        for bb in range(a, ncol):
+            h = 0.0
+            for k in range(m):
+                h += J[k, a] * J[k, bb]
+            if h != 0.0:
+                ab[BAND + ra - (base + bb), base + bb] += w * h
+
+
+@njit(cache=True)
+def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
+    """Dead reckoning over epochs j0+1 .. j1 from keyframe i's state.
+
+    Returns (dE, dN, dpsi, d_psi_e, d_psi_n, d_b_e, d_b_n, d_s_e, d_s_n, d_v0_e, d_v0_n,
+    d_v1_e, d_v1_n, t_gyro, dist, sum_var_speed_dt2, t_free, t_nogyro, turned)."""
+    b0 = 6 * i
+    psi0 = x[b0 + PSI]
+    v0 = x[b0 + V]
+    v1 = x[b0 + N_X + V]
+    bias = x[b0 + B]
+    scale = x[b0 + S]
+    T = t_s[j1] - t_s[j0]
+    de = dn = 0.0
+    dpsi = 0.0
+    jpe = jpn = jbe = jbn = jse = jsn = 0.0
+    jv0e = jv0n = jv1e = jv1n = 0.0
+    t_gyro = 0.0
+    dist = 0.0
+    var_sp = 0.0
+    t_free = 0.0
+    t_nogyro = 0.0
+    turned = 0.0
+    max_step = prm[P_MAX_STEP]
+    for j in range(j0 + 1, j1 + 1):
+        dt = t_s[j] - t_s[j - 1]
+        if dt <= 0.0:
+            continue
+        if dt > max_step:  # no record for this long: nothing is known of the motion
+            t_free += dt
+            continue
+        k = j - 1
+        if gyro_ok[k]:
+            step = -(yaw[k] - bias) * dt
+            tg_mid = t_gyro + 0.5 * dt
+            t_gyro += dt
+        else:
+            step = 0.0
+            tg_mid = t_gyro
+            t_nogyro += dt
+        turned += abs(step)
+        psi_mid = psi0 + dpsi + 0.5 * step
+        sn = math.sin(psi_mid)
+        cs = math.cos(psi_mid)
+        if odo_ok[k]:
+            u = scale * odo[k]
+            jse += odo[k] * dt * sn
+            jsn += odo[k] * dt * cs
+            var_sp += (prm[P_SD_ODO] * dt) ** 2
+        else:
+            tau = (t_s[j - 1] + 0.5 * dt - t_s[j0]) / T if T > 0.0 else 0.0
+            u = v0 + (v1 - v0) * tau
+            jv0e += (1.0 - tau) * dt * sn
+            jv0n += (1.0 - tau) * dt * cs
+            jv1e += tau * dt * sn
+            jv1n += tau * dt * cs
+        de += u * dt * sn
+        dn += u * dt * cs
+        jpe += u * dt * cs
+        jpn += -u * dt * sn
+        jbe += u * dt * cs * tg_mid
+        jbn += -u * dt * sn * tg_mid
+        dist += abs(u) * dt
+        dpsi += step
+    return (de, dn, dpsi, jpe, jpn, jbe, jbn, jse, jsn, jv0e, jv0n, jv1e, jv1n, t_gyro, dist,
+            var_sp, t_free, t_nogyro, turned)
+
+
+@njit(cache=True)
+def interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, q_out):
+    """Covariance of each interval's dead-reckoned displacement (ee, en, nn) and heading
+    change, from the sensors' noise at the state ``x`` (frozen while the state is solved)."""
+    n_key = len(key_ep)
+    for i in range(n_key - 1):
+        j0, j1 = key_ep[i], key_ep[i + 1]
+        res = _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm)
+        dpsi, t_gyro, dist, var_sp, t_free, t_nogyro, turned = (res[2], res[13], res[14],
+                                                                  res[15], res[16], res[17],
+                                                                  res[18])
+        T = t_s[j1] - t_s[j0]
+        # heading: gyro white noise per sample, the per-radian scale error, a random walk;
+        # without a gyro the heading walks freely
+        var_psi = prm[P_GYRO_SD] ** 2 * t_gyro + prm[P_GYRO_SCALE] ** 2 * turned \
+            + prm[P_HEAD_RW] ** 2 * T + prm[P_NOGYRO_RW] ** 2 * t_nogyro + 1e-12
+        var_a = var_sp + prm[P_Q_DIST] ** 2 * dist + prm[P_POS_FLOOR] ** 2
+        # speed from the interpolated speed state: unmodelled acceleration inside the interval
+        var_a += prm[P_ACC_SD] ** 2 * T ** 3 / 12.0 * _odo_free_share(j0, j1, t_s, odo_ok)
+        var_c = dist * dist * var_psi / 3.0 + prm[P_Q_DIST] ** 2 * dist + prm[P_POS_FLOOR] ** 2
+        free = (60.0 * t_free) ** 2  # 60 m/s through a stretch without any record
+        var_a += free
+        var_c += free
+        psi_m = x[6 * i + PSI] + 0.5 * dpsi
+        sa, ca = math.sin(psi_m), math.cos(psi_m)
+        # along = (sin, cos), cross = (cos, -sin)
+        q_out[i, Q_AE] = var_a * sa * sa + var_c * ca * ca
+        q_out[i, Q_AN] = var_a * sa * ca - var_c * ca * sa
+        q_out[i, Q_NN] = var_a * ca * ca + var_c * sa * sa
+        q_out[i, Q_PSI] = var_psi + (10.0 * t_free) ** 2
+
+
+@njit(cache=True)
+def _odo_free_share(j0, j1, t_s, odo_ok):
+    T = t_s[j1] - t_s[j0]
+    if T <= 0.0:
+        return 0.0
+    free = 0.0
+    for j in range(j0 + 1, j1 + 1):
+        if not odo_ok[j - 1]:
+            free += t_s[j] - t_s[j - 1]
+    return free / T
+
+
+@njit(cache=True)
+def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
+              fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs,
+              prior_mean, prior_sd, kernel, c, ab, g, want):
+    """Cost of the state ``x`` and, with ``want``, the normal equations H (banded, ``ab``) and
+    gradient ``g`` (J^T W r) of every factor at ``x`` (IRLS weights from ``x``).
+
+    Fix arrays are per keyframe (NaN: no fix / no speed there).  Returns the cost: the robust
+    cost of the GNSS factors plus the squared whitened residuals of the others."""
+    n_key = len(key_ep)
+    if want:
+        ab[:, :] = 0.0
+        g[:] = 0.0
+    cost = 0.0
+    J = np.zeros((8, 12))
+    r = np.zeros(8)
+    # ---- prior on keyframe 0 (and, through the random walks, on every b and s)
+    for a in range(N_X):
+        J[:, :] = 0.0
+        rr = (x[a] - prior_mean[a]) / prior_sd[a]
+        if a == PSI:
+            rr = wrap(x[a] - prior_mean[a]) / prior_sd[a]
+        cost += rr * rr
+        if want:
+            J[0, a] = 1.0 / prior_sd[a]
+            r[0] = rr
+            _add_block(ab, g, 0, J, r, 1, N_X, 1.0)
+    for i in range(n_key - 1):
+        j0, j1 = key_ep[i], key_ep[i + 1]
+        T = t_s[j1] - t_s[j0]
+        b0 = 6 * i
+        res = _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm)
+        de, dn, dpsi = res[0], res[1], res[2]
+        t_gyro = res[13]
+        # ---- displacement: r = p1 - p0 - D, whitened by the inverse Cholesky factor of Q
+        qee, qen, qnn = q[i, Q_AE], q[i, Q_AN], q[i, Q_NN]
+        l11 = math.sqrt(qee)
+        l21 = qen / l11
+        l22 = math.sqrt(max(qnn - l21 * l21, 1e-18))
+        # L^-1 = [[1/l11, 0], [-l21/(l11 l22), 1/l22]]
+        m11, m21, m22 = 1.0 / l11, -l21 / (l11 * l22), 1.0 / l22
+        re = x[b0 + N_X + E] - x[b0 + E] - de
+        rn = x[b0 + N_X + N] - x[b0 + N] - dn
+        w0 = m11 * re
+        w1 = m21 * re + m22 * rn
+        cost += w0 * w0 + w1 * w1
+        J[:, :] = 0.0
+        if want:
+            # raw Jacobian rows (east, north) over the 12 unknowns of keyframes i, i+1
+            je = np.zeros(12)
+            jn = np.zeros(12)
+            je[E] = -1.0
+            jn[N] = -1.0
+            je[N_X + E] = 1.0
+            jn[N_X + N] = 1.0
+            je[PSI] = -res[3]
+            jn[PSI] = -res[4]
+            je[B] = -res[5]
+            jn[B] = -res[6]
+            je[S] = -res[7]
+            jn[S] = -res[8]
+            je[V] = -res[9]
+            jn[V] = -res[10]
+            je[N_X + V] = -res[11]
+            jn[N_X + V] = -res[12]
+            for cc in range(12):
+                J[0, cc] = m11 * je[cc]
+                J[1, cc] = m21 * je[cc] + m22 * jn[cc]
+            r[0] = w0
+            r[1] = w1
+        # ---- heading change against the gyro
+        sd_psi = math.sqrt(q[i, Q_PSI])
+        rp = wrap(x[b0 + N_X + PSI] - x[b0 + PSI] - dpsi) / sd_psi
+        cost += rp * rp
+        m = 3
+        if want:
+            J[2, N_X + PSI] = 1.0 / sd_psi
+            J[2, PSI] = -1.0 / sd_psi
+            J[2, B] = -t_gyro / sd_psi
+            r[2] = rp
+        # ---- random walks of b, s, and the speed state
+        sq = math.sqrt(max(T, 1e-6))
+        sdb = prm[P_BIAS_RW] * sq
+        sds = prm[P_SCALE_RW] * sq
+        sdv = prm[P_ACC_SD] * sq
+        rb = (x[b0 + N_X + B] - x[b0 + B]) / sdb
+        rs = (x[b0 + N_X + S] - x[b0 + S]) / sds
+        rv = (x[b0 + N_X + V] - x[b0 + V]) / sdv
+        cost += rb * rb + rs * rs + rv * rv
+        if want:
+            J[3, N_X + B] = 1.0 / sdb
+            J[3, B] = -1.0 / sdb
+            r[3] = rb
+            J[4, N_X + S] = 1.0 / sds
+            J[4, S] = -1.0 / sds
+            r[4] = rs
+            J[5, N_X + V] = 1.0 / sdv
+            J[5, V] = -1.0 / sdv
+            r[5] = rv
+        m = 6
+        # ---- the speed state tied to the odometer at keyframe i+1
+        k1 = key_ep[i + 1]
+        if odo_ok[k1]:
+            rt = (x[b0 + N_X + V] - x[b0 + N_X + S] * odo[k1]) / prm[P_VTIE_SD]
+            cost += rt * rt
+            if want:
+                J[m, N_X + V] = 1.0 / prm[P_VTIE_SD]
+                J[m, N_X + S] = -odo[k1] / prm[P_VTIE_SD]
+                r[m] = rt
+            m += 1
+        # ---- standstill: no heading change (the gyro's reading is then its bias)
+        if stopped[i]:
+            rz = wrap(x[b0 + N_X + PSI] - x[b0 + PSI]) / prm[P_ZARU_SD]
+            cost += rz * rz
+            if want:
+                J[m, N_X + PSI] = 1.0 / prm[P_ZARU_SD]
+                J[m, PSI] = -1.0 / prm[P_ZARU_SD]
+                r[m] = rz
+            m += 1
+        if want:
+            _add_block(ab, g, b0, J, r, m, 12, 1.0)
+    # ---- odometer tie at keyframe 0
+    if odo_ok[key_ep[0]]:
+        J[:, :] = 0.0
+        rt = (x[V] - x[S] * odo[key_ep[0]]) / prm[P_VTIE_SD]
+        cost += rt * rt
+        if want:
+            J[0, V] = 1.0 / prm[P_VTIE_SD]
+            J[0, S] = -odo[key_ep[0]] / prm[P_VTIE_SD]
+            r[0] = rt
+            _add_block(ab, g, 0, J, r, 1, N_X, 1.0)
+    # ---- GNSS factors (robust)
+    for i in range(n_key):
+        b0 = 6 * i
+        if not math.isnan(fix_e[i]):
+            J[:, :] = 0.0
+            re = (x[b0 + E] - fix_e[i]) / fix_sde[i]
+            rn = (x[b0 + N] - fix_n[i]) / fix_sdn[i]
+            r2 = re * re + rn * rn
+            cost += robust_cost(r2, kernel, c)
+            if want:
+                w = robust_weight(r2, kernel, c)
+                J[0, E] = 1.0 / fix_sde[i]
+                J[1, N] = 1.0 / fix_sdn[i]
+                r[0] = re
+                r[1] = rn
+                _add_block(ab, g, b0, J, r, 2, N_X, w)
+        if not math.isnan(gspd[i]):
+            J[:, :] = 0.0
+            sd = prm[P_GSPEED_SD]
+            rv = (x[b0 + V] - gspd[i]) / sd
+            m = 1
+            J[0, V] = 1.0 / sd
+            r[0] = rv
+            r2 = rv * rv
+            if not math.isnan(gcrs[i]) and gspd[i] >= prm[P_GCOURSE_MIN]:
+                sdc = sd / gspd[i]
+                rc = wrap(x[b0 + PSI] - gcrs[i]) / sdc
+                J[1, PSI] = 1.0 / sdc
+                r[1] = rc
+                r2 += rc * rc
+                m = 2
+            cost += robust_cost(r2, kernel, c)
+            if want:
+                _add_block(ab, g, b0, J, r, m, N_X, robust_weight(r2, kernel, c))
+    return cost
+
+
+@njit(cache=True)
+def fix_weights(x, fix_e, fix_n, fix_sde, fix_sdn, kernel, c, w_out, r2_out):
+    """Robust weight and squared normalised residual of each keyframe's fix (NaN: none)."""
+    for i in range(len(fix_e)):
+        if math.isnan(fix_e[i]):
+            w_out[i] = np.nan
+            r2_out[i] = np.nan
+            continue
+        re = (x[6 * i + E] - fix_e[i]) / fix_sde[i]
+        rn = (x[6 * i + N] - fix_n[i]) / fix_sdn[i]
+        r2 = re * re + rn * rn
+        r2_out[i] = r2
+        w_out[i] = robust_weight(r2, kernel, c)
+
+
+@njit(cache=True)
+def banded_inverse_band(cb, n):
+    """Entries of H^-1 inside the band from H's upper banded Cholesky factor ``cb``
+    (H = U^T U, ``cb[BAND + r - c, c] = U[r, c]``), by the backward recursion of Takahashi,
+    Fagan & Chin (1973): O(n BAND^2).  Returns the same banded layout."""
+    u = BAND
+    sb = np.zeros((u + 1, n))
+    for i in range(n - 1, -1, -1):
+        uii = cb[u, i]
+        hi = min(i + u, n - 1)
+        for j in range(hi, i - 1, -1):
+            s = 0.0
+            for k in range(i + 1, hi + 1):
+                uik = cb[u + i - k, k]
+                if uik == 0.0:
+                    continue
+                # Sigma[k, j], symmetric, inside the band
+                if k <= j:
+                    skj = sb[u + k - j, j]
+                else:
+                    skj = sb[u + j - k, k]
+                s += uik * skj
+            if j == i:
+                sb[u, i] = (1.0 / uii - s) / uii
+            else:
+                sb[u + i - j, j] = -s / uii
+    return sb
+
+
+@njit(cache=True)
+def to_epochs(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, n_ep,
+              e_out, n_out, ve_out, vn_out, psi_out):
+    """Every epoch's position, velocity and heading: the dead reckoning from the keyframe
+    before it, its closure error at the next keyframe spread linearly in time."""
+    n_key = len(key_ep)
+    for i in range(n_key):
+        k = key_ep[i]
+        e_out[k] = x[6 * i + E]
+        n_out[k] = x[6 * i + N]
+        psi_out[k] = x[6 * i + PSI]
+    for i in range(n_key - 1):
+        j0, j1 = key_ep[i], key_ep[i + 1]
+        res = _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm)
+        T = t_s[j1] - t_s[j0]
+        ce = x[6 * i + N_X + E] - x[6 * i + E] - res[0]
+        cn = x[6 * i + N_X + N] - x[6 * i + N] - res[1]
+        cp = wrap(x[6 * i + N_X + PSI] - x[6 * i + PSI] - res[2])
+        psi0 = x[6 * i + PSI]
+        bias = x[6 * i + B]
+        scale = x[6 * i + S]
+        v0 = x[6 * i + V]
+        v1 = x[6 * i + N_X + V]
+        pe = x[6 * i + E]
+        pn = x[6 * i + N]
+        dpsi = 0.0
+        for j in range(j0 + 1, j1):
+            dt = t_s[j] - t_s[j - 1]
+            kk = j - 1
+            if dt > 0.0 and dt <= prm[P_MAX_STEP]:
+                step = -(yaw[kk] - bias) * dt if gyro_ok[kk] else 0.0
+                psi_mid = psi0 + dpsi + 0.5 * step
+                tau = (t_s[j - 1] + 0.5 * dt - t_s[j0]) / T if T > 0.0 else 0.0
+                u = scale * odo[kk] if odo_ok[kk] else v0 + (v1 - v0) * tau
+                pe += u * dt * math.sin(psi_mid)
+                pn += u * dt * math.cos(psi_mid)
+                dpsi += step
+            f = (t_s[j] - t_s[j0]) / T if T > 0.0 else 0.0
+            e_out[j] = pe + ce * f
+            n_out[j] = pn + cn * f
+            psi_out[j] = psi0 + dpsi + cp * f
+    # velocity at every epoch from the speed at it and its heading
+    for i in range(n_key - 1):
+        j0, j1 = key_ep[i], key_ep[i + 1]
+        T = t_s[j1] - t_s[j0]
+        scale = x[6 * i + S]
+        v0 = x[6 * i + V]
+        v1 = x[6 * i + N_X + V]
+        for j in range(j0, j1 + 1 if i == n_key - 2 else j1):
+            tau = (t_s[j] - t_s[j0]) / T if T > 0.0 else 0.0
+            u = scale * odo[j] if odo_ok[j] else v0 + (v1 - v0) * tau
+            ve_out[j] = u * math.sin(psi_out[j])
+            vn_out[j] = u * math.cos(psi_out[j])
+    if n_key == 1:
+        k = key_ep[0]
+        u = x[S] * odo[k] if odo_ok[k] else x[V]
+        ve_out[k] = u * math.sin(x[PSI])
+        vn_out[k] = u * math.cos(x[PSI])

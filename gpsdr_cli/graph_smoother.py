@@ -1,0 +1,404 @@
+"""Robust batch smoother: the whole drive solved at once (maximum a posteriori), with a
+robust kernel on the GNSS factors so that the dead reckoning outvotes a run of consistent
+but wrong (non-line-of-sight) fixes.  ``[filter] smoother = "graph"``, ``--smooth graph``.
+
+Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW-positive:
+``d(psi)/dt = -(yaw_rate - b)``):
+
+* States at keyframes (every fix epoch, and at least every ``[graph] keyframe_s`` between):
+  e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), odometer scale s; b and s are
+  random walks from keyframe to keyframe (``[gyro] bias_sd_radps`` over its correlation
+  time, ``[odo] scale_rw_sd``), so every factor links neighbours only.
+* Dead reckoning between keyframes: integrated from the raw epochs at every iteration
+  (exact in psi, b and s; its Jacobians summed alongside: :mod:`.graph_kernels`), with the
+  covariance of the displacement from the sensors' declared noise (``[gyro]``, ``[odo]``)
+  plus a per-metre random walk ``[graph] dr_dist_sd``.  Without an odometer the speed
+  state (a random walk in acceleration) carries the position; without a gyro the heading
+  walks freely.  The speed state is tied to s x odometer speed where there is one.
+* GNSS: position factors with the receiver's sigma (``Epochs.gnss_sd_e/n``), speed and
+  course factors (the receiver's Doppler velocity), both under a robust kernel.
+* Standstill (odometer below ``[standstill] speed_mps`` over a whole interval): no heading
+  change (the gyro's reading is then its bias).  Priors: keyframe 0 loosely at the forward
+  filter's smoothed solution (also the initial guess of every keyframe), b and s at the
+  user's calibration (``--gyro-bias``, ``--odo-scale``) or loosely at 0 and 1.
+
+Engine: Levenberg-Marquardt over iteratively reweighted least squares on the banded normal
+equations (11 super-diagonals), solved by LAPACK's banded Cholesky
+(``scipy.linalg.solveh_banded``): O(keyframes) per iteration.  Chosen over GTSAM (its
+Python-side custom factors cost milliseconds each, and a pose chain with a per-sample
+between-factor needs 360 k of them an hour) and over ``scipy.optimize.least_squares``
+(its robust losses re-scale the whole Jacobian and its sparse trust-region solver is an
+iterative LSQR, far slower than a direct banded solve on this structure).  The kernel is
+graduated (graduated non-convexity, Yang et al. 2020): the Cauchy scale starts at
+``gnc_start`` x ``kernel_scale`` and halves to ``kernel_scale``, so the start -- the forward
+filter's track, already pulled towards the biased fixes -- does not lock the solution into
+accepting them.  Kernel and scale by benchmark: docs/decisions/0001-graph-smoother.md.
+
+Marginal sigmas: the entries of H^-1 inside the band by the Takahashi recursion on the
+banded Cholesky factor (:func:`.graph_kernels.banded_inverse_band`), interpolated linearly
+between keyframes.  A solve that does not converge (or goes non-finite) returns None and
+the caller keeps the RTS track with a warning.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .align import Epochs
+from .config import Params
+from .conventions import NS_PER_S
+from .filters.base import FilterResult
+
+KERNELS = {"gauss": 0, "huber": 1, "cauchy": 2}
+
+
+@dataclass
+class GraphOutcome:
+    """The smoothed result (None when the solve failed) and what happened."""
+
+    result: FilterResult | None
+    converged: bool
+    iterations: int
+    message: str
+    #: per epoch: robust weight of the fix (NaN where none)
+    gnss_weight: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    odo_scale: float = math.nan
+    odo_scale_sd: float = math.nan
+    gyro_bias_radps: float = math.nan
+    gyro_bias_sd_radps: float = math.nan
+
+
+def parse_prior(text: str, default_sd: float, what: str) -> tuple[float, float]:
+    """``"1.02"`` or ``"1.02+-0.005"`` -> (value, sd); the sd defaults to ``default_sd``."""
+    from .errors import UsageError
+
+    s = text.strip().replace("±", "+-")
+    val, sep, sd = s.partition("+-")
+    try:
+        v = float(val)
+        d = float(sd) if sep else float(default_sd)
+    except ValueError as err:
+        raise UsageError(f"{what} {text!r}: expected VALUE or VALUE+-SD, e.g. 1.02+-0.005") from err
+    if not (math.isfinite(v) and math.isfinite(d) and d > 0):
+        raise UsageError(f"{what} {text!r}: expected a finite value and a positive SD")
+    return v, d
+
+
+def _ffill_ok(t_s: np.ndarray, has: np.ndarray, val: np.ndarray, max_age_s: float,
+              bad: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The latest good reading at every epoch and whether it is at most ``max_age_s`` old."""
+    good = has & np.isfinite(val)
+    if bad is not None:
+        good &= ~bad
+    n = len(t_s)
+    if not good.any():
+        return np.zeros(n), np.zeros(n, bool)
+    idx = np.where(good, np.arange(n), -1)
+    last = np.maximum.accumulate(idx)
+    ok = last >= 0
+    out = np.where(ok, val[np.maximum(last, 0)], 0.0)
+    age = np.where(ok, t_s - t_s[np.maximum(last, 0)], np.inf)
+    return np.nan_to_num(out), ok & (age <= max_age_s)
+
+
+def keyframes(t_s: np.ndarray, has_fix: np.ndarray, step_s: float) -> np.ndarray:
+    """Epoch indices of the keyframes: every fix, the first and the last epoch, and enough
+    epochs between so that no two keyframes are more than ``step_s`` apart where epochs allow."""
+    n = len(t_s)
+    mark = has_fix.copy()
+    mark[0] = mark[-1] = True
+    # greedy fill: walk the epochs, a new keyframe once step_s has passed since the last one
+    out = [0]
+    last_t = t_s[0]
+    for k in range(1, n):
+        if mark[k] or t_s[k] - last_t >= step_s - 1e-9:
+            out.append(k)
+            last_t = t_s[k]
+    return np.unique(np.asarray(out, np.int64))
+
+
+def _initial_heading(t_s: np.ndarray, yaw: np.ndarray, gyro_ok: np.ndarray,
+                     ve: np.ndarray, vn: np.ndarray) -> np.ndarray:
+    """Heading at every epoch: the gyro's integrated heading turned onto the forward track's
+    course where that moves at >= 2 m/s (the offset interpolated in time between)."""
+    dt = np.diff(t_s, prepend=t_s[0])
+    rate = np.where(np.roll(gyro_ok, 1), -np.roll(yaw, 1), 0.0)
+    rate[0] = 0.0
+    psi_g = np.cumsum(rate * dt)
+    course = np.arctan2(ve, vn)
+    fast = np.hypot(ve, vn) >= 2.0
+    if not fast.any():
+        return psi_g
+    off = np.unwrap(course[fast] - psi_g[fast])
+    return psi_g + np.interp(t_s, t_s[fast], off)
+
+
+def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOutcome:
+    """Solve the drive as one robust least-squares problem, started from ``init`` (the
+    forward filter's RTS result on the same epochs)."""
+    from scipy.linalg import LinAlgError, cholesky_banded, solveh_banded
+
+    from . import graph_kernels as gk
+
+    gp = params["graph"]
+    n_ep = len(epochs)
+    if n_ep == 0:
+        return GraphOutcome(None, False, 0, "no epochs")
+    t_s = (np.asarray(epochs.t_ns, np.int64) - int(epochs.t_ns[0])) / NS_PER_S
+    max_rate = float(params["gyro"]["max_rate_radps"])
+    max_spd = float(params["odo"]["max_speed_mps"])
+    yaw_raw = np.asarray(epochs.yaw_rate_radps, float)
+    odo_raw = np.asarray(epochs.odo_speed_mps, float)
+    yaw_bad = ~(np.abs(np.nan_to_num(yaw_raw)) <= max_rate)
+    # a clipping gyro: many readings exactly at the drive's largest magnitude are not rates
+    mag = np.abs(np.where(np.isfinite(yaw_raw) & ~yaw_bad, yaw_raw, 0.0))
+    if len(mag) and mag.max() > 0:
+        at_max = mag >= mag.max()
+        if at_max.sum() >= int(params["gyro"]["saturation_min_count"]):
+            yaw_bad |= at_max
+    yaw, gyro_ok = _ffill_ok(t_s, np.asarray(epochs.has_gyro, bool), yaw_raw,
+                             float(gp["sensor_max_age_s"]), bad=yaw_bad)
+    odo, odo_ok = _ffill_ok(t_s, np.asarray(epochs.has_odo, bool), odo_raw,
+                            float(gp["sensor_max_age_s"]),
+                            bad=~((np.nan_to_num(odo_raw, nan=-1.0) >= 0) & (odo_raw <= max_spd)))
+    has_fix = (np.asarray(epochs.has_gnss, bool) & np.isfinite(epochs.gnss_e)
+               & np.isfinite(epochs.gnss_n))
+    key_ep = keyframes(t_s, has_fix, float(gp["keyframe_s"]))
+    n_key = len(key_ep)
+    n_x = gk.N_X * n_key
+
+    # ---- fixes per keyframe
+    sd_min = float(params["gnss"]["sigma_min_m"])
+    fe = np.where(has_fix, epochs.gnss_e, np.nan)[key_ep]
+    fn = np.where(has_fix, epochs.gnss_n, np.nan)[key_ep]
+    sde = np.nan_to_num(np.asarray(epochs.gnss_sd_e, float)[key_ep],
+                        nan=float(params["gnss"]["sigma_default_m"]))
+    sdn = np.nan_to_num(np.asarray(epochs.gnss_sd_n, float)[key_ep],
+                        nan=float(params["gnss"]["sigma_default_m"]))
+    sde = np.maximum(sde, sd_min)
+    sdn = np.maximum(sdn, sd_min)
+    # Fixes' errors are correlated (multipath, NLOS): fixes within one decorrelation span
+    # (1/span = 1/tau + speed/distance) count as one, their variance times their number --
+    # with white fixes a 2-minute stop's 600 fixes outvoted the rest of the drive.
+    tau = float(gp["gnss_corr_tau_s"])
+    if tau > 0 and has_fix.sum() > 1:
+        tf = t_s[has_fix]
+        rate = (len(tf) - 1) / max(tf[-1] - tf[0], 1e-9)
+        spd_k = np.hypot(np.nan_to_num(init.v_e), np.nan_to_num(init.v_n))[key_ep]
+        span = 1.0 / (1.0 / tau + spd_k / max(float(gp["gnss_corr_dist_m"]), 1e-9))
+        infl = np.sqrt(np.maximum(1.0, rate * span))
+        # carrier-phase fixes (centimetres) are white at the fix rate: no inflation
+        infl = np.where(np.hypot(sde, sdn) / math.sqrt(2.0) < float(gp["gnss_corr_min_sd_m"]),
+                        1.0, infl)
+        sde = sde * infl
+        sdn = sdn * infl
+    gspd = np.asarray(epochs.gnss_speed_mps, float)[key_ep].copy()
+    gcrs = np.asarray(epochs.gnss_course_rad, float)[key_ep].copy()
+    use_vel = bool(gp["gnss_velocity"])
+    gspd[~(has_fix[key_ep] & np.isfinite(gspd) & (gspd >= 0)) | (not use_vel)] = np.nan
+    gcrs[~np.isfinite(gcrs)] = np.nan
+
+    # ---- standstill intervals: the odometer below the threshold over the whole interval
+    stop_v = float(params["standstill"]["speed_mps"])
+    still_ep = odo_ok & (odo < stop_v)
+    stopped = np.zeros(max(n_key - 1, 0), bool)
+    if bool(params["standstill"]["enabled"]) and n_key > 1:
+        cs = np.concatenate(([0], np.cumsum(~still_ep)))
+        # epochs key_ep[i] .. key_ep[i+1] all still
+        stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1]]) == 0
+
+    # ---- parameters of the kernels
+    gyro_dt = 0.01
+    if epochs.has_gyro.sum() > 2:
+        tg = t_s[np.asarray(epochs.has_gyro, bool)]
+        gyro_dt = float(np.median(np.diff(tg))) or 0.01
+    prm = np.zeros(gk.N_P)
+    prm[gk.P_SD_ODO] = float(params["odo"]["noise_sd_mps"])
+    prm[gk.P_Q_DIST] = float(gp["dr_dist_sd"])
+    prm[gk.P_POS_FLOOR] = float(gp["dr_floor_m"])
+    prm[gk.P_HEAD_RW] = float(gp["heading_rw_sd"])
+    prm[gk.P_GYRO_SCALE] = float(params["gyro"]["scale_sd"])
+    prm[gk.P_NOGYRO_RW] = float(gp["no_gyro_heading_rw_sd"])
+    prm[gk.P_ACC_SD] = float(gp["accel_sd"])
+    tau_b = float(params["gyro"]["bias_tau_s"])
+    prm[gk.P_BIAS_RW] = max(float(params["gyro"]["bias_sd_radps"]) * math.sqrt(2.0 / tau_b), 1e-9)
+    prm[gk.P_SCALE_RW] = max(float(params["odo"]["scale_rw_sd"]), 1e-9)
+    prm[gk.P_ZARU_SD] = float(gp["zaru_sd_rad"])
+    prm[gk.P_VTIE_SD] = float(params["odo"]["noise_sd_mps"])
+    prm[gk.P_GSPEED_SD] = float(gp["gnss_speed_sd_mps"])
+    prm[gk.P_GCOURSE_MIN] = float(gp["gnss_course_min_mps"])
+    prm[gk.P_MAX_STEP] = float(gp["max_step_s"])
+    prm[gk.P_GYRO_SD] = float(params["gyro"]["noise_sd_radps"]) * math.sqrt(gyro_dt)
+    prm[gk.P_STOP_SPEED] = stop_v
+
+    # ---- priors and the initial guess
+    have_gyro = bool(gyro_ok.any())
+    have_odo = bool(odo_ok.any())
+    b_mean = float(gp["gyro_bias_radps"])
+    b_sd = float(gp["gyro_bias_sd_radps"])
+    b_given = math.isfinite(b_mean)
+    if not b_given:
+        b_mean, b_sd = 0.0, float(params["gyro"]["bias_init_sd_radps"])
+    s_mean = float(gp["odo_scale"])
+    s_sd = float(gp["odo_scale_sd"])
+    s_given = math.isfinite(s_mean)
+    if not s_given:
+        s_mean, s_sd = 1.0, float(params["odo"]["scale_init_sd"])
+    if not have_gyro:
+        b_mean, b_sd = 0.0, 1e-6
+    if not have_odo:
+        s_mean, s_sd = 1.0, 1e-6
+    e0 = np.nan_to_num(np.asarray(init.e, float))
+    n0 = np.nan_to_num(np.asarray(init.n, float))
+    ve0 = np.nan_to_num(np.asarray(init.v_e, float))
+    vn0 = np.nan_to_num(np.asarray(init.v_n, float))
+    psi0 = _initial_heading(t_s, yaw, gyro_ok, ve0, vn0)
+    x = np.zeros(n_x)
+    x[gk.E::gk.N_X] = e0[key_ep]
+    x[gk.N::gk.N_X] = n0[key_ep]
+    x[gk.PSI::gk.N_X] = psi0[key_ep]
+    x[gk.V::gk.N_X] = np.hypot(ve0, vn0)[key_ep]
+    x[gk.B::gk.N_X] = b_mean
+    x[gk.S::gk.N_X] = s_mean
+    prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean])
+    prior_sd = np.array([float(gp["init_pos_sd_m"]), float(gp["init_pos_sd_m"]),
+                         float(gp["init_heading_sd_rad"]), float(gp["init_speed_sd_mps"]),
+                         b_sd, s_sd])
+
+    kernel = KERNELS[str(gp["kernel"])]
+    c_final = float(gp["kernel_scale"])
+    n_stages = max(int(gp["gnc_stages"]), 1) if kernel != KERNELS["gauss"] else 1
+    stages = [c_final * 2.0 ** (n_stages - 1 - k) for k in range(n_stages)]
+    ab = np.zeros((gk.BAND + 1, n_x))
+    g = np.zeros(n_x)
+    q = np.zeros((max(n_key - 1, 1), gk.N_Q))
+    max_it = int(gp["max_iterations"])
+    tol = float(gp["tolerance"])
+    its = 0
+    converged = False
+    message = ""
+    args_fix = (fe, fn, sde, sdn, gspd, gcrs, prior_mean, prior_sd)
+
+    def cost_at(xx: np.ndarray, c: float, want: bool) -> float:
+        return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
+                            *args_fix, kernel, c, ab, g, want)
+
+    try:
+        for c in stages:
+            gk.interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, q)
+            lam = 1e-6
+            stage_done = False
+            cost = cost_at(x, c, True)
+            while its < max_it:
+                its += 1
+                diag = ab[gk.BAND].copy()
+                step = None
+                while lam < 1e10:
+                    ab[gk.BAND] = diag * (1.0 + lam) + 1e-12
+                    try:
+                        step = solveh_banded(ab, -g, overwrite_ab=False, lower=False,
+                                             check_finite=False)
+                    except (LinAlgError, ValueError):
+                        step = None
+                    if step is not None and np.all(np.isfinite(step)):
+                        x_new = x + step
+                        new_cost = cost_at(x_new, c, False)
+                        if math.isfinite(new_cost) and new_cost <= cost:
+                            break
+                    lam *= 10.0
+                    step = None
+                ab[gk.BAND] = diag
+                if step is None:
+                    stage_done = True  # no descent left at any damping: a minimum
+                    break
+                rel = (cost - new_cost) / max(cost, 1e-12)
+                x = x_new
+                lam = max(lam / 10.0, 1e-9)
+                cost = cost_at(x, c, True)
+                if rel < tol or float(np.max(np.abs(step))) < 1e-5:
+                    stage_done = True
+                    break
+            if not stage_done:
+                message = f"no convergence in {max_it} iterations"
+                break
+        else:
+            converged = True
+    except (LinAlgError, ValueError, FloatingPointError) as err:
+        message = f"solver failed: {err}"
+    if converged and not np.all(np.isfinite(x)):
+        converged, message = False, "solution not finite"
+    if not converged:
+        return GraphOutcome(None, False, its, message or "not converged")
+
+    # ---- marginal covariance inside the band (H at the solution, final weights)
+    cost_at(x, c_final, True)
+    var_e_k = var_n_k = cov_en_k = None
+    try:
+        ab[gk.BAND] += 1e-12
+        cb = cholesky_banded(ab, lower=False, check_finite=False)
+        sb = gk.banded_inverse_band(cb, n_x)
+        var_e_k = sb[gk.BAND, gk.E::gk.N_X]
+        var_n_k = sb[gk.BAND, gk.N::gk.N_X]
+        cov_en_k = sb[gk.BAND - 1, gk.N::gk.N_X]   # H^-1[6i, 6i+1]
+        s_var = sb[gk.BAND, gk.S::gk.N_X]
+        b_var = sb[gk.BAND, gk.B::gk.N_X]
+    except (LinAlgError, ValueError) as err:
+        return GraphOutcome(None, False, its, f"information matrix not positive definite: {err}")
+    if not (np.all(np.isfinite(var_e_k)) and np.all(np.isfinite(var_n_k))):
+        return GraphOutcome(None, False, its, "marginal covariance not finite")
+
+    # ---- to every epoch
+    e = np.zeros(n_ep)
+    nn = np.zeros(n_ep)
+    ve = np.zeros(n_ep)
+    vn = np.zeros(n_ep)
+    psi = np.zeros(n_ep)
+    gk.to_epochs(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, n_ep, e, nn, ve, vn, psi)
+    tk = t_s[key_ep]
+    var_e = np.interp(t_s, tk, np.maximum(var_e_k, 0.0))
+    var_n = np.interp(t_s, tk, np.maximum(var_n_k, 0.0))
+    cov_en = np.interp(t_s, tk, cov_en_k)
+    w_k = np.full(n_key, np.nan)
+    r2_k = np.full(n_key, np.nan)
+    gk.fix_weights(x, fe, fn, sde, sdn, kernel, c_final, w_k, r2_k)
+    weight = np.full(n_ep, np.nan)
+    weight[key_ep] = w_k
+    nis = np.full(n_ep, np.nan)
+    nis[key_ep] = r2_k
+    rejected = has_fix & (np.nan_to_num(weight, nan=1.0) < float(gp["weight_rejected"]))
+    static = np.zeros(n_ep, bool)
+    for i in np.flatnonzero(stopped):
+        static[key_ep[i]:key_ep[i + 1] + 1] = True
+    s_k = x[gk.S::gk.N_X]
+    b_k = x[gk.B::gk.N_X]
+    if not (np.all(np.isfinite(e)) and np.all(np.isfinite(nn)) and np.all(np.isfinite(ve))
+            and np.all(np.isfinite(vn))):
+        return GraphOutcome(None, False, its, "track not finite")
+    extras = {"gyro_bias_radps": np.interp(t_s, tk, b_k), "odo_scale": np.interp(t_s, tk, s_k),
+              "gnss_weight": weight}
+    n_down = int(np.count_nonzero(has_fix & (np.nan_to_num(weight, nan=1.0) < 0.5)))
+    info = dict(init.info)
+    info.update({"smoothing": "graph", "smoothed": True, "graph_iterations": its,
+                 "graph_keyframes": n_key, "graph_kernel": str(gp["kernel"]),
+                 "graph_fixes_downweighted": n_down,
+                 "graph_odo_scale": float(np.mean(s_k)) if have_odo else math.nan,
+                 "graph_gyro_bias_radps": float(np.mean(b_k)) if have_gyro else math.nan,
+                 "graph_odo_scale_sd": float(math.sqrt(max(s_var[-1], 0.0)))
+                 if have_odo else math.nan,
+                 "graph_gyro_bias_sd_radps": float(math.sqrt(max(b_var[-1], 0.0)))
+                 if have_gyro else math.nan,
+                 "gnss_rejected": int(rejected.sum())})
+    res = FilterResult(t_ns=np.asarray(epochs.t_ns, np.int64), e=e, n=nn, v_e=ve, v_n=vn,
+                       var_e=var_e, var_n=var_n, cov_en=cov_en,
+                       gnss_used=has_fix & ~rejected, gnss_rejected=rejected, nis=nis,
+                       static=static, extras=extras, info=info)
+    # pooled calibration of this drive (the mean over keyframes; its sd from the last one)
+    return GraphOutcome(res, True, its, "converged", gnss_weight=weight,
+                        odo_scale=float(np.mean(s_k)) if have_odo else math.nan,
+                        odo_scale_sd=float(math.sqrt(max(s_var[-1], 0.0))) if have_odo else math.nan,
+                        gyro_bias_radps=float(np.mean(b_k)) if have_gyro else math.nan,
+                        gyro_bias_sd_radps=float(math.sqrt(max(b_var[-1], 0.0)))
+                        if have_gyro else math.nan)

@@ -1,0 +1,244 @@
+"""The robust batch smoother (gpsdr_cli.graph_smoother) on seeded simulated drives with
+known truth: NLOS steps, an outage, RTK-like fixes, GNSS only, a handful of fixes."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+
+from gpsdr_cli import config, filters
+from gpsdr_cli.align import build_epochs
+from gpsdr_cli.graph_smoother import parse_prior, smooth_graph
+from gpsdr_cli.simulate import simulate_drive
+from gpsdr_cli.testing.nlos import add_nlos
+
+DUR_S = 300.0
+
+
+def _run(sim, drive, graph: dict | None = None):
+    p = config.defaults()
+    p["filter"]["name"] = "aekf"
+    p["filter"]["smooth"] = True
+    p["graph"].update(graph or {})
+    ep = build_epochs(copy.deepcopy(drive), sim.frame, p)
+    rts = filters.get("aekf")(ep, p)
+    out = smooth_graph(ep, rts, p)
+    tr = sim.truth
+    te = np.interp(ep.t_ns, tr.t_ns, tr.e)
+    tn = np.interp(ep.t_ns, tr.t_ns, tr.n)
+    return ep, rts, out, te, tn
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+@pytest.fixture(scope="module")
+def nlos_run():
+    sim = simulate_drive("urban_canyon", seed=2, duration_s=DUR_S)
+    nl = add_nlos(sim, 2)
+    return sim, nl, _run(sim, nl.drive)
+
+
+def test_nlos_graph_beats_fixes_and_rts(nlos_run) -> None:
+    _sim, _nl, (ep, rts, out, te, tn) = nlos_run
+    assert out.result is not None, out.message
+    g = out.result
+    f = ep.has_gnss
+    fix_rmse = _rms(np.hypot(ep.gnss_e[f] - te[f], ep.gnss_n[f] - tn[f]))
+    graph_rmse = _rms(np.hypot(g.e - te, g.n - tn))
+    rts_rmse = _rms(np.hypot(rts.e - te, rts.n - tn))
+    assert fix_rmse > 20.0  # the NLOS steps are really there (m)
+    assert graph_rmse <= 0.5 * fix_rmse
+    assert graph_rmse < rts_rmse
+    assert graph_rmse < 4.0  # m
+    for col in (g.e, g.n, g.v_e, g.v_n, g.var_e, g.var_n):
+        assert np.all(np.isfinite(col))
+
+
+def test_nlos_fixes_are_downweighted(nlos_run) -> None:
+    _sim, _nl, (ep, _rts, out, te, tn) = nlos_run
+    w = out.gnss_weight
+    f = ep.has_gnss
+    err = np.hypot(ep.gnss_e - te, ep.gnss_n - tn)
+    bad = f & (err > 15.0)     # fixes of an NLOS step (m)
+    good = f & (err < 5.0)
+    assert bad.sum() > 100
+    assert np.mean(w[bad] < 0.5) >= 0.9
+    assert np.median(w[good]) > 3 * np.median(w[bad])
+    assert np.all(np.isnan(w[~f]))
+    assert np.all((w[f] > 0) & (w[f] <= 1))
+
+
+def test_odometer_scale_is_estimated(nlos_run) -> None:
+    sim, _nl, (_ep, _rts, out, _te, _tn) = nlos_run
+    true_scale = 1.0 / (1.0 + sim.noise["odo_scale_error"])  # the odometer reads (1 + err) x
+    assert abs(out.odo_scale - true_scale) < 0.005
+
+
+def test_outage_end_error_small() -> None:
+    """60 s of fixes withheld on an urban drive: the end of the gap within 0.5 % of the
+    distance driven in it."""
+    sim = simulate_drive("urban_canyon", seed=1, duration_s=DUR_S)
+    drive = copy.deepcopy(sim.drive)
+    g = drive.gnss
+    t = (g.t_ns - g.t_ns[0]) / 1e9
+    gap = (t >= 150.0) & (t < 210.0)
+    g.lat_deg = np.where(gap, np.nan, g.lat_deg)
+    g.lon_deg = np.where(gap, np.nan, g.lon_deg)
+    g.fix_quality = np.where(gap, 0, g.fix_quality).astype(g.fix_quality.dtype)
+    ep, _rts, out, te, tn = _run(sim, drive)
+    assert out.result is not None, out.message
+    r = out.result
+    ts = (ep.t_ns - g.t_ns[0]) / 1e9
+    inside = (ts >= 150.0) & (ts < 210.0)
+    k_end = int(np.flatnonzero(inside)[-1])
+    tr = sim.truth
+    seg = (tr.t_ns >= g.t_ns[0] + 150e9) & (tr.t_ns < g.t_ns[0] + 210e9)
+    dist = float(np.sum(tr.speed[seg]) * 0.01)
+    end_err = float(np.hypot(r.e[k_end] - te[k_end], r.n[k_end] - tn[k_end]))
+    worst = float(np.max(np.hypot(r.e[inside] - te[inside], r.n[inside] - tn[inside])))
+    assert dist > 100.0
+    assert end_err <= 0.005 * dist
+    assert worst <= 0.01 * dist + 3.0
+
+
+def test_rtk_fixes_followed_to_centimetres() -> None:
+    sim = simulate_drive("open_sky", seed=3, duration_s=120.0)
+    drive = copy.deepcopy(sim.drive)
+    g = drive.gnss
+    rng = np.random.default_rng(5)
+    ok = np.isfinite(g.lat_deg)
+    tr = sim.truth
+    e = np.interp(g.t_ns, tr.t_ns, tr.e) + rng.normal(0, 0.02, len(g.t_ns))
+    n = np.interp(g.t_ns, tr.t_ns, tr.n) + rng.normal(0, 0.02, len(g.t_ns))
+    lat, lon = sim.frame.inverse(e, n)
+    g.lat_deg = np.where(ok, lat, np.nan)
+    g.lon_deg = np.where(ok, lon, np.nan)
+    g.sigma_e_m = np.where(ok, 0.02, np.nan)
+    g.sigma_n_m = np.where(ok, 0.02, np.nan)
+    g.fix_quality = np.where(ok, 4, 0).astype(g.fix_quality.dtype)
+    ep, _rts, out, te, tn = _run(sim, drive)
+    assert out.result is not None, out.message
+    r = out.result
+    k0 = int(np.argmax(ep.has_gnss))  # from the first fix (the lead-in is dead-reckoned)
+    err = np.hypot(r.e - te, r.n - tn)[k0:]
+    assert _rms(err) < 0.05  # m
+    assert np.percentile(err, 99) < 0.12  # m
+
+
+def test_gnss_only_and_a_handful_of_fixes_are_finite() -> None:
+    sim = simulate_drive("urban_canyon", seed=4, duration_s=120.0)
+    only = dataclasses.replace(sim.drive, gyro=None, odo=None)
+    ep, rts, out, te, tn = _run(sim, only)
+    assert out.result is not None, out.message
+    r = out.result
+    for col in (r.e, r.n, r.v_e, r.v_n, r.var_e, r.var_n):
+        assert np.all(np.isfinite(col))
+    f = ep.has_gnss
+    fix_rmse = _rms(np.hypot(ep.gnss_e[f] - te[f], ep.gnss_n[f] - tn[f]))
+    assert _rms(np.hypot(r.e - te, r.n - tn)) < fix_rmse
+    # five fixes, gyro and odometer throughout
+    few = copy.deepcopy(sim.drive)
+    g = few.gnss
+    keep = np.zeros(len(g.t_ns), bool)
+    keep[np.linspace(0, len(keep) - 1, 5).astype(int)] = True
+    few.gnss = dataclasses.replace(g, **{fl.name: getattr(g, fl.name)[keep]
+                                         for fl in dataclasses.fields(g)})
+    ep, rts, out, te, tn = _run(sim, few)
+    r = out.result if out.result is not None else rts
+    for col in (r.e, r.n, r.v_e, r.v_n, r.var_e, r.var_n):
+        assert np.all(np.isfinite(col))
+
+
+def test_parse_prior() -> None:
+    assert parse_prior("1.02", 0.005, "--odo-scale") == (1.02, 0.005)
+    assert parse_prior("1.02+-0.001", 0.005, "--odo-scale") == (1.02, 0.001)
+    from gpsdr_cli.errors import UsageError
+
+    with pytest.raises(UsageError, match="--odo-scale"):
+        parse_prior("abc", 0.005, "--odo-scale")
+    with pytest.raises(UsageError):
+        parse_prior("1.0+-0", 0.005, "--odo-scale")
+
+
+def test_cli_smooth_choices(tmp_path) -> None:
+    """--smooth graph writes gnss_weight; a bare --smooth stays RTS; --no-smooth is none."""
+    from pathlib import Path
+
+    import pandas as pd
+    from click.testing import CliRunner
+
+    from gpsdr_cli.cli.main import cli
+
+    log = Path(__file__).resolve().parents[1] / "sample_logs" / "urban_drive.mcap"
+    runner = CliRunner()
+    for args, smoother in ((["--smooth", "graph", "--odo-scale", "1.0+-0.05"], "graph"),
+                           (["--smooth"], "rts"), (["--no-smooth"], "none")):
+        out = tmp_path / f"{smoother}.parquet"
+        res = runner.invoke(cli, ["fuse", str(log), *args, "-o", str(out)])
+        assert res.exit_code == 0, res.output
+        track = pd.read_parquet(out)
+        assert ("gnss_weight" in track.columns) == (smoother == "graph")
+        import pyarrow.parquet as pq
+
+        meta = {k.decode(): v.decode() for k, v in pq.read_schema(out).metadata.items()}
+        assert meta["smoother"] == smoother
+    # a bare --smooth before the LOG argument is still RTS (it was a flag)
+    out = tmp_path / "bare.parquet"
+    res = runner.invoke(cli, ["fuse", "--smooth", str(log), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "gnss_weight" not in pd.read_parquet(out).columns
+    res = runner.invoke(cli, ["fuse", str(log), "--smooth", "graph", "--odo-scale", "x",
+                              "-o", str(tmp_path / "x.parquet")])
+    assert res.exit_code != 0 and "--odo-scale" in res.output
+
+
+def test_batch_calibrates_per_vehicle(tmp_path) -> None:
+    """Two vehicles (folders), two drives each: the pooled odometer scale of each vehicle
+    within 0.005 of its truth, and the second pass fuses with it."""
+    from click.testing import CliRunner
+
+    from gpsdr_cli.batch import BatchOptions, calibrate_vehicles, find_drives
+    from gpsdr_cli.cli.main import cli
+    from gpsdr_cli.simulate import write_drive
+
+    truth = {}
+    for vehicle, seed in (("car_a", 11), ("car_b", 12)):
+        for k, dur in enumerate((100.0, 130.0)):
+            sim = simulate_drive("urban_canyon", seed=seed, duration_s=dur)
+            write_drive(sim, tmp_path / "fleet" / vehicle / f"drive{k}", mcap=False)
+            truth[vehicle] = 1.0 / (1.0 + sim.noise["odo_scale_error"])
+    specs = find_drives(str(tmp_path / "fleet"))
+    assert len(specs) == 4
+    cals = calibrate_vehicles(specs, BatchOptions(out_dir=str(tmp_path / "o"),
+                                                  params=config.defaults()))
+    assert len(cals) == 2
+    for vehicle, cal in cals.items():
+        name = vehicle.rsplit("/", 1)[-1]
+        assert cal.drives == 2
+        assert abs(cal.odo_scale - truth[name]) < 0.005, (name, cal)
+    res = CliRunner().invoke(cli, ["batch", str(tmp_path / "fleet"), "-o", str(tmp_path / "out"),
+                                   "--jobs", "1", "--calibrate-per-vehicle", "-q"])
+    assert res.exit_code == 0, res.output
+    assert len(list((tmp_path / "out").rglob("*.fused.parquet"))) == 4
+
+
+@pytest.mark.parametrize("case", ["gyro_saturation", "jump_100m", "no_gyro", "no_dr",
+                                  "outage_60s", "standstill_30min"])
+def test_fault_cases_with_the_graph(case: str, tmp_path, monkeypatch) -> None:
+    """The fault suite's contract and accuracy bounds (faults.accuracy_problems: RMSE per
+    fault, 100 m jumps rejected, < 1 m drift over a 30-min stop) with [filter] smoother = graph
+    (a failed solve would keep the RTS track: none is allowed here)."""
+    from gpsdr_cli.testing import faults as F
+
+    monkeypatch.setitem(config.DEFAULTS["filter"], "smoother", "graph")
+    c = F.CASES[case]
+    inputs, out = F.run_case(c, "aekf", tmp_path, F.base_sim())
+    assert F.outcome_problems(out, c.expect) == []
+    assert "graph smoother:" not in (out.stderr or "")
+    problems = [p for p in F.accuracy_problems(c, inputs, out) if "no growth" not in p]
+    assert problems == []
