@@ -384,7 +384,8 @@ ACCEL_FIT_S = 5.0
 def hold_baselines(sim) -> dict[str, list[float]]:
     """End errors (m, against the truth) of no_odometer's 15-s outages dead-reckoned from the
     last fix: its position and course, the gyro's yaw rate as measured (d(psi)/dt =
-    -yaw_rate; standing, the last course before the stop), and either the last fix's speed held (``HOLD``) or that speed plus the
+    -yaw_rate; standing, the last course before the stop), and either the last fix's speed held
+    (``HOLD``) or that speed plus the
     integral of the forward accelerometer less its mean bias-plus-gravity over the last
     ``ACCEL_FIT_S`` of fixes (reading minus the fixes' speed slope; ``HOLD_ACCEL``; speed
     floored at 0).  Each outage ends at the last gyro sample before the next fix."""

@@ -429,7 +429,8 @@ def simulate_drive(scenario: str = "urban_canyon", seed: int = 0, duration_s: fl
 
     ``duration_s`` defaults to the scenario's length (600 s; stop_and_go 900 s;
     one_hour 3600 s).  ``gnss_rate_hz`` 0.5-20 Hz (default: the scenario's, 5 Hz; rtk and
-    no_odometer 4 Hz); gyro, accelerometer and odometer rates must divide 100 Hz.  ``gnss_stamp_offset_s``: each fix holds the true position at
+    no_odometer 4 Hz); gyro, accelerometer and odometer rates must divide 100 Hz.
+    ``gnss_stamp_offset_s``: each fix holds the true position at
     ``stamp + offset`` (> 0: fixes ahead of their stamps, as in comma2k19).
     Same arguments, same drive (bit for bit).
     """

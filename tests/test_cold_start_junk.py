@@ -15,8 +15,8 @@ from click.testing import CliRunner
 from gpsdr_cli import config, filters, pipeline
 from gpsdr_cli.align import build_epochs
 from gpsdr_cli.cli.main import cli
-from gpsdr_cli.io.readers import read_drive
 from gpsdr_cli.io.parquet import read_track
+from gpsdr_cli.io.readers import read_drive
 
 LAT0, LON0 = 48.1, 11.5
 SPEED_MPS = 5.0           # due north

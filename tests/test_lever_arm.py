@@ -80,7 +80,8 @@ def test_lever_arm_brings_the_track_to_the_reference_point(antenna_drive) -> Non
     p_arm["gnss"]["lever_arm_m"] = [ARM_FWD_M, 0.0, 0.0]
     res = pipeline.fuse(antenna, p_arm)
     err_arm = _errors(sim, res.track)
-    rmse = lambda d: float(np.sqrt(np.mean(d ** 2)))
+    def rmse(d):
+        return float(np.sqrt(np.mean(d ** 2)))
     t = res.track["time"].astype("int64").to_numpy()
     turning = np.abs(np.interp(t, sim.truth.t_ns, sim.truth.yaw_rate)) > 0.2
     assert turning.any()

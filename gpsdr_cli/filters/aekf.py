@@ -302,7 +302,8 @@ def initial_heading_var(x0: np.ndarray, P0: np.ndarray, heading_known: bool,
 def gnss_velocity(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray]:
     """Receiver velocity (m/s, east and north) where a fix reports speed and course, else NaN."""
     spd, crs = epochs.gnss_speed_mps, epochs.gnss_course_rad
-    ok = epochs.has_gnss & np.isfinite(spd) & np.isfinite(crs) & (spd >= params["aekf"]["gnss_velocity_min_mps"])
+    ok = (epochs.has_gnss & np.isfinite(spd) & np.isfinite(crs)
+          & (spd >= params["aekf"]["gnss_velocity_min_mps"]))
     with np.errstate(invalid="ignore"):
         return np.where(ok, spd * np.sin(crs), np.nan), np.where(ok, spd * np.cos(crs), np.nan)
 

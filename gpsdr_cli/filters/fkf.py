@@ -858,7 +858,8 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     return Prepared(dt=np.ascontiguousarray(epochs.dt_s, dtype=float),
                     has_gnss=np.ascontiguousarray(epochs.has_gnss, dtype=bool),
                     gnss_e=np.nan_to_num(epochs.gnss_e), gnss_n=np.nan_to_num(epochs.gnss_n),
-                    gnss_var_e=var_e, gnss_var_n=var_n, gnss_ve=gv_e, gnss_vn=gv_n, theta=theta, dist=dist, t_m=t_m,
+                    gnss_var_e=var_e, gnss_var_n=var_n, gnss_ve=gv_e, gnss_vn=gv_n, theta=theta,
+                    dist=dist, t_m=t_m,
                     static=static, eps_w=eps_w, x0=x0, P0=P0, psi0=psi0, par=par, flags=flags, info=info)
 
 

@@ -149,7 +149,8 @@ def build_r_table(n: int = N_TABLE_R) -> np.ndarray:
 
 
 def build_w_table(n: int = N_TABLE_W) -> np.ndarray:
-    """Control surface of :func:`weight_controller` on an ``n x n`` grid over [0, 1]^2 (PE rows, DE columns)."""
+    """Control surface of :func:`weight_controller` on an ``n x n`` grid over [0, 1]^2
+    (PE rows, DE columns)."""
     grid = np.linspace(0.0, 1.0, n)
     mu = memberships(grid, CENTRES_UNIT)                               # (n, 5)
     strengths = np.zeros((n, n, 5))

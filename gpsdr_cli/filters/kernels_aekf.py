@@ -923,7 +923,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     ``flg[F_STORE]`` the block's covariances follow the packed P in ``P_store`` and the
     bias transition f_b is ``prior_store[k, Q_FB]``.
     The options that are off by default come as keyword arguments that are None
-    when off (``*_on``; ``*_off`` for those on by default): numba prunes the branches of a None argument before type
+    when off (``*_on``; ``*_off`` for those on by default): numba prunes the branches of a None
+    argument before type
     inference, so a default run compiles none of their code and helpers (cold
     start); :func:`kernel_options` builds them from ``flg``.
     """

@@ -48,7 +48,8 @@ plus (our choice, beyond the paper) the receiver's velocity ``z = [v_e, v_n]``
 (RMC/VTG speed and course: Doppler, barely touched by multipath), sigma
 ``[fkf] gnss_velocity_sd_mps``, with each accepted fix while moving (the
 paper's GNSS filter sees positions only; this halved fkf's error in the
-simulated urban canyon, 5.65 -> 3.08 m), with a chi-square gate on the 2-dof NIS.  The gate is off until ``[gnss]
+simulated urban canyon, 5.65 -> 3.08 m), with a chi-square gate on the 2-dof NIS.  The gate is off
+until ``[gnss]
 gate_warmup_fixes`` fixes were accepted (the initial state is one fix: when
 that one was an outlier, e.g. the 11 m-off copy of a duplicated NMEA record,
 the gate otherwise rejected every good fix and kept only the copies, fault
@@ -73,7 +74,8 @@ inflate the speed variance in a 10-min outage and lock the heading out) (the var
 along itself, which the heading rows do not reduce: no lock-out; below it the
 direction is noise: a
 stop without an odometer left a GNSS-noise velocity pointing backwards, the
-heading residual near pi moved v by 80 m/s, fault case no_odo: 268 m RMSE); below ``v_lin`` the distance row is linearised
+heading residual near pi moved v by 80 m/s, fault case no_odo: 268 m RMSE); below ``v_lin`` the
+distance row is linearised
 along the latest heading instead of ``v/|v|``: no division by a speed that
 can be zero.  Heading residuals are wrapped to (-pi, pi] and gated
 (chi-square(1) at ``[gnss] gate_prob``); after ``gate_reset_s`` of rejected

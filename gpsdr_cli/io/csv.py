@@ -177,7 +177,7 @@ def _read_table(path: str | Path, data: bytes, t_column: str, columns: list[str]
     the message when a column is missing).
     """
     names, delim, body = _parse_header(path, data)
-    for col, option in zip([t_column, *columns], options):
+    for col, option in zip([t_column, *columns], options, strict=False):
         if col not in names:
             raise _missing_column(path, names, col, option)
     info: dict[str, Any] = {"columns": names, "delimiter": delim}
@@ -317,10 +317,10 @@ def _slow_path(data: bytes, body: int, names: list[str], delim: str, t_column: s
             continue
         t_out.append(t)
         line_out.append(lineno)
-        for lst, x in zip(v_out, vals):
+        for lst, x in zip(v_out, vals, strict=False):
             lst.append(x)
     t_ns = np.array(t_out, dtype=np.int64)
-    return (t_ns, {c: np.array(v, dtype=np.float64) for c, v in zip(columns, v_out)},
+    return (t_ns, {c: np.array(v, dtype=np.float64) for c, v in zip(columns, v_out, strict=False)},
             np.array(line_out, dtype=np.int64), n_rows)
 
 

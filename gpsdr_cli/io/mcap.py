@@ -164,7 +164,8 @@ class Decoder:
                 chan.add("log_ns", lt[ok])
                 if layout == "sentence":
                     chan.add("stamp_ns", fields["stamp_ns"][ok])
-                    for o, n in zip(fields["text_off"][ok].tolist(), fields["text_len"][ok].tolist()):
+                    offs = fields["text_off"][ok].tolist()
+                    for o, n in zip(offs, fields["text_len"][ok].tolist(), strict=False):
                         chan.texts.append(bytes(buf[o:o + n]))
                 else:
                     for name, values in fields.items():

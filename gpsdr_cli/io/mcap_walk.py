@@ -287,7 +287,7 @@ class Walker:
             return
         chunks: dict[int, frozenset[int]] = {}
         try:
-            for op, pos, ln in zip(ops.tolist(), body.tolist(), length.tolist()):
+            for op, pos, ln in zip(ops.tolist(), body.tolist(), length.tolist(), strict=False):
                 end = pos + ln
                 if op == _OP_SCHEMA:
                     self._schema(data, pos, end)

@@ -144,7 +144,7 @@ def _read_sqlite(files: list[Path], decoder: mcap.Decoder) -> list[mcap.Channel]
                                    "ORDER BY id", (tid,)).fetchall()
                 if not rows:
                     continue
-                t_ns, blobs = zip(*rows)
+                t_ns, blobs = zip(*rows, strict=False)
                 sizes = np.fromiter(map(len, blobs), np.int64, len(blobs))
                 buf = b"".join(blobs)
                 off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)

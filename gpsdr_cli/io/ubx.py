@@ -433,7 +433,7 @@ def _esf_words(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: S
     if not parts:
         e = np.zeros(0, np.int64)
         return e, e, e, e, np.zeros(0, np.int8)
-    return tuple(np.concatenate(c) for c in zip(*parts))  # type: ignore[return-value]
+    return tuple(np.concatenate(c) for c in zip(*parts, strict=False))  # type: ignore[return-value]
 
 
 def _u32(buf: np.ndarray, pos: np.ndarray) -> np.ndarray:
@@ -496,7 +496,7 @@ def _esf_streams(buf: np.ndarray, fr: dict[str, np.ndarray], pvt_start: np.ndarr
         return None, None, None
     order = np.argsort(fstart, kind="stable")
     fstart, tag, dtype, field, src = (a[order] for a in (fstart, tag, dtype, field, src))
-    meta["esf_words"] = {int(t): int(c) for t, c in zip(*np.unique(dtype, return_counts=True))}
+    meta["esf_words"] = {int(t): int(c) for t, c in zip(*np.unique(dtype, return_counts=True), strict=False)}
     streams: dict[str, Any] = {"gyro": None, "odo": None, "accel": None}
     for s in (0, 1):
         m = src == s
@@ -580,7 +580,7 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
     warnings: list[str] = []
     meta: dict[str, Any] = {"frames": len(fr["start"]), "bad_frames": len(fr["bad_at"])}
     ids, counts = np.unique(fr["cls"].astype(np.int64) * 256 + fr["id"], return_counts=True)
-    meta["messages"] = {f"{i >> 8:02X}-{i & 0xFF:02X}": int(c) for i, c in zip(ids, counts)}
+    meta["messages"] = {f"{i >> 8:02X}-{i & 0xFF:02X}": int(c) for i, c in zip(ids, counts, strict=False)}
     gnss, pvt_start, pvt_t, _, nav_counts = nav_fixes(buf, fr, name, skipped)
     meta.update(nav_counts)
     gyro, odo, accel = _esf_streams(buf, fr, pvt_start, pvt_t, ticks_per_m, name, skipped,

@@ -38,11 +38,11 @@ def write_rosbag(drive: Drive, path: str | Path, *, ros1: bool = False) -> Path:
                 cov_type=2)))
     if drive.gyro is not None:
         c = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts)
-        for t, wz in zip(drive.gyro.t_ns.tolist(), drive.gyro.yaw_rate_radps.tolist()):
+        for t, wz in zip(drive.gyro.t_ns.tolist(), drive.gyro.yaw_rate_radps.tolist(), strict=False):
             events.append((t, c, ros2_fast.encode("imu", t, "imu", ros1=ros1, wz=wz)))
     if drive.odo is not None:
         c = w.add_connection("/vel", "geometry_msgs/msg/TwistStamped", typestore=ts)
-        for t, v in zip(drive.odo.t_ns.tolist(), drive.odo.speed_mps.tolist()):
+        for t, v in zip(drive.odo.t_ns.tolist(), drive.odo.speed_mps.tolist(), strict=False):
             events.append((t, c, ros2_fast.encode("twist", t, "base", ros1=ros1, vx=v)))
     events.sort(key=lambda e: e[0])
     for t, c, raw in events:

@@ -77,16 +77,16 @@ def ubx_log(drive: Drive, *, local_offset_ms: int = -1_234_567_890_123, ticks_pe
         return t // 1_000_000 + local_offset_ms
 
     if drive.gyro is not None:
-        for t, w in zip(drive.gyro.t_ns.tolist(), drive.gyro.yaw_rate_radps.tolist()):
+        for t, w in zip(drive.gyro.t_ns.tolist(), drive.gyro.yaw_rate_radps.tolist(), strict=False):
             # u-blox z is down: a counter-clockwise yaw rate is a negative gyro z
             events.append((t, 1, esf_meas(tag(t), [(5, round(-math.degrees(w) * 4096))])))
     if drive.accel is not None:
-        for t, a in zip(drive.accel.t_ns.tolist(), drive.accel.accel_mps2.tolist()):
+        for t, a in zip(drive.accel.t_ns.tolist(), drive.accel.accel_mps2.tolist(), strict=False):
             events.append((t, 1, esf_meas(tag(t), [(16, round(a * 1024))])))
     if drive.odo is not None:
         dist = 0.0
         last = None
-        for t, v in zip(drive.odo.t_ns.tolist(), drive.odo.speed_mps.tolist()):
+        for t, v in zip(drive.odo.t_ns.tolist(), drive.odo.speed_mps.tolist(), strict=False):
             if ticks_per_m > 0:
                 if last is not None:
                     dist += abs(v) * (t - last) / NS_PER_S
