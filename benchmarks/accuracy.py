@@ -14,8 +14,8 @@ and the oracle (the same filter told the true noise: ``simulate.oracle_params`` 
 
 Smoothing modes: forward, ``+ RTS`` and ``+ graph`` (the robust batch smoother,
 ``[filter] smoother = "graph"``; ``--no-graph`` skips it; no oracle for it).  Scenario
-``urban_nlos``: urban_canyon with NLOS steps of 10-80 m lasting 5-60 s added to its fixes
-while the reported sigma stays 1.5 m (``gpsdr_cli.testing.nlos.add_nlos``).
+``urban_nlos``: ``gpsdr simulate``'s canyon drive whose fixes carry NLOS steps of 10-80 m
+lasting 5-60 s while HDOP and GST look good.
 
 Figures per run: RMSE, CEP95, max horizontal error against the truth (m), and the
 60-s-outage drift: the error at the end of each GNSS outage of 50-70 s as % of the
@@ -133,8 +133,6 @@ POSITIONS_ONLY = " (positions only)"
 POSITIONS_ONLY_SCENARIOS = ("open_sky", "urban_canyon", "tunnels", "stop_and_go")
 #: the scenario the issue sets the comparative and the GNSS-reduction targets for
 URBAN = "urban_canyon"
-#: the urban canyon with non-line-of-sight steps of 10-80 m for 5-60 s on its fixes
-NLOS = "urban_nlos"
 #: the comparative targets: (check, what it measures, adaptive method, baseline method,
 #: figure compared (RMSE or the mean squared error), reduction needed)
 COMPARISONS = [
@@ -287,15 +285,7 @@ def mode_label(smooth: bool | str) -> str:
 def bench_sim(scenario: str, names: list[str], duration_s: float | None,
               smooth_modes: list[bool | str], oracle: bool, keep: dict, seed: int,
               paper: bool = True, positions: bool = True) -> list[Row]:
-    nlos = scenario == NLOS
-    if nlos:  # the urban canyon with NLOS steps on its fixes (gpsdr_cli.testing.nlos)
-        from gpsdr_cli.testing.nlos import add_nlos
-
-        sim = simulate_drive(URBAN, seed=seed, duration_s=duration_s)
-        sim.drive = add_nlos(sim, seed).drive
-        oracle = paper = positions = False
-    else:
-        sim = simulate_drive(scenario, seed=seed, duration_s=duration_s)
+    sim = simulate_drive(scenario, seed=seed, duration_s=duration_s)
     label = f"{scenario} (seed {seed}, {sim.truth['t_ns'].size / 100 / 60:.0f} min)"
     rows: list[Row] = []
     truth_ll = sim.truth[["t_ns", "lat", "lon"]]
