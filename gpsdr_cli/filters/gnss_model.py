@@ -13,8 +13,8 @@ receiver's own figures cannot say:
   one fix sees them.  What does: over a few seconds (``[gnss] nlos_lag_s``) the distance
   between two fixes disagrees with the distance the odometer (else the receiver's
   Doppler speed) measured.  Each fix whose chord disagrees by more than
-  ``nlos_mismatch_m``, in a run of at least ``nlos_run_fixes`` such fixes (a step's
-  ramp; a lone outlier is the gate's), gets its sigma scaled by ``mismatch /
+  ``nlos_mismatch_m``, in a run of such fixes lasting ``nlos_run_s`` or more (a step's
+  ramp plus the chord; a burst of outliers is the gate's), gets its sigma scaled by ``mismatch /
   nlos_mismatch_m`` (a Huber weight on that fix).  A drive where at least
   ``nlos_drive_share`` of the fixes are so marked is an NLOS drive: ekf/aekf's bias sigma
   becomes ``nlos_err_sd_m``, so they let the dead reckoning carry the shape and average
@@ -86,7 +86,8 @@ def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     # a step of NLOS error disagrees over every chord that spans its ramp: a run of
     # disagreeing fixes; a lone outlier (one fix, left to the gate) gives no run
     starts, last = true_runs(known & (mis > thr))
-    long_run = (last - starts + 1) >= int(g["nlos_run_fixes"])
+    t_fix = epochs.t_ns[epochs.has_gnss] / NS_PER_S
+    long_run = (t_fix[last] - t_fix[starts]) >= float(g["nlos_run_s"])
     if not long_run.any():
         return epochs, params
     bad = np.zeros(len(mis), bool)
