@@ -32,7 +32,7 @@ iterative LSQR, far slower than a direct banded solve on this structure).  The k
 graduated (graduated non-convexity, Yang et al. 2020): the Cauchy scale starts at
 ``gnc_start`` x ``kernel_scale`` and halves to ``kernel_scale``, so the start -- the forward
 filter's track, already pulled towards the biased fixes -- does not lock the solution into
-accepting them.  Kernel and scale by benchmark: docs/decisions/0001-graph-smoother.md.
+accepting them.  Kernel and scale by benchmark: docs/decisions/0002-graph-smoother.md.
 
 Marginal sigmas: the entries of H^-1 inside the band by the Takahashi recursion on the
 banded Cholesky factor (:func:`.graph_kernels.banded_inverse_band`), interpolated linearly

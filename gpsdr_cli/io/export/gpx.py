@@ -11,7 +11,7 @@ are left out.
 Written as text column by column rather than with gpxpy's object model, although gpxpy
 is a dependency: building and serialising one ``GPXTrackPoint`` per row does not fit a
 100 Hz hour (360 k points) into the 10 s an export may take, this writer does
-(docs/decisions/0017-export-writers.md).  The output is read back with ``gpxpy.parse``
+(docs/decisions/0006-export-writers.md).  The output is read back with ``gpxpy.parse``
 in the tests.
 """
 

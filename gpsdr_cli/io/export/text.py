@@ -2,7 +2,7 @@
 
 Each helper turns one numpy column into a list of strings (one per row), so a writer joins
 rows with ``zip`` instead of building an object per point: that is what keeps a 360 k-point
-export within its time budget (docs/decisions/0017-export-writers.md).
+export within its time budget (docs/decisions/0006-export-writers.md).
 """
 
 from __future__ import annotations
