@@ -42,7 +42,8 @@ def test_one_file_per_stream_with_units(gpsdr, sample_dir: Path, tmp_path: Path)
     n_fix, lat, lon = first_gga(sample_dir / "gps.nmea")
     gnss = pd.read_parquet(files["gnss"])
     assert list(gnss.columns) == ["time", "lat", "lon", "alt", "fix_quality", "n_sats", "hdop",
-                                  "pdop", "vdop", "sigma_e", "sigma_n", "speed", "course_deg"]
+                                  "pdop", "vdop", "sigma_e", "sigma_n", "speed", "course_deg",
+                                  "geometry"]  # GeoParquet: a WKB point per fix
     assert int((gnss.fix_quality > 0).sum()) == n_fix == 579
     assert abs(gnss.lat.iloc[0] - lat) < TOL_DEG and abs(gnss.lon.iloc[0] - lon) < TOL_DEG
     assert gnss.time.iloc[0] == pd.Timestamp("2018-08-02T16:14:48.30", tz="UTC")

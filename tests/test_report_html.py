@@ -107,8 +107,9 @@ def test_report_data_of_a_fused_track(fused) -> None:
     assert data["counts"]["fixes"] == int(track["gnss_e"].notna().sum())
     assert data["counts"]["rejected"] == int((track["gnss_rejected"]
                                               & track["gnss_e"].notna()).sum())
-    assert data["colour_by"] == "sigma" and not data["has"]["quality"]
-    assert [p["id"] for p in data["panels"]] == ["error", "pdop", "sigma"]
+    # a fused track carries the QC columns: coloured by quality, with a separation panel
+    assert data["colour_by"] == "quality" and data["has"]["quality"]
+    assert [p["id"] for p in data["panels"]] == ["error", "pdop", "sigma", "separation"]
     # the page's RMSE is the statistics' RMSE
     rmse = float(fused.stats.loc[fused.stats["segment"] == "all", "rmse_m"].iloc[0])
     assert f"RMSE {rmse:.2f} m" in data["stats_text"]
