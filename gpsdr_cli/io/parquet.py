@@ -29,11 +29,13 @@ Conventions: :mod:`gpsdr_cli.conventions` (``time`` is timestamp[ns, UTC]).
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
@@ -201,6 +203,15 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, *, metadata: dict[str
         out.write(buf.getvalue())
         out.flush()
         return
+    with atomic_output(path) as fh:
+        _write_to(table, fh, fmt)
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike) -> Iterator[BinaryIO]:
+    """A binary file that replaces ``path`` only once it is completely written and synced
+    (a temporary file in the target's directory, fsync'ed, renamed): a killed process
+    leaves the old file or none."""
     target = Path(path)
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
@@ -209,7 +220,7 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, *, metadata: dict[str
     try:
         os.chmod(tmp_name, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual mode
         with os.fdopen(fd, "wb") as fh:
-            _write_to(table, fh, fmt)
+            yield fh
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp_name, target)

@@ -15,19 +15,15 @@ WGS84, sigma_e/sigma_n metres 1-sigma, heading clockwise from north).
 
 from __future__ import annotations
 
-import contextlib
 import os
-import tempfile
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
 
 import numpy as np
 import pandas as pd
 
 from ...errors import InputError, UsageError
-from ..parquet import _fsync_dir, _umask, _unlink_quietly
+from ..parquet import atomic_output as atomic_output  # the writers' one atomic file
 
 #: Output suffix -> format name.
 SUFFIXES: dict[str, str] = {".gpx": "gpx", ".kml": "kml", ".geojson": "geojson",
@@ -140,30 +136,6 @@ def decimate(track: pd.DataFrame, every_s: float | None = None,
     if kept[-1] != n - 1:
         kept.append(n - 1)
     return track.iloc[np.asarray(kept)].reset_index(drop=True)
-
-
-@contextlib.contextmanager
-def atomic_output(path: str | os.PathLike) -> Iterator[BinaryIO]:
-    """A binary file that replaces ``path`` only once it is completely written and synced."""
-    target = Path(path)
-    directory = target.parent if str(target.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(target, f"cannot write: directory {directory} does not exist")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
-    try:
-        os.chmod(tmp_name, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp_name, target)
-    except OSError as err:
-        _unlink_quietly(tmp_name)
-        raise InputError(target, f"cannot write: {err.strerror or err}") from err
-    except BaseException:
-        _unlink_quietly(tmp_name)
-        raise
-    _fsync_dir(directory)
 
 
 def export_track(track: pd.DataFrame, meta: dict[str, str], path: str | os.PathLike,
