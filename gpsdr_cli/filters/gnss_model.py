@@ -36,6 +36,9 @@ from ..align import Epochs, true_runs
 from ..config import Params
 from ..conventions import NS_PER_S
 
+#: a speed reading older than this (s) is not trusted for the chord check
+SPEED_MAX_AGE_S = 0.5
+
 
 def _held(has: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Each epoch's latest finite value of ``values`` where ``has`` (0 before the first)."""
@@ -53,15 +56,22 @@ def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
     if len(f) < 3:
         return out
     if epochs.has_odo.any():
-        speed = np.abs(_held(epochs.has_odo, epochs.odo_speed_mps))
+        has, values = epochs.has_odo, epochs.odo_speed_mps
     elif np.isfinite(epochs.gnss_speed_mps).any():
-        speed = np.abs(_held(epochs.has_gnss, epochs.gnss_speed_mps))
+        has, values = epochs.has_gnss, epochs.gnss_speed_mps
     else:
         return out
+    speed = np.abs(_held(has, values))
+    # a chord is judged only where the speed is fresh at every epoch it spans: a held
+    # reading through a dropout is no measurement
+    idx = np.maximum.accumulate(np.where(has & np.isfinite(values), np.arange(len(has)), -1))
+    age = np.where(idx >= 0, (epochs.t_ns - epochs.t_ns[np.maximum(idx, 0)]) / NS_PER_S, np.inf)
+    stale = np.concatenate(([0], np.cumsum(age > SPEED_MAX_AGE_S)))
     dist = np.concatenate(([0.0], np.cumsum(speed[:-1] * epochs.dt_s[1:])))
     t = epochs.t_ns[f] / NS_PER_S
     j = np.clip(np.searchsorted(t, t - lag_s), 0, len(f) - 1)
     ok = (t - t[j] >= 0.5 * lag_s) & (t - t[j] <= 1.5 * lag_s)
+    ok &= stale[f + 1] == stale[f[j]]   # no stale epoch in (t_j, t_i]
     chord = np.hypot(epochs.gnss_e[f] - epochs.gnss_e[f[j]], epochs.gnss_n[f] - epochs.gnss_n[f[j]])
     mis = np.abs(chord - (dist[f] - dist[f[j]]))
     out[ok] = mis[ok]
