@@ -132,6 +132,10 @@ def warm_up(params: Params, *, auto_gnss_offset: bool = False) -> None:
     graph = smoother_of(params) == "graph"
     if graph:
         smooths.add(True)
+    from .qc import qc_enabled
+
+    if qc_enabled(params):
+        smooths.add(False)  # the forward/backward QC passes are unsmoothed
     for smooth in sorted(smooths):
         p = copy.deepcopy(params)
         p["filter"]["smooth"] = smooth
