@@ -321,7 +321,7 @@ def flicker_zeros(t_ns: np.ndarray, speed_mps: np.ndarray, stop_mps: float, min_
     A wheel-tick odometer at walking pace, or one whose speed is a tick count over a short
     window, reads 1, 0, 0, 1 m/s while the car creeps; each zero said "stopped" and fired a
     zero-velocity update (10 ticks/m, open sky ekf 1.97 m RMSE against 0.94 m for its oracle;
-    helper-23's sweep).  A real stop lasts longer; the dropped readings are ambiguous, not
+    benchmarks/sweep.py).  A real stop lasts longer; the dropped readings are ambiguous, not
     wrong, so they are not counted as skipped.  A run at either end of the stream is kept.
     """
     n = len(t_ns)
