@@ -40,13 +40,6 @@ from ..conventions import NS_PER_S
 SPEED_MAX_AGE_S = 0.5
 
 
-def _held(has: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Each epoch's latest finite value of ``values`` where ``has`` (0 before the first)."""
-    ok = has & np.isfinite(values)
-    idx = np.maximum.accumulate(np.where(ok, np.arange(len(values)), -1))
-    return np.where(idx >= 0, values[np.maximum(idx, 0)], 0.0)
-
-
 def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
     """Per usable fix, | |p_i - p_j| - DR distance(t_j, t_i) | (m) with j the fix nearest
     ``lag_s`` before i; NaN where no earlier fix is within 1.5 lag or the drive has no
@@ -61,10 +54,10 @@ def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
         has, values = epochs.has_gnss, epochs.gnss_speed_mps
     else:
         return out
-    speed = np.abs(_held(has, values))
-    # a chord is judged only where the speed is fresh at every epoch it spans: a held
-    # reading through a dropout is no measurement
+    # each epoch's latest speed reading (0 before the first); a chord is judged only where
+    # that reading is fresh at every epoch it spans: a held reading is no measurement
     idx = np.maximum.accumulate(np.where(has & np.isfinite(values), np.arange(len(has)), -1))
+    speed = np.where(idx >= 0, np.abs(values[np.maximum(idx, 0)]), 0.0)
     age = np.where(idx >= 0, (epochs.t_ns - epochs.t_ns[np.maximum(idx, 0)]) / NS_PER_S, np.inf)
     stale = np.concatenate(([0], np.cumsum(age > SPEED_MAX_AGE_S)))
     dist = np.concatenate(([0.0], np.cumsum(speed[:-1] * epochs.dt_s[1:])))
