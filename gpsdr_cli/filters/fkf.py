@@ -801,7 +801,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_GNSS_STALE_S] = epochs.gap_s
     par[kf.K_DR_STALE_S] = fp["dr_stale_s"]
     # no odometer: in GNSS outages nothing measures the speed (kernels_fkf: zero-acceleration rows)
-    par[kf.K_COAST_Q] = 0.0 if len(o) else fp["coast_acc_psd"]
+    par[kf.K_COAST_Q] = fp["coast_acc_psd"]  # the kernel coasts only while no distance is fresh
     positive = {"fkf.heading_sd_rad": fp["heading_sd_rad"], "odo.noise_sd_mps": par[kf.K_ODO_SD],
                 "standstill.zupt_sd_mps": sp["zupt_sd_mps"], "fkf.gnss_err_sd_m": fp["gnss_err_sd_m"],
                 "fkf.gnss_err_obstructed_sd_m": fp["gnss_err_obstructed_sd_m"],
