@@ -59,11 +59,12 @@ def test_filters_not_worse_than_the_fixes_with_a_zero_odometer(city, name: str) 
     assert r.rmse_m < r.gnss_rmse_m
 
 
-def test_odometer_silent_after_a_stop_does_not_hold_the_car(city) -> None:
+@pytest.mark.parametrize("name", ["ekf", "fkf"])
+def test_odometer_silent_after_a_stop_does_not_hold_the_car(city, name: str) -> None:
     """The odometer stops reporting while the car stands (t = 100 s) and stays silent for
     300 s of driving: the standstill it last reported must expire (it held ekf's track
-    parked behind the fixes, 49 m RMSE against their 7.6 m)."""
+    parked behind the fixes, 49 m RMSE against their 7.6 m), and the stops in between come
+    from the receiver's speed (fkf drove through them: 17 m)."""
     d = F.odo_dropout(city.drive, 100.0, 300.0, mode="missing")
-    r = run_filter(city, copy.deepcopy(d), "ekf")
-    assert r.rmse_m < 0.6 * r.gnss_rmse_m
-    assert not r.result.static[(r.epochs.t_ns - r.epochs.t_ns[0]) / 1e9 > 110.0][:1000].any()
+    r = run_filter(city, copy.deepcopy(d), name)
+    assert r.rmse_m < 0.75 * r.gnss_rmse_m

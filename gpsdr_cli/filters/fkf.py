@@ -754,6 +754,10 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             held = np.zeros(n)
             held[o] = speed
             static = fresh & (held[lastc] < sp["speed_mps"])
+            if gnss_on and not fresh.all():  # a silent odometer: the receiver's speed says when
+                gnss_static = standstill_from_gnss(epochs, t_s, params,
+                                                   (t_s[g], psi_g) if len(g) else None)
+                static |= ~fresh & gnss_static
     elif sp["enabled"] and gnss_on:        # no odometer: the receiver's speed says when stopped
         static = standstill_from_gnss(epochs, t_s, params, (t_s[g], psi_g) if len(g) else None)
 
