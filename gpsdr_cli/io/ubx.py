@@ -592,6 +592,7 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
     gyro, odo, accel = _esf_streams(buf, fr, pvt_start, pvt_t, ticks_per_m, name, skipped,
                                     warnings, meta)
     text = np.flatnonzero(fr["text"])
+    notes: list[str] = []
     if len(text) and b"$" in data:
         day = date
         if day is None and len(gnss):
@@ -614,6 +615,7 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
             else:
                 gnss = fixes
                 skipped.merge(rep)
+                notes = nmea_meta.get("notes", [])  # e.g. sentences that disagree
     drive = Drive(skipped=skipped, sources=[Source(name, hashlib.sha256(data).hexdigest())])
     drive.gnss = gnss if len(gnss) else None
     drive.gyro, drive.odo, drive.accel = gyro, odo, accel
@@ -622,6 +624,8 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
     drive.meta["ubx"] = meta
     if warnings:
         drive.meta["warnings"] = warnings
+    if notes:
+        drive.meta["notes"] = list(notes)
     if not streams:
         raise NoDataError(name, f"no usable UBX NAV-PVT or ESF message and no NMEA fix "
                           f"({meta['frames']} valid frames, {meta['bad_frames']} damaged; "

@@ -364,3 +364,18 @@ def test_front_wheel_ticks_when_the_rear_ones_are_absent() -> None:
     events.sort(key=lambda e: e[0])
     d = _one(b"".join(e[1] for e in events), ticks_per_m=20.0)
     assert np.allclose(d.odo.speed_mps, 10.5, atol=1e-9)  # the front pair, not the single tick
+
+
+def test_nmea_fixes_of_a_ubx_log_keep_the_disagreement_note(tmp_path: Path, gpsdr) -> None:
+    """A UBX log whose fixes come from its NMEA lines: an RMC 0.01' north of its GGA is a
+    disagreement, counted in the note ``gpsdr info`` prints; GGA's position is taken."""
+    gga = _nmea("GPGGA,102030.00,5406.000,N,01836.000,E,1,08,0.9,10.0,M,30.0,M,,")
+    rmc = _nmea("GPRMC,102030.00,A,5406.010,N,01836.000,E,0.0,0.0,040526,,,A")
+    path = tmp_path / "esf_nmea.ubx"
+    path.write_bytes((gga + "\r\n").encode() + esf_meas(5, [(5, 1)]) + (rmc + "\r\n").encode())
+    d = read_ubx(path)
+    assert d.gnss.lat_deg[0] == pytest.approx(54.1, abs=1e-9)
+    assert d.meta["ubx"]["nmea"]["position_disagreements"] == 1
+    r = gpsdr(["info", str(path)])
+    assert r.exit_code == 0, r.output
+    assert "1 epochs whose sentences disagree on the position" in r.output
