@@ -13,7 +13,8 @@ the way other tools write their logs rather than as ``gpsdr simulate`` does:
 Each revision runs ``python -m gpsdr_cli.cli.main fuse --gps .. --gyro .. --odo ..``
 (the defaults: aekf, RTS smoothing) once to fill the numba cache, then ``--runs``
 times under ``/usr/bin/time -v``, the two revisions interleaved so both see the same
-load; the table gives the median, min and max of the wall time and the peak RSS.
+load; the table gives the median, min and max of the wall time, the CPU time (user +
+system: on a shared machine it moves less than the wall time) and the peak RSS.
 ``--before REV`` (default ``main``) is exported with ``git archive`` into a temporary
 folder; the "after" is this checkout.  ``--cold`` also times one cold start per
 revision (an empty ``NUMBA_CACHE_DIR``).  The drive is generated once into
@@ -69,18 +70,19 @@ def write_drive(out: Path, seed: int = 1) -> None:
     (out / "gps.nmea").write_text("".join(lines), encoding="ascii", newline="")
 
 
-def _time_v(cmd: list[str], env: dict[str, str], cwd: Path) -> tuple[float, float]:
-    """(wall s, peak RSS MB) of one run under /usr/bin/time -v."""
+def _time_v(cmd: list[str], env: dict[str, str], cwd: Path) -> tuple[float, float, float]:
+    """(wall s, peak RSS MB, user + system CPU s) of one run under /usr/bin/time -v."""
     r = subprocess.run(["/usr/bin/time", "-v", *cmd], env=env, cwd=cwd, capture_output=True,
                        text=True)
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{r.stderr[-2000:]}")
     wall = re.search(r"Elapsed \(wall clock\) time.*: (?:(\d+):)?(\d+):([\d.]+)", r.stderr)
     rss = re.search(r"Maximum resident set size \(kbytes\): (\d+)", r.stderr)
-    assert wall and rss, r.stderr[-2000:]
+    cpu = [re.search(rf"{k} time \(seconds\): ([\d.]+)", r.stderr) for k in ("User", "System")]
+    assert wall and rss and all(cpu), r.stderr[-2000:]
     h = int(wall.group(1) or 0)
     s = h * 3600 + int(wall.group(2)) * 60 + float(wall.group(3))
-    return s, int(rss.group(1)) / 1024
+    return s, int(rss.group(1)) / 1024, sum(float(c.group(1)) for c in cpu)  # type: ignore[union-attr]
 
 
 def _cmd(drive: Path, out: Path) -> list[str]:
@@ -119,8 +121,9 @@ def main() -> None:
                                  check=True, capture_output=True).stdout
         subprocess.run(["tar", "-x", "-C", str(before)], input=archive, check=True)
         revs = {f"before ({args.before})": before, "after (this checkout)": ROOT}
-        results: dict[str, dict[str, list[float]]] = {k: {"wall": [], "rss": []} for k in revs}
-        cold: dict[str, tuple[float, float]] = {}
+        results: dict[str, dict[str, list[float]]] = {
+            k: {"wall": [], "rss": [], "cpu": []} for k in revs}
+        cold: dict[str, tuple[float, float, float]] = {}
         for name, src in revs.items():
             _time_v(_cmd(args.drive, tmpd), _env(src), tmpd)  # fill the numba cache
             if args.cold:
@@ -128,16 +131,19 @@ def main() -> None:
                                      _env(src, tempfile.mkdtemp(dir=tmpd)), tmpd)
         for _ in range(args.runs):
             for name, src in revs.items():
-                wall, rss = _time_v(_cmd(args.drive, tmpd), _env(src), tmpd)
+                wall, rss, cpu = _time_v(_cmd(args.drive, tmpd), _env(src), tmpd)
                 results[name]["wall"].append(wall)
                 results[name]["rss"].append(rss)
+                results[name]["cpu"].append(cpu)
     load = os.getloadavg()[0]
     print(f"warm gpsdr fuse, one-hour drive ({args.drive}), {args.runs} runs each, "
           f"median (min-max); load average {load:.1f} on {os.cpu_count()} cores")
-    print(f"{'revision':<26} {'wall s':>20} {'peak RSS MB':>22}" + ("  cold s / MB" if cold else ""))
+    print(f"{'revision':<26} {'wall s':>18} {'CPU s':>18} {'peak RSS MB':>16}"
+          + ("  cold wall s / MB" if cold else ""))
     for name, r in results.items():
         extra = f"  {cold[name][0]:.2f} / {cold[name][1]:.0f}" if name in cold else ""
-        print(f"{name:<26} {_summary(r['wall'], '.2f'):>20} {_summary(r['rss'], '.0f'):>22}{extra}")
+        print(f"{name:<26} {_summary(r['wall'], '.2f'):>18} {_summary(r['cpu'], '.2f'):>18} "
+              f"{_summary(r['rss'], '.0f'):>16}{extra}")
 
 
 if __name__ == "__main__":
