@@ -20,7 +20,9 @@ message.  So the two common layouts have a hand-written fast path:
   rosbags refuses) is read up to its last whole chunk, with a warning.
 * ROS 2 SQLite (a ``.db3`` file or a bag folder of them, uncompressed): the
   ``topics`` table, then the wanted topics' rows of ``messages`` in id (insertion)
-  order by one aggregate query per 500 k rows that returns their blobs concatenated
+  order -- the table's own, so no sort, and not log-time order through the timestamp
+  index, which costs a row lookup per message; the times are the header stamps
+  anyway -- by one aggregate query per 500 k rows that returns their blobs concatenated
   and their log times, topics and sizes as one fixed-width hex string, so no Python
   object is made per message (a row-per-message fetch costs ~2 us a row).
 * Anything else (compressed ROS 2 bags, MCAP storage, other chunk codecs): rosbags.
