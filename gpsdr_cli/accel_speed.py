@@ -1,0 +1,251 @@
+"""The forward accelerometer as the speed through GNSS outages of drives without an odometer.
+
+A drive with a gyro and no odometer has nothing that measures the speed while the fixes are
+out: the filters hold the last speed (``coast_acc_psd``), and a car that brakes to a stop or
+drives off inside a 15-s outage ends it 80-140 m off.  A forward accelerometer (``acc_x``, or
+``sensor_msgs/Imu`` linear_acceleration.x) measures the speed change.
+
+:func:`speed_track` runs a small Kalman filter forward in time over the epochs, state
+``[s, v, b, c]``: the distance driven since the last used fix (m), the horizontal speed (m/s),
+the reading's offset (m/s^2) and the offset's rate of change along the road (m/s^2 per m).
+The reading drives the prediction, ``dv/dt = a_meas - b``, and the receiver's Doppler speed
+updates it at every fix, so ``b`` and ``c`` are estimated against the GNSS speed up to the
+last fix before an outage.
+
+Gravity: on a slope of pitch theta the accelerometer also reads ``g sin(theta)`` (0.98 m/s^2
+at 10 %).  Nothing on a car with a yaw gyro and a forward accelerometer measures the pitch, so
+``b`` is the sensor's bias *plus* ``g sin(theta)`` of the road under the car.  The grade
+changes along the road, not in time (and not while parked): roads are built as straight
+grades joined by parabolic vertical curves, along which the grade changes at a constant rate
+per metre, so ``db/ds = c`` with ``c`` a random walk in the distance driven
+(``grade_rate_rw_var_per_m``), beside a random walk of ``b`` itself per metre
+(``grade_rw_var_m2ps4_per_m``) and the bias's slow wander in time (``bias_rw_var_m2ps5``).
+At each fix the Doppler speed pins ``b`` down; through an outage the grade rate learnt before
+it is extrapolated and the variances grow with the distance driven: the reported
+along-track sigma is that of the distance (conservative: the random walks are sized for
+vertical curves of ~100 m).
+
+:func:`bridge_outages` replaces the forward filter's track inside each such outage (no
+odometer, the accelerometer throughout): from the filter's position at the last used fix,
+the distance of :func:`speed_track` along the gyro's heading (the filter's velocity heading
+where it last moved at >= ``heading_min_speed_mps``, then the yaw rate less the filter's
+gyro-bias estimate, or the mean rate at the drive's standstills).  The across-track
+variance stays the filter's, the along-track one is the fix's plus the distance's.  The
+smoothed tracks are left as they are (the RTS pass already has the fix at the outage's end).
+The speed stays >= 0 (a braking car stops, it does not reverse).  The filters' own state is
+not touched: each resumes at the outage's first fix as before, so the bridge changes the
+track's outage epochs and nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .align import Epochs
+from .config import Params
+from .conventions import NS_PER_S
+from .filters.base import FilterResult
+
+#: a fix's Doppler speed below this (m/s) is a standstill (the gyro's rest rate is its bias)
+STANDSTILL_MPS = 0.1
+#: the accelerometer's last reading older than this (s) leaves an epoch uncovered
+MAX_ACCEL_AGE_S = 0.5
+
+
+@dataclass
+class SpeedTrack:
+    """Per epoch (after the epoch's update): ``v_mps`` speed, ``v_var`` its variance (m^2/s^2),
+    ``s_m`` distance since the last used fix, ``s_var`` its variance (m^2), ``b_mps2`` the
+    offset (bias + g sin(pitch)) and ``covered`` (an accelerometer reading within
+    MAX_ACCEL_AGE_S)."""
+
+    v_mps: np.ndarray
+    v_var: np.ndarray
+    s_m: np.ndarray
+    s_var: np.ndarray
+    b_mps2: np.ndarray
+    covered: np.ndarray
+
+
+@njit(cache=True, error_model="numpy")
+def _speed_kf(dt: np.ndarray, acc: np.ndarray, z: np.ndarray, anchor: np.ndarray,
+              prm: np.ndarray, v_out: np.ndarray, vv_out: np.ndarray, s_out: np.ndarray,
+              ss_out: np.ndarray, b_out: np.ndarray) -> None:
+    """The [s, v, b, c] filter (module docstring): ``acc`` the held reading (NaN: none yet),
+    ``z`` the Doppler speed (NaN: none), ``anchor`` where s restarts from 0 (used fixes).
+    ``prm``: initial sds of the speed, the offset and the grade rate; the white-acceleration
+    PSD (m^2/s^3); the offset's random walk per s and per m; the grade rate's per m; the
+    Doppler speed's variance (m^2/s^2)."""
+    q_a, q_bt, q_bs, q_c, r_v = prm[3], prm[4], prm[5], prm[6], prm[7]
+    x = np.zeros(4)          # s, v, b, c
+    P = np.zeros((4, 4))
+    P[1, 1] = prm[0] * prm[0]
+    P[2, 2] = prm[1] * prm[1]
+    P[3, 3] = prm[2] * prm[2]
+    F = np.eye(4)
+    started = False
+    for k in range(len(dt)):
+        T = dt[k]
+        if started and T > 0.0:
+            a = acc[k] if math.isfinite(acc[k]) else x[2]  # no reading: no speed change
+            v0 = x[1]
+            v1 = max(v0 + (a - x[2]) * T, 0.0)
+            ds = 0.5 * (v0 + v1) * T
+            x[0] += ds
+            x[1] = v1
+            x[2] += x[3] * ds        # the grade changes along the road (a vertical curve)
+            F[0, 1] = T
+            F[0, 2] = -0.5 * T * T
+            F[1, 2] = -T
+            F[2, 3] = ds
+            P = F @ P @ F.T
+            P[0, 0] += q_a * T * T * T / 3.0
+            P[0, 1] += q_a * T * T / 2.0
+            P[1, 0] += q_a * T * T / 2.0
+            P[1, 1] += q_a * T
+            P[2, 2] += q_bt * T + q_bs * ds
+            P[3, 3] += q_c * ds
+        if math.isfinite(z[k]):
+            if not started:  # the first Doppler speed starts the filter
+                x[1] = z[k]
+                P[1, 1] = r_v
+                started = True
+            else:
+                S = P[1, 1] + r_v
+                y = z[k] - x[1]
+                K = P[:, 1] / S
+                x += K * y
+                x[1] = max(x[1], 0.0)
+                P = P - np.outer(K, P[1, :])
+                P = 0.5 * (P + P.T)
+        if anchor[k]:
+            x[0] = 0.0
+            P[0, :] = 0.0
+            P[:, 0] = 0.0
+        v_out[k] = x[1]
+        vv_out[k] = P[1, 1]
+        s_out[k] = x[0]
+        ss_out[k] = P[0, 0]
+        b_out[k] = x[2]
+
+
+def speed_track(epochs: Epochs, params: Params, anchor: np.ndarray | None = None) -> SpeedTrack:
+    """The accelerometer's speed and distance per epoch (module docstring); ``anchor`` marks
+    the epochs where the distance restarts (default: every epoch with a fix)."""
+    p = params["accel"]
+    n = len(epochs)
+    covered = accel_covered(epochs)
+    acc = np.where(covered, _ffill(np.where(epochs.has_accel, epochs.accel_mps2, np.nan)), np.nan)
+    z = np.where(epochs.has_gnss, epochs.gnss_speed_mps, np.nan)
+    if anchor is None:
+        anchor = epochs.has_gnss
+    prm = np.array([float(p["init_speed_sd_mps"]), float(p["bias_init_sd_mps2"]),
+                    float(p["grade_rate_init_sd_mps2_per_m"]), float(p["noise_psd_m2ps3"]),
+                    float(p["bias_rw_var_m2ps5"]), float(p["grade_rw_var_m2ps4_per_m"]),
+                    float(p["grade_rate_rw_var_per_m"]), float(p["gnss_speed_sd_mps"]) ** 2])
+    out = [np.empty(n) for _ in range(5)]
+    _speed_kf(np.ascontiguousarray(epochs.dt_s, np.float64), acc, z,
+              np.ascontiguousarray(anchor, np.bool_), prm, *out)
+    return SpeedTrack(*out, covered=covered)
+
+
+def _gyro_bias(epochs: Epochs, result: FilterResult) -> np.ndarray:
+    """The gyro bias per epoch (rad/s, in the yaw rate's sign: true rate = reading - bias):
+    the filter's estimate when it has one, else the mean reading at the fixes' standstills."""
+    est = result.extras.get("gyro_bias_radps")
+    if est is not None and np.all(np.isfinite(est)):
+        return np.asarray(est, float)
+    yaw = epochs.yaw_rate_radps
+    speed = _ffill(np.where(epochs.has_gnss, epochs.gnss_speed_mps, np.nan))
+    still = epochs.has_gyro & np.isfinite(yaw) & (speed < STANDSTILL_MPS)
+    return np.full(len(epochs), float(np.mean(yaw[still])) if still.any() else 0.0)
+
+
+def _ffill(x: np.ndarray) -> np.ndarray:
+    """``x`` with each NaN replaced by the latest finite value before it (NaN before the first)."""
+    idx = np.maximum.accumulate(np.where(np.isfinite(x), np.arange(len(x)), -1))
+    return np.where(idx >= 0, x[np.maximum(idx, 0)], np.nan)
+
+
+def outage_spans(epochs: Epochs, result: FilterResult, params: Params
+                 ) -> list[tuple[int, int]]:
+    """(k, m): the last used fix before a gap longer than ``accel.min_outage_s`` and the next
+    used fix (exclusive end), where no odometer record lies in between and the accelerometer
+    covers every epoch of it."""
+    if epochs.has_odo.any() or not epochs.has_accel.any():
+        return []
+    used = np.flatnonzero(np.asarray(result.gnss_used, bool))
+    if len(used) < 2:
+        return []
+    gap = np.diff(epochs.t_ns[used]) / NS_PER_S
+    cov = accel_covered(epochs)
+    bad = np.concatenate(([0], np.cumsum(~cov)))
+    out = []
+    for i in np.flatnonzero(gap > float(params["accel"]["min_outage_s"])):
+        k, m = int(used[i]), int(used[i + 1])
+        if bad[m] == bad[k + 1]:
+            out.append((k, m))
+    return out
+
+
+def accel_covered(epochs: Epochs) -> np.ndarray:
+    """Epochs with an accelerometer reading at most MAX_ACCEL_AGE_S old."""
+    n = len(epochs)
+    t_s = (epochs.t_ns - epochs.t_ns[0]) / NS_PER_S
+    has = epochs.has_accel & np.isfinite(epochs.accel_mps2)
+    last = np.maximum.accumulate(np.where(has, np.arange(n), -1))
+    return (last >= 0) & (t_s - t_s[np.maximum(last, 0)] <= MAX_ACCEL_AGE_S)
+
+
+def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> FilterResult:
+    """The forward track through each outage of :func:`outage_spans` dead-reckoned with the
+    accelerometer's speed (module docstring); ``result`` is changed in place and returned.
+    ``result.info["accel_bridged_outages"]`` counts them."""
+    if not params["accel"]["enabled"]:
+        return result
+    spans = outage_spans(epochs, result, params)
+    result.info["accel_bridged_outages"] = len(spans)
+    if not spans:
+        return result
+    anchor = np.asarray(result.gnss_used, bool)
+    sp = speed_track(epochs, params, anchor)
+    bias = _gyro_bias(epochs, result)
+    yaw = np.where(epochs.has_gyro & np.isfinite(epochs.yaw_rate_radps), epochs.yaw_rate_radps,
+                   np.nan)
+    omega = -(_ffill(yaw) - bias)                 # d(psi)/dt, clockwise-positive
+    omega = np.where(np.isfinite(omega), omega, 0.0)
+    fspeed = np.hypot(result.v_e, result.v_n)
+    moving = np.flatnonzero(fspeed >= float(params["accel"]["heading_min_speed_mps"]))
+    dt = epochs.dt_s
+    for k, m in spans:
+        i = np.searchsorted(moving, k, side="right") - 1
+        if i < 0:
+            continue  # never moved before: no heading to drive along
+        j0 = int(moving[i])
+        psi_ref = math.atan2(result.v_e[j0], result.v_n[j0])
+        cum = np.cumsum(omega[j0 + 1:m] * dt[j0 + 1:m])
+        psi = psi_ref + cum[k - j0:]                # epochs k+1 .. m-1
+        sl = slice(k + 1, m)
+        v = sp.v_mps[sl]
+        v_prev = np.concatenate(([sp.v_mps[k]], v[:-1]))
+        step = 0.5 * (v + v_prev) * dt[sl]
+        ue, un = np.sin(psi), np.cos(psi)
+        e = result.e[k] + np.cumsum(step * ue)
+        n = result.n[k] + np.cumsum(step * un)
+        # along-track: the fix's variance plus the distance's; across: the filter's
+        pe, pn, pen = result.var_e[k], result.var_n[k], result.cov_en[k]
+        along0 = ue * ue * pe + 2 * ue * un * pen + un * un * pn
+        ce, cn = un, -ue
+        qe, qn, qen = result.var_e[sl], result.var_n[sl], result.cov_en[sl]
+        cross = ce * ce * qe + 2 * ce * cn * qen + cn * cn * qn
+        along = along0 + sp.s_var[sl]
+        result.e[sl], result.n[sl] = e, n
+        result.v_e[sl], result.v_n[sl] = v * ue, v * un
+        result.var_e[sl] = along * ue * ue + cross * ce * ce
+        result.var_n[sl] = along * un * un + cross * cn * cn
+        result.cov_en[sl] = along * ue * un + cross * ce * cn
+    return result
