@@ -155,14 +155,23 @@ def speed_track(epochs: Epochs, params: Params, anchor: np.ndarray | None = None
 
 def _gyro_bias(epochs: Epochs, result: FilterResult) -> np.ndarray:
     """The gyro bias per epoch (rad/s, in the yaw rate's sign: true rate = reading - bias):
-    the filter's estimate when it has one, else the mean reading at the fixes' standstills."""
+    the filter's estimate when it has one, else the mean reading at the standstills so far
+    (a fix's Doppler speed under STANDSTILL_MPS at most MAX_ACCEL_AGE_S old; 0 before the
+    first)."""
     est = result.extras.get("gyro_bias_radps")
     if est is not None and np.all(np.isfinite(est)):
         return np.asarray(est, float)
+    n = len(epochs)
+    t_s = (epochs.t_ns - epochs.t_ns[0]) / NS_PER_S
+    fix = epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps)
+    last = np.maximum.accumulate(np.where(fix, np.arange(n), -1))
+    j = np.maximum(last, 0)
+    fresh = (last >= 0) & (t_s - t_s[j] <= MAX_ACCEL_AGE_S)
     yaw = epochs.yaw_rate_radps
-    speed = _ffill(np.where(epochs.has_gnss, epochs.gnss_speed_mps, np.nan))
-    still = epochs.has_gyro & np.isfinite(yaw) & (speed < STANDSTILL_MPS)
-    return np.full(len(epochs), float(np.mean(yaw[still])) if still.any() else 0.0)
+    still = fresh & (epochs.gnss_speed_mps[j] < STANDSTILL_MPS) & epochs.has_gyro & np.isfinite(yaw)
+    total = np.cumsum(np.where(still, yaw, 0.0))
+    count = np.cumsum(still)
+    return np.where(count > 0, total / np.maximum(count, 1), 0.0)
 
 
 def _ffill(x: np.ndarray) -> np.ndarray:
