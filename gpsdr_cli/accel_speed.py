@@ -1,9 +1,14 @@
-"""The forward accelerometer as the speed through GNSS outages of drives without an odometer.
+"""The speed through the GNSS outages of drives without an odometer: the forward
+accelerometer's, else the last fixes'.
 
 A drive with a gyro and no odometer has nothing that measures the speed while the fixes are
-out: the filters hold the last speed (``coast_acc_psd``), and a car that brakes to a stop or
-drives off inside a 15-s outage ends it 80-140 m off.  A forward accelerometer (``acc_x``, or
-``sensor_msgs/Imu`` linear_acceleration.x) measures the speed change.
+out.  The filters' current statistical model carried the last acceleration estimate on
+(its mean is ``abar = a_hat``; the coasting rows, ``coast_acc_psd``, only slow it), and
+through a 15-s outage that turned a passing acceleration into metres per second of speed
+(no_odometer seed 3: 14.4 -> 15.4 m/s while the car braked to a stop); a car that brakes to
+a stop or drives off inside the outage ends it 80-140 m off whatever holds the speed.  A
+forward accelerometer (``acc_x``, or ``sensor_msgs/Imu`` linear_acceleration.x) measures the
+speed change.
 
 :func:`speed_track` runs a small Kalman filter forward in time over the epochs, state
 ``[s, v, b, c]``: the distance driven since the last used fix (m), the horizontal speed (m/s),
@@ -25,16 +30,19 @@ it is extrapolated and the variances grow with the distance driven: the reported
 along-track sigma is that of the distance (conservative: the random walks are sized for
 vertical curves of ~100 m).
 
-:func:`bridge_outages` replaces the forward filter's track inside each such outage (no
-odometer, the accelerometer throughout): from the filter's position at the last used fix,
-the distance of :func:`speed_track` along the gyro's heading (the filter's velocity heading
-where it last moved at >= ``heading_min_speed_mps``, then the yaw rate less the filter's
-gyro-bias estimate, or the mean rate at the drive's standstills).  The across-track
-variance stays the filter's, the along-track one is the fix's plus the distance's.  The
-smoothed tracks are left as they are (the RTS pass already has the fix at the outage's end).
-The speed stays >= 0 (a braking car stops, it does not reverse).  The filters' own state is
-not touched: each resumes at the outage's first fix as before, so the bridge changes the
-track's outage epochs and nothing else.
+:func:`bridge_outages` replaces the forward filter's track inside each GNSS outage of a drive
+with a gyro and no odometer: from the filter's position at the last used fix, the distance
+driven along the gyro's heading (the filter's velocity heading where it last moved at >=
+``heading_min_speed_mps``, then the yaw rate less the filter's gyro-bias estimate, or the
+mean rate at the standstills so far).  The distance is :func:`speed_track`'s where the
+accelerometer covers the outage, else :func:`held_speed`'s: the last fix's Doppler speed
+plus the acceleration the last second of fixes showed, decaying over a few seconds (a
+manoeuvre is short; what the current statistical model should predict with nothing
+measuring the speed).  The across-track variance stays the filter's, the along-track one is
+the fix's plus the distance's.  The smoothed tracks are left as they are (the RTS pass
+already has the fix at the outage's end).  The speed stays >= 0 (a braking car stops, it
+does not reverse).  The filters' own state is not touched: each resumes at the outage's
+first fix as before, so the bridge changes the track's outage epochs and nothing else.
 """
 
 from __future__ import annotations
@@ -181,24 +189,54 @@ def _ffill(x: np.ndarray) -> np.ndarray:
 
 
 def outage_spans(epochs: Epochs, result: FilterResult, params: Params
-                 ) -> list[tuple[int, int]]:
-    """(k, m): the last used fix before a gap longer than ``accel.min_outage_s`` and the next
-    used fix (exclusive end), where no odometer record lies in between and the accelerometer
-    covers every epoch of it."""
-    if epochs.has_odo.any() or not epochs.has_accel.any():
+                 ) -> list[tuple[int, int, bool]]:
+    """(k, m, accel): a fix the filter used, the next fix (exclusive end) more than
+    ``accel.min_outage_s`` later, and whether the accelerometer covers every epoch in
+    between; none on a drive with an odometer (it measures the speed) or without a gyro.
+    Only GNSS outages: a stretch of fixes the filter rejected is the filter's to judge."""
+    if epochs.has_odo.any() or not epochs.has_gyro.any():
         return []
-    used = np.flatnonzero(np.asarray(result.gnss_used, bool))
-    if len(used) < 2:
+    fixes = np.flatnonzero(epochs.has_gnss)
+    if len(fixes) < 2:
         return []
-    gap = np.diff(epochs.t_ns[used]) / NS_PER_S
+    gap = np.diff(epochs.t_ns[fixes]) / NS_PER_S
+    used = np.asarray(result.gnss_used, bool)
     cov = accel_covered(epochs)
     bad = np.concatenate(([0], np.cumsum(~cov)))
     out = []
     for i in np.flatnonzero(gap > float(params["accel"]["min_outage_s"])):
-        k, m = int(used[i]), int(used[i + 1])
-        if bad[m] == bad[k + 1]:
-            out.append((k, m))
+        k, m = int(fixes[i]), int(fixes[i + 1])
+        if used[k]:
+            out.append((k, m, bool(bad[m] == bad[k + 1])))
     return out
+
+
+def held_speed(epochs: Epochs, result: FilterResult, params: Params, k: int, m: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Speed (m/s) and distance variance (m^2) at epochs k+1 .. m-1 of a gyro-only outage:
+    the last fix's Doppler speed (else the filter's) plus the acceleration the fixes' speed
+    showed over the last ``gyro_only_fit_s`` (a straight-line slope over >= 3 fixes, else 0),
+    decaying with ``gyro_only_tau_s`` (a manoeuvre lasts seconds: v = v_k + a_k tau (1 -
+    exp(-t / tau)), >= 0); the distance variance that of an unseen manoeuvre acceleration of
+    sigma ``gyro_only_acc_sd_mps2`` and the same correlation time (2/3 sigma^2 tau t^3) on top
+    of the speed's (``accel.gnss_speed_sd_mps``) t^2."""
+    p = params["accel"]
+    t_s = (epochs.t_ns - epochs.t_ns[k]) / NS_PER_S
+    v_k = float(epochs.gnss_speed_mps[k])
+    if not math.isfinite(v_k):
+        v_k = math.hypot(result.v_e[k], result.v_n[k])
+    fit_s = float(p["gyro_only_fit_s"])
+    lo = int(np.searchsorted(t_s, -fit_s, side="right"))
+    near = lo + np.flatnonzero(epochs.has_gnss[lo:k + 1] & np.isfinite(epochs.gnss_speed_mps[lo:k + 1]))
+    a_k = 0.0
+    if len(near) >= 3 and np.ptp(t_s[near]) > 0:
+        a_k = float(np.polyfit(t_s[near], epochs.gnss_speed_mps[near], 1)[0])
+    tau = max(float(p["gyro_only_tau_s"]), 1e-9)
+    t = t_s[k + 1:m]
+    v = np.maximum(v_k + a_k * tau * -np.expm1(-t / tau), 0.0)
+    s_var = (float(p["gnss_speed_sd_mps"]) ** 2 * t * t
+             + 2.0 / 3.0 * float(p["gyro_only_acc_sd_mps2"]) ** 2 * tau * t ** 3)
+    return v, s_var
 
 
 def accel_covered(epochs: Epochs) -> np.ndarray:
@@ -211,26 +249,29 @@ def accel_covered(epochs: Epochs) -> np.ndarray:
 
 
 def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> FilterResult:
-    """The forward track through each outage of :func:`outage_spans` dead-reckoned with the
-    accelerometer's speed (module docstring); ``result`` is changed in place and returned.
-    ``result.info["accel_bridged_outages"]`` counts them."""
-    if not params["accel"]["enabled"]:
-        return result
-    spans = outage_spans(epochs, result, params)
-    result.info["accel_bridged_outages"] = len(spans)
+    """The forward track through each outage of :func:`outage_spans` dead-reckoned along the
+    gyro's heading with the accelerometer's speed (``accel.enabled``) or, without readings,
+    the last fixes' speed (:func:`held_speed`, ``accel.gyro_only``); ``result`` is changed in
+    place and returned.  ``result.info["accel_bridged_outages"]`` and
+    ``["gyro_only_bridged_outages"]`` count them."""
+    p = params["accel"]
+    spans = [(k, m, acc) for k, m, acc in outage_spans(epochs, result, params)
+             if (p["enabled"] if acc else p["gyro_only"])]
+    result.info["accel_bridged_outages"] = sum(acc for _, _, acc in spans)
+    result.info["gyro_only_bridged_outages"] = sum(not acc for _, _, acc in spans)
     if not spans:
         return result
     anchor = np.asarray(result.gnss_used, bool)
-    sp = speed_track(epochs, params, anchor)
+    sp = speed_track(epochs, params, anchor) if any(acc for _, _, acc in spans) else None
     bias = _gyro_bias(epochs, result)
     yaw = np.where(epochs.has_gyro & np.isfinite(epochs.yaw_rate_radps), epochs.yaw_rate_radps,
                    np.nan)
     omega = -(_ffill(yaw) - bias)                 # d(psi)/dt, clockwise-positive
     omega = np.where(np.isfinite(omega), omega, 0.0)
     fspeed = np.hypot(result.v_e, result.v_n)
-    moving = np.flatnonzero(fspeed >= float(params["accel"]["heading_min_speed_mps"]))
+    moving = np.flatnonzero(fspeed >= float(p["heading_min_speed_mps"]))
     dt = epochs.dt_s
-    for k, m in spans:
+    for k, m, acc in spans:
         i = np.searchsorted(moving, k, side="right") - 1
         if i < 0:
             continue  # never moved before: no heading to drive along
@@ -239,8 +280,12 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> Filt
         cum = np.cumsum(omega[j0 + 1:m] * dt[j0 + 1:m])
         psi = psi_ref + cum[k - j0:]                # epochs k+1 .. m-1
         sl = slice(k + 1, m)
-        v = sp.v_mps[sl]
-        v_prev = np.concatenate(([sp.v_mps[k]], v[:-1]))
+        if acc:
+            v, v_k, s_var = sp.v_mps[sl], sp.v_mps[k], sp.s_var[sl]
+        else:
+            v, s_var = held_speed(epochs, result, params, k, m)
+            v_k = v[0] if len(v) else 0.0
+        v_prev = np.concatenate(([v_k], v[:-1]))
         step = 0.5 * (v + v_prev) * dt[sl]
         ue, un = np.sin(psi), np.cos(psi)
         e = result.e[k] + np.cumsum(step * ue)
@@ -251,7 +296,7 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> Filt
         ce, cn = un, -ue
         qe, qn, qen = result.var_e[sl], result.var_n[sl], result.cov_en[sl]
         cross = ce * ce * qe + 2 * ce * cn * qen + cn * cn * qn
-        along = along0 + sp.s_var[sl]
+        along = along0 + s_var
         result.e[sl], result.n[sl] = e, n
         result.v_e[sl], result.v_n[sl] = v * ue, v * un
         result.var_e[sl] = along * ue * ue + cross * ce * ce

@@ -3,8 +3,9 @@
 The no_odometer scenario puts its outages where the speed changes most: braking to a stop
 (from ~14 m/s) and driving off, on rolling hills.  Holding the last fix's speed along the
 gyro's heading ends them 80-140 m off (median 94 m over seeds 1-3); the filters, which
-hold the speed too, ended them 94-96 m off.  With the accelerometer's speed
-(:mod:`gpsdr_cli.accel_speed`) the forward track ends them within a few metres.
+held the speed too and carried their last acceleration estimate on, ended them 94-96 m off.
+With the accelerometer's speed (:mod:`gpsdr_cli.accel_speed`) the forward track ends them
+within a few metres; without it, at the last fixes' speed, no worse than the hold.
 """
 
 from __future__ import annotations
@@ -76,21 +77,37 @@ def test_forward_outage_ends_with_the_accelerometer(no_odo, name):
     assert np.max(ends) < 40.0
 
 
-@pytest.mark.parametrize("name", ["aekf", "fkf"])
-def test_gyro_only_forward_is_no_worse_than_the_hold(no_odo, name):
-    """Without the accelerometer the forward filters hold the speed: within a few % of the
-    hold baseline's median (nothing measures the braking or the drive-off)."""
-    drive = copy.deepcopy(no_odo.drive)
-    drive.accel = None
-    ends, info = outage_end_errors(no_odo, drive, name)
-    hold = _hold_baselines(no_odo)
-    assert info.get("accel_bridged_outages", 0) == 0
-    assert np.median(ends) <= 1.05 * np.median(hold), (np.median(ends), np.median(hold))
+@pytest.fixture(scope="module")
+def no_odo_seeds(no_odo):
+    return [no_odo] + [simulate_drive("no_odometer", seed=seed) for seed in (2, 3)]
 
 
-def test_accelerometer_bridge_switched_off_is_the_plain_filter(no_odo):
-    ends, info = outage_end_errors(no_odo, no_odo.drive, "aekf", overrides={"accel": {"enabled": False}})
-    assert "accel_bridged_outages" not in info
+@pytest.mark.parametrize("name", filters.NAMES)
+def test_gyro_only_forward_is_no_worse_than_the_hold(no_odo_seeds, name):
+    """Without the accelerometer nothing measures the braking or the drive-off: over seeds
+    1-3 the forward track ends the 27 outages no farther off than the hold baseline at the
+    median (94.2 m; the filters alone 94.4-96.5 m, one outage 13 m worse than the hold),
+    none more than 10 m worse (the acceleration of the last second of fixes is noise at
+    cruise: 0.05 m/s Doppler speed)."""
+    ends, hold = [], []
+    for sim in no_odo_seeds:
+        drive = copy.deepcopy(sim.drive)
+        drive.accel = None
+        e, info = outage_end_errors(sim, drive, name)
+        assert info["accel_bridged_outages"] == 0
+        assert info["gyro_only_bridged_outages"] >= len(e)
+        ends.extend(e)
+        hold.extend(_hold_baselines(sim))
+    ends, hold = np.array(ends), np.array(hold)
+    assert len(ends) == 27
+    assert np.median(ends) <= np.median(hold), (np.median(ends), np.median(hold))
+    assert np.all(ends <= hold + 10.0), np.round(ends - hold, 1)
+
+
+def test_bridges_switched_off_give_the_plain_filter(no_odo):
+    off = {"accel": {"enabled": False, "gyro_only": False}}
+    ends, info = outage_end_errors(no_odo, no_odo.drive, "aekf", overrides=off)
+    assert info["accel_bridged_outages"] == info["gyro_only_bridged_outages"] == 0
     assert np.median(ends) > 50.0                       # braking / driving off unseen
 
 
@@ -113,7 +130,7 @@ def test_a_drive_with_an_odometer_is_unchanged():
     assert ep.has_accel.any() and ep.has_odo.any()
     r = run_filter(ep, p)
     plain = filters.get("aekf")(ep, p)
-    assert r.info["accel_bridged_outages"] == 0
+    assert r.info["accel_bridged_outages"] == r.info["gyro_only_bridged_outages"] == 0
     np.testing.assert_array_equal(r.e, plain.e)
     np.testing.assert_array_equal(r.var_n, plain.var_n)
 
