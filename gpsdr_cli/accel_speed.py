@@ -265,9 +265,13 @@ def held_speed(epochs: Epochs, result: FilterResult, params: Params, k: int, m: 
 
 def accel_covered(epochs: Epochs) -> np.ndarray:
     """Epochs with an accelerometer reading at most MAX_ACCEL_AGE_S old."""
+    return _covered(epochs, epochs.has_accel & np.isfinite(epochs.accel_mps2))
+
+
+def _covered(epochs: Epochs, has: np.ndarray) -> np.ndarray:
+    """Epochs with a reading (``has``) at most MAX_ACCEL_AGE_S old."""
     n = len(epochs)
     t_s = (epochs.t_ns - epochs.t_ns[0]) / NS_PER_S
-    has = epochs.has_accel & np.isfinite(epochs.accel_mps2)
     last = np.maximum.accumulate(np.where(has, np.arange(n), -1))
     return (last >= 0) & (t_s - t_s[np.maximum(last, 0)] <= MAX_ACCEL_AGE_S)
 
@@ -277,12 +281,13 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> Filt
     gyro's heading with the accelerometer's speed (``accel.enabled``) or, without readings,
     the last fixes' speed (:func:`held_speed`, ``accel.gyro_only``); ``result`` is changed in
     place and returned.  ``result.info["accel_bridged_outages"]`` and
-    ``["gyro_only_bridged_outages"]`` count them."""
+    ``["gyro_only_bridged_outages"]`` count them; an outage the gyro does not cover (from
+    where the filter last moved to its end) is left to the filter."""
     p = params["accel"]
     spans = [(k, m, acc) for k, m, acc in outage_spans(epochs, result, params)
              if (p["enabled"] if acc else p["gyro_only"])]
-    result.info["accel_bridged_outages"] = sum(acc for _, _, acc in spans)
-    result.info["gyro_only_bridged_outages"] = sum(not acc for _, _, acc in spans)
+    result.info["accel_bridged_outages"] = 0
+    result.info["gyro_only_bridged_outages"] = 0
     if not spans:
         return result
     anchor = np.asarray(result.gnss_used, bool)
@@ -294,6 +299,9 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> Filt
     dt = epochs.dt_s
     psi_gyro = np.cumsum(-yaw * dt)
     own = "gyro_bias_radps" in result.extras
+    # a span the gyro does not cover (a dropout, clipped samples left out) stays the filter's
+    gyro_gap = np.concatenate(([0], np.cumsum(~_covered(epochs, epochs.has_gyro
+                                                         & np.isfinite(epochs.yaw_rate_radps)))))
     fspeed = np.hypot(result.v_e, result.v_n)
     moving = np.flatnonzero(fspeed >= float(p["heading_min_speed_mps"]))
     for k, m, acc in spans:
@@ -301,6 +309,8 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> Filt
         if i < 0:
             continue  # never moved before: no heading to drive along
         j0 = int(moving[i])
+        if gyro_gap[m] != gyro_gap[j0 + 1]:
+            continue
         psi_ref = math.atan2(result.v_e[j0], result.v_n[j0])
         # the filter's own bias estimate, else the fixes' course, else the standstills'
         b = None if own else course_gyro_bias(epochs, k, psi_gyro)
@@ -330,4 +340,5 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> Filt
         result.var_e[sl] = along * ue * ue + cross * ce * ce
         result.var_n[sl] = along * un * un + cross * cn * cn
         result.cov_en[sl] = along * ue * un + cross * ce * cn
+        result.info["accel_bridged_outages" if acc else "gyro_only_bridged_outages"] += 1
     return result

@@ -201,3 +201,18 @@ def test_gyro_only_tunnels_take_the_gyro_bias_from_the_course():
         out[label] = (float(np.sqrt(np.mean(err ** 2))), r.info["gyro_only_bridged_outages"])
     assert out["bridge"][1] >= 3 and out["plain"][1] == 0
     assert out["bridge"][0] < 35.0 and out["bridge"][0] < 0.5 * out["plain"][0], out
+
+
+def test_an_outage_without_the_gyro_is_left_to_the_filter(no_odo):
+    """A gyro dropout inside one outage (or clipped samples left out): that outage keeps the
+    filter's track, the others are bridged, and every output stays finite."""
+    drive = copy.deepcopy(no_odo.drive)
+    t0 = int(no_odo.truth.t_ns.iloc[0])
+    o = no_odo.noise["brake_outages"][1]
+    start = t0 + int((o["start_s"] + 5.0) * 1e9)
+    keep = (drive.gyro.t_ns < start) | (drive.gyro.t_ns > start + int(3e9))
+    drive.gyro.t_ns = drive.gyro.t_ns[keep]
+    drive.gyro.yaw_rate_radps = drive.gyro.yaw_rate_radps[keep]
+    ends, info = outage_end_errors(no_odo, drive, "aekf")
+    assert info["accel_bridged_outages"] == 7
+    assert ends[1] > 50.0 and np.median(np.delete(ends, 1)) <= ACCEL_FWD_M
