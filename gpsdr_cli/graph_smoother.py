@@ -104,6 +104,31 @@ def _ffill_ok(t_s: np.ndarray, has: np.ndarray, val: np.ndarray, max_age_s: floa
     return np.nan_to_num(out), ok & (age <= max_age_s)
 
 
+def odo_lag_s(t_s: np.ndarray, odo_good: np.ndarray, odo: np.ndarray, has_fix: np.ndarray,
+              gnss_speed: np.ndarray, max_lag_s: float, step_s: float = 0.005) -> float:
+    """How long (s) the odometer's speed lags the receiver's Doppler speed: the shift that
+    best fits one to the other (least squares, one scale fitted, both above 1 m/s), on a
+    ``step_s`` grid within +-``max_lag_s``; 0 without enough of both."""
+    f = has_fix & np.isfinite(gnss_speed)
+    if odo_good.sum() < 10 or f.sum() < 10 or not max_lag_s > 0:
+        return 0.0
+    to, vo = t_s[odo_good], odo[odo_good]
+    tf, vf = t_s[f], gnss_speed[f]
+    inside = (tf >= to[0] + max_lag_s) & (tf <= to[-1] - max_lag_s)
+    tf, vf = tf[inside], vf[inside]
+    best, best_lag = math.inf, 0.0
+    for lag in np.arange(-max_lag_s, max_lag_s + 0.5 * step_s, step_s):
+        vi = np.interp(tf + lag, to, vo)
+        m = (vf > 1.0) & (vi > 1.0)
+        if m.sum() < 10:
+            return 0.0
+        s = float(np.dot(vf[m], vi[m]) / np.dot(vi[m], vi[m]))
+        cost = float(np.mean((vf[m] - s * vi[m]) ** 2))
+        if cost < best:
+            best, best_lag = cost, float(lag)
+    return best_lag
+
+
 def keyframes(t_s: np.ndarray, has_fix: np.ndarray, step_s: float) -> np.ndarray:
     """Epoch indices of the keyframes: every fix, the first and the last epoch, and enough
     epochs between so that no two keyframes are more than ``step_s`` apart where epochs allow."""
@@ -161,9 +186,23 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
             yaw_bad |= at_max
     yaw, gyro_ok = _ffill_ok(t_s, np.asarray(epochs.has_gyro, bool), yaw_raw,
                              float(gp["sensor_max_age_s"]), bad=yaw_bad)
+    odo_bad = ~((np.nan_to_num(odo_raw, nan=-1.0) >= 0) & (odo_raw <= max_spd))
     odo, odo_ok = _ffill_ok(t_s, np.asarray(epochs.has_odo, bool), odo_raw,
-                            float(gp["sensor_max_age_s"]),
-                            bad=~((np.nan_to_num(odo_raw, nan=-1.0) >= 0) & (odo_raw <= max_spd)))
+                            float(gp["sensor_max_age_s"]), bad=odo_bad)
+    # a speed from wheel ticks over a window describes the window's middle: read it that
+    # much later (linear between readings), else every speed change leaves a distance error
+    odo_good = np.asarray(epochs.has_odo, bool) & ~odo_bad
+    lag = float(gp["odo_lag_s"])
+    if not math.isfinite(lag):
+        lag = odo_lag_s(t_s, odo_good, odo_raw, np.asarray(epochs.has_gnss, bool),
+                        np.asarray(epochs.gnss_speed_mps, float), float(gp["odo_lag_max_s"]))
+    if lag != 0.0 and odo_good.sum() > 1:
+        odo = np.where(odo_ok, np.interp(t_s + lag, t_s[odo_good], odo_raw[odo_good]), odo)
+    # the filters' GNSS quality model: NLOS-suspect fixes' sigmas scaled, the error
+    # states' sigma for this drive (RTK, NLOS)
+    from .filters.gnss_model import gnss_error_model
+
+    epochs, qparams = gnss_error_model(epochs, params)
     has_fix = (np.asarray(epochs.has_gnss, bool) & np.isfinite(epochs.gnss_e)
                & np.isfinite(epochs.gnss_n))
     key_ep = keyframes(t_s, has_fix, float(gp["keyframe_s"]))
@@ -183,7 +222,14 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # Fixes' errors are correlated (multipath, NLOS): fixes within one decorrelation span
     # (1/span = 1/tau + speed/distance) count as one, their variance times their number --
     # with white fixes a 2-minute stop's 600 fixes outvoted the rest of the drive.
-    tau = float(gp["gnss_corr_tau_s"])
+    # An NLOS drive (by the quality model) keeps white fixes under the tight kernel: with
+    # error states the NLOS steps trade between the error state and the track, and the
+    # solve crawls (urban_nlos: 10 m against 4 m white, in 3x the iterations).
+    nlos_drive = (epochs.rtk_fixed_share < float(params["gnss"]["rtk_share"])
+                  and float(qparams["aekf"]["gnss_err_sd_m"]) == float(params["gnss"]["nlos_err_sd_m"])
+                  and float(params["aekf"]["gnss_err_sd_m"]) != float(params["gnss"]["nlos_err_sd_m"]))
+    err_on = bool(gp["gnss_err_states"]) and not nlos_drive
+    tau = float(gp["gnss_corr_tau_s"]) if not err_on else 0.0
     if tau > 0 and has_fix.sum() > 1:
         tf = t_s[has_fix]
         rate = (len(tf) - 1) / max(tf[-1] - tf[0], 1e-9)
@@ -200,6 +246,27 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     use_vel = bool(gp["gnss_velocity"])
     gspd[~(has_fix[key_ep] & np.isfinite(gspd) & (gspd >= 0)) | (not use_vel)] = np.nan
     gcrs[~np.isfinite(gcrs)] = np.nan
+
+    # ---- GNSS error states: first-order Gauss-Markov per axis, 1/tau = 1/tau_s + speed/dist
+    # (the ekf/aekf model, its sigma from the quality model); off: pinned at zero
+    tk_s = t_s[key_ep]
+    if err_on:
+        # the quality model's RTK sigma, but not its NLOS one: the kernel rejects NLOS
+        # steps, which a 20-m error state would absorb instead
+        err_sd = min(float(gp["gnss_err_sd_m"]), float(qparams["aekf"]["gnss_err_sd_m"]))
+        err_tau = float(gp["gnss_err_tau_s"])
+        err_dist = float(gp["gnss_err_dist_m"])
+    else:
+        err_sd, err_tau, err_dist = 1e-4, 1e9, 0.0
+    err_sd = max(err_sd, 1e-4)
+    spd_all = np.hypot(np.nan_to_num(init.v_e), np.nan_to_num(init.v_n))
+    cdist = np.concatenate(([0.0], np.cumsum(0.5 * (spd_all[1:] + spd_all[:-1]) * np.diff(t_s))))
+    dt_k = np.diff(tk_s)
+    dd_k = np.diff(cdist[key_ep])
+    expo = dt_k / max(err_tau, 1e-9) + (dd_k / err_dist if err_dist > 0 else 0.0)
+    err_phi = np.exp(-expo) if len(dt_k) else np.ones(1)
+    err_wsd = err_sd * np.sqrt(np.maximum(-np.expm1(-2.0 * expo), 1e-12)) if len(dt_k) \
+        else np.ones(1)
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval
     stop_v = float(params["standstill"]["speed_mps"])
@@ -263,13 +330,13 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     x[gk.V::gk.N_X] = np.hypot(ve0, vn0)[key_ep]
     x[gk.B::gk.N_X] = b_mean
     x[gk.S::gk.N_X] = s_mean
-    prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean])
+    prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean, 0.0, 0.0])
     prior_sd = np.array([float(gp["init_pos_sd_m"]), float(gp["init_pos_sd_m"]),
                          float(gp["init_heading_sd_rad"]), float(gp["init_speed_sd_mps"]),
-                         b_sd, s_sd])
+                         b_sd, s_sd, err_sd, err_sd])
 
     kernel = KERNELS[str(gp["kernel"])]
-    c_final = float(gp["kernel_scale"])
+    c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
     n_stages = max(int(gp["gnc_stages"]), 1) if kernel != KERNELS["gauss"] else 1
     stages = [c_final * 2.0 ** (n_stages - 1 - k) for k in range(n_stages)]
     ab = np.zeros((gk.BAND + 1, n_x))
@@ -280,7 +347,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     its = 0
     converged = False
     message = ""
-    args_fix = (fe, fn, sde, sdn, gspd, gcrs, prior_mean, prior_sd)
+    args_fix = (fe, fn, sde, sdn, gspd, gcrs, err_phi, err_wsd, prior_mean, prior_sd)
 
     def cost_at(xx: np.ndarray, c: float, want: bool) -> float:
         return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
@@ -383,6 +450,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     info = dict(init.info)
     info.update({"smoothing": "graph", "smoothed": True, "graph_iterations": its,
                  "graph_keyframes": n_key, "graph_kernel": str(gp["kernel"]),
+                 "graph_odo_lag_s": lag, "graph_gnss_err_states": err_on,
                  "graph_fixes_downweighted": n_down,
                  "graph_odo_scale": float(np.mean(s_k)) if have_odo else math.nan,
                  "graph_gyro_bias_radps": float(np.mean(b_k)) if have_gyro else math.nan,
