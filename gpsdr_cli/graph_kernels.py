@@ -2,11 +2,12 @@
 Jacobians of every factor assembled into the banded normal equations, the selected
 inversion of the banded Cholesky factor, and the interpolation from keyframes to epochs.
 
-Layout: keyframe ``i`` owns the six unknowns ``6 i + (E, N, PSI, V, B, S)``: east and north
-(m, local frame), heading psi (rad, clockwise from north, unwrapped), speed v (m/s),
-gyro bias b (rad/s, in the yaw rate's sign: ``d(psi)/dt = -(yaw_rate - b)``) and odometer
-scale s (true speed = s x odometer speed).  Every factor links keyframe i to i + 1 at most,
-so the information matrix is banded with ``BAND = 11`` super-diagonals, stored in LAPACK's
+Layout: keyframe ``i`` owns the eight unknowns ``8 i + (E, N, PSI, V, B, S, GE, GN)``: east
+and north (m, local frame), heading psi (rad, clockwise from north, unwrapped), speed v
+(m/s), gyro bias b (rad/s, in the yaw rate's sign: ``d(psi)/dt = -(yaw_rate - b)``),
+odometer scale s (true speed = s x odometer speed) and the GNSS error per axis (m: fix =
+position + error + white noise).  Every factor links keyframe i to i + 1 at most,
+so the information matrix is banded with ``BAND = 15`` super-diagonals, stored in LAPACK's
 upper form (``ab[BAND + r - c, c] = H[r, c]`` for r <= c), as
 ``scipy.linalg.solveh_banded`` / ``cholesky_banded`` take it.
 
@@ -210,8 +211,9 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
     gradient ``g`` (J^T W r) of every factor at ``x`` (IRLS weights from ``x``).
 
     Fix arrays are per keyframe (NaN: no fix / no speed there).  The GNSS error states
-    follow ``eps[i+1] = err_phi[i] eps[i] + w``, sd(w) = ``err_wsd[i]`` (per interval, m).  Returns the cost: the robust
-    cost of the GNSS factors plus the squared whitened residuals of the others."""
+    follow ``eps[i+1] = err_phi[i] eps[i] + w``, sd(w) = ``err_wsd[i]`` (per interval, m).
+    Returns the cost: the robust cost of the GNSS factors plus the squared whitened
+    residuals of the others."""
     n_key = len(key_ep)
     if want:
         ab[:, :] = 0.0

@@ -202,7 +202,11 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # states' sigma for this drive (RTK, NLOS)
     from .filters.gnss_model import gnss_error_model
 
+    sd_before = np.asarray(epochs.gnss_sd_e, float)
     epochs, qparams = gnss_error_model(epochs, params)
+    f_all = np.asarray(epochs.has_gnss, bool)
+    nlos_share = float(np.mean(np.asarray(epochs.gnss_sd_e, float)[f_all]
+                               > 1.0001 * sd_before[f_all])) if f_all.any() else 0.0
     has_fix = (np.asarray(epochs.has_gnss, bool) & np.isfinite(epochs.gnss_e)
                & np.isfinite(epochs.gnss_n))
     key_ep = keyframes(t_s, has_fix, float(gp["keyframe_s"]))
@@ -225,10 +229,11 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # An NLOS drive (by the quality model) keeps white fixes under the tight kernel: with
     # error states the NLOS steps trade between the error state and the track, and the
     # solve crawls (urban_nlos: 10 m against 4 m white, in 3x the iterations).
-    nlos_drive = (epochs.rtk_fixed_share < float(params["gnss"]["rtk_share"])
-                  and float(qparams["aekf"]["gnss_err_sd_m"]) == float(params["gnss"]["nlos_err_sd_m"])
-                  and float(params["aekf"]["gnss_err_sd_m"]) != float(params["gnss"]["nlos_err_sd_m"]))
-    err_on = bool(gp["gnss_err_states"]) and not nlos_drive
+    # (the share of fixes the quality model marked NLOS: a lower bar than the filters')
+    nlos_drive = nlos_share >= float(gp["nlos_share"])
+    # An RTK drive too: centimetre fixes against a 0.3-m error state did not converge.
+    rtk_drive = epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])
+    err_on = bool(gp["gnss_err_states"]) and not nlos_drive and not rtk_drive
     tau = float(gp["gnss_corr_tau_s"]) if not err_on else 0.0
     if tau > 0 and has_fix.sum() > 1:
         tf = t_s[has_fix]
@@ -250,20 +255,27 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # ---- GNSS error states: first-order Gauss-Markov per axis, 1/tau = 1/tau_s + speed/dist
     # (the ekf/aekf model, its sigma from the quality model); off: pinned at zero
     tk_s = t_s[key_ep]
-    if err_on:
-        # the quality model's RTK sigma, but not its NLOS one: the kernel rejects NLOS
-        # steps, which a 20-m error state would absorb instead
-        err_sd = min(float(gp["gnss_err_sd_m"]), float(qparams["aekf"]["gnss_err_sd_m"]))
-        err_tau = float(gp["gnss_err_tau_s"])
-        err_dist = float(gp["gnss_err_dist_m"])
-    else:
-        err_sd, err_tau, err_dist = 1e-4, 1e9, 0.0
-    err_sd = max(err_sd, 1e-4)
+    # Two regimes, fkf's (:func:`.filters.fkf.multipath_regime`): under obstruction the
+    # error decorrelates with the distance driven, in clear sky with time only
     spd_all = np.hypot(np.nan_to_num(init.v_e), np.nan_to_num(init.v_n))
     cdist = np.concatenate(([0.0], np.cumsum(0.5 * (spd_all[1:] + spd_all[:-1]) * np.diff(t_s))))
     dt_k = np.diff(tk_s)
     dd_k = np.diff(cdist[key_ep])
-    expo = dt_k / max(err_tau, 1e-9) + (dd_k / err_dist if err_dist > 0 else 0.0)
+    if err_on:
+        from .filters.fkf import multipath_regime
+
+        err_sd = min(float(gp["gnss_err_sd_m"]), float(qparams["aekf"]["gnss_err_sd_m"]))
+        w_ob = multipath_regime(epochs, params)[key_ep][:-1]
+        dist_o = float(gp["gnss_err_dist_m"])
+        dist_c = float(gp["gnss_err_clear_dist_m"])
+        expo = (w_ob * (dt_k / float(gp["gnss_err_tau_s"])
+                        + (dd_k / dist_o if dist_o > 0 else 0.0))
+                + (1.0 - w_ob) * (dt_k / float(gp["gnss_err_clear_tau_s"])
+                                  + (dd_k / dist_c if dist_c > 0 else 0.0)))
+    else:  # each pinned at zero on its own (a tight chain would ruin the conditioning)
+        err_sd = 1e-5
+        expo = np.full(len(dt_k), np.inf)
+    err_sd = max(err_sd, 1e-5)
     err_phi = np.exp(-expo) if len(dt_k) else np.ones(1)
     err_wsd = err_sd * np.sqrt(np.maximum(-np.expm1(-2.0 * expo), 1e-12)) if len(dt_k) \
         else np.ones(1)
