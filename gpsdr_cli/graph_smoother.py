@@ -6,7 +6,8 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
 ``d(psi)/dt = -(yaw_rate - b)``):
 
 * States at keyframes (every fix epoch, and at least every ``[graph] keyframe_s`` between):
-  e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), odometer scale s; b and s are
+  e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), odometer scale s, GNSS error
+  eps_e, eps_n (m); b and s are
   random walks from keyframe to keyframe (``[gyro] bias_sd_radps`` over its correlation
   time, ``[odo] scale_rw_sd``), so every factor links neighbours only.
 * Dead reckoning between keyframes: integrated from the raw epochs at every iteration
@@ -15,15 +16,27 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   plus a per-metre random walk ``[graph] dr_dist_sd``.  Without an odometer the speed
   state (a random walk in acceleration) carries the position; without a gyro the heading
   walks freely.  The speed state is tied to s x odometer speed where there is one.
-* GNSS: position factors with the receiver's sigma (``Epochs.gnss_sd_e/n``), speed and
-  course factors (the receiver's Doppler velocity), both under a robust kernel.
+* GNSS: position factors with the receiver's sigma after the filters' GNSS quality model
+  (:func:`.filters.gnss_model.gnss_error_model`: NLOS-suspect fixes' sigmas scaled) and,
+  with the error states, times the PDOP regime's factor; speed and course factors (the
+  receiver's Doppler velocity); both under a robust kernel.  A fix is position + GNSS
+  error + white noise: the GNSS error is a first-order Gauss-Markov state per axis
+  (multipath, two more unknowns per keyframe), with fkf's two sky regimes
+  (:func:`.filters.fkf.multipath_regime`): clear sky decorrelates in time, obstructed
+  sky with the distance driven as well.
+  Drives where the quality model marks NLOS fixes (``[graph] nlos_share``) and RTK
+  drives keep white fixes instead, their variance inflated by the number of fixes per
+  decorrelation span, under a tighter kernel.
+* The odometer's speed is read ``[graph] odo_lag_s`` later than its stamp (a speed from
+  ticks over a window describes the window's middle); by default that lag is fitted to
+  the receiver's speed (:func:`odo_lag_s`).
 * Standstill (odometer below ``[standstill] speed_mps`` over a whole interval): no heading
   change (the gyro's reading is then its bias).  Priors: keyframe 0 loosely at the forward
   filter's smoothed solution (also the initial guess of every keyframe), b and s at the
   user's calibration (``--gyro-bias``, ``--odo-scale``) or loosely at 0 and 1.
 
 Engine: Levenberg-Marquardt over iteratively reweighted least squares on the banded normal
-equations (11 super-diagonals), solved by LAPACK's banded Cholesky
+equations (15 super-diagonals), solved by LAPACK's banded Cholesky
 (``scipy.linalg.solveh_banded``): O(keyframes) per iteration.  Chosen over GTSAM (its
 Python-side custom factors cost milliseconds each, and a pose chain with a per-sample
 between-factor needs 360 k of them an hour) and over ``scipy.optimize.least_squares``
@@ -213,6 +226,15 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     n_key = len(key_ep)
     n_x = gk.N_X * n_key
 
+    # An NLOS drive (by the quality model) keeps white fixes under the tight kernel: with
+    # error states the NLOS steps trade between the error state and the track, and the
+    # solve crawls (urban_nlos: 10 m against 4 m white, in 3x the iterations).
+    # (a share of NLOS-marked fixes: a lower bar than the filters' NLOS drive)
+    nlos_drive = nlos_share >= float(gp["nlos_share"])
+    # An RTK drive too: centimetre fixes against a 0.3-m error state did not converge.
+    rtk_drive = epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])
+    err_on = bool(gp["gnss_err_states"]) and not nlos_drive and not rtk_drive
+
     # ---- fixes per keyframe
     sd_min = float(params["gnss"]["sigma_min_m"])
     fe = np.where(has_fix, epochs.gnss_e, np.nan)[key_ep]
@@ -223,17 +245,16 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
                         nan=float(params["gnss"]["sigma_default_m"]))
     sde = np.maximum(sde, sd_min)
     sdn = np.maximum(sdn, sd_min)
+    if err_on and bool(gp["pdop_factors"]):
+        # the filters' PDOP regimes (Fang et al.'s R factor k: sigma x k at medium / poor PDOP)
+        from .filters.aekf import pdop_factors
+
+        k_fix = pdop_factors(np.asarray(epochs.pdop, float)[key_ep], params["gnss"])[0]
+        sde = sde * k_fix
+        sdn = sdn * k_fix
     # Fixes' errors are correlated (multipath, NLOS): fixes within one decorrelation span
     # (1/span = 1/tau + speed/distance) count as one, their variance times their number --
     # with white fixes a 2-minute stop's 600 fixes outvoted the rest of the drive.
-    # An NLOS drive (by the quality model) keeps white fixes under the tight kernel: with
-    # error states the NLOS steps trade between the error state and the track, and the
-    # solve crawls (urban_nlos: 10 m against 4 m white, in 3x the iterations).
-    # (the share of fixes the quality model marked NLOS: a lower bar than the filters')
-    nlos_drive = nlos_share >= float(gp["nlos_share"])
-    # An RTK drive too: centimetre fixes against a 0.3-m error state did not converge.
-    rtk_drive = epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])
-    err_on = bool(gp["gnss_err_states"]) and not nlos_drive and not rtk_drive
     tau = float(gp["gnss_corr_tau_s"]) if not err_on else 0.0
     if tau > 0 and has_fix.sum() > 1:
         tf = t_s[has_fix]
@@ -264,8 +285,10 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     if err_on:
         from .filters.fkf import multipath_regime
 
-        err_sd = min(float(gp["gnss_err_sd_m"]), float(qparams["aekf"]["gnss_err_sd_m"]))
-        w_ob = multipath_regime(epochs, params)[key_ep][:-1]
+        w_all = multipath_regime(epochs, params)[key_ep]
+        err_sd = np.sqrt(w_all * float(gp["gnss_err_sd_m"]) ** 2
+                         + (1.0 - w_all) * float(gp["gnss_err_clear_sd_m"]) ** 2)
+        w_ob = w_all[:-1]
         dist_o = float(gp["gnss_err_dist_m"])
         dist_c = float(gp["gnss_err_clear_dist_m"])
         expo = (w_ob * (dt_k / float(gp["gnss_err_tau_s"])
@@ -273,12 +296,18 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
                 + (1.0 - w_ob) * (dt_k / float(gp["gnss_err_clear_tau_s"])
                                   + (dd_k / dist_c if dist_c > 0 else 0.0)))
     else:  # each pinned at zero on its own (a tight chain would ruin the conditioning)
-        err_sd = 1e-5
+        err_sd = np.full(n_key, 1e-5)
         expo = np.full(len(dt_k), np.inf)
-    err_sd = max(err_sd, 1e-5)
+    err_sd = np.maximum(err_sd, 1e-5)
     err_phi = np.exp(-expo) if len(dt_k) else np.ones(1)
-    err_wsd = err_sd * np.sqrt(np.maximum(-np.expm1(-2.0 * expo), 1e-12)) if len(dt_k) \
-        else np.ones(1)
+    # eps[i+1] = phi eps[i] + w: var(w) = sd[i+1]^2 - phi^2 sd[i]^2 keeps each keyframe's
+    # variance at its regime's (floored at the stationary increment of the smaller sigma)
+    if len(dt_k):
+        v1 = err_sd[1:] ** 2 - err_phi ** 2 * err_sd[:-1] ** 2
+        v0 = np.minimum(err_sd[1:], err_sd[:-1]) ** 2 * -np.expm1(-2.0 * expo)
+        err_wsd = np.sqrt(np.maximum(np.maximum(v1, v0), 1e-12))
+    else:
+        err_wsd = np.ones(1)
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval
     stop_v = float(params["standstill"]["speed_mps"])
@@ -345,7 +374,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean, 0.0, 0.0])
     prior_sd = np.array([float(gp["init_pos_sd_m"]), float(gp["init_pos_sd_m"]),
                          float(gp["init_heading_sd_rad"]), float(gp["init_speed_sd_mps"]),
-                         b_sd, s_sd, err_sd, err_sd])
+                         b_sd, s_sd, err_sd[0], err_sd[0]])
 
     kernel = KERNELS[str(gp["kernel"])]
     c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
