@@ -2,11 +2,12 @@
 Jacobians of every factor assembled into the banded normal equations, the selected
 inversion of the banded Cholesky factor, and the interpolation from keyframes to epochs.
 
-Layout: keyframe ``i`` owns the six unknowns ``6 i + (E, N, PSI, V, B, S)``: east and north
-(m, local frame), heading psi (rad, clockwise from north, unwrapped), speed v (m/s),
-gyro bias b (rad/s, in the yaw rate's sign: ``d(psi)/dt = -(yaw_rate - b)``) and odometer
-scale s (true speed = s x odometer speed).  Every factor links keyframe i to i + 1 at most,
-so the information matrix is banded with ``BAND = 11`` super-diagonals, stored in LAPACK's
+Layout: keyframe ``i`` owns the eight unknowns ``8 i + (E, N, PSI, V, B, S, GE, GN)``: east
+and north (m, local frame), heading psi (rad, clockwise from north, unwrapped), speed v
+(m/s), gyro bias b (rad/s, in the yaw rate's sign: ``d(psi)/dt = -(yaw_rate - b)``),
+odometer scale s (true speed = s x odometer speed) and the GNSS error per axis (m: fix =
+position + error + white noise).  Every factor links keyframe i to i + 1 at most,
+so the information matrix is banded with ``BAND = 15`` super-diagonals, stored in LAPACK's
 upper form (``ab[BAND + r - c, c] = H[r, c]`` for r <= c), as
 ``scipy.linalg.solveh_banded`` / ``cholesky_banded`` take it.
 
@@ -26,9 +27,10 @@ import math
 import numpy as np
 from numba import njit
 
-N_X = 6
-E, N, PSI, V, B, S = 0, 1, 2, 3, 4, 5
+N_X = 8
+E, N, PSI, V, B, S, GE, GN = 0, 1, 2, 3, 4, 5, 6, 7
 BAND = 2 * N_X - 1
+N_2 = 2 * N_X
 
 # kernel ids
 K_GAUSS, K_HUBER, K_CAUCHY = 0, 1, 2
@@ -95,7 +97,7 @@ def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
 
     Returns (dE, dN, dpsi, d_psi_e, d_psi_n, d_b_e, d_b_n, d_s_e, d_s_n, d_v0_e, d_v0_n,
     d_v1_e, d_v1_n, t_gyro, dist, sum_var_speed_dt2, t_free, t_nogyro, turned)."""
-    b0 = 6 * i
+    b0 = N_X * i
     psi0 = x[b0 + PSI]
     v0 = x[b0 + V]
     v1 = x[b0 + N_X + V]
@@ -180,7 +182,7 @@ def interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, q_out):
         free = (60.0 * t_free) ** 2  # 60 m/s through a stretch without any record
         var_a += free
         var_c += free
-        psi_m = x[6 * i + PSI] + 0.5 * dpsi
+        psi_m = x[N_X * i + PSI] + 0.5 * dpsi
         sa, ca = math.sin(psi_m), math.cos(psi_m)
         # along = (sin, cos), cross = (cos, -sin)
         q_out[i, Q_AE] = var_a * sa * sa + var_c * ca * ca
@@ -203,19 +205,21 @@ def _odo_free_share(j0, j1, t_s, odo_ok):
 
 @njit(cache=True)
 def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
-              fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs,
+              fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs, err_phi, err_wsd,
               prior_mean, prior_sd, kernel, c, ab, g, want):
     """Cost of the state ``x`` and, with ``want``, the normal equations H (banded, ``ab``) and
     gradient ``g`` (J^T W r) of every factor at ``x`` (IRLS weights from ``x``).
 
-    Fix arrays are per keyframe (NaN: no fix / no speed there).  Returns the cost: the robust
-    cost of the GNSS factors plus the squared whitened residuals of the others."""
+    Fix arrays are per keyframe (NaN: no fix / no speed there).  The GNSS error states
+    follow ``eps[i+1] = err_phi[i] eps[i] + w``, sd(w) = ``err_wsd[i]`` (per interval, m).
+    Returns the cost: the robust cost of the GNSS factors plus the squared whitened
+    residuals of the others."""
     n_key = len(key_ep)
     if want:
         ab[:, :] = 0.0
         g[:] = 0.0
     cost = 0.0
-    J = np.zeros((8, 12))
+    J = np.zeros((10, N_2))
     r = np.zeros(8)
     # ---- prior on keyframe 0 (and, through the random walks, on every b and s)
     for a in range(N_X):
@@ -231,7 +235,7 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
     for i in range(n_key - 1):
         j0, j1 = key_ep[i], key_ep[i + 1]
         T = t_s[j1] - t_s[j0]
-        b0 = 6 * i
+        b0 = N_X * i
         res = _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm)
         de, dn, dpsi = res[0], res[1], res[2]
         t_gyro = res[13]
@@ -250,8 +254,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
         J[:, :] = 0.0
         if want:
             # raw Jacobian rows (east, north) over the 12 unknowns of keyframes i, i+1
-            je = np.zeros(12)
-            jn = np.zeros(12)
+            je = np.zeros(N_2)
+            jn = np.zeros(N_2)
             je[E] = -1.0
             jn[N] = -1.0
             je[N_X + E] = 1.0
@@ -266,7 +270,7 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             jn[V] = -res[10]
             je[N_X + V] = -res[11]
             jn[N_X + V] = -res[12]
-            for cc in range(12):
+            for cc in range(N_2):
                 J[0, cc] = m11 * je[cc]
                 J[1, cc] = m21 * je[cc] + m22 * jn[cc]
             r[0] = w0
@@ -320,8 +324,20 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 J[m, PSI] = -1.0 / prm[P_ZARU_SD]
                 r[m] = rz
             m += 1
+        # ---- the GNSS error states: first-order Gauss-Markov per axis
+        phi = err_phi[i]
+        wsd = err_wsd[i]
+        for ax in range(2):
+            col = GE + ax
+            rg = (x[b0 + N_X + col] - phi * x[b0 + col]) / wsd
+            cost += rg * rg
+            if want:
+                J[m, N_X + col] = 1.0 / wsd
+                J[m, col] = -phi / wsd
+                r[m] = rg
+            m += 1
         if want:
-            _add_block(ab, g, b0, J, r, m, 12, 1.0)
+            _add_block(ab, g, b0, J, r, m, N_2, 1.0)
     # ---- odometer tie at keyframe 0
     if odo_ok[key_ep[0]]:
         J[:, :] = 0.0
@@ -334,17 +350,19 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             _add_block(ab, g, 0, J, r, 1, N_X, 1.0)
     # ---- GNSS factors (robust)
     for i in range(n_key):
-        b0 = 6 * i
+        b0 = N_X * i
         if not math.isnan(fix_e[i]):
             J[:, :] = 0.0
-            re = (x[b0 + E] - fix_e[i]) / fix_sde[i]
-            rn = (x[b0 + N] - fix_n[i]) / fix_sdn[i]
+            re = (x[b0 + E] + x[b0 + GE] - fix_e[i]) / fix_sde[i]
+            rn = (x[b0 + N] + x[b0 + GN] - fix_n[i]) / fix_sdn[i]
             r2 = re * re + rn * rn
             cost += robust_cost(r2, kernel, c)
             if want:
                 w = robust_weight(r2, kernel, c)
                 J[0, E] = 1.0 / fix_sde[i]
+                J[0, GE] = 1.0 / fix_sde[i]
                 J[1, N] = 1.0 / fix_sdn[i]
+                J[1, GN] = 1.0 / fix_sdn[i]
                 r[0] = re
                 r[1] = rn
                 _add_block(ab, g, b0, J, r, 2, N_X, w)
@@ -377,8 +395,8 @@ def fix_weights(x, fix_e, fix_n, fix_sde, fix_sdn, kernel, c, w_out, r2_out):
             w_out[i] = np.nan
             r2_out[i] = np.nan
             continue
-        re = (x[6 * i + E] - fix_e[i]) / fix_sde[i]
-        rn = (x[6 * i + N] - fix_n[i]) / fix_sdn[i]
+        re = (x[N_X * i + E] + x[N_X * i + GE] - fix_e[i]) / fix_sde[i]
+        rn = (x[N_X * i + N] + x[N_X * i + GN] - fix_n[i]) / fix_sdn[i]
         r2 = re * re + rn * rn
         r2_out[i] = r2
         w_out[i] = robust_weight(r2, kernel, c)
@@ -421,23 +439,23 @@ def to_epochs(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, n_ep,
     n_key = len(key_ep)
     for i in range(n_key):
         k = key_ep[i]
-        e_out[k] = x[6 * i + E]
-        n_out[k] = x[6 * i + N]
-        psi_out[k] = x[6 * i + PSI]
+        e_out[k] = x[N_X * i + E]
+        n_out[k] = x[N_X * i + N]
+        psi_out[k] = x[N_X * i + PSI]
     for i in range(n_key - 1):
         j0, j1 = key_ep[i], key_ep[i + 1]
         res = _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm)
         T = t_s[j1] - t_s[j0]
-        ce = x[6 * i + N_X + E] - x[6 * i + E] - res[0]
-        cn = x[6 * i + N_X + N] - x[6 * i + N] - res[1]
-        cp = wrap(x[6 * i + N_X + PSI] - x[6 * i + PSI] - res[2])
-        psi0 = x[6 * i + PSI]
-        bias = x[6 * i + B]
-        scale = x[6 * i + S]
-        v0 = x[6 * i + V]
-        v1 = x[6 * i + N_X + V]
-        pe = x[6 * i + E]
-        pn = x[6 * i + N]
+        ce = x[N_X * i + N_X + E] - x[N_X * i + E] - res[0]
+        cn = x[N_X * i + N_X + N] - x[N_X * i + N] - res[1]
+        cp = wrap(x[N_X * i + N_X + PSI] - x[N_X * i + PSI] - res[2])
+        psi0 = x[N_X * i + PSI]
+        bias = x[N_X * i + B]
+        scale = x[N_X * i + S]
+        v0 = x[N_X * i + V]
+        v1 = x[N_X * i + N_X + V]
+        pe = x[N_X * i + E]
+        pn = x[N_X * i + N]
         dpsi = 0.0
         for j in range(j0 + 1, j1):
             dt = t_s[j] - t_s[j - 1]
@@ -458,9 +476,9 @@ def to_epochs(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, n_ep,
     for i in range(n_key - 1):
         j0, j1 = key_ep[i], key_ep[i + 1]
         T = t_s[j1] - t_s[j0]
-        scale = x[6 * i + S]
-        v0 = x[6 * i + V]
-        v1 = x[6 * i + N_X + V]
+        scale = x[N_X * i + S]
+        v0 = x[N_X * i + V]
+        v1 = x[N_X * i + N_X + V]
         for j in range(j0, j1 + 1 if i == n_key - 2 else j1):
             tau = (t_s[j] - t_s[j0]) / T if T > 0.0 else 0.0
             u = scale * odo[j] if odo_ok[j] else v0 + (v1 - v0) * tau

@@ -6,7 +6,8 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
 ``d(psi)/dt = -(yaw_rate - b)``):
 
 * States at keyframes (every fix epoch, and at least every ``[graph] keyframe_s`` between):
-  e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), odometer scale s; b and s are
+  e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), odometer scale s, GNSS error
+  eps_e, eps_n (m); b and s are
   random walks from keyframe to keyframe (``[gyro] bias_sd_radps`` over its correlation
   time, ``[odo] scale_rw_sd``), so every factor links neighbours only.
 * Dead reckoning between keyframes: integrated from the raw epochs at every iteration
@@ -15,15 +16,27 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   plus a per-metre random walk ``[graph] dr_dist_sd``.  Without an odometer the speed
   state (a random walk in acceleration) carries the position; without a gyro the heading
   walks freely.  The speed state is tied to s x odometer speed where there is one.
-* GNSS: position factors with the receiver's sigma (``Epochs.gnss_sd_e/n``), speed and
-  course factors (the receiver's Doppler velocity), both under a robust kernel.
+* GNSS: position factors with the receiver's sigma after the filters' GNSS quality model
+  (:func:`.filters.gnss_model.gnss_error_model`: NLOS-suspect fixes' sigmas scaled) and,
+  with the error states, times the PDOP regime's factor; speed and course factors (the
+  receiver's Doppler velocity); both under a robust kernel.  A fix is position + GNSS
+  error + white noise: the GNSS error is a first-order Gauss-Markov state per axis
+  (multipath, two more unknowns per keyframe), with fkf's two sky regimes
+  (:func:`.filters.fkf.multipath_regime`): clear sky decorrelates in time, obstructed
+  sky with the distance driven as well.
+  Drives where the quality model marks NLOS fixes (``[graph] nlos_share``) and RTK
+  drives keep white fixes instead, their variance inflated by the number of fixes per
+  decorrelation span, under a tighter kernel.
+* The odometer's speed is read ``[graph] odo_lag_s`` later than its stamp (a speed from
+  ticks over a window describes the window's middle); by default that lag is fitted to
+  the receiver's speed (:func:`odo_lag_s`).
 * Standstill (odometer below ``[standstill] speed_mps`` over a whole interval): no heading
   change (the gyro's reading is then its bias).  Priors: keyframe 0 loosely at the forward
   filter's smoothed solution (also the initial guess of every keyframe), b and s at the
   user's calibration (``--gyro-bias``, ``--odo-scale``) or loosely at 0 and 1.
 
 Engine: Levenberg-Marquardt over iteratively reweighted least squares on the banded normal
-equations (11 super-diagonals), solved by LAPACK's banded Cholesky
+equations (15 super-diagonals), solved by LAPACK's banded Cholesky
 (``scipy.linalg.solveh_banded``): O(keyframes) per iteration.  Chosen over GTSAM (its
 Python-side custom factors cost milliseconds each, and a pose chain with a per-sample
 between-factor needs 360 k of them an hour) and over ``scipy.optimize.least_squares``
@@ -104,6 +117,31 @@ def _ffill_ok(t_s: np.ndarray, has: np.ndarray, val: np.ndarray, max_age_s: floa
     return np.nan_to_num(out), ok & (age <= max_age_s)
 
 
+def odo_lag_s(t_s: np.ndarray, odo_good: np.ndarray, odo: np.ndarray, has_fix: np.ndarray,
+              gnss_speed: np.ndarray, max_lag_s: float, step_s: float = 0.005) -> float:
+    """How long (s) the odometer's speed lags the receiver's Doppler speed: the shift that
+    best fits one to the other (least squares, one scale fitted, both above 1 m/s), on a
+    ``step_s`` grid within +-``max_lag_s``; 0 without enough of both."""
+    f = has_fix & np.isfinite(gnss_speed)
+    if odo_good.sum() < 10 or f.sum() < 10 or not max_lag_s > 0:
+        return 0.0
+    to, vo = t_s[odo_good], odo[odo_good]
+    tf, vf = t_s[f], gnss_speed[f]
+    inside = (tf >= to[0] + max_lag_s) & (tf <= to[-1] - max_lag_s)
+    tf, vf = tf[inside], vf[inside]
+    best, best_lag = math.inf, 0.0
+    for lag in np.arange(-max_lag_s, max_lag_s + 0.5 * step_s, step_s):
+        vi = np.interp(tf + lag, to, vo)
+        m = (vf > 1.0) & (vi > 1.0)
+        if m.sum() < 10:
+            return 0.0
+        s = float(np.dot(vf[m], vi[m]) / np.dot(vi[m], vi[m]))
+        cost = float(np.mean((vf[m] - s * vi[m]) ** 2))
+        if cost < best:
+            best, best_lag = cost, float(lag)
+    return best_lag
+
+
 def keyframes(t_s: np.ndarray, has_fix: np.ndarray, step_s: float) -> np.ndarray:
     """Epoch indices of the keyframes: every fix, the first and the last epoch, and enough
     epochs between so that no two keyframes are more than ``step_s`` apart where epochs allow."""
@@ -161,14 +199,41 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
             yaw_bad |= at_max
     yaw, gyro_ok = _ffill_ok(t_s, np.asarray(epochs.has_gyro, bool), yaw_raw,
                              float(gp["sensor_max_age_s"]), bad=yaw_bad)
+    odo_bad = ~((np.nan_to_num(odo_raw, nan=-1.0) >= 0) & (odo_raw <= max_spd))
     odo, odo_ok = _ffill_ok(t_s, np.asarray(epochs.has_odo, bool), odo_raw,
-                            float(gp["sensor_max_age_s"]),
-                            bad=~((np.nan_to_num(odo_raw, nan=-1.0) >= 0) & (odo_raw <= max_spd)))
+                            float(gp["sensor_max_age_s"]), bad=odo_bad)
+    # a speed from wheel ticks over a window describes the window's middle: read it that
+    # much later (linear between readings), else every speed change leaves a distance error
+    odo_good = np.asarray(epochs.has_odo, bool) & ~odo_bad
+    lag = float(gp["odo_lag_s"])
+    if not math.isfinite(lag):
+        lag = odo_lag_s(t_s, odo_good, odo_raw, np.asarray(epochs.has_gnss, bool),
+                        np.asarray(epochs.gnss_speed_mps, float), float(gp["odo_lag_max_s"]))
+    if lag != 0.0 and odo_good.sum() > 1:
+        odo = np.where(odo_ok, np.interp(t_s + lag, t_s[odo_good], odo_raw[odo_good]), odo)
+    # the filters' GNSS quality model: NLOS-suspect fixes' sigmas scaled, the error
+    # states' sigma for this drive (RTK, NLOS)
+    from .filters.gnss_model import gnss_error_model
+
+    sd_before = np.asarray(epochs.gnss_sd_e, float)
+    epochs, qparams = gnss_error_model(epochs, params)
+    f_all = np.asarray(epochs.has_gnss, bool)
+    nlos_share = float(np.mean(np.asarray(epochs.gnss_sd_e, float)[f_all]
+                               > 1.0001 * sd_before[f_all])) if f_all.any() else 0.0
     has_fix = (np.asarray(epochs.has_gnss, bool) & np.isfinite(epochs.gnss_e)
                & np.isfinite(epochs.gnss_n))
     key_ep = keyframes(t_s, has_fix, float(gp["keyframe_s"]))
     n_key = len(key_ep)
     n_x = gk.N_X * n_key
+
+    # An NLOS drive (by the quality model) keeps white fixes under the tight kernel: with
+    # error states the NLOS steps trade between the error state and the track, and the
+    # solve crawls (urban_nlos: 10 m against 4 m white, in 3x the iterations).
+    # (a share of NLOS-marked fixes: a lower bar than the filters' NLOS drive)
+    nlos_drive = nlos_share >= float(gp["nlos_share"])
+    # An RTK drive too: centimetre fixes against a 0.3-m error state did not converge.
+    rtk_drive = epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])
+    err_on = bool(gp["gnss_err_states"]) and not nlos_drive and not rtk_drive
 
     # ---- fixes per keyframe
     sd_min = float(params["gnss"]["sigma_min_m"])
@@ -180,10 +245,17 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
                         nan=float(params["gnss"]["sigma_default_m"]))
     sde = np.maximum(sde, sd_min)
     sdn = np.maximum(sdn, sd_min)
+    if err_on and bool(gp["pdop_factors"]):
+        # the filters' PDOP regimes (Fang et al.'s R factor k: sigma x k at medium / poor PDOP)
+        from .filters.aekf import pdop_factors
+
+        k_fix = pdop_factors(np.asarray(epochs.pdop, float)[key_ep], params["gnss"])[0]
+        sde = sde * k_fix
+        sdn = sdn * k_fix
     # Fixes' errors are correlated (multipath, NLOS): fixes within one decorrelation span
     # (1/span = 1/tau + speed/distance) count as one, their variance times their number --
     # with white fixes a 2-minute stop's 600 fixes outvoted the rest of the drive.
-    tau = float(gp["gnss_corr_tau_s"])
+    tau = float(gp["gnss_corr_tau_s"]) if not err_on else 0.0
     if tau > 0 and has_fix.sum() > 1:
         tf = t_s[has_fix]
         rate = (len(tf) - 1) / max(tf[-1] - tf[0], 1e-9)
@@ -200,6 +272,42 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     use_vel = bool(gp["gnss_velocity"])
     gspd[~(has_fix[key_ep] & np.isfinite(gspd) & (gspd >= 0)) | (not use_vel)] = np.nan
     gcrs[~np.isfinite(gcrs)] = np.nan
+
+    # ---- GNSS error states: first-order Gauss-Markov per axis, 1/tau = 1/tau_s + speed/dist
+    # (the ekf/aekf model, its sigma from the quality model); off: pinned at zero
+    tk_s = t_s[key_ep]
+    # Two regimes, fkf's (:func:`.filters.fkf.multipath_regime`): under obstruction the
+    # error decorrelates with the distance driven, in clear sky with time only
+    spd_all = np.hypot(np.nan_to_num(init.v_e), np.nan_to_num(init.v_n))
+    cdist = np.concatenate(([0.0], np.cumsum(0.5 * (spd_all[1:] + spd_all[:-1]) * np.diff(t_s))))
+    dt_k = np.diff(tk_s)
+    dd_k = np.diff(cdist[key_ep])
+    if err_on:
+        from .filters.fkf import multipath_regime
+
+        w_all = multipath_regime(epochs, params)[key_ep]
+        err_sd = np.sqrt(w_all * float(gp["gnss_err_sd_m"]) ** 2
+                         + (1.0 - w_all) * float(gp["gnss_err_clear_sd_m"]) ** 2)
+        w_ob = w_all[:-1]
+        dist_o = float(gp["gnss_err_dist_m"])
+        dist_c = float(gp["gnss_err_clear_dist_m"])
+        expo = (w_ob * (dt_k / float(gp["gnss_err_tau_s"])
+                        + (dd_k / dist_o if dist_o > 0 else 0.0))
+                + (1.0 - w_ob) * (dt_k / float(gp["gnss_err_clear_tau_s"])
+                                  + (dd_k / dist_c if dist_c > 0 else 0.0)))
+    else:  # each pinned at zero on its own (a tight chain would ruin the conditioning)
+        err_sd = np.full(n_key, 1e-5)
+        expo = np.full(len(dt_k), np.inf)
+    err_sd = np.maximum(err_sd, 1e-5)
+    err_phi = np.exp(-expo) if len(dt_k) else np.ones(1)
+    # eps[i+1] = phi eps[i] + w: var(w) = sd[i+1]^2 - phi^2 sd[i]^2 keeps each keyframe's
+    # variance at its regime's (floored at the stationary increment of the smaller sigma)
+    if len(dt_k):
+        v1 = err_sd[1:] ** 2 - err_phi ** 2 * err_sd[:-1] ** 2
+        v0 = np.minimum(err_sd[1:], err_sd[:-1]) ** 2 * -np.expm1(-2.0 * expo)
+        err_wsd = np.sqrt(np.maximum(np.maximum(v1, v0), 1e-12))
+    else:
+        err_wsd = np.ones(1)
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval
     stop_v = float(params["standstill"]["speed_mps"])
@@ -263,13 +371,13 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     x[gk.V::gk.N_X] = np.hypot(ve0, vn0)[key_ep]
     x[gk.B::gk.N_X] = b_mean
     x[gk.S::gk.N_X] = s_mean
-    prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean])
+    prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean, 0.0, 0.0])
     prior_sd = np.array([float(gp["init_pos_sd_m"]), float(gp["init_pos_sd_m"]),
                          float(gp["init_heading_sd_rad"]), float(gp["init_speed_sd_mps"]),
-                         b_sd, s_sd])
+                         b_sd, s_sd, err_sd[0], err_sd[0]])
 
     kernel = KERNELS[str(gp["kernel"])]
-    c_final = float(gp["kernel_scale"])
+    c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
     n_stages = max(int(gp["gnc_stages"]), 1) if kernel != KERNELS["gauss"] else 1
     stages = [c_final * 2.0 ** (n_stages - 1 - k) for k in range(n_stages)]
     ab = np.zeros((gk.BAND + 1, n_x))
@@ -280,7 +388,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     its = 0
     converged = False
     message = ""
-    args_fix = (fe, fn, sde, sdn, gspd, gcrs, prior_mean, prior_sd)
+    args_fix = (fe, fn, sde, sdn, gspd, gcrs, err_phi, err_wsd, prior_mean, prior_sd)
 
     def cost_at(xx: np.ndarray, c: float, want: bool) -> float:
         return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
@@ -383,6 +491,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     info = dict(init.info)
     info.update({"smoothing": "graph", "smoothed": True, "graph_iterations": its,
                  "graph_keyframes": n_key, "graph_kernel": str(gp["kernel"]),
+                 "graph_odo_lag_s": lag, "graph_gnss_err_states": err_on,
                  "graph_fixes_downweighted": n_down,
                  "graph_odo_scale": float(np.mean(s_k)) if have_odo else math.nan,
                  "graph_gyro_bias_radps": float(np.mean(b_k)) if have_gyro else math.nan,
