@@ -43,7 +43,12 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
     probe = copy.deepcopy(params)
     probe["filter"]["smooth"] = True
     init = run(epochs, probe)
-    outcome = smooth_graph(epochs, init, probe)
+    # each fix weighed by its own sigma: the chord check's scaled sigmas would shrink the
+    # very residuals the weights are for; white fixes, as the graph takes an NLOS drive
+    fit = copy.deepcopy(probe)
+    fit["gnss"]["nlos_mismatch_m"] = 0.0
+    fit["graph"]["gnss_err_states"] = False
+    outcome = smooth_graph(epochs, init, fit)
     if outcome.result is None or len(outcome.gnss_weight) != len(epochs):
         return epochs, {"nlos_screen": f"not applied: {outcome.message}"}
     w = outcome.gnss_weight
