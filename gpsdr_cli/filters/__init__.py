@@ -36,7 +36,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
 
         @functools.wraps(fn)
         def run(epochs, params):  # every filter sees the same GNSS error model
-            return fn(*gnss_error_model(epochs, params))
+            return fn(*gnss_error_model(epochs, params, name))
 
         _REGISTRY[name] = run
         return fn
