@@ -36,7 +36,8 @@ def test_rtk_drive_follows_centimetre_fixes(name, smooth):
     """rtk scenario (GGA 4 at 1-2.5 cm, float stretches, false fixes, no odometer, a
     2-minute stop), seed 1: the track stays within 5 cm RMS of the right RTK-fixed fixes
     (0.11-0.13 m with the error states of one sigma per drive) with its sigma within 2 x of
-    that, within 5 cm of the truth while parked, and does not follow the false fixes."""
+    that, within 5 cm of the truth while parked on such fixes, and does not follow the false
+    fixes."""
     sim = simulate.simulate_drive("rtk", seed=1)
     assert sim.drive.odo is None
     ep = build_epochs(sim.drive, sim.frame, config.defaults())
@@ -46,7 +47,7 @@ def test_rtk_drive_follows_centimetre_fixes(name, smooth):
     assert dev < 0.05
     assert 0.5 * dev < sig < 2.0 * dev
     assert parked < 0.05
-    assert on_false < 0.3 * false_fix
+    assert on_false < 0.5 * false_fix  # followed, it would be ~1 x
     assert run.rmse_m < 0.6 * run.gnss_rmse_m
 
 
@@ -141,17 +142,24 @@ def test_false_rtk_fixes_found(seed):
 
 
 def _rtk_figures(run, sim):
-    """RMS distance (m) of the track from the right RTK-fixed fixes at their epochs, the
-    RMS reported sigma there (m), and the track's RMS error while parked and during the
-    false fixes against the fixes' own error there (m)."""
+    """At every epoch between two right RTK-fixed fixes at most 0.3 s apart: the RMS
+    distance (m) of the track from the fixes interpolated there and the RMS reported sigma
+    (m); the track's RMS error there while parked; and its RMS error during the false fixes
+    against the fixes' own error there (m)."""
     ep, r = run.epochs, run.result
     g = sim.drive.gnss
     false = np.isin(ep.t_ns, g.t_ns[sim.gnss_errors["false_fix"].to_numpy(bool) & g.valid])
-    right = ep.has_gnss & (ep.gnss_sd_e < 0.05) & ~false
-    dev = np.sqrt(np.mean((r.e[right] - ep.gnss_e[right]) ** 2 + (r.n[right] - ep.gnss_n[right]) ** 2))
-    sig = np.sqrt(np.mean(r.var_e[right] + r.var_n[right]))
-    parked = run.true_speed_mps < 0.01
+    f = np.flatnonzero(ep.has_gnss & (ep.gnss_sd_e < 0.05) & ~false)
+    tf = ep.t_ns[f]
+    i = np.clip(np.searchsorted(tf, ep.t_ns, side="right"), 1, len(f) - 1)
+    ok = (ep.t_ns >= tf[0]) & (ep.t_ns < tf[-1]) & (tf[i] - tf[i - 1] <= 0.3e9)
+    w = (ep.t_ns - tf[i - 1]) / (tf[i] - tf[i - 1])
+    ie = ep.gnss_e[f[i - 1]] + w * (ep.gnss_e[f[i]] - ep.gnss_e[f[i - 1]])
+    in_ = ep.gnss_n[f[i - 1]] + w * (ep.gnss_n[f[i]] - ep.gnss_n[f[i - 1]])
     rms = lambda a: float(np.sqrt(np.mean(a ** 2)))  # noqa: E731
+    dev = rms(np.hypot(r.e - ie, r.n - in_)[ok])
+    sig = rms(np.sqrt(r.var_e + r.var_n)[ok])
+    parked = ok & (run.true_speed_mps < 0.01)
     fix_err = np.full(len(ep), np.nan)
     fix_err[ep.has_gnss] = run.gnss_err_m
     return dev, sig, rms(run.err_m[parked]), rms(run.err_m[false]), rms(fix_err[false])
