@@ -163,3 +163,22 @@ def _rtk_figures(run, sim):
     fix_err = np.full(len(ep), np.nan)
     fix_err[ep.has_gnss] = run.gnss_err_m
     return dev, sig, rms(run.err_m[parked]), rms(run.err_m[false]), rms(fix_err[false])
+
+
+def test_false_fix_check_needs_the_receivers_velocity():
+    """Positions only (GGA without RMC): no step fit, so no fix is judged false -- a
+    quadratic in time misfits city turns by as much as the smallest false fix."""
+    import dataclasses
+
+    from gpsdr_cli.filters.gnss_model import centimetre_fixes, false_fixes
+
+    sim = simulate.simulate_drive("rtk", seed=1)
+    p = config.defaults()
+    p_off = config.defaults()
+    p_off["gnss"]["rtk_step_m"] = np.inf
+    ep = build_epochs(sim.drive, sim.frame, p_off)
+    cm = centimetre_fixes(ep, p)
+    assert false_fixes(ep, p, cm).sum() > 100
+    nan = np.full(len(ep), np.nan)
+    blind = dataclasses.replace(ep, gnss_speed_mps=nan, gnss_course_rad=nan)
+    assert not false_fixes(blind, p, cm).any()
