@@ -67,8 +67,8 @@ others; ``real_data_targets``):
   that deviation.  Its oracle keeps the false fixes with their jump in the true sigma.
 * no_odometer (RTK-fixed fixes, gyro and forward accelerometer, 15-s outages while braking
   and accelerating): the end error of the 15-s outages (13-17 s from the last fix), median
-  over the seeds' outages, <= 25 m forward, <= 10 m with the accelerometer (the same figure
-  while no filter reads it), <= 0.5 m smoothed.  Two dead-reckoning baselines run beside the
+  over the seeds' outages, <= 25 m forward, <= 10 m with the accelerometer (the forward track
+  reads it, ``gpsdr_cli.accel_speed``), <= 0.5 m smoothed.  Two dead-reckoning baselines run beside the
   filters (informational rows, ``hold_baselines``): the last fix's speed held with the gyro's
   heading, and that speed plus the integrated accelerometer less its bias and gravity as
   measured over the last 5 s of fixes (no slope model).
@@ -562,8 +562,19 @@ def table(rows: list[Row]) -> str:
         ratio = r.rmse_m / r.oracle_rmse_m if has_oracle else math.nan
         lines.append(f"| {r.drive} | {r.method} | {fmt(r.rmse_m)} | {fmt(r.cep95_m)} | {fmt(r.max_m)} | "
                      f"{fmt(r.drift60_pct)} | {fmt(r.oracle_rmse_m)} | {fmt(ratio)} | "
-                     f"{fmt(r.oracle_drift60_pct)} | {fmt(r.seconds, 1)} | {r.note} |")
+                     f"{fmt(r.oracle_drift60_pct)} | {fmt(r.seconds, 1)} | {row_note(r)} |")
     return "\n".join(lines)
+
+
+def row_note(r: Row) -> str:
+    """The row's note, with no_odometer's 15-s outage end errors (median and max over the
+    seeds' outages) for the filters and the dead-reckoning baselines alike."""
+    ends = np.asarray(r.extra.get("outage_end_m", []), float)
+    if not len(ends):
+        return r.note
+    what = (f"15-s outage end error median {np.median(ends):.2f} m, max {np.max(ends):.1f} m "
+            f"({len(ends)} outages)")
+    return f"{r.note}; {what}" if r.note else what
 
 
 def _finite(*xs: float) -> bool:

@@ -33,6 +33,7 @@ from functools import lru_cache
 import numpy as np
 import pandas as pd
 
+from . import dr_health
 from .config import Params
 from .conventions import FIX_DR, FIX_FLOAT_RTK, FIX_RTK, NS_PER_S
 from .geodesy import LocalFrame
@@ -342,6 +343,9 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     """Clean, shift, project and merge the drive's streams into :class:`Epochs`."""
     tp = params["time"]
     parts: list[np.ndarray] = []
+    health = dr_health.screen(drive, params)
+    warnings = drive.meta.setdefault("warnings", [])
+    warnings.extend(n for n in health.notes if n not in warnings)
 
     gnss_t = np.zeros(0, np.int64)
     g_rec: dict[str, np.ndarray] = {}
@@ -370,6 +374,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     if drive.gyro is not None and len(drive.gyro):
         y = drive.gyro
         keep = _clean_stream(drive, "gyro", y.t_ns, np.isfinite(y.yaw_rate_radps))
+        if health.gyro_ok is not None:  # unhealthy samples: a warning line, not a skip count
+            keep = keep[health.gyro_ok[keep]]
         gyro_t = y.t_ns[keep] + np.int64(round(tp["gyro_offset_s"] * NS_PER_S))
         gyro_v = y.yaw_rate_radps[keep]
         parts.append(gyro_t)
@@ -378,6 +384,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     if drive.odo is not None and len(drive.odo):
         o = drive.odo
         keep = _clean_stream(drive, "odo", o.t_ns, np.isfinite(o.speed_mps))
+        if health.odo_ok is not None:  # unhealthy samples: a warning line, not a skip count
+            keep = keep[health.odo_ok[keep]]
         odo_t = o.t_ns[keep] + np.int64(round(tp["odo_offset_s"] * NS_PER_S))
         odo_v = o.speed_mps[keep]
         sp = params["standstill"]

@@ -449,11 +449,17 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
 def run_filter(epochs: Epochs, params: Params) -> FilterResult:
     """The configured filter over ``epochs``: it starts at the first usable fix, and the
     epochs before it (gyro and odometer logged before the receiver had a fix) are
-    dead-reckoned back from it (:mod:`gpsdr_cli.lead_in`)."""
+    dead-reckoned back from it (:mod:`gpsdr_cli.lead_in`).  Forward only, on a drive without an
+    odometer, the forward accelerometer's speed (without one, the last fixes' speed) carries
+    the track through the GNSS outages along the gyro's heading (:mod:`gpsdr_cli.accel_speed`)."""
     from . import filters, lead_in
 
     k_fix, from_fix = lead_in.split(epochs)
     result = filters.get(params["filter"]["name"])(from_fix, params)
+    if not params["filter"]["smooth"]:  # no odometer: the speed through the GNSS outages
+        from .accel_speed import bridge_outages
+
+        result = bridge_outages(from_fix, result, params)
     if k_fix:
         result = lead_in.backfill(epochs, k_fix, result)
     return result
@@ -492,6 +498,12 @@ def latest_gnss_pdop(epochs: Epochs, gnss_t_ns: np.ndarray) -> np.ndarray:
     return np.where(last >= 0, pdop[np.maximum(last, 0)], np.nan)
 
 
+#: ``auto_gnss_offset``: probes at most this many times, until the residual estimate is
+#: below OFFSET_TOL_S (s)
+OFFSET_ITERATIONS = 4
+OFFSET_TOL_S = 0.003
+
+
 def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
          auto_gnss_offset: bool = False, progress: Progress | None = None,
          ready: Callable[[], object] | None = None) -> FuseResult:
@@ -526,16 +538,25 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
         probe = copy.deepcopy(params)
         probe["filter"]["smooth"] = True
         probe["filter"]["smoother"] = "rts"
-        _, _, probe_track, _ = _run_once(drive, probe, frame, progress, ready)
-        est = estimate_gnss_offset(probe_track)
         offset_auto = float(params["time"]["gnss_offset_s"])
-        if est.identified and math.isfinite(est.offset_s):
-            params["time"]["gnss_offset_s"] = offset_auto + float(est.offset_s)
-            offset_auto = params["time"]["gnss_offset_s"]
+        # The fixes' own speed and course pull the probe's velocity toward the GNSS clock, so
+        # one estimate falls short of the offset by a share of it; probing again at the
+        # estimate until the residual is below OFFSET_TOL_S reaches the fixed point, where
+        # the GNSS and the dead reckoning agree.
+        for i in range(OFFSET_ITERATIONS):
+            probe["time"]["gnss_offset_s"] = offset_auto
+            _, _, probe_track, _ = _run_once(drive, probe, frame, progress, ready)
+            est = estimate_gnss_offset(probe_track)
+            if not (est.identified and math.isfinite(est.offset_s)):
+                if i == 0:
+                    offset_note = f"not estimated ({est.reason}); kept {offset_auto:+.3f} s"
+                break
+            offset_auto += float(est.offset_s)
             offset_note = (f"{est.method}, +-{est.stderr_s:.3f} s from {est.n_used} fixes"
                            if math.isfinite(est.stderr_s) else est.method)
-        else:
-            offset_note = f"not estimated ({est.reason}); kept {offset_auto:+.3f} s"
+            if abs(est.offset_s) < OFFSET_TOL_S:
+                break
+        params["time"]["gnss_offset_s"] = offset_auto
     epochs, result, track, work = _run_once(drive, params, frame, progress, ready)
     skipped = work.skipped
     track = add_qc_columns(track, epochs, result, params, progress)

@@ -25,6 +25,9 @@ SLOW_MODULES = frozenset({
     "tests/test_warmup.py",                   # compiles the kernels in fresh processes
     "tests/test_faults.py",                   # every fault x filter, ~1 min in all
     "tests/io/test_nmea_props.py",            # hypothesis, ~2 s per property
+    "tests/test_accel_outages.py",            # no-odometer drives through the pipeline, ~15 s
+    "tests/test_dr_health.py",                # faulty city drives, every filter, ~40 s
+    "tests/filters/test_nlos_screen.py",      # batch fit + four filters on a city drive
 })
 SLOW_TESTS = frozenset({
     "tests/filters/test_adaptive.py::test_gate_threshold_matches_chi2",

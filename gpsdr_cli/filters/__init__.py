@@ -8,6 +8,7 @@ import, and ``gpsdr --help`` must stay fast).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import importlib
 from collections.abc import Callable
@@ -36,7 +37,20 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
 
         @functools.wraps(fn)
         def run(epochs, params):  # every filter sees the same GNSS error model
-            return fn(*gnss_error_model(epochs, params, name))
+            from .nlos_screen import screen
+
+            model_epochs, model_params = gnss_error_model(epochs, params, name)
+            # gnss_error_model copies the parameters only for an RTK or an NLOS drive
+            nlos = (model_params is not params
+                    and epochs.rtk_fixed_share < float(params["gnss"]["rtk_share"]))
+            # the batch fit weighs each fix by its own sigma, not the chord-scaled one
+            screened, info = screen(epochs, params, nlos, fn)
+            if info.get("nlos_screened"):  # the fixes left are judged afresh
+                model_epochs, model_params = gnss_error_model(
+                    dataclasses.replace(epochs, has_gnss=screened.has_gnss), params, name)
+            result = fn(model_epochs, model_params)
+            result.info.update(info)
+            return result
 
         _REGISTRY[name] = run
         return fn

@@ -465,14 +465,15 @@ def odometer_inputs(epochs: Epochs, params: Params, use_odo: np.ndarray
 
 
 def coast_psd(epochs: Epochs, params: Params) -> float:
-    """``aekf.coast_acc_psd`` (m^2/s^3) on a drive without an odometer, else 0 (off).
+    """``aekf.coast_acc_psd`` (m^2/s^3); the kernel coasts only while the odometer is
+    silent (a drive without one, or one that dropped out, ``kernels_aekf.STALE_ODO_S``).
 
     Coasting: in a GNSS outage with nothing measuring the speed, the kernel takes
     zero-acceleration rows ``a_e = a_n = 0`` with ``r = q_c / T`` (kernels_aekf step 3).
     The current statistical model's mean keeps the last acceleration estimate, so without
     them a drive-off or a braking carried on through the outage.
     """
-    return 0.0 if epochs.has_odo.any() else max(float(params["aekf"]["coast_acc_psd"]), 0.0)
+    return max(float(params["aekf"]["coast_acc_psd"]), 0.0)
 
 
 def drive_off_var(params: Params) -> tuple[float, float]:
@@ -511,6 +512,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     st[kn.S_HEADING_KNOWN] = float(heading_known)
     st[kn.S_W] = 0.0
     st[kn.S_W_T] = -math.inf  # no gyro rate held yet
+    st[kn.S_ODO_T] = -math.inf  # no odometer record yet
     st[kn.S_VPSI] = initial_heading_var(x0, P0, heading_known, params)
     st[kn.S_WH_T] = -math.inf  # no previous innovation yet
     st[kn.S_WH_T2] = -math.inf
@@ -580,7 +582,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         "gnss_err_states": bool(params["aekf"]["gnss_err_states"]),
         "gnss_standstill_epochs": gnss_still,
         "coast_epochs": int(np.count_nonzero(epochs.gnss_outage & ~static & (epochs.dt_s > 0.0)))
-        if prm[kn.P_COAST_Q] > 0.0 else 0,
+        if prm[kn.P_COAST_Q] > 0.0 and not epochs.has_odo.any() else 0,
     }
     if ge_wanted and not params["aekf"]["gnss_err_states"]:
         info["gnss_err_states_off"] = (f"the receiver gives its velocity at {epochs.velocity_share:.0%} "

@@ -754,6 +754,10 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             held = np.zeros(n)
             held[o] = speed
             static = fresh & (held[lastc] < sp["speed_mps"])
+            if gnss_on and not fresh.all():  # a silent odometer: the receiver's speed says when
+                gnss_static = standstill_from_gnss(epochs, t_s, params,
+                                                   (t_s[g], psi_g) if len(g) else None)
+                static |= ~fresh & gnss_static
     elif sp["enabled"] and gnss_on:        # no odometer: the receiver's speed says when stopped
         static = standstill_from_gnss(epochs, t_s, params, (t_s[g], psi_g) if len(g) else None)
 
@@ -801,7 +805,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.K_GNSS_STALE_S] = epochs.gap_s
     par[kf.K_DR_STALE_S] = fp["dr_stale_s"]
     # no odometer: in GNSS outages nothing measures the speed (kernels_fkf: zero-acceleration rows)
-    par[kf.K_COAST_Q] = 0.0 if len(o) else fp["coast_acc_psd"]
+    par[kf.K_COAST_Q] = fp["coast_acc_psd"]  # the kernel coasts only while no distance is fresh
     positive = {"fkf.heading_sd_rad": fp["heading_sd_rad"], "odo.noise_sd_mps": par[kf.K_ODO_SD],
                 "standstill.zupt_sd_mps": sp["zupt_sd_mps"], "fkf.gnss_err_sd_m": fp["gnss_err_sd_m"],
                 "fkf.gnss_err_obstructed_sd_m": fp["gnss_err_obstructed_sd_m"],

@@ -85,7 +85,11 @@ S_PSI, S_STATIC, S_T, S_REJ_SINCE, S_SH_R, S_SH_M, S_HEADING_KNOWN = range(7)
 S_W, S_W_T, S_N_FIX, S_VPSI, S_CPE = 7, 8, 9, 10, 11
 S_WH_C0, S_WH_C1, S_WH_UE, S_WH_UN, S_WH_T, S_WH_M, S_WH_STATIC = range(12, 19)
 S_WH_C2, S_WH_UE2, S_WH_UN2, S_WH_T2, S_B_SINCE = range(19, 24)
-N_ST = 24
+S_ODO_T = 24  # time of the latest odometer record (s since the start)
+N_ST = 25
+#: a standstill the odometer said is forgotten after this long without an odometer record (s),
+#: as fkf's STALE_ODO_S: an odometer that drops out at a stop must not hold the car for minutes
+STALE_ODO_S = 1.0
 #: largest heading variance (rad^2) of the heading floor: a heading uniform on (-pi, pi]
 VPSI_MAX = math.pi ** 2 / 3.0
 # stored prior scalars per epoch (columns of ``prior_prm``)
@@ -955,6 +959,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     r_w = prm[P_R_OMEGA]
     w_held = st[S_W]
     w_t = st[S_W_T]
+    odo_t = st[S_ODO_T]
     vpsi = st[S_VPSI]
     cpe = st[S_CPE]
     heading_min = prm[P_HEADING_MIN]
@@ -986,6 +991,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # a step longer than aekf.max_gap_s (a logger pause, a far-future stamp) is not
         # propagated: held like a standstill, the position variance grown by (speed bound x T)^2
         gap = T > prm[P_MAX_GAP]
+        if is_static and t + T - odo_t > STALE_ODO_S:
+            is_static = False
         hold = (standstill and is_static) or gap
         # ---- 1. predict (seed 000 CS model; seed 004 static hold; fading memory)
         if k > 0 and T > 0.0:
@@ -1077,6 +1084,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
         if has_odo[k]:
             u = odo[k]
+            odo_t = t
             was_static = is_static
             is_static = standstill and u < prm[P_STATIC_SPEED]
             if was_static and not is_static and heading_known:
@@ -1133,7 +1141,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                         for i in range(n):
                             gw[GW_H + n_rows, i] = H[i]
                         n_rows = ge_push(gw, n_rows, GW_ODO, H, PHt, prm[P_R_ODO], u - h)
-        if coast_q > 0.0 and outage[k] and not is_static and T > 0.0:
+        if coast_q > 0.0 and outage[k] and not is_static and T > 0.0 and t - odo_t > STALE_ODO_S:
             # coasting (aekf.coast_acc_psd; a drive without an odometer, in a GNSS outage): nothing
             # measures the speed, and the current statistical model's mean (abar = a_hat) carries
             # the last acceleration through the outage (one_hour seed 2: 12 -> 106 m/s in 60 s);
@@ -1241,5 +1249,6 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     st[S_HEADING_KNOWN] = 1.0 if heading_known else 0.0
     st[S_W] = w_held
     st[S_W_T] = w_t
+    st[S_ODO_T] = odo_t
     st[S_VPSI] = vpsi
     st[S_CPE] = cpe

@@ -45,7 +45,9 @@ Field choices, documented here once:
   GGA fix claiming 0 satellites leaves the count to GNS, else unknown).
 - Sentences of one epoch that disagree on the position (by more than 1e-7 deg
   and more than one unit of the last digit either prints) are counted in
-  ``meta['position_disagreements']`` and a note, not as skipped records.
+  ``meta['position_disagreements']`` and a note, not as skipped records;
+  ``position_from="last"`` takes the epoch's last position sentence instead, as
+  gpsd does (the ranked choice is the default: it keeps GGA's quality fields).
   Positions that agree that closely are one fix printed twice: the last of
   them printed as finely as the chosen one gives the coordinates (a receiver
   that rounds GGA and truncates GLL; gpsd reports the last, too).
@@ -876,10 +878,14 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     (``sentences``, ``talkers``, ``lines``, ``epochs``, ``dates``, ``date_source``,
     ``warnings``, ...).  ``date`` is used only when the log holds no RMC/ZDA date.
     ``strict`` raises :class:`ParseError` at the first bad line instead of skipping it.
-    ``position_from``: which position an epoch whose sentences disagree takes: ``"rank"``
-    (GGA, then GNS, RMC, GLL: the most informative) or ``"last"`` (the last in file order,
-    as gpsd does).
-    Raises :class:`InputError` for empty, UTF-16 or binary input and
+    ``position_from``: which position an epoch whose sentences disagree takes:
+    ``"rank"``, the default (GGA, then GNS, RMC, GLL: the sentence that also carries the
+    quality, satellites, HDOP and height), or ``"last"`` (the last in file order, as
+    gpsd does; docs/decisions/0005-nmea-epoch-position-and-text-readers.md has a log
+    where the two differ by 1.7e-6 deg).  Either way the disagreeing epochs are counted
+    in ``meta['position_disagreements']`` and a note (``gpsdr info`` prints it).
+    UTF-16 and Latin-1 input is decoded (``meta['encoding']`` and a note).
+    Raises :class:`InputError` for empty or binary input and
     :class:`NoDataError` when no epoch with a time (and a date) can be built.
     """
     data = bytes(data)  # bytearray / memoryview welcome

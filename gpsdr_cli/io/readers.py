@@ -80,10 +80,10 @@ def sniff(path: str | Path) -> str:
 def _looks_like_ubx(path: str | Path, head: bytes) -> bool:
     """UBX frames with valid checksums (two, or one in a ``.ubx`` file or a short head),
     alone or among NMEA lines."""
+    if UBX_SYNC not in head:
+        return False  # before the import: the UBX reader loads numba
     from .ubx import count_frames
 
-    if UBX_SYNC not in head:
-        return False
     n = count_frames(head)
     return n >= 2 or (n == 1 and (str(path).lower().endswith(".ubx") or len(head) < 4096))
 

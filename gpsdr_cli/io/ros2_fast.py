@@ -54,7 +54,15 @@ _AR8 = np.arange(8)
 
 
 def _gather(buf: np.ndarray, pos: np.ndarray, width: np.ndarray, dtype: str) -> np.ndarray:
-    return buf[pos[:, None] + width].view(dtype)[:, 0]
+    """The ``dtype`` value at each byte position ``pos`` of ``buf`` (all in bounds)."""
+    w = len(width)
+    if len(buf) < w or len(pos) < 4096:  # small batches: the view costs more than it saves
+        return buf[pos[:, None] + width].view(dtype)[:, 0]
+    # rows of a (len - w + 1, w) byte-overlapping view: one index per value, not w
+    rows = np.lib.stride_tricks.as_strided(buf, shape=(len(buf) - w + 1, w),
+                                           strides=(buf.strides[0], buf.strides[0]),
+                                           writeable=False)
+    return rows[pos].view(dtype)[:, 0]
 
 
 def _align(q: np.ndarray, n: int) -> np.ndarray:

@@ -7,17 +7,24 @@ TwistWithCovarianceStamped ``linear.x`` as the odometer, chosen per stream by th
 channel with the most usable messages unless a topic override names one.  The
 mapping to a :class:`Drive` is the MCAP module's (:func:`mcap.drive_from_channels`).
 
-How the containers are read, and why not all through ``rosbags``: rosbags takes
-a Python step per message (its ROS 1 reader also parses the whole index on open:
-~70 k messages/s here, ~160 k for ROS 2 SQLite, against a 300 k target), and its
-deserialiser builds a Python object per message.  So:
+How the containers are read, and why not all through ``rosbags``: rosbags is the
+library for the formats (it reads every bag gpsdr does not read itself, and the
+tests write their bags with it), but it takes a Python step per message (its ROS 1
+reader also parses the whole index on open: ~70 k messages/s here, ~160 k for ROS 2
+SQLite, against a 300 k target), and its deserialiser builds a Python object per
+message.  So the two common layouts have a hand-written fast path:
 
 * ROS 1 ``.bag``: the records are framed by a compiled scan
   (:mod:`gpsdr_cli.io.rosbag1_walk`; chunks uncompressed, bz2 or lz4), the
   connections taken from their own records.  A bag cut short (no index, which
   rosbags refuses) is read up to its last whole chunk, with a warning.
 * ROS 2 SQLite (a ``.db3`` file or a bag folder of them, uncompressed): the
-  ``topics`` table and one query per wanted topic on ``messages``.
+  ``topics`` table, then the wanted topics' rows of ``messages`` in id (insertion)
+  order -- the table's own, so no sort, and not log-time order through the timestamp
+  index, which costs a row lookup per message; the times are the header stamps
+  anyway -- by one aggregate query per 500 k rows that returns their blobs concatenated
+  and their log times, topics and sizes as one fixed-width hex string, so no Python
+  object is made per message (a row-per-message fetch costs ~2 us a row).
 * Anything else (compressed ROS 2 bags, MCAP storage, other chunk codecs): rosbags.
 
 In every case the raw messages of a wanted topic are decoded in one batch by the
@@ -116,40 +123,90 @@ def _compressed(path: Path) -> bool:
     return bool(m and m.group(1) and m.group(1).lower() != "none")
 
 
+#: Rows per query on ``messages``: keeps the concatenated blob well under SQLite's
+#: 1 GB value limit for the small message types gpsdr reads.
+_SQL_CHUNK_ROWS = 500_000
+
+# One query per chunk of the wanted topics' messages, in id (= insertion) order: the
+# blobs concatenated, and per message its log time, size and topic as fixed-width hex,
+# so no Python object is made per message.  The ORDER BY + LIMIT subquery is a
+# co-routine the aggregates consume in its order (SQLite does not flatten it).
+_SQL_CHUNK = (
+    "SELECT CAST(group_concat(data, '') AS BLOB), "
+    "group_concat(printf('%016x%016x%08x', timestamp, topic_id, length(data)), ''), "
+    "count(*), max(id) FROM (SELECT id, topic_id, timestamp, data FROM messages "
+    "WHERE topic_id IN ({ids}) AND id > ? ORDER BY id LIMIT ?)")
+_SQL_ROW = np.dtype([("t_ns", ">i8"), ("topic", ">i8"), ("size", ">u4")])
+
+
+def _message_chunks(con: Any, tids: list[int]) -> Any:
+    """(blob, log times ns, topic ids, sizes) per chunk of the messages of ``tids``."""
+    import apsw
+
+    sql = _SQL_CHUNK.format(ids=",".join(str(int(t)) for t in tids))
+    last = -(1 << 63)
+    while True:
+        try:
+            (blob, rows_hex, n, last_id), = con.execute(sql, (last, _SQL_CHUNK_ROWS))
+        except apsw.TooBigError:  # messages too large to concatenate: one row at a time
+            yield _rows(con, tids, last)
+            return
+        if not n:
+            return
+        rows = np.frombuffer(bytes.fromhex(rows_hex), _SQL_ROW)
+        yield (blob or b"", rows["t_ns"].astype(np.int64), rows["topic"].astype(np.int64),
+               rows["size"].astype(np.int64))
+        if n < _SQL_CHUNK_ROWS:
+            return
+        last = last_id
+
+
+def _rows(con: Any, tids: list[int], after: int) -> tuple[bytes, np.ndarray, np.ndarray,
+                                                            np.ndarray]:
+    rows = con.execute(f"SELECT timestamp, topic_id, data FROM messages WHERE topic_id IN "
+                       f"({','.join(str(int(t)) for t in tids)}) AND id > ? ORDER BY id",
+                       (after,)).fetchall()
+    t_ns, topic, blobs = zip(*rows, strict=True) if rows else ((), (), ())
+    return (b"".join(blobs), np.array(t_ns, np.int64), np.array(topic, np.int64),
+            np.fromiter(map(len, blobs), np.int64, len(blobs)))
+
+
 def _read_sqlite(files: list[Path], decoder: mcap.Decoder) -> list[mcap.Channel]:
     """A ROS 2 SQLite bag's channels from its ``topics`` table, the wanted ones decoded
-    from one query on ``messages`` per topic (rosbags would take a Python step per
-    message)."""
-    # apsw (SQLite's own Python binding, which rosbags uses) fetches rows about twice as
-    # fast as the standard library's sqlite3
+    from their rows of ``messages`` fetched by a few aggregate queries (rosbags would
+    take a Python step per message)."""
+    # apsw (SQLite's own Python binding, which rosbags uses) bundles a recent SQLite
     import apsw
 
     channels: dict[str, mcap.Channel] = {}
     for f in files:
         con = apsw.Connection(str(f), flags=apsw.SQLITE_OPEN_READONLY)
         try:
-            counts = dict(con.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
+            # map the file rather than copy each page through SQLite's page cache
+            con.execute(f"PRAGMA mmap_size = {1 << 40}")
             topics = list(con.execute(
                 "SELECT id, name, type, serialization_format FROM topics ORDER BY id"))
+            wanted: dict[int, mcap.Channel] = {}
+            unwanted: dict[int, mcap.Channel] = {}
             for tid, name, msgtype, fmt in topics:
                 chan = channels.get(name)
                 if chan is None:
                     enc = "cdr" if fmt in ("cdr", "") else str(fmt)
                     chan = channels[name] = mcap.new_channel(len(channels) + 1, name, enc,
                                                               msgtype, "", b"")
-                if not decoder.is_wanted(chan):
+                (wanted if decoder.is_wanted(chan) else unwanted)[int(tid)] = chan
+            for buf, t_ns, topic, sizes in _message_chunks(con, sorted(wanted)) if wanted else ():
+                off = np.zeros(len(sizes), np.int64)
+                np.cumsum(sizes[:-1], out=off[1:])
+                npbuf = np.frombuffer(buf, np.uint8) if buf else np.zeros(1, np.uint8)
+                for tid in np.unique(topic).tolist():
+                    sel = topic == tid
+                    decoder.on_messages(wanted[tid], buf, npbuf, t_ns[sel], off[sel], sizes[sel])
+            if unwanted:
+                counts = dict(con.execute(
+                    "SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
+                for tid, chan in unwanted.items():
                     chan.n_msgs += int(counts.get(tid, 0))
-                    continue
-                rows = con.execute("SELECT timestamp, data FROM messages WHERE topic_id = ? "
-                                   "ORDER BY id", (tid,)).fetchall()
-                if not rows:
-                    continue
-                t_ns, blobs = zip(*rows, strict=False)
-                sizes = np.fromiter(map(len, blobs), np.int64, len(blobs))
-                buf = b"".join(blobs)
-                off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-                decoder.on_messages(chan, buf, np.frombuffer(buf, np.uint8) if buf else
-                                    np.zeros(1, np.uint8), np.array(t_ns, np.int64), off, sizes)
         finally:
             con.close()
     return list(channels.values())
@@ -220,6 +277,17 @@ def read_rosbag(path: str | Path, *, topics: dict[str, str] | None = None,
     if not p.exists():
         raise InputError(path_s, "no such file or folder")
     topics, wanted = mcap.check_topics(path_s, topics)
+    # hashlib drops the GIL on big blocks: the checksum runs beside the reading
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool:
+        sha = pool.submit(_sha256, p)
+        return _read_bag(p, path_s, topics, wanted, use_log_time, date, sha)
+
+
+def _read_bag(p: Path, path_s: str, topics: dict[str, str], wanted: dict[str, str | None],
+              use_log_time: bool, date: dt.date | None, sha: Any) -> Drive:
+    """:func:`read_rosbag` once the checksum (the future ``sha``) is under way."""
     decoder = mcap.Decoder(path_s, wanted)
     errors = _damage_errors()
     skipped = SkipReport()
@@ -245,7 +313,7 @@ def read_rosbag(path: str | Path, *, topics: dict[str, str] | None = None,
     meta["format"] = "ROS 1 bag" if ros1 else "ROS 2 bag"
     meta["messages"] = int(sum(c.n_msgs for c in channels))
     warnings = [f"{path_s}: {d}; read up to there" for d in meta.get("damage", [])]
-    drive = mcap.drive_from_channels(path_s, _sha256(p), channels, topics=topics, wanted=wanted,
+    drive = mcap.drive_from_channels(path_s, sha.result(), channels, topics=topics, wanted=wanted,
                                      use_log_time=use_log_time, date=date, skipped=skipped,
                                      warnings=warnings, meta=meta)
     drive.meta["rosbag"] = meta

@@ -11,8 +11,10 @@ NAV-DOP       hDOP, vDOP (and pDOP) of the NAV-PVT with the same iTOW
 NAV-HPPOSLLH  lat/lon/height with the 0.1 mm parts and its hAcc, overriding
               the NAV-PVT of the same iTOW
 ESF-MEAS      data type 5 gyro z -> yaw rate; 11 speed -> odometer; 8/9 rear
-ESF-RAW       wheel ticks (averaged) or 10 single tick -> odometer through
-              ``[odo] ticks_per_m``; 16 accelerometer x -> forward accel
+ESF-RAW       wheel ticks (averaged), else 6/7 front ones, else 10 single tick
+              -> odometer through ``[odo] ticks_per_m``; 16 accelerometer x ->
+              forward accel; the other types (12 gyro temperature, 13/14 gyro
+              y/x, 17/18 accelerometer y/z) are counted in ``meta`` only
 NMEA          lines between the UBX frames, through :func:`parse_nmea`; used
               for the fixes only when the log has no NAV-PVT with a UTC time
 ============  ===============================================================
@@ -80,8 +82,11 @@ _MEAS, _RAW = 0x02, 0x03
 #: NAV-PVT up to pDOP (the u-blox 7 length); M8/F9 send 92 bytes.
 PVT_MIN = 84
 
-#: ESF data types (interface description, "ESF data types").
-T_GYRO_Z, T_WHEEL_RL, T_WHEEL_RR, T_SINGLE_TICK, T_SPEED, T_ACCEL_X = 5, 8, 9, 10, 11, 16
+#: ESF data types (interface description, "ESF data types"; the same numbers as
+#: ublox_msgs/EsfMEAS): 5 gyro z, 6-9 wheel ticks FL/FR/RL/RR, 10 single tick, 11 speed,
+#: 12 gyro temperature, 13/14 gyro y/x, 16-18 accelerometer x/y/z.
+T_GYRO_Z, T_WHEEL_FL, T_WHEEL_FR, T_WHEEL_RL, T_WHEEL_RR = 5, 6, 7, 8, 9
+T_SINGLE_TICK, T_SPEED, T_ACCEL_X = 10, 11, 16
 _GYRO_SCALE_DPS = 2.0 ** -12
 _ACCEL_SCALE = 2.0 ** -10
 _SPEED_SCALE = 1e-3
@@ -538,10 +543,11 @@ def _esf_streams(buf: np.ndarray, fr: dict[str, np.ndarray], pvt_start: np.ndarr
 
 def _ticks_odometer(t: np.ndarray, d: np.ndarray, f: np.ndarray, ticks_per_m: float, path: str,
                     warnings: list[str], name: str) -> Odometry | None:
-    """Speed from rear wheel ticks (RL/RR averaged) or the single tick counter."""
-    series = [(t[d == w], f[d == w]) for w in (T_WHEEL_RL, T_WHEEL_RR) if (d == w).sum() >= 2]
-    if not series and (d == T_SINGLE_TICK).sum() >= 2:
-        series = [(t[d == T_SINGLE_TICK], f[d == T_SINGLE_TICK])]
+    """Speed from rear wheel ticks (RL/RR averaged), else the front ones, else the
+    single tick counter (the rear axle's are preferred: unsteered wheels)."""
+    series: list[tuple[np.ndarray, np.ndarray]] = []
+    for wheels in ((T_WHEEL_RL, T_WHEEL_RR), (T_WHEEL_FL, T_WHEEL_FR), (T_SINGLE_TICK,)):
+        series = series or [(t[d == w], f[d == w]) for w in wheels if (d == w).sum() >= 2]
     if not series:
         return None
     if not (math.isfinite(ticks_per_m) and ticks_per_m > 0):
@@ -586,6 +592,7 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
     gyro, odo, accel = _esf_streams(buf, fr, pvt_start, pvt_t, ticks_per_m, name, skipped,
                                     warnings, meta)
     text = np.flatnonzero(fr["text"])
+    notes: list[str] = []
     if len(text) and b"$" in data:
         day = date
         if day is None and len(gnss):
@@ -608,6 +615,7 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
             else:
                 gnss = fixes
                 skipped.merge(rep)
+                notes = nmea_meta.get("notes", [])  # e.g. sentences that disagree
     drive = Drive(skipped=skipped, sources=[Source(name, hashlib.sha256(data).hexdigest())])
     drive.gnss = gnss if len(gnss) else None
     drive.gyro, drive.odo, drive.accel = gyro, odo, accel
@@ -616,6 +624,8 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
     drive.meta["ubx"] = meta
     if warnings:
         drive.meta["warnings"] = warnings
+    if notes:
+        drive.meta["notes"] = list(notes)
     if not streams:
         raise NoDataError(name, f"no usable UBX NAV-PVT or ESF message and no NMEA fix "
                           f"({meta['frames']} valid frames, {meta['bad_frames']} damaged; "

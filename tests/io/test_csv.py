@@ -223,3 +223,35 @@ def test_distance_after_a_skipped_line_is_dropped_ticks_are_not(tmp_path):
     k = read_odo_csv(_csv(tmp_path, f"t,ticks\n{t0},0\n{t0 + 1},20\n{t0 + 2},x\n{t0 + 3},60\n",
                           "k.csv"), _opts("odo", ticks_per_m=10.0))
     np.testing.assert_array_equal(k.odo.speed_mps, [2.0, 2.0])  # 40 ticks over 2 s
+
+
+def test_cumulative_distance_column_is_read_as_the_running_total(tmp_path):
+    """A distance column that is the odometer's total (50 Hz, 4-decimal times, 12.5 m/s with
+    a 2 s stop, 30 km on the clock): speed = its step / dt, with a warning; per-row
+    distances of the same drive read as before."""
+    t0 = 1_700_000_000
+    t = t0 + np.arange(500) * 0.02
+    v_true = np.where((np.arange(499) >= 200) & (np.arange(499) < 300), 0.0, 12.5)
+    total = 30_000.0 + np.concatenate([[0.0], np.cumsum(v_true * 0.02)])
+    rows = "".join(f"{a:.4f},{b:.5f}\n" for a, b in zip(t, total, strict=True))
+    d = read_odo_csv(_csv(tmp_path, "t,distance\n" + rows), P["odo"])
+    np.testing.assert_allclose(d.odo.speed_mps, v_true, atol=1e-6)
+    assert d.meta["odo_csv"]["kind"] == "distance (cumulative)"
+    assert any("odometer's total" in w for w in d.meta["warnings"])
+    steps = np.diff(total)
+    rows = f"{t[0]:.4f},0.00000\n" + "".join(
+        f"{a:.4f},{b:.5f}\n" for a, b in zip(t[1:], steps, strict=True))
+    d = read_odo_csv(_csv(tmp_path, "t,distance\n" + rows, "steps.csv"), P["odo"])
+    np.testing.assert_allclose(d.odo.speed_mps, v_true, atol=1e-6)
+    assert d.meta["odo_csv"]["kind"] == "distance" and "warnings" not in d.meta
+
+
+def test_exponents_still_checked_when_the_file_has_an_e(tmp_path):
+    t0 = 1_700_000_000
+    plain = _csv(tmp_path, f"t,yaw_rate\n{t0},0.5\n{t0 + 1},2.5E-1\n{t0 + 2},1e-2\n")
+    d = read_gyro_csv(plain, P["gyro"])
+    np.testing.assert_allclose(d.gyro.yaw_rate_radps, [0.5, 0.25, 0.01], rtol=1e-15)
+    assert d.meta["gyro_csv"]["parser"] == "pyarrow"
+    huge = _csv(tmp_path, f"t,yaw_rate\n{t0},0.5\n{t0 + 1},1e-3201000\n", "huge.csv")
+    d = read_gyro_csv(huge, P["gyro"])
+    assert d.meta["gyro_csv"]["parser"] == "line-by-line" and len(d.gyro) == 2

@@ -117,3 +117,22 @@ def test_sha256_file(tmp_path):
     assert sha256_file(p) == hashlib.sha256(data).hexdigest()
     with pytest.raises(InputError):
         sha256_file(tmp_path / "missing")
+
+
+def test_sniffing_text_logs_does_not_load_numba(tmp_path: Path) -> None:
+    """The UBX check imports its compiled reader only for a head with UBX sync bytes, so
+    ``gpsdr info`` on CSV or NMEA files does not pay numba's start-up."""
+    import os
+    import subprocess
+
+    csv = tmp_path / "gyro.csv"
+    csv.write_text("t,yaw_rate\n1700000000.0,0.1\n1700000000.01,0.2\n")
+    nmea = tmp_path / "gps.nmea"
+    nmea.write_text("$GPGGA,120000.00,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*5C\r\n" * 3)
+    code = ("import sys; from gpsdr_cli.io.readers import sniff; "
+            f"kinds = [sniff({str(csv)!r}), sniff({str(nmea)!r})]; "
+            "print(kinds, 'numba' in sys.modules)")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(root)}).stdout
+    assert out.strip() == "['csv', 'nmea'] False"

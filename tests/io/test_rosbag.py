@@ -194,3 +194,78 @@ def test_ublox_msgs_navpvt_topic_as_gnss(tmp_path: Path) -> None:
     assert np.max(np.abs(g.lat_deg - (54.3 + np.arange(5) * 1e-6))) < 1e-9
     assert g.fix_quality.tolist() == [5, 4, 4, 4, 4]
     assert np.allclose(g.sigma_e_m, 0.014 / np.sqrt(2), atol=1e-9)
+
+
+def _extra_topic(bag: Path, n: int) -> None:
+    """Append ``n`` std_msgs/String messages on /chatter (a topic gpsdr does not read)."""
+    import apsw
+
+    con = apsw.Connection(str(next(bag.glob("*.db3"))))
+    con.execute("INSERT INTO topics (name, type, serialization_format, offered_qos_profiles, "
+                "type_description_hash) VALUES ('/chatter', 'std_msgs/msg/String', 'cdr', '', '')")
+    tid = con.last_insert_rowid()
+    for i in range(n):
+        con.execute("INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)",
+                    (tid, T0 + i, b"\x00\x01\x00\x00\x03\x00\x00\x00hi\x00"))
+    con.close()
+
+
+def _streams(d) -> dict[str, np.ndarray]:
+    return {"gyro_t": d.gyro.t_ns, "wz": d.gyro.yaw_rate_radps, "ax": d.accel.accel_mps2,
+            "odo_t": d.odo.t_ns, "v": d.odo.speed_mps, "gnss_t": d.gnss.t_ns,
+            "lat": d.gnss.lat_deg, "sig": d.gnss.sigma_e_m}
+
+
+def test_sqlite_chunked_and_row_by_row_reads_agree(tmp_path: Path, monkeypatch) -> None:
+    """The aggregate queries split into chunks, and the row-by-row fallback for values
+    past SQLite's length limit, read the same streams as one query."""
+    import apsw
+
+    from gpsdr_cli.io import rosbag
+
+    bag = write_bag(tmp_path / "b2", False)
+    _extra_topic(bag, 37)
+    whole = read_rosbag(bag)
+    counts = {c["topic"]: c["messages"] for c in whole.meta["rosbag"]["channels"]}
+    assert counts == {"/imu": N, "/vel": N, "/fix": N // 10, "/chatter": 37}
+    assert whole.skipped.total == 0
+    assert np.max(np.abs(whole.gyro.yaw_rate_radps - 0.001 * np.arange(N))) < VALUE_TOL
+
+    monkeypatch.setattr(rosbag, "_SQL_CHUNK_ROWS", 7)
+    chunked = read_rosbag(bag)
+    monkeypatch.undo()
+
+    class Limited(apsw.Connection):  # an SQLite built with a 4 kB value limit
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            self.limit(apsw.SQLITE_LIMIT_LENGTH, 4096)
+
+    monkeypatch.setattr(apsw, "Connection", Limited)
+    rows = read_rosbag(bag)
+    for d in (chunked, rows):
+        assert {c["topic"]: c["messages"] for c in d.meta["rosbag"]["channels"]} == counts
+        for name, values in _streams(whole).items():
+            assert np.array_equal(_streams(d)[name], values), name
+
+
+@pytest.mark.parametrize("ros1", [False, True])
+def test_fast_decoder_large_batches_match_small_ones(ros1: bool) -> None:
+    """Batches past the decoder's strided-gather threshold give the values encoded, and the
+    same as one message at a time (frame ids of varying length shift every field)."""
+    from gpsdr_cli.io import ros2_fast
+
+    n = 6000
+    msgs = [ros2_fast.encode("imu", T0 + i * 10_000_000, "f" * (i % 7), ros1=ros1,
+                             wz=0.001 * i - 2.0, ax=0.5 - 1e-4 * i) for i in range(n)]
+    sizes = np.array([len(m) for m in msgs], np.int64)
+    off = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    buf = np.frombuffer(b"".join(msgs), np.uint8)
+    fields, ok = ros2_fast.decode("imu", buf, off, sizes, ros1=ros1)
+    assert ok.all()
+    assert np.array_equal(fields["stamp_ns"], T0 + np.arange(n) * 10_000_000)
+    assert np.array_equal(fields["wz"], 0.001 * np.arange(n) - 2.0)
+    assert np.array_equal(fields["ax"], 0.5 - 1e-4 * np.arange(n))
+    for i in (0, 1, 4097, n - 1):
+        one, ok1 = ros2_fast.decode("imu", np.frombuffer(msgs[i], np.uint8), np.zeros(1, np.int64),
+                                    sizes[i:i + 1], ros1=ros1)
+        assert ok1[0] and one["wz"][0] == fields["wz"][i] and one["ax"][0] == fields["ax"][i]

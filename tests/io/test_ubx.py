@@ -306,3 +306,76 @@ def test_esf_raw_gyro_and_accel() -> None:
     assert np.allclose(d.gyro.yaw_rate_radps, math.radians(1.0), atol=1e-12)  # -1 deg/s z down
     assert np.allclose(d.accel.accel_mps2, 2.0, atol=1e-12)
     assert np.max(np.abs(d.gyro.t_ns - (T0 + np.arange(50) * 40_000_000))) <= 20_000_000
+
+
+# Every ESF data type of the interface description, with a value that would show if it
+# were read as another: (type, signed 24-bit field).
+ALL_ESF_TYPES = [(5, -3 * 4096), (6, 11), (7, 12), (8, 13), (9, 14), (10, 15), (11, 2750),
+                 (12, 2500), (13, 7 * 4096), (14, -9 * 4096), (16, -256), (17, 5000),
+                 (18, -10040)]
+
+
+def test_esf_meas_data_types_as_pyubx2_reads_them() -> None:
+    """Each word's type and 24-bit field as pyubx2 parses the frame; only type 5 is the yaw
+    rate (deg/s * 2^-12, z down), 11 the speed (m/s * 1e-3) and 16 the forward accel
+    (m/s^2 * 2^-10); the temperature, x/y gyros and y/z accelerometers are not."""
+    frame = esf_meas(4321, ALL_ESF_TYPES)
+    m = UBXReader.parse(frame)
+    assert m.numMeas == len(ALL_ESF_TYPES)
+    for k, (typ, field) in enumerate(ALL_ESF_TYPES, start=1):
+        assert getattr(m, f"dataType_{k:02d}") == typ
+        assert getattr(m, f"dataField_{k:02d}") == field & 0xFFFFFF
+    events = _pvts(11)
+    for k in range(20):
+        t = T0 + k * 100_000_000 + 5_000_000
+        events.append((t, esf_meas(t // 10**6 - 4_000, ALL_ESF_TYPES)))
+    events.sort(key=lambda e: e[0])
+    d = _one(b"".join(e[1] for e in events))
+    assert len(d.gyro) == len(d.odo) == len(d.accel) == 20
+    assert np.allclose(d.gyro.yaw_rate_radps, math.radians(3.0), atol=1e-12)  # -3 deg/s z down
+    assert np.allclose(d.odo.speed_mps, 2.75, atol=1e-12)
+    assert np.allclose(d.accel.accel_mps2, -0.25, atol=1e-12)
+    assert d.meta["ubx"]["esf_words"] == {typ: 20 for typ, _ in ALL_ESF_TYPES}
+
+
+@pytest.mark.parametrize("counting", ["down", "up"])
+def test_wheel_ticks_direction_bit_gives_a_negative_speed(counting: str) -> None:
+    """Bit 23 set = backward: the speed is negative whether the 23-bit count runs down
+    (through the wrap at 0) or keeps counting up."""
+    events = _pvts(11)
+    ticks_per_m = 50.0
+    for k in range(21):  # 10 Hz, 2 m/s backward
+        t = T0 + k * 100_000_000
+        step = round(k * 0.1 * 2.0 * ticks_per_m)
+        n = ((40 - step) if counting == "down" else (8_388_600 + step)) % (1 << 23)
+        events.append((t, esf_meas(t // 10**6 + 1000, [(8, (1 << 23) | n), (9, (1 << 23) | n)])))
+    events.sort(key=lambda e: e[0])
+    d = _one(b"".join(e[1] for e in events), ticks_per_m=ticks_per_m)
+    assert len(d.odo) == 20
+    assert np.allclose(d.odo.speed_mps, -2.0, atol=1e-9)
+
+
+def test_front_wheel_ticks_when_the_rear_ones_are_absent() -> None:
+    events = _pvts(11)
+    for k in range(21):  # front wheels 20 and 22 ticks per 0.1 s (a left turn): 10.5 m/s
+        t = T0 + k * 100_000_000
+        words = [(6, 1000 + 20 * k), (7, 1000 + 22 * k), (10, 5 * k)]
+        events.append((t, esf_meas(t // 10**6 + 1000, words)))
+    events.sort(key=lambda e: e[0])
+    d = _one(b"".join(e[1] for e in events), ticks_per_m=20.0)
+    assert np.allclose(d.odo.speed_mps, 10.5, atol=1e-9)  # the front pair, not the single tick
+
+
+def test_nmea_fixes_of_a_ubx_log_keep_the_disagreement_note(tmp_path: Path, gpsdr) -> None:
+    """A UBX log whose fixes come from its NMEA lines: an RMC 0.01' north of its GGA is a
+    disagreement, counted in the note ``gpsdr info`` prints; GGA's position is taken."""
+    gga = _nmea("GPGGA,102030.00,5406.000,N,01836.000,E,1,08,0.9,10.0,M,30.0,M,,")
+    rmc = _nmea("GPRMC,102030.00,A,5406.010,N,01836.000,E,0.0,0.0,040526,,,A")
+    path = tmp_path / "esf_nmea.ubx"
+    path.write_bytes((gga + "\r\n").encode() + esf_meas(5, [(5, 1)]) + (rmc + "\r\n").encode())
+    d = read_ubx(path)
+    assert d.gnss.lat_deg[0] == pytest.approx(54.1, abs=1e-9)
+    assert d.meta["ubx"]["nmea"]["position_disagreements"] == 1
+    r = gpsdr(["info", str(path)])
+    assert r.exit_code == 0, r.output
+    assert "1 epochs whose sentences disagree on the position" in r.output

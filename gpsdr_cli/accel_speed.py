@@ -1,0 +1,344 @@
+"""The speed through the GNSS outages of drives without an odometer: the forward
+accelerometer's, else the last fixes'.
+
+A drive with a gyro and no odometer has nothing that measures the speed while the fixes are
+out.  The filters' current statistical model carried the last acceleration estimate on
+(its mean is ``abar = a_hat``; the coasting rows, ``coast_acc_psd``, only slow it), and
+through a 15-s outage that turned a passing acceleration into metres per second of speed
+(no_odometer seed 3: 14.4 -> 15.4 m/s while the car braked to a stop); a car that brakes to
+a stop or drives off inside the outage ends it 80-140 m off whatever holds the speed.  A
+forward accelerometer (``acc_x``, or ``sensor_msgs/Imu`` linear_acceleration.x) measures the
+speed change.
+
+:func:`speed_track` runs a small Kalman filter forward in time over the epochs, state
+``[s, v, b, c]``: the distance driven since the last used fix (m), the horizontal speed (m/s),
+the reading's offset (m/s^2) and the offset's rate of change along the road (m/s^2 per m).
+The reading drives the prediction, ``dv/dt = a_meas - b``, and the receiver's Doppler speed
+updates it at every fix, so ``b`` and ``c`` are estimated against the GNSS speed up to the
+last fix before an outage.
+
+Gravity: on a slope of pitch theta the accelerometer also reads ``g sin(theta)`` (0.98 m/s^2
+at 10 %).  Nothing on a car with a yaw gyro and a forward accelerometer measures the pitch, so
+``b`` is the sensor's bias *plus* ``g sin(theta)`` of the road under the car.  The grade
+changes along the road, not in time (and not while parked): roads are built as straight
+grades joined by parabolic vertical curves, along which the grade changes at a constant rate
+per metre, so ``db/ds = c`` with ``c`` a random walk in the distance driven
+(``grade_rate_rw_var_per_m``), beside a random walk of ``b`` itself per metre
+(``grade_rw_var_m2ps4_per_m``) and the bias's slow wander in time (``bias_rw_var_m2ps5``).
+At each fix the Doppler speed pins ``b`` down; through an outage the grade rate learnt before
+it is extrapolated and the variances grow with the distance driven: the reported
+along-track sigma is that of the distance (conservative: the random walks are sized for
+vertical curves of ~100 m).
+
+:func:`bridge_outages` replaces the forward filter's track inside each GNSS outage of a drive
+with a gyro and no odometer: from the filter's position at the last used fix, the distance
+driven along the gyro's heading (the filter's velocity heading where it last moved at >=
+``heading_min_speed_mps``, then the yaw rate less the filter's gyro-bias estimate, or the
+mean rate at the standstills so far).  The distance is :func:`speed_track`'s where the
+accelerometer covers the outage, else :func:`held_speed`'s: the last fix's Doppler speed
+plus the acceleration the last second of fixes showed, decaying over a few seconds (a
+manoeuvre is short; what the current statistical model should predict with nothing
+measuring the speed).  The across-track variance stays the filter's, the along-track one is
+the fix's plus the distance's.  The smoothed tracks are left as they are (the RTS pass
+already has the fix at the outage's end).  The speed stays >= 0 (a braking car stops, it
+does not reverse).  The filters' own state is not touched: each resumes at the outage's
+first fix as before, so the bridge changes the track's outage epochs and nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .align import Epochs
+from .config import Params
+from .conventions import NS_PER_S
+from .filters.base import FilterResult
+
+#: a fix's Doppler speed below this (m/s) is a standstill (the gyro's rest rate is its bias)
+STANDSTILL_MPS = 0.1
+#: the accelerometer's last reading older than this (s) leaves an epoch uncovered
+MAX_ACCEL_AGE_S = 0.5
+#: the gyro bias against the fixes' course (:func:`course_gyro_bias`): courses at this speed
+#: or more (m/s) over the last COURSE_WINDOW_S, at least COURSE_MIN_FIXES spanning
+#: COURSE_MIN_SPAN_S
+COURSE_MIN_MPS = 3.0
+COURSE_WINDOW_S = 60.0
+COURSE_MIN_FIXES = 8
+COURSE_MIN_SPAN_S = 10.0
+
+
+@dataclass
+class SpeedTrack:
+    """Per epoch (after the epoch's update): ``v_mps`` speed, ``v_var`` its variance (m^2/s^2),
+    ``s_m`` distance since the last used fix, ``s_var`` its variance (m^2), ``b_mps2`` the
+    offset (bias + g sin(pitch)) and ``covered`` (an accelerometer reading within
+    MAX_ACCEL_AGE_S)."""
+
+    v_mps: np.ndarray
+    v_var: np.ndarray
+    s_m: np.ndarray
+    s_var: np.ndarray
+    b_mps2: np.ndarray
+    covered: np.ndarray
+
+
+@njit(cache=True, error_model="numpy")
+def _speed_kf(dt: np.ndarray, acc: np.ndarray, z: np.ndarray, anchor: np.ndarray,
+              prm: np.ndarray, v_out: np.ndarray, vv_out: np.ndarray, s_out: np.ndarray,
+              ss_out: np.ndarray, b_out: np.ndarray) -> None:
+    """The [s, v, b, c] filter (module docstring): ``acc`` the held reading (NaN: none yet),
+    ``z`` the Doppler speed (NaN: none), ``anchor`` where s restarts from 0 (used fixes).
+    ``prm``: initial sds of the speed, the offset and the grade rate; the white-acceleration
+    PSD (m^2/s^3); the offset's random walk per s and per m; the grade rate's per m; the
+    Doppler speed's variance (m^2/s^2)."""
+    q_a, q_bt, q_bs, q_c, r_v = prm[3], prm[4], prm[5], prm[6], prm[7]
+    x = np.zeros(4)          # s, v, b, c
+    P = np.zeros((4, 4))
+    P[1, 1] = prm[0] * prm[0]
+    P[2, 2] = prm[1] * prm[1]
+    P[3, 3] = prm[2] * prm[2]
+    F = np.eye(4)
+    started = False
+    for k in range(len(dt)):
+        T = dt[k]
+        if started and T > 0.0:
+            a = acc[k] if math.isfinite(acc[k]) else x[2]  # no reading: no speed change
+            v0 = x[1]
+            v1 = max(v0 + (a - x[2]) * T, 0.0)
+            ds = 0.5 * (v0 + v1) * T
+            x[0] += ds
+            x[1] = v1
+            x[2] += x[3] * ds        # the grade changes along the road (a vertical curve)
+            F[0, 1] = T
+            F[0, 2] = -0.5 * T * T
+            F[1, 2] = -T
+            F[2, 3] = ds
+            P = F @ P @ F.T
+            P[0, 0] += q_a * T * T * T / 3.0
+            P[0, 1] += q_a * T * T / 2.0
+            P[1, 0] += q_a * T * T / 2.0
+            P[1, 1] += q_a * T
+            P[2, 2] += q_bt * T + q_bs * ds
+            P[3, 3] += q_c * ds
+        if math.isfinite(z[k]):
+            if not started:  # the first Doppler speed starts the filter
+                x[1] = z[k]
+                P[1, 1] = r_v
+                started = True
+            else:
+                S = P[1, 1] + r_v
+                y = z[k] - x[1]
+                K = P[:, 1] / S
+                x += K * y
+                x[1] = max(x[1], 0.0)
+                P = P - np.outer(K, P[1, :])
+                P = 0.5 * (P + P.T)
+        if anchor[k]:
+            x[0] = 0.0
+            P[0, :] = 0.0
+            P[:, 0] = 0.0
+        v_out[k] = x[1]
+        vv_out[k] = P[1, 1]
+        s_out[k] = x[0]
+        ss_out[k] = P[0, 0]
+        b_out[k] = x[2]
+
+
+def speed_track(epochs: Epochs, params: Params, anchor: np.ndarray | None = None) -> SpeedTrack:
+    """The accelerometer's speed and distance per epoch (module docstring); ``anchor`` marks
+    the epochs where the distance restarts (default: every epoch with a fix)."""
+    p = params["accel"]
+    n = len(epochs)
+    covered = accel_covered(epochs)
+    acc = np.where(covered, _ffill(np.where(epochs.has_accel, epochs.accel_mps2, np.nan)), np.nan)
+    z = np.where(epochs.has_gnss, epochs.gnss_speed_mps, np.nan)
+    if anchor is None:
+        anchor = epochs.has_gnss
+    prm = np.array([float(p["init_speed_sd_mps"]), float(p["bias_init_sd_mps2"]),
+                    float(p["grade_rate_init_sd_mps2_per_m"]), float(p["noise_psd_m2ps3"]),
+                    float(p["bias_rw_var_m2ps5"]), float(p["grade_rw_var_m2ps4_per_m"]),
+                    float(p["grade_rate_rw_var_per_m"]), float(p["gnss_speed_sd_mps"]) ** 2])
+    out = [np.empty(n) for _ in range(5)]
+    _speed_kf(np.ascontiguousarray(epochs.dt_s, np.float64), acc, z,
+              np.ascontiguousarray(anchor, np.bool_), prm, *out)
+    return SpeedTrack(*out, covered=covered)
+
+
+def _gyro_bias(epochs: Epochs, result: FilterResult) -> np.ndarray:
+    """The gyro bias per epoch (rad/s, in the yaw rate's sign: true rate = reading - bias):
+    the filter's estimate when it has one, else the mean reading at the standstills so far
+    (a fix's Doppler speed under STANDSTILL_MPS at most MAX_ACCEL_AGE_S old; 0 before the
+    first)."""
+    est = result.extras.get("gyro_bias_radps")
+    if est is not None and np.all(np.isfinite(est)):
+        return np.asarray(est, float)
+    n = len(epochs)
+    t_s = (epochs.t_ns - epochs.t_ns[0]) / NS_PER_S
+    fix = epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps)
+    last = np.maximum.accumulate(np.where(fix, np.arange(n), -1))
+    j = np.maximum(last, 0)
+    fresh = (last >= 0) & (t_s - t_s[j] <= MAX_ACCEL_AGE_S)
+    yaw = epochs.yaw_rate_radps
+    still = fresh & (epochs.gnss_speed_mps[j] < STANDSTILL_MPS) & epochs.has_gyro & np.isfinite(yaw)
+    total = np.cumsum(np.where(still, yaw, 0.0))
+    count = np.cumsum(still)
+    return np.where(count > 0, total / np.maximum(count, 1), 0.0)
+
+
+def course_gyro_bias(epochs: Epochs, k: int, psi_gyro: np.ndarray) -> float | None:
+    """The gyro bias (rad/s, in the yaw rate's sign) from the fixes' course over the
+    COURSE_WINDOW_S before epoch ``k``: the slope of course minus the raw gyro heading
+    ``psi_gyro`` (the integral of -yaw rate, rad), unwrapped; None with too few courses.
+    A 60-s fit at 0.05 m/s Doppler noise pins the bias to ~1e-4 rad/s, where a highway
+    without a stop gives the standstill mean nothing to average."""
+    t_s = (epochs.t_ns - epochs.t_ns[k]) / NS_PER_S
+    lo = int(np.searchsorted(t_s, -COURSE_WINDOW_S))
+    sel = lo + np.flatnonzero(epochs.has_gnss[lo:k + 1]
+                              & np.isfinite(epochs.gnss_course_rad[lo:k + 1])
+                              & (epochs.gnss_speed_mps[lo:k + 1] >= COURSE_MIN_MPS))
+    if len(sel) < COURSE_MIN_FIXES or np.ptp(t_s[sel]) < COURSE_MIN_SPAN_S:
+        return None
+    r = np.unwrap(epochs.gnss_course_rad[sel] - psi_gyro[sel])
+    return float(np.polyfit(t_s[sel], r, 1)[0])
+
+
+def _ffill(x: np.ndarray) -> np.ndarray:
+    """``x`` with each NaN replaced by the latest finite value before it (NaN before the first)."""
+    idx = np.maximum.accumulate(np.where(np.isfinite(x), np.arange(len(x)), -1))
+    return np.where(idx >= 0, x[np.maximum(idx, 0)], np.nan)
+
+
+def outage_spans(epochs: Epochs, result: FilterResult, params: Params
+                 ) -> list[tuple[int, int, bool]]:
+    """(k, m, accel): a fix the filter used, the next fix (exclusive end) more than
+    ``accel.min_outage_s`` later, and whether the accelerometer covers every epoch in
+    between; none on a drive with an odometer (it measures the speed) or without a gyro.
+    Only GNSS outages: a stretch of fixes the filter rejected is the filter's to judge."""
+    if epochs.has_odo.any() or not epochs.has_gyro.any():
+        return []
+    fixes = np.flatnonzero(epochs.has_gnss)
+    if len(fixes) < 2:
+        return []
+    gap = np.diff(epochs.t_ns[fixes]) / NS_PER_S
+    used = np.asarray(result.gnss_used, bool)
+    cov = accel_covered(epochs)
+    bad = np.concatenate(([0], np.cumsum(~cov)))
+    out = []
+    for i in np.flatnonzero(gap > float(params["accel"]["min_outage_s"])):
+        k, m = int(fixes[i]), int(fixes[i + 1])
+        if used[k]:
+            out.append((k, m, bool(bad[m] == bad[k + 1])))
+    return out
+
+
+def held_speed(epochs: Epochs, result: FilterResult, params: Params, k: int, m: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Speed (m/s) and distance variance (m^2) at epochs k+1 .. m-1 of a gyro-only outage:
+    the last fix's Doppler speed (else the filter's) plus the acceleration the fixes' speed
+    showed over the last ``gyro_only_fit_s`` (a straight-line slope over >= 3 fixes, else 0),
+    decaying with ``gyro_only_tau_s`` (a manoeuvre lasts seconds: v = v_k + a_k tau (1 -
+    exp(-t / tau)), >= 0); the distance variance that of an unseen manoeuvre acceleration of
+    sigma ``gyro_only_acc_sd_mps2`` and the same correlation time (2/3 sigma^2 tau t^3) on top
+    of the speed's (``accel.gnss_speed_sd_mps``) t^2."""
+    p = params["accel"]
+    t_s = (epochs.t_ns - epochs.t_ns[k]) / NS_PER_S
+    v_k = float(epochs.gnss_speed_mps[k])
+    if not math.isfinite(v_k):
+        v_k = math.hypot(result.v_e[k], result.v_n[k])
+    fit_s = float(p["gyro_only_fit_s"])
+    lo = int(np.searchsorted(t_s, -fit_s, side="right"))
+    near = lo + np.flatnonzero(epochs.has_gnss[lo:k + 1] & np.isfinite(epochs.gnss_speed_mps[lo:k + 1]))
+    a_k = 0.0
+    if len(near) >= 3 and np.ptp(t_s[near]) > 0:
+        a_k = float(np.polyfit(t_s[near], epochs.gnss_speed_mps[near], 1)[0])
+    tau = max(float(p["gyro_only_tau_s"]), 1e-9)
+    t = t_s[k + 1:m]
+    v = np.maximum(v_k + a_k * tau * -np.expm1(-t / tau), 0.0)
+    s_var = (float(p["gnss_speed_sd_mps"]) ** 2 * t * t
+             + 2.0 / 3.0 * float(p["gyro_only_acc_sd_mps2"]) ** 2 * tau * t ** 3)
+    return v, s_var
+
+
+def accel_covered(epochs: Epochs) -> np.ndarray:
+    """Epochs with an accelerometer reading at most MAX_ACCEL_AGE_S old."""
+    return _covered(epochs, epochs.has_accel & np.isfinite(epochs.accel_mps2))
+
+
+def _covered(epochs: Epochs, has: np.ndarray) -> np.ndarray:
+    """Epochs with a reading (``has``) at most MAX_ACCEL_AGE_S old."""
+    n = len(epochs)
+    t_s = (epochs.t_ns - epochs.t_ns[0]) / NS_PER_S
+    last = np.maximum.accumulate(np.where(has, np.arange(n), -1))
+    return (last >= 0) & (t_s - t_s[np.maximum(last, 0)] <= MAX_ACCEL_AGE_S)
+
+
+def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> FilterResult:
+    """The forward track through each outage of :func:`outage_spans` dead-reckoned along the
+    gyro's heading with the accelerometer's speed (``accel.enabled``) or, without readings,
+    the last fixes' speed (:func:`held_speed`, ``accel.gyro_only``); ``result`` is changed in
+    place and returned.  ``result.info["accel_bridged_outages"]`` and
+    ``["gyro_only_bridged_outages"]`` count them; an outage the gyro does not cover (from
+    where the filter last moved to its end) is left to the filter."""
+    p = params["accel"]
+    spans = [(k, m, acc) for k, m, acc in outage_spans(epochs, result, params)
+             if (p["enabled"] if acc else p["gyro_only"])]
+    result.info["accel_bridged_outages"] = 0
+    result.info["gyro_only_bridged_outages"] = 0
+    if not spans:
+        return result
+    anchor = np.asarray(result.gnss_used, bool)
+    sp = speed_track(epochs, params, anchor) if any(acc for _, _, acc in spans) else None
+    bias = _gyro_bias(epochs, result)
+    yaw = np.where(epochs.has_gyro & np.isfinite(epochs.yaw_rate_radps), epochs.yaw_rate_radps,
+                   np.nan)
+    yaw = np.where(np.isfinite(_ffill(yaw)), _ffill(yaw), 0.0)
+    dt = epochs.dt_s
+    psi_gyro = np.cumsum(-yaw * dt)
+    own = "gyro_bias_radps" in result.extras
+    # a span the gyro does not cover (a dropout, clipped samples left out) stays the filter's
+    gyro_gap = np.concatenate(([0], np.cumsum(~_covered(epochs, epochs.has_gyro
+                                                         & np.isfinite(epochs.yaw_rate_radps)))))
+    fspeed = np.hypot(result.v_e, result.v_n)
+    moving = np.flatnonzero(fspeed >= float(p["heading_min_speed_mps"]))
+    for k, m, acc in spans:
+        i = np.searchsorted(moving, k, side="right") - 1
+        if i < 0:
+            continue  # never moved before: no heading to drive along
+        j0 = int(moving[i])
+        if gyro_gap[m] != gyro_gap[j0 + 1]:
+            continue
+        psi_ref = math.atan2(result.v_e[j0], result.v_n[j0])
+        # the filter's own bias estimate, else the fixes' course, else the standstills'
+        b = None if own else course_gyro_bias(epochs, k, psi_gyro)
+        b_sp = bias[j0 + 1:m] if b is None else b
+        cum = np.cumsum(-(yaw[j0 + 1:m] - b_sp) * dt[j0 + 1:m])
+        psi = psi_ref + cum[k - j0:]                # epochs k+1 .. m-1
+        sl = slice(k + 1, m)
+        if acc:
+            v, v_k, s_var = sp.v_mps[sl], sp.v_mps[k], sp.s_var[sl]
+        else:
+            v, s_var = held_speed(epochs, result, params, k, m)
+            v_k = v[0] if len(v) else 0.0
+        v_prev = np.concatenate(([v_k], v[:-1]))
+        step = 0.5 * (v + v_prev) * dt[sl]
+        ue, un = np.sin(psi), np.cos(psi)
+        e = result.e[k] + np.cumsum(step * ue)
+        n = result.n[k] + np.cumsum(step * un)
+        # along-track: the fix's variance plus the distance's; across: the filter's
+        pe, pn, pen = result.var_e[k], result.var_n[k], result.cov_en[k]
+        along0 = ue * ue * pe + 2 * ue * un * pen + un * un * pn
+        ce, cn = un, -ue
+        qe, qn, qen = result.var_e[sl], result.var_n[sl], result.cov_en[sl]
+        cross = ce * ce * qe + 2 * ce * cn * qen + cn * cn * qn
+        along = along0 + s_var
+        result.e[sl], result.n[sl] = e, n
+        result.v_e[sl], result.v_n[sl] = v * ue, v * un
+        result.var_e[sl] = along * ue * ue + cross * ce * ce
+        result.var_n[sl] = along * un * un + cross * cn * cn
+        result.cov_en[sl] = along * ue * un + cross * ce * cn
+        result.info["accel_bridged_outages" if acc else "gyro_only_bridged_outages"] += 1
+    return result
