@@ -438,11 +438,13 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     if len(fix_t) > 2:
         gap_s = max(gap_s, 2.5 * float(np.median(np.diff(fix_t))) / NS_PER_S)
     outage = outage_mask(t, fix_t, gap_s)
-    return Epochs(t_ns=t, dt_s=dt, has_gnss=has_gnss, gnss_e=gnss_e, gnss_n=gnss_n,
-                  gnss_sd_e=sd_e, gnss_sd_n=sd_n, pdop=pdop, gnss_speed_mps=gspeed,
-                  gnss_course_rad=gcourse, has_gyro=has_gyro, yaw_rate_radps=yaw,
-                  has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s,
-                  has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share)
+    epochs = Epochs(t_ns=t, dt_s=dt, has_gnss=has_gnss, gnss_e=gnss_e, gnss_n=gnss_n,
+                    gnss_sd_e=sd_e, gnss_sd_n=sd_n, pdop=pdop, gnss_speed_mps=gspeed,
+                    gnss_course_rad=gcourse, has_gyro=has_gyro, yaw_rate_radps=yaw,
+                    has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s,
+                    has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share)
+    from .filters.gnss_model import mark_false_fixes  # it needs the merged epochs
+    return mark_false_fixes(epochs, params)
 
 
 def sorted_unique(t: np.ndarray) -> np.ndarray:
