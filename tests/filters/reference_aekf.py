@@ -148,6 +148,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     n_fix = 0
     is_static = False
     t = 0.0
+    odo_t = -math.inf  # the latest odometer record (s)
     rej_since = -1.0
     sh_r, sh_m = 1.0, 0
     xs = np.zeros((n, m))
@@ -162,6 +163,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     for k in range(n):
         T = epochs.dt_s[k]
         gap = T > params["aekf"]["max_gap_s"]
+        if is_static and t + T - odo_t > kn.STALE_ODO_S:  # a silent odometer's stop expires
+            is_static = False
         hold = (standstill and is_static) or gap
         F = np.eye(m)
         if k > 0 and T > 0:
@@ -320,6 +323,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             cons_w = (0, 1, 3, 4, 6, 7)  # the lateral row corrects the acceleration only
         if has_odo[k]:
             u = odo_speed[k]
+            odo_t = t
             was_static = is_static
             is_static = standstill and u < st["speed_mps"]
             if was_static and not is_static and heading_known:  # drive-off (aekf.drive_off_*),
@@ -352,8 +356,9 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                                             (d_e, d_n))
                     else:
                         x, P = joseph(x, P, H, u - h, params["odo"]["noise_sd_mps"] ** 2, cons_o)
-        if coast > 0.0 and epochs.gnss_outage[k] and not is_static and T > 0.0:
-            for i in (2, 5):  # coasting without an odometer (aekf.coast_acc_psd): a = 0 rows
+        if (coast > 0.0 and epochs.gnss_outage[k] and not is_static and T > 0.0
+                and t - odo_t > kn.STALE_ODO_S):
+            for i in (2, 5):  # coasting while no odometer record is fresh: a = 0 rows
                 x, P = joseph(x, P, unit(i, m), -x[i], coast / T)
         static[k] = is_static
         if has_gyro[k]:
