@@ -473,6 +473,46 @@ def _last_per_epoch(out: np.ndarray, epoch: np.ndarray, values: np.ndarray,
     out[e[last]] = v[last]
 
 
+#: Fewest fields (address included) a sentence without a checksum must have to be read:
+#: every field up to the last one this reader uses is then complete, so a line cut short
+#: by a logger is not mistaken for a sentence that merely omits its checksum.
+_MIN_FIELDS_NO_CK = {b"GGA": 14, b"GNS": 12, b"RMC": 12, b"GLL": 7, b"GSA": 18, b"VTG": 9,
+                     b"GST": 9, b"ZDA": 6}
+
+
+def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndarray,
+                               star: np.ndarray, eol: np.ndarray,
+                               commas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Of the sentences without ``*hh``, those read anyway: (starts, body ends).
+
+    NMEA 0183 made the checksum optional for most sentences before 2.0 and some
+    receivers (old Garmin and Magellan handhelds, loggers that strip it) never send one;
+    gpsd reads such lines.  Taken: a known type from any talker, ended by a line end (not
+    by the next ``$``, not the unterminated last line of the file), no ``*`` at all,
+    printable ASCII only, and at least ``_MIN_FIELDS_NO_CK`` fields.
+    """
+    if len(starts) == 0:
+        return starts, starts
+    at_eol = np.isin(end, eol) & (star >= end)
+    st = end.copy()
+    for _ in range(2):  # trailing blanks before the line end ("\r\r\n", "... \r\n")
+        blank = (st > starts + 1) & ((arr[np.maximum(st - 1, 0)] == 32)
+                                     | (arr[np.maximum(st - 1, 0)] == 13))
+        st = np.where(blank, st - 1, st)
+    ok = at_eol & (st - starts >= 7)
+    if not ok.any():
+        return starts[:0], starts[:0]
+    printable = np.r_[0, np.cumsum((arr < 32) | (arr > 126))]
+    ok &= printable[st] - printable[starts + 1] == 0
+    nf = np.searchsorted(commas, st) - np.searchsorted(commas, starts) + 1
+    heads = [bytes(arr[a + 1:a + 7]) for a in starts[ok]]
+    take = np.zeros(len(starts), bool)
+    for i, h in zip(np.flatnonzero(ok), heads, strict=True):
+        need = _MIN_FIELDS_NO_CK.get(h[2:5]) if h[5:6] == b"," else None
+        take[i] = need is not None and isinstance(_classify(h[:5], False), int) and nf[i] >= need
+    return starts[take], st[take]
+
+
 def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems,
                 acc: dict[int, list[dict[str, np.ndarray]]], stats: dict) -> int:
     """Steps 1-4 on one chunk of whole lines (``arr``, starting at byte ``base`` of the file).
@@ -507,7 +547,12 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     doubled = (next_start == starts + 1) & (next_start < n)  # "$$": ignore the first
     stats["doubled_starts"] += int(doubled.sum())
     no_ck = ~has_ck & ~doubled
-    probs.add("no checksum (truncated sentence)", starts[no_ck] + base)
+    commas = np.flatnonzero(arr == 44)
+    nock_start, nock_st = _complete_without_checksum(arr, starts[no_ck], end[no_ck],
+                                                     star[no_ck], eol, commas)
+    stats["no_checksum"] += len(nock_start)
+    probs.add("no checksum (truncated sentence)",
+              np.setdiff1d(starts[no_ck], nock_start, assume_unique=True) + base)
 
     # ---- 2. checksums, all at once
     s1 = starts[has_ck] + 1
@@ -526,6 +571,13 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         probs.add("bad checksum", starts[has_ck][~good] + base, exc=ChecksumError,
                   detail=computed)
     ok_start = starts[has_ck][good]
+    ok_st_a = st[good]
+    if len(nock_start):
+        ok_start = np.r_[ok_start, nock_start]
+        ok_st_a = np.r_[ok_st_a, nock_st]
+        order = np.argsort(ok_start, kind="stable")
+        ok_start, ok_st_a = ok_start[order], ok_st_a[order]
+    ok_s1_a = ok_start + 1
 
     # lines that hold no sentence start at all but are not blank: free text, JSON, comments
     line_first = np.r_[0, breaks + 1]
@@ -540,8 +592,6 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
 
 
     # ---- 3. classify by the first 7 bytes ('$'/'!' + address + ','), once per distinct head
-    ok_s1_a = s1[good]
-    ok_st_a = st[good]
     # window view over the chunk padded with NULs: row i = the _MAX_FIELD bytes from i
     win = np.lib.stride_tricks.sliding_window_view(
         np.concatenate([arr, np.zeros(_MAX_FIELD, np.uint8)]), _MAX_FIELD)
@@ -562,7 +612,6 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     kind_arr = kind_of_uniq[inverse.ravel()] if len(uniq) else np.zeros(0, np.int64)
 
     sent: dict[int, _Sentences] = {}
-    commas = np.flatnonzero(arr == 44)
     for kind in range(len(_KNOWN)):
         sel = np.flatnonzero(kind_arr == kind)
         if len(sel) == 0:
@@ -903,7 +952,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     probs = _Problems()
     acc: dict[int, list[dict[str, np.ndarray]]] = {}
     stats: dict = {"doubled_starts": 0, "sentences": Counter(), "talkers": Counter(),
-                   "alt_without_geoid_sep": 0}
+                   "alt_without_geoid_sep": 0, "no_checksum": 0}
     # whole lines per chunk bound the temporaries' memory (about 10 bytes per input byte)
     all_breaks = []
     n_valid = 0
@@ -922,7 +971,8 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
                                "$GPGGA,...*hh; is this a UBX/RTCM/SBF log?)")
     meta: dict = {"lines": lines.count, "doubled_starts": stats["doubled_starts"],
                   "sentences": dict(stats["sentences"]), "talkers": dict(stats["talkers"]),
-                  "alt_without_geoid_sep": stats["alt_without_geoid_sep"]}
+                  "alt_without_geoid_sep": stats["alt_without_geoid_sep"],
+                  "sentences_without_checksum": stats["no_checksum"]}
     parsed = {k: {f: np.concatenate([d[f] for d in parts]) for f in parts[0]}
               for k, parts in sorted(acc.items())}
 
@@ -979,6 +1029,9 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     if encoding is not None:
         meta["encoding"] = encoding
         notes.append(f"text encoding {encoding}: decoded (NMEA is ASCII; save as UTF-8 to skip this)")
+    if meta["sentences_without_checksum"]:
+        notes.append(f"{meta['sentences_without_checksum']} complete sentences without a "
+                     "checksum read as they are (not verified)")
     if meta["position_disagreements"]:
         notes.append(
             f"{meta['position_disagreements']} epochs whose sentences disagree on the position "
