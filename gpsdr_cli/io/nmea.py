@@ -654,7 +654,8 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                      alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
                      q=np.where(fix, qi, 0).astype(np.float64),
                      nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
-                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan))
+                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan),
+                     talker=_talker_code(s.f(0)))
         elif kind == _GNS:
             lat, lon, res, badpos = _position(s, 2)
             probs.add("malformed position in GNS", s.pos[badpos & keep])
@@ -845,7 +846,9 @@ def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int,
     elif position_from != "rank":
         raise ValueError(f"position_from must be 'rank' or 'last', not {position_from!r}")
     e["disagree"] = _disagreements(parsed, e, n_ep)
-    e["nsat"] = field([(_GNS, "nsat"), (_GGA, "nsat")])  # GGA wins
+    e["nsat"] = field([(_GNS, "nsat")])
+    if _GGA in parsed:
+        _gga_satellites(e["nsat"], parsed[_GGA])  # GGA wins
     e["hdop"] = field([(_GSA, "hdop"), (_GNS, "hdop"), (_GGA, "hdop")])  # GGA's HDOP wins
     e["pdop"] = field([(_GSA, "pdop")])
     e["vdop"] = field([(_GSA, "vdop")])
@@ -855,6 +858,41 @@ def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int,
     e["course"] = field([(_VTG, "course"), (_RMC, "course")])
     e["row"] = row
     return e
+
+
+def _talker_code(addr: np.ndarray) -> np.ndarray:
+    """The two talker letters of each address (``GP``, ``GL``, ``GN``...) as one number."""
+    t = np.frombuffer(np.ascontiguousarray(addr.astype("S2")).tobytes(), np.uint8)
+    t = t.reshape(-1, 2).astype(np.float64) if len(addr) else np.zeros((0, 2))
+    return t[:, 0] * 256 + t[:, 1]
+
+
+_GN_CODE = float(ord("G") * 256 + ord("N"))
+
+
+def _gga_satellites(out: np.ndarray, g: dict[str, np.ndarray]) -> None:
+    """out[e] = the satellites of epoch ``e``'s GGA fix.
+
+    Receivers that print one GGA per constellation (SiRFstar V: ``$GPGGA`` with the GPS
+    satellites, ``$GLGGA`` with the GLONASS ones, same position) count the fix's
+    satellites in their sum; a ``$GN`` (combined) GGA of the epoch gives the total itself.
+    One talker per epoch (the usual case) is its last GGA's count.
+    """
+    m = np.isfinite(g["nsat"])
+    ep, tk, ns = g["ep"][m], g["talker"][m], g["nsat"][m]
+    if len(ep) == 0:
+        return
+    o = np.lexsort((tk, ep))  # stable: file order kept within (epoch, talker)
+    ep, tk, ns = ep[o], tk[o], ns[o]
+    last = np.r_[(ep[1:] != ep[:-1]) | (tk[1:] != tk[:-1]), True]
+    ep, tk, ns = ep[last], tk[last], ns[last]
+    gn = tk == _GN_CODE
+    total = np.zeros(len(out))
+    np.add.at(total, ep[~gn], ns[~gn])
+    has = np.zeros(len(out), bool)
+    has[ep] = True
+    out[has] = total[has]
+    out[ep[gn]] = ns[gn]
 
 
 def _disagreements(parsed: dict[int, dict[str, np.ndarray]], e: dict[str, np.ndarray],

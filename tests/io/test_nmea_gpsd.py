@@ -20,7 +20,7 @@ from gpsdr_cli.io.nmea import parse_nmea
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "gpsd"
 REPO = Path(__file__).resolve().parents[2]
-LOGS = ["humminbird-M37", "ac12", "polarx2", "beidou-bd", "garmin48", "saab-r4"]
+LOGS = ["humminbird-M37", "ac12", "polarx2", "beidou-bd", "garmin48", "saab-r4", "sirfstarv-nmea"]
 TOL_DEG = 1e-6
 
 
@@ -70,6 +70,24 @@ def test_humminbird_each_kind_alone_in_its_second():
     j = int(np.flatnonzero(fixes.t_ns == np.datetime64("2006-09-16T19:41:08", "ns").astype(np.int64))[0])
     assert fixes.fix_quality[j] == 2 and fixes.alt_m[j] == pytest.approx(268.0)
     assert meta["alt_without_geoid_sep"] == 6
+
+
+def test_one_gga_per_constellation_sums_the_satellites():
+    # SiRFstar V: $GPGGA counts the GPS satellites (8), $GLGGA the GLONASS ones (2) of the
+    # same fix; the epoch's fix used both, as its two GSA sentences list (8 + 2 = 10)
+    t, _, _ = _expected("sirfstarv-nmea")
+    fixes, _, _ = _ours((DATA / "sirfstarv-nmea.log").read_bytes(), int(t[0]))
+    assert fixes.n_sats.tolist() == [10, 10, 15, 15, 14]
+    # a combined $GN GGA of the epoch is the total itself, whatever per-system ones say
+    gga = b"$%sGGA,020935.000,4404.1351,N,12118.8556,W,1,%02d,0.9,1123.9,M,-19.6,M,,0000"
+    def s(body):
+        ck = 0
+        for c in body[1:]:
+            ck ^= c
+        return body + b"*%02X\r\n" % ck
+    data = s(gga % (b"GP", 8)) + s(gga % (b"GL", 2)) + s(gga % (b"GN", 11))
+    fixes, _, _ = parse_nmea(data, date=datetime.date(2019, 2, 5))
+    assert fixes.n_sats.tolist() == [11]
 
 
 def _strip_checksums(data: bytes) -> bytes:
