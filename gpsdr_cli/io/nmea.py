@@ -505,11 +505,17 @@ def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndar
     printable = np.r_[0, np.cumsum((arr < 32) | (arr > 126))]
     ok &= printable[st] - printable[starts + 1] == 0
     nf = np.searchsorted(commas, st) - np.searchsorted(commas, starts) + 1
-    heads = [bytes(arr[a + 1:a + 7]) for a in starts[ok]]
+    idx = np.flatnonzero(ok)
+    cols = [arr[np.minimum(starts[idx] + 1 + j, len(arr) - 1)] for j in range(6)]
+    heads = np.ascontiguousarray(np.stack(cols, axis=1)).view("S6").ravel()
+    uniq, inverse = np.unique(heads, return_inverse=True)
+    need = np.full(len(uniq), np.iinfo(np.int64).max)
+    for u, h in enumerate(uniq.tolist()):  # once per distinct address
+        k = _MIN_FIELDS_NO_CK.get(h[2:5]) if h[5:6] == b"," else None
+        if k is not None and isinstance(_classify(h[:5], False), int):
+            need[u] = k
     take = np.zeros(len(starts), bool)
-    for i, h in zip(np.flatnonzero(ok), heads, strict=True):
-        need = _MIN_FIELDS_NO_CK.get(h[2:5]) if h[5:6] == b"," else None
-        take[i] = need is not None and isinstance(_classify(h[:5], False), int) and nf[i] >= need
+    take[idx] = nf[idx] >= need[inverse.ravel()]
     return starts[take], st[take]
 
 
