@@ -191,6 +191,7 @@ class _Lines:
 
 # ------------------------------------------------------------------ sniffing and encoding
 _SNIFF = re.compile(rb"[$!]([A-Za-z0-9]{2,12}[^*$!\r\n]*)\*([0-9A-Fa-f]{2})")
+_SNIFF_NO_CK = re.compile(rb"(?m)^\$[A-Z]{2}(?:GGA|RMC|GNS|ZDA),\d{6}(?:\.\d*)?,[0-9A-Z.,+-]*\r?$")
 
 
 def _utf16_kind(head: bytes) -> str | None:
@@ -235,7 +236,10 @@ def looks_like_nmea(head: bytes) -> bool:
             found += 1
             if found >= 2:
                 return True
-    return found == 1 and head.count(b"$") + head.count(b"!") <= 3
+    if found == 1 and head.count(b"$") + head.count(b"!") <= 3:
+        return True
+    # receivers that send no checksums: three lines that are plainly timed sentences
+    return found == 0 and len(_SNIFF_NO_CK.findall(head)) >= 3
 
 
 def _is_binary(data: bytes) -> bool:
@@ -476,14 +480,16 @@ def _last_per_epoch(out: np.ndarray, epoch: np.ndarray, values: np.ndarray,
 #: Fewest fields (address included) a sentence without a checksum must have to be read:
 #: every field up to the last one this reader uses is then complete, so a line cut short
 #: by a logger is not mistaken for a sentence that merely omits its checksum.
+_ADDRESS = re.compile(rb"[A-Z][A-Z0-9]{2,6},")
 _MIN_FIELDS_NO_CK = {b"GGA": 14, b"GNS": 12, b"RMC": 12, b"GLL": 7, b"GSA": 18, b"VTG": 9,
                      b"GST": 9, b"ZDA": 6}
 
 
 def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndarray,
                                star: np.ndarray, eol: np.ndarray,
-                               commas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Of the sentences without ``*hh``, those read anyway: (starts, body ends).
+                               commas: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of the sentences without ``*hh``, those read anyway: (starts, body ends), and the
+    starts of whole lines of a type this reader does not use (counted as unknown).
 
     NMEA 0183 made the checksum optional for most sentences before 2.0 and some
     receivers (old Garmin and Magellan handhelds, loggers that strip it) never send one;
@@ -492,7 +498,7 @@ def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndar
     printable ASCII only, and at least ``_MIN_FIELDS_NO_CK`` fields.
     """
     if len(starts) == 0:
-        return starts, starts
+        return starts, starts, starts
     at_eol = np.isin(end, eol) & (star >= end)
     st = end.copy()
     for _ in range(2):  # trailing blanks before the line end ("\r\r\n", "... \r\n")
@@ -501,22 +507,28 @@ def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndar
         st = np.where(blank, st - 1, st)
     ok = at_eol & (st - starts >= 7)
     if not ok.any():
-        return starts[:0], starts[:0]
+        return starts[:0], starts[:0], starts[:0]
     printable = np.r_[0, np.cumsum((arr < 32) | (arr > 126))]
     ok &= printable[st] - printable[starts + 1] == 0
     nf = np.searchsorted(commas, st) - np.searchsorted(commas, starts) + 1
     idx = np.flatnonzero(ok)
-    cols = [arr[np.minimum(starts[idx] + 1 + j, len(arr) - 1)] for j in range(6)]
-    heads = np.ascontiguousarray(np.stack(cols, axis=1)).view("S6").ravel()
+    cols = [arr[np.minimum(starts[idx] + 1 + j, len(arr) - 1)] for j in range(8)]
+    heads = np.ascontiguousarray(np.stack(cols, axis=1)).view("S8").ravel()
     uniq, inverse = np.unique(heads, return_inverse=True)
-    need = np.full(len(uniq), np.iinfo(np.int64).max)
+    never = np.iinfo(np.int64).max
+    need = np.full(len(uniq), never)
+    address = np.zeros(len(uniq), bool)
     for u, h in enumerate(uniq.tolist()):  # once per distinct address
+        address[u] = _ADDRESS.match(h) is not None
         k = _MIN_FIELDS_NO_CK.get(h[2:5]) if h[5:6] == b"," else None
         if k is not None and isinstance(_classify(h[:5], False), int):
             need[u] = k
     take = np.zeros(len(starts), bool)
-    take[idx] = nf[idx] >= need[inverse.ravel()]
-    return starts[take], st[take]
+    need_i = need[inverse.ravel()]
+    take[idx] = nf[idx] >= need_i
+    other = np.zeros(len(starts), bool)  # e.g. $GPRMB, $PGRME: not "$" inside free text
+    other[idx] = (need_i == never) & address[inverse.ravel()]
+    return starts[take], st[take], starts[other]
 
 
 def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems,
@@ -554,11 +566,12 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     stats["doubled_starts"] += int(doubled.sum())
     no_ck = ~has_ck & ~doubled
     commas = np.flatnonzero(arr == 44)
-    nock_start, nock_st = _complete_without_checksum(arr, starts[no_ck], end[no_ck],
-                                                     star[no_ck], eol, commas)
+    nock_start, nock_st, nock_other = _complete_without_checksum(
+        arr, starts[no_ck], end[no_ck], star[no_ck], eol, commas)
     stats["no_checksum"] += len(nock_start)
+    probs.add("unknown sentence without checksum", nock_other + base, fatal=False)
     probs.add("no checksum (truncated sentence)",
-              np.setdiff1d(starts[no_ck], nock_start, assume_unique=True) + base)
+              np.setdiff1d(starts[no_ck], np.r_[nock_start, nock_other]) + base)
 
     # ---- 2. checksums, all at once
     s1 = starts[has_ck] + 1

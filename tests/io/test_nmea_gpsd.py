@@ -112,9 +112,12 @@ def test_sentences_without_checksum_read_like_the_originals():
     np.testing.assert_array_equal(a.lon_deg, b.lon_deg)
     np.testing.assert_array_equal(a.hdop, b.hdop)
     assert "without a checksum" in " ".join(mb["notes"])
-    # proprietary/unknown sentences without a checksum are still only unknown or truncated
-    assert rb.counts["no checksum (truncated sentence)"] >= 1
-    assert ra.counts["no checksum (truncated sentence)"] == 1  # the cut GSV
+    # whole lines of other types (RMB, BOD, RTE, $PGRM...) are unknown sentences, and the
+    # GSV cut in its checksum is still the one truncated sentence
+    n_other = len(re.findall(rb"^\$(?!GP(RMC|GGA|GSA|GLL),)[^*\r\n]*\r?$", bare, re.M))
+    assert rb.counts["unknown sentence without checksum"] == n_other == 25
+    assert rb.counts["no checksum (truncated sentence)"] == 1
+    assert ra.counts["no checksum (truncated sentence)"] == 1
 
 
 def test_line_cut_short_without_checksum_is_not_a_sentence():
@@ -149,3 +152,17 @@ def test_gpsd_compare_benchmark_on_the_excerpts(tmp_path):
         row = mod.compare(tmp_path / f"{name}.log", "rank", 60.0)
         assert row["status"] == "ok"
         assert row["matched"] == row["within"] == row["gpsd"] == len(_expected(name)[0])
+
+
+def test_checksum_less_log_is_recognised_as_nmea(tmp_path):
+    # the Humminbird's $IN sentences without their checksums: sniffed as NMEA (its talker
+    # is neither $GP nor $GN, so only complete timed sentences can tell)
+    from gpsdr_cli.io.nmea import looks_like_nmea
+    from gpsdr_cli.io.readers import sniff
+
+    bare = _strip_checksums((DATA / "humminbird-M37.log").read_bytes())
+    assert looks_like_nmea(bare[:4096])
+    assert not looks_like_nmea(b"$GPGGA,no checksum here\n$GPRMC,nor here\n$GPGGA,x\n")
+    p = tmp_path / "m37.log"
+    p.write_bytes(bare)
+    assert sniff(p) == "nmea"
