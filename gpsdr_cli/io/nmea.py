@@ -11,7 +11,9 @@ sentence, see ``benchmarks/read_nmea.py``):
    starts and two sentences spliced on one line all work.  A sentence ends at
    the next start or line end; its checksum is the first ``*hh`` in it.
 2. Verify every checksum at once (``np.bitwise_xor.reduceat``); hex digits
-   upper or lower case.
+   upper or lower case.  A sentence without ``*hh`` is read when it is whole
+   (see :func:`_complete_without_checksum`; gpsd reads them too) and counted in
+   ``meta['sentences_without_checksum']``.
 3. Classify sentences by their first bytes (``np.unique`` over the addresses),
    locate the fields of each known type by comma offsets, gather each wanted
    field of all sentences into one fixed-width bytes array and convert it with
@@ -42,7 +44,9 @@ Field choices, documented here once:
   NavIC); the best letter gives the quality (R 4 > F 5 > D 2 > P 3 > A 1 > E
   6; only N/M/S: no fix), so a fix exists when any system has one.  GNS
   satellites, HDOP, altitude and geoid separation read as GGA's (GGA's win; a
-  GGA fix claiming 0 satellites leaves the count to GNS, else unknown).
+  GGA fix claiming 0 satellites leaves the count to GNS, else unknown).  One GGA
+  per constellation in an epoch (``$GPGGA`` + ``$GLGGA``, SiRFstar V): their
+  satellites add up; a ``$GN`` GGA of the epoch is the total.
 - Sentences of one epoch that disagree on the position (by more than 1e-7 deg
   and more than one unit of the last digit either prints) are counted in
   ``meta['position_disagreements']`` and a note, not as skipped records;
