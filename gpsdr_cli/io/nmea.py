@@ -11,7 +11,9 @@ sentence, see ``benchmarks/read_nmea.py``):
    starts and two sentences spliced on one line all work.  A sentence ends at
    the next start or line end; its checksum is the first ``*hh`` in it.
 2. Verify every checksum at once (``np.bitwise_xor.reduceat``); hex digits
-   upper or lower case.
+   upper or lower case.  A sentence without ``*hh`` is read when it is whole
+   (see :func:`_complete_without_checksum`; gpsd reads them too) and counted in
+   ``meta['sentences_without_checksum']``.
 3. Classify sentences by their first bytes (``np.unique`` over the addresses),
    locate the fields of each known type by comma offsets, gather each wanted
    field of all sentences into one fixed-width bytes array and convert it with
@@ -42,7 +44,9 @@ Field choices, documented here once:
   NavIC); the best letter gives the quality (R 4 > F 5 > D 2 > P 3 > A 1 > E
   6; only N/M/S: no fix), so a fix exists when any system has one.  GNS
   satellites, HDOP, altitude and geoid separation read as GGA's (GGA's win; a
-  GGA fix claiming 0 satellites leaves the count to GNS, else unknown).
+  GGA fix claiming 0 satellites leaves the count to GNS, else unknown).  One GGA
+  per constellation in an epoch (``$GPGGA`` + ``$GLGGA``, SiRFstar V): their
+  satellites add up; a ``$GN`` GGA of the epoch is the total.
 - Sentences of one epoch that disagree on the position (by more than 1e-7 deg
   and more than one unit of the last digit either prints) are counted in
   ``meta['position_disagreements']`` and a note, not as skipped records;
@@ -191,6 +195,7 @@ class _Lines:
 
 # ------------------------------------------------------------------ sniffing and encoding
 _SNIFF = re.compile(rb"[$!]([A-Za-z0-9]{2,12}[^*$!\r\n]*)\*([0-9A-Fa-f]{2})")
+_SNIFF_NO_CK = re.compile(rb"(?m)^\$[A-Z]{2}(?:GGA|RMC|GNS|ZDA),\d{6}(?:\.\d*)?,[0-9A-Z.,+-]*\r?$")
 
 
 def _utf16_kind(head: bytes) -> str | None:
@@ -235,7 +240,10 @@ def looks_like_nmea(head: bytes) -> bool:
             found += 1
             if found >= 2:
                 return True
-    return found == 1 and head.count(b"$") + head.count(b"!") <= 3
+    if found == 1 and head.count(b"$") + head.count(b"!") <= 3:
+        return True
+    # receivers that send no checksums: three lines that are plainly timed sentences
+    return found == 0 and len(_SNIFF_NO_CK.findall(head)) >= 3
 
 
 def _is_binary(data: bytes) -> bool:
@@ -473,6 +481,60 @@ def _last_per_epoch(out: np.ndarray, epoch: np.ndarray, values: np.ndarray,
     out[e[last]] = v[last]
 
 
+#: Fewest fields (address included) a sentence without a checksum must have to be read:
+#: every field up to the last one this reader uses is then complete, so a line cut short
+#: by a logger is not mistaken for a sentence that merely omits its checksum.
+_ADDRESS = re.compile(rb"[A-Z][A-Z0-9]{2,6},")
+_MIN_FIELDS_NO_CK = {b"GGA": 14, b"GNS": 12, b"RMC": 12, b"GLL": 7, b"GSA": 18, b"VTG": 9,
+                     b"GST": 9, b"ZDA": 6}
+
+
+def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndarray,
+                               star: np.ndarray, eol: np.ndarray,
+                               commas: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of the sentences without ``*hh``, those read anyway: (starts, body ends), and the
+    starts of whole lines of a type this reader does not use (counted as unknown).
+
+    NMEA 0183 made the checksum optional for most sentences before 2.0 and some
+    receivers (old Garmin and Magellan handhelds, loggers that strip it) never send one;
+    gpsd reads such lines.  Taken: a known type from any talker, ended by a line end (not
+    by the next ``$``, not the unterminated last line of the file), no ``*`` at all,
+    printable ASCII only, and at least ``_MIN_FIELDS_NO_CK`` fields.
+    """
+    if len(starts) == 0:
+        return starts, starts, starts
+    at_eol = np.isin(end, eol) & (star >= end)
+    st = end.copy()
+    for _ in range(2):  # trailing blanks before the line end ("\r\r\n", "... \r\n")
+        blank = (st > starts + 1) & ((arr[np.maximum(st - 1, 0)] == 32)
+                                     | (arr[np.maximum(st - 1, 0)] == 13))
+        st = np.where(blank, st - 1, st)
+    ok = at_eol & (st - starts >= 7)
+    if not ok.any():
+        return starts[:0], starts[:0], starts[:0]
+    printable = np.r_[0, np.cumsum((arr < 32) | (arr > 126))]
+    ok &= printable[st] - printable[starts + 1] == 0
+    nf = np.searchsorted(commas, st) - np.searchsorted(commas, starts) + 1
+    idx = np.flatnonzero(ok)
+    cols = [arr[np.minimum(starts[idx] + 1 + j, len(arr) - 1)] for j in range(8)]
+    heads = np.ascontiguousarray(np.stack(cols, axis=1)).view("S8").ravel()
+    uniq, inverse = np.unique(heads, return_inverse=True)
+    never = np.iinfo(np.int64).max
+    need = np.full(len(uniq), never)
+    address = np.zeros(len(uniq), bool)
+    for u, h in enumerate(uniq.tolist()):  # once per distinct address
+        address[u] = _ADDRESS.match(h) is not None
+        k = _MIN_FIELDS_NO_CK.get(h[2:5]) if h[5:6] == b"," else None
+        if k is not None and isinstance(_classify(h[:5], False), int):
+            need[u] = k
+    take = np.zeros(len(starts), bool)
+    need_i = need[inverse.ravel()]
+    take[idx] = nf[idx] >= need_i
+    other = np.zeros(len(starts), bool)  # e.g. $GPRMB, $PGRME: not "$" inside free text
+    other[idx] = (need_i == never) & address[inverse.ravel()]
+    return starts[take], st[take], starts[other]
+
+
 def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems,
                 acc: dict[int, list[dict[str, np.ndarray]]], stats: dict) -> int:
     """Steps 1-4 on one chunk of whole lines (``arr``, starting at byte ``base`` of the file).
@@ -507,7 +569,13 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     doubled = (next_start == starts + 1) & (next_start < n)  # "$$": ignore the first
     stats["doubled_starts"] += int(doubled.sum())
     no_ck = ~has_ck & ~doubled
-    probs.add("no checksum (truncated sentence)", starts[no_ck] + base)
+    commas = np.flatnonzero(arr == 44)
+    nock_start, nock_st, nock_other = _complete_without_checksum(
+        arr, starts[no_ck], end[no_ck], star[no_ck], eol, commas)
+    stats["no_checksum"] += len(nock_start)
+    probs.add("unknown sentence without checksum", nock_other + base, fatal=False)
+    probs.add("no checksum (truncated sentence)",
+              np.setdiff1d(starts[no_ck], np.r_[nock_start, nock_other]) + base)
 
     # ---- 2. checksums, all at once
     s1 = starts[has_ck] + 1
@@ -526,6 +594,13 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         probs.add("bad checksum", starts[has_ck][~good] + base, exc=ChecksumError,
                   detail=computed)
     ok_start = starts[has_ck][good]
+    ok_st_a = st[good]
+    if len(nock_start):
+        ok_start = np.r_[ok_start, nock_start]
+        ok_st_a = np.r_[ok_st_a, nock_st]
+        order = np.argsort(ok_start, kind="stable")
+        ok_start, ok_st_a = ok_start[order], ok_st_a[order]
+    ok_s1_a = ok_start + 1
 
     # lines that hold no sentence start at all but are not blank: free text, JSON, comments
     line_first = np.r_[0, breaks + 1]
@@ -540,8 +615,6 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
 
 
     # ---- 3. classify by the first 7 bytes ('$'/'!' + address + ','), once per distinct head
-    ok_s1_a = s1[good]
-    ok_st_a = st[good]
     # window view over the chunk padded with NULs: row i = the _MAX_FIELD bytes from i
     win = np.lib.stride_tricks.sliding_window_view(
         np.concatenate([arr, np.zeros(_MAX_FIELD, np.uint8)]), _MAX_FIELD)
@@ -562,7 +635,6 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     kind_arr = kind_of_uniq[inverse.ravel()] if len(uniq) else np.zeros(0, np.int64)
 
     sent: dict[int, _Sentences] = {}
-    commas = np.flatnonzero(arr == 44)
     for kind in range(len(_KNOWN)):
         sel = np.flatnonzero(kind_arr == kind)
         if len(sel) == 0:
@@ -605,7 +677,8 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                      alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
                      q=np.where(fix, qi, 0).astype(np.float64),
                      nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
-                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan))
+                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan),
+                     talker=_talker_code(s.f(0)))
         elif kind == _GNS:
             lat, lon, res, badpos = _position(s, 2)
             probs.add("malformed position in GNS", s.pos[badpos & keep])
@@ -796,7 +869,9 @@ def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int,
     elif position_from != "rank":
         raise ValueError(f"position_from must be 'rank' or 'last', not {position_from!r}")
     e["disagree"] = _disagreements(parsed, e, n_ep)
-    e["nsat"] = field([(_GNS, "nsat"), (_GGA, "nsat")])  # GGA wins
+    e["nsat"] = field([(_GNS, "nsat")])
+    if _GGA in parsed:
+        _gga_satellites(e["nsat"], parsed[_GGA])  # GGA wins
     e["hdop"] = field([(_GSA, "hdop"), (_GNS, "hdop"), (_GGA, "hdop")])  # GGA's HDOP wins
     e["pdop"] = field([(_GSA, "pdop")])
     e["vdop"] = field([(_GSA, "vdop")])
@@ -806,6 +881,41 @@ def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int,
     e["course"] = field([(_VTG, "course"), (_RMC, "course")])
     e["row"] = row
     return e
+
+
+def _talker_code(addr: np.ndarray) -> np.ndarray:
+    """The two talker letters of each address (``GP``, ``GL``, ``GN``...) as one number."""
+    t = np.frombuffer(np.ascontiguousarray(addr.astype("S2")).tobytes(), np.uint8)
+    t = t.reshape(-1, 2).astype(np.float64) if len(addr) else np.zeros((0, 2))
+    return t[:, 0] * 256 + t[:, 1]
+
+
+_GN_CODE = float(ord("G") * 256 + ord("N"))
+
+
+def _gga_satellites(out: np.ndarray, g: dict[str, np.ndarray]) -> None:
+    """out[e] = the satellites of epoch ``e``'s GGA fix.
+
+    Receivers that print one GGA per constellation (SiRFstar V: ``$GPGGA`` with the GPS
+    satellites, ``$GLGGA`` with the GLONASS ones, same position) count the fix's
+    satellites in their sum; a ``$GN`` (combined) GGA of the epoch gives the total itself.
+    One talker per epoch (the usual case) is its last GGA's count.
+    """
+    m = np.isfinite(g["nsat"])
+    ep, tk, ns = g["ep"][m], g["talker"][m], g["nsat"][m]
+    if len(ep) == 0:
+        return
+    o = np.lexsort((tk, ep))  # stable: file order kept within (epoch, talker)
+    ep, tk, ns = ep[o], tk[o], ns[o]
+    last = np.r_[(ep[1:] != ep[:-1]) | (tk[1:] != tk[:-1]), True]
+    ep, tk, ns = ep[last], tk[last], ns[last]
+    gn = tk == _GN_CODE
+    total = np.zeros(len(out))
+    np.add.at(total, ep[~gn], ns[~gn])
+    has = np.zeros(len(out), bool)
+    has[ep] = True
+    out[has] = total[has]
+    out[ep[gn]] = ns[gn]
 
 
 def _disagreements(parsed: dict[int, dict[str, np.ndarray]], e: dict[str, np.ndarray],
@@ -903,7 +1013,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     probs = _Problems()
     acc: dict[int, list[dict[str, np.ndarray]]] = {}
     stats: dict = {"doubled_starts": 0, "sentences": Counter(), "talkers": Counter(),
-                   "alt_without_geoid_sep": 0}
+                   "alt_without_geoid_sep": 0, "no_checksum": 0}
     # whole lines per chunk bound the temporaries' memory (about 10 bytes per input byte)
     all_breaks = []
     n_valid = 0
@@ -922,7 +1032,8 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
                                "$GPGGA,...*hh; is this a UBX/RTCM/SBF log?)")
     meta: dict = {"lines": lines.count, "doubled_starts": stats["doubled_starts"],
                   "sentences": dict(stats["sentences"]), "talkers": dict(stats["talkers"]),
-                  "alt_without_geoid_sep": stats["alt_without_geoid_sep"]}
+                  "alt_without_geoid_sep": stats["alt_without_geoid_sep"],
+                  "sentences_without_checksum": stats["no_checksum"]}
     parsed = {k: {f: np.concatenate([d[f] for d in parts]) for f in parts[0]}
               for k, parts in sorted(acc.items())}
 
@@ -979,6 +1090,9 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     if encoding is not None:
         meta["encoding"] = encoding
         notes.append(f"text encoding {encoding}: decoded (NMEA is ASCII; save as UTF-8 to skip this)")
+    if meta["sentences_without_checksum"]:
+        notes.append(f"{meta['sentences_without_checksum']} complete sentences without a "
+                     "checksum read as they are (not verified)")
     if meta["position_disagreements"]:
         notes.append(
             f"{meta['position_disagreements']} epochs whose sentences disagree on the position "
