@@ -10,7 +10,7 @@ triangle of P(k|k) for that segment only, then walks it backwards; Phi is
 recomputed from dt.  Cost: one extra forward pass.  Memory: about
 (8 + 7) x 8 = 120 B per epoch (43 MB for a one-hour drive at 100 Hz) instead
 of 2 x 64 x 8 for two full covariance stacks (368 MB).  Each backward step is
-:func:`gpsdr_cli.filters.linalg.rts_step` (a Cholesky solve, no inverse).
+:func:`gpsdr_cli.filters.core.rts.rts_step` (a Cholesky solve, no inverse).
 
 Mean transition for the smoother gain: the covariance transition Phi (Singer
 blocks) is the one that produced P(k+1|k), so it is the Phi in
@@ -38,6 +38,8 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
+from .filters.core.packing import unpack
+from .filters.core.rts import phi_times, rts_step
 from .filters.kernels_aekf import (
     GE_BE,
     GE_BN,
@@ -66,9 +68,7 @@ from .filters.kernels_aekf import (
     predict_mean,
     rebuild_prior,
     turn_jacobian,
-    unpack,
 )
-from .filters.linalg import rts_step
 from .models.cs_model import N_STATES, singer_phi
 
 
@@ -159,6 +159,7 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
     F8 = np.zeros((n8, n8))
     L = np.zeros((n, n))
     B = np.zeros((n, n))
+    dx = np.zeros(n)
     x_post = np.zeros(n)
     x_prior = np.zeros(n)
     x8 = np.zeros(n8)
@@ -219,7 +220,8 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
                 for i in range(n8):
                     for j in range(n8):
                         P_prior[i, j] = P8[i, j]
-            rts_step(x_post, P_post, x_prior, P_prior, F, x_s_next, P_s_next, x_s, P_s, L, B)
+            phi_times(F, P_post, B)
+            rts_step(x_post, P_post, B, x_prior, P_prior, x_s_next, P_s_next, x_s, P_s, L, dx)
         else:  # no time step: the smoothed estimate carries over
             for i in range(n):
                 x_s[i] = x_s_next[i]

@@ -61,7 +61,8 @@ from numba import njit
 
 from ..models.cs_model import N_STATES, cs_sigma_a2, odo_row, omega_row, singer_phi, singer_q
 from .adaptive import adaptive_factor, fading_factor, nis_2d, sage_husa_r
-from .linalg import cholesky
+from .core.linalg import cholesky
+from .core.packing import pack
 
 # indices into the float parameter vector ``prm``
 P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_ODO = range(9)
@@ -137,27 +138,6 @@ def kernel_options(flg: np.ndarray) -> dict[str, int]:
         if on:
             opts[name] = 1
     return opts
-
-
-@njit(cache=True, error_model="numpy")
-def pack(P: np.ndarray, out: np.ndarray) -> None:
-    """Upper triangle of symmetric P, row by row, into ``out`` (length n(n+1)/2)."""
-    m = 0
-    for i in range(N_STATES):
-        for j in range(i, N_STATES):
-            out[m] = P[i, j]
-            m += 1
-
-
-@njit(cache=True, error_model="numpy")
-def unpack(v: np.ndarray, P: np.ndarray) -> None:
-    """Inverse of :func:`pack`."""
-    m = 0
-    for i in range(N_STATES):
-        for j in range(i, N_STATES):
-            P[i, j] = v[m]
-            P[j, i] = v[m]
-            m += 1
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -139,7 +139,9 @@ from numba import njit, types
 from numba.extending import overload
 
 from .adaptive import nis_2d
-from .linalg import cholesky, is_spd, symmetrize
+from .core.linalg import cholesky, is_spd
+from .core.packing import pack, unpack
+from .core.rts import rts_step
 
 NX = 10
 IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS = range(NX)
@@ -302,27 +304,6 @@ def copy_state(x: np.ndarray, P: np.ndarray, x_to: np.ndarray, P_to: np.ndarray)
         x_to[i] = x[i]
         for j in range(NX):
             P_to[i, j] = P[i, j]
-
-
-@njit(cache=True)
-def pack(P: np.ndarray, out: np.ndarray) -> None:
-    """Upper triangle of P, row by row, into ``out`` (length n(n+1)/2)."""
-    m = 0
-    for i in range(P.shape[0]):
-        for j in range(i, P.shape[0]):
-            out[m] = P[i, j]
-            m += 1
-
-
-@njit(cache=True)
-def unpack(p: np.ndarray, P: np.ndarray) -> None:
-    """Inverse of :func:`pack`."""
-    m = 0
-    for i in range(P.shape[0]):
-        for j in range(i, P.shape[0]):
-            P[i, j] = p[m]
-            P[j, i] = p[m]
-            m += 1
 
 
 @njit(cache=True)
@@ -692,11 +673,11 @@ def adapt_r(j: int, r2: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt
 
 @njit(cache=True)
 def chol_inverse(L: np.ndarray, Linv: np.ndarray, out: np.ndarray) -> None:
-    """``out = (L L^T)^-1`` from a Cholesky factor L (of :func:`~.linalg.cholesky`).
+    """``out = (L L^T)^-1`` from a Cholesky factor L (of :func:`~.core.linalg.cholesky`).
 
     ``Linv = L^-1`` by forward substitution with one reciprocal per pivot, then
     ``out = Linv^T Linv`` on the upper triangle, mirrored.  Written here
-    because :func:`~.linalg.chol_solve` against the identity divides at every
+    because :func:`~.core.linalg.chol_solve` against the identity divides at every
     element of every column: on these 8x8 to 10x10 blocks it was 4x slower.
     """
     k = L.shape[0]
@@ -1702,19 +1683,13 @@ def rts_step_fused(x_post: np.ndarray, P_post: np.ndarray, x_prior: np.ndarray,
                    P_prior: np.ndarray, T: float, static: bool, f: float, x_sn: np.ndarray,
                    P_sn: np.ndarray, x_s: np.ndarray, P_s: np.ndarray, L: np.ndarray,
                    B: np.ndarray, dx: np.ndarray) -> None:
-    """:func:`~.linalg.rts_step` for this model's Phi, with the same floats, in half the time.
+    """The RTS step (:func:`~gpsdr_cli.filters.core.rts.rts_step`) with this model's Phi.
 
-    ``C = P_post Phi^T P_prior^-1``, ``x_s = x_post + C (x_sn - x_prior)``,
-    ``P_s = P_post + C (P_sn - P_prior) C^T`` (Rauch, Tung & Striebel 1965).
-    Written here because the generic step multiplies by the dense Phi and
-    forms ``P_sn - P_prior`` inside a triple loop: ``B = Phi P_post`` is taken
-    by Phi's rows (:func:`phi_matrix`: ``1, T, T^2/2`` per axis, ``f`` for
-    eps; the dense sum's other terms are exact zeros, so each element is the
-    same float), and every sum runs over the same index in the same order,
-    with the independent index innermost (the compiler vectorises it): the
-    one-hour drive's backward pass took 1.25 s, now 0.60 s (CPU).  ``f``:
-    the eps factor of the step (:func:`eps_decay` at ``x_post``); ``L``, ``B``
-    (10, 10) and ``dx`` (10,) are scratch.
+    ``B = Phi P_post`` is taken by Phi's rows (:func:`phi_matrix`: ``1, T, T^2/2`` per
+    axis, ``f`` for eps): the dense product's other terms are exact zeros, so each
+    element is the float :func:`~gpsdr_cli.filters.core.rts.phi_times` gives, in a
+    fraction of its time.  ``f``: the eps factor of the step (:func:`eps_decay` at
+    ``x_post``); ``L``, ``B`` (10, 10) and ``dx`` (10,) are scratch.
     """
     for i in range(NX):
         for j in range(NX):
@@ -1728,41 +1703,4 @@ def rts_step_fused(x_post: np.ndarray, P_post: np.ndarray, x_prior: np.ndarray,
     for j in range(NX):
         B[IEPS_E, j] = f * P_post[IEPS_E, j]
         B[IEPS_N, j] = f * P_post[IEPS_N, j]
-    cholesky(P_prior, L)
-    for i in range(NX):                             # B <- P_prior^-1 B = C^T: L y = b ...
-        for j in range(i):
-            lij = L[i, j]
-            for c in range(NX):
-                B[i, c] -= lij * B[j, c]
-        for c in range(NX):
-            B[i, c] = B[i, c] / L[i, i]
-    for i in range(NX - 1, -1, -1):                 # ... then L^T x = y
-        for j in range(i + 1, NX):
-            lji = L[j, i]
-            for c in range(NX):
-                B[i, c] -= lji * B[j, c]
-        for c in range(NX):
-            B[i, c] = B[i, c] / L[i, i]
-    for m in range(NX):
-        dx[m] = x_sn[m] - x_prior[m]
-    for i in range(NX):
-        x_s[i] = x_post[i]
-    for m in range(NX):
-        for i in range(NX):
-            x_s[i] += B[m, i] * dx[m]
-    D = L                                           # D = (P_sn - P_prior) C^T (L is spent)
-    for i in range(NX):
-        for j in range(NX):
-            D[i, j] = 0.0
-        for m in range(NX):
-            dif = P_sn[i, m] - P_prior[i, m]
-            for j in range(NX):
-                D[i, j] += dif * B[m, j]
-    for i in range(NX):                             # P_s = P_post + C D
-        for j in range(NX):
-            P_s[i, j] = P_post[i, j]
-        for m in range(NX):
-            bmi = B[m, i]
-            for j in range(NX):
-                P_s[i, j] += bmi * D[m, j]
-    symmetrize(P_s)
+    rts_step(x_post, P_post, B, x_prior, P_prior, x_sn, P_sn, x_s, P_s, L, dx)
