@@ -71,6 +71,7 @@ from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
 from .base import FilterResult
+from .core import update as core_update
 
 #: Speed sigma (m/s) assigned to a velocity taken from the receiver's speed and course.
 GNSS_VEL_SD_MPS = 1.0
@@ -601,13 +602,13 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
     :func:`run_cs` gives them (the same options from ``params``), so numba compiles, or
     loads from its cache, the specialisations the kernel then uses.  In order:
 
-    [0] ``joseph_apply``, which both halves call (before the fork: once);
+    [0] ``core.update.gain_update``, which both halves call (before the fork: once);
     [1] (helper) the GNSS fix's helpers ``nis_2d``, ``ge_fix_update``, ``ge_push``,
     ``unit_update``; [2] (helper, once [3] is done) :func:`kernels_aekf.gnss_fix
     <gpsdr_cli.filters.kernels_aekf.gnss_fix>`, which loads [3]'s ``ge_epoch`` from the
     cache;
     [3] ``ge_epoch``; [4] what only the kernel's 100-Hz path calls (``predict_cov``,
-    ``turn_predict``, ``ge_turn``, ``row_update``, ``pack``).
+    ``turn_predict``, ``ge_turn``, ``sparse_update``, ``pack``).
 
     The kernel, compiled after all of them where [3] and [4] ran, finds them compiled in
     its process or in the cache.  A type that drifted from the kernel's only costs time
@@ -624,8 +625,8 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
                 np.zeros((kn.GW_ROWS, N_STATES)), ge0.copy())
 
     def shared() -> None:
-        _, P, wk, _, _ = state()
-        kn.joseph_apply(P, wk[1], wk[2], 1.0, 1.0, wk[3])
+        x, P, wk, _, _ = state()
+        core_update.gain_update(x, P, wk[2], 1.0, 0.0, 1.0, wk[1], no_cons, 0.0, 0.0)
 
     def fix_helpers() -> None:
         x, P, wk, gw, ge = state()
@@ -633,7 +634,7 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
         if ge_on:
             kn.ge_fix_update(x, P, ge, 0.0, 0.0, 1.0, 1.0, wk[1], False)
             kn.ge_push(gw, no_cons, 1.0, wk[0], wk[2], 1.0, 0.0)
-        kn.unit_update(x, P, no_cons, 0.0, 1.0, wk[1], wk[2], wk[3], no_cons)
+        kn.unit_update(x, P, no_cons, 0.0, 1.0, 1.0, wk[1], wk[2], no_cons)
 
     def fix() -> None:
         x, P, wk, gw, ge = state()
@@ -656,7 +657,7 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
             kn.ge_turn(gw, x, 0.01, 0.0)
         nz = kn.NZ_ODO.copy()
         nz.flags.writeable = False  # a global array is read-only in the kernel: the same type
-        kn.row_update(x, P, wk[0], nz, 0.0, 1.0, wk[1], wk[2], wk[3], 0, 0.0, 0.0)
+        kn.sparse_update(x, P, wk[0], nz, 0.0, 1.0, 1.0, wk[1], wk[2], 0, 0.0, 0.0)
         if "store_on" in opts:
             kn.pack(P, np.zeros((1, kn.N_PACKED + kn.N_GE_PACKED))[0])
 

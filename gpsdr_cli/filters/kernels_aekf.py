@@ -63,6 +63,7 @@ from ..models.cs_model import N_STATES, cs_sigma_a2, odo_row, omega_row, singer_
 from .adaptive import adaptive_factor, fading_factor, nis_2d, sage_husa_r
 from .core.linalg import cholesky
 from .core.packing import pack
+from .core.update import sparse_update, unit_update
 
 # indices into the float parameter vector ``prm``
 P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_ODO = range(9)
@@ -212,93 +213,6 @@ def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float
             v = 0.5 * (P[i, j] + P[j, i])
             P[i, j] = v
             P[j, i] = v
-
-
-@njit(cache=True, error_model="numpy")
-def joseph_apply(P: np.ndarray, K: np.ndarray, PHt: np.ndarray, HPHt: float, R: float,
-                 Bh: np.ndarray) -> None:
-    """Joseph form for a scalar measurement, P <- (I - K H) P (I - K H)^T + R K K^T, in place.
-
-    With ``B = (I - K H) P = P - K PHt^T`` and ``B H^T = PHt - K (H P H^T)`` (valid
-    for any gain, so also with consider states) the result is
-    ``B - (B H^T) K^T + R K K^T``; evaluated on the upper triangle and mirrored,
-    so P stays exactly symmetric (one O(n^2) pass instead of three).
-    """
-    n = N_STATES
-    for i in range(n):
-        Bh[i] = PHt[i] - K[i] * HPHt
-    for i in range(n):
-        ki = K[i]
-        bi = Bh[i]
-        for j in range(i, n):
-            v = P[i, j] - ki * PHt[j] - bi * K[j] + R * ki * K[j]
-            P[i, j] = v
-            P[j, i] = v
-
-
-@njit(cache=True, error_model="numpy")
-def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
-                K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int) -> bool:
-    """Scalar update with H = unit row ``idx`` (Joseph form).  False if S is not positive.
-
-    ``consider``: bit mask of states whose gain is zero (see :func:`row_update`).
-    """
-    n = N_STATES
-    HPHt = P[idx, idx]
-    S = HPHt + R
-    if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
-        return False
-    for i in range(n):
-        PHt[i] = P[i, idx]
-        K[i] = 0.0 if (consider >> i) & 1 else PHt[i] / S
-    for i in range(n):
-        x[i] += K[i] * y
-    joseph_apply(P, K, PHt, HPHt, R, Bh)
-    return True
-
-
-@njit(cache=True, error_model="numpy")
-def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: float, R: float,
-               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int,
-               along_e: float, along_n: float) -> bool:
-    """Scalar update with a sparse Jacobian row H (nonzeros at indices ``nz``), Joseph form.
-
-    False if S is not positive.  ``consider >= 0``: Schmidt-Kalman "consider"
-    their gain is set to zero (they are not corrected by this
-    measurement) while its uncertainty still enters S and the
-    cross-covariances; the Joseph form keeps P exact for such a suboptimal gain.
-    ``(along_e, along_n)`` a unit vector: the gains of the (e, n), (v_e, v_n) and
-    (a_e, a_n) pairs are projected on it (the measurement corrects those states
-    along that direction only; again exact P through the Joseph form).
-    """
-    n = N_STATES
-    nnz = nz.shape[0]
-    HPHt = 0.0
-    for i in range(n):
-        s = 0.0
-        for q in range(nnz):
-            s += P[i, nz[q]] * H[nz[q]]
-        PHt[i] = s
-    for q in range(nnz):
-        HPHt += H[nz[q]] * PHt[nz[q]]
-    S = HPHt + R
-    if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
-        return False
-    for i in range(n):
-        K[i] = PHt[i] / S
-    if consider > 0:
-        for i in range(n):
-            if (consider >> i) & 1:
-                K[i] = 0.0
-    if along_e != 0.0 or along_n != 0.0:
-        for o in range(3):
-            dot = K[o] * along_e + K[o + 3] * along_n
-            K[o] = dot * along_e
-            K[o + 3] = dot * along_n
-    for i in range(n):
-        x[i] += K[i] * y
-    joseph_apply(P, K, PHt, HPHt, R, Bh)
-    return True
 
 
 @njit(cache=True, error_model="numpy")
@@ -647,7 +561,6 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     H = wk[0]
     K = wk[1]
     PHt = wk[2]
-    Bh = wk[3]
     alpha = prm[P_ALPHA]
     # state indices and the empty consider mask as int64 values (see cs_filter_kernel)
     i_e = np.int64(0)
@@ -826,8 +739,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             ok1 = ge_fix_update(x, P, ge, z_e, z_n, re, rn, K, est_b)
             ok2 = ok1
         else:
-            ok1 = unit_update(x, P, i_e, ye, re, K, PHt, Bh, no_cons)
-            ok2 = unit_update(x, P, i_n, z_n - x[3], rn, K, PHt, Bh, no_cons)
+            ok1 = unit_update(x, P, i_e, ye, re, 1.0, K, PHt, no_cons)
+            ok2 = unit_update(x, P, i_n, z_n - x[3], rn, 1.0, K, PHt, no_cons)
         if ok1 and ok2:
             used = True
             n_fix += 1.0
@@ -835,7 +748,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
                 # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
                 for idx in (1, 4):
                     y = (gv_e if idx == 1 else gv_n) - x[idx]
-                    ok_v = unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
+                    ok_v = unit_update(x, P, idx, y, prm[P_GVEL_VAR], 1.0, K, PHt, no_cons)
                     if ge_on is not None:  # noqa: SIM102 (a plain test: numba prunes it when off)
                         if ok_v:
                             n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[P_GVEL_VAR], y)
@@ -912,7 +825,6 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     H = wk[0]
     K = wk[1]
     PHt = wk[2]
-    Bh = wk[3]
     qbuf = wk[4]
     if check_on is not None:
         L = np.empty((n, n))  # Cholesky scratch of the SPD check (tests)
@@ -1079,7 +991,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 zupt_cons = CONS_POS if (zupt_pos == 2 or (zupt_pos == 1 and outage[k])) else 0
                 for idx in (1, 4, 2, 5):
                     y = -x[idx]
-                    if not unit_update(x, P, idx, y, prm[P_R_ZUPT], K, PHt, Bh, zupt_cons):
+                    if not unit_update(x, P, idx, y, prm[P_R_ZUPT], 1.0, K, PHt, zupt_cons):
                         info[I_SKIPPED] += 1.0
                     elif ge_on is not None:
                         n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[P_R_ZUPT], y)
@@ -1107,7 +1019,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                         cons |= CONS_KS | CONS_POS
                     pe = ue if along_off is None else 0.0
                     pn = un if along_off is None else 0.0
-                    if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons, pe, pn):
+                    if not sparse_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], 1.0, K, PHt, cons, pe, pn):
                         info[I_SKIPPED] += 1.0
                     elif ge_on is not None:
                         for i in range(n):
@@ -1122,7 +1034,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             r_c = coast_q / T
             for idx in (2, 5):
                 y = -x[idx]
-                if not unit_update(x, P, idx, y, r_c, K, PHt, Bh, no_cons):
+                if not unit_update(x, P, idx, y, r_c, 1.0, K, PHt, no_cons):
                     info[I_SKIPPED] += 1.0
                 elif ge_on is not None:
                     n_rows = ge_push(gw, n_rows, float(idx), H, PHt, r_c, y)
@@ -1132,7 +1044,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         if has_gyro[k]:
             if is_static:
                 y = -yaw[k] - x[6]
-                if not unit_update(x, P, i_eps, y, prm[P_R_OMEGA], K, PHt, Bh, no_cons):
+                if not unit_update(x, P, i_eps, y, prm[P_R_OMEGA], 1.0, K, PHt, no_cons):
                     info[I_SKIPPED] += 1.0
                 elif ge_on is not None:
                     n_rows = ge_push(gw, n_rows, 6.0, H, PHt, prm[P_R_OMEGA], y)
@@ -1156,7 +1068,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     cons |= CONS_VEL
                 if turn_off is None and (flg[F_LATERAL_ACC] == 2 or (flg[F_LATERAL_ACC] == 1 and outage[k])):
                     cons |= CONS_NOT_ACC
-                if not row_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], K, PHt, Bh, cons, 0.0, 0.0):
+                if not sparse_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], 1.0, K, PHt, cons, 0.0, 0.0):
                     info[I_SKIPPED] += 1.0
                 elif ge_on is not None:
                     for i in range(n):
