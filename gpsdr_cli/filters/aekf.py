@@ -71,7 +71,6 @@ from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
 from .base import FilterResult
-from .core import update as core_update
 
 #: Speed sigma (m/s) assigned to a velocity taken from the receiver's speed and course.
 GNSS_VEL_SD_MPS = 1.0
@@ -602,9 +601,9 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
     :func:`run_cs` gives them (the same options from ``params``), so numba compiles, or
     loads from its cache, the specialisations the kernel then uses.  In order:
 
-    [0] ``core.update.gain_update``, which both halves call (before the fork: once);
-    [1] (helper) the GNSS fix's helpers ``nis_2d``, ``ge_fix_update``, ``ge_push``,
-    ``unit_update``; [2] (helper, once [3] is done) :func:`kernels_aekf.gnss_fix
+    [0] ``unit_update``, which both halves call (before the fork: once);
+    [1] (helper) the GNSS fix's helpers ``nis_2d``, ``ge_fix_update``, ``ge_push``;
+    [2] (helper, once [3] is done) :func:`kernels_aekf.gnss_fix
     <gpsdr_cli.filters.kernels_aekf.gnss_fix>`, which loads [3]'s ``ge_epoch`` from the
     cache;
     [3] ``ge_epoch``; [4] what only the kernel's 100-Hz path calls (``predict_cov``,
@@ -626,7 +625,7 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
 
     def shared() -> None:
         x, P, wk, _, _ = state()
-        core_update.gain_update(x, P, wk[2], 1.0, 0.0, 1.0, wk[1], no_cons, 0.0, 0.0)
+        kn.unit_update(x, P, no_cons, 0.0, 1.0, 1.0, wk[1], wk[2], no_cons)
 
     def fix_helpers() -> None:
         x, P, wk, gw, ge = state()
@@ -634,7 +633,6 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
         if ge_on:
             kn.ge_fix_update(x, P, ge, 0.0, 0.0, 1.0, 1.0, wk[1], False)
             kn.ge_push(gw, no_cons, 1.0, wk[0], wk[2], 1.0, 0.0)
-        kn.unit_update(x, P, no_cons, 0.0, 1.0, 1.0, wk[1], wk[2], no_cons)
 
     def fix() -> None:
         x, P, wk, gw, ge = state()

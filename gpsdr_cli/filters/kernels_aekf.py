@@ -61,9 +61,9 @@ from numba import njit
 
 from ..models.cs_model import N_STATES, cs_sigma_a2, odo_row, omega_row, singer_phi, singer_q
 from .adaptive import adaptive_factor, fading_factor, nis_2d, sage_husa_r
+from .core import update as core_update
 from .core.linalg import cholesky
 from .core.packing import pack
-from .core.update import sparse_update, unit_update
 
 # indices into the float parameter vector ``prm``
 P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_ODO = range(9)
@@ -213,6 +213,22 @@ def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float
             v = 0.5 * (P[i, j] + P[j, i])
             P[i, j] = v
             P[j, i] = v
+
+
+@njit(cache=True, error_model="numpy")
+def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float, w: float,
+                K: np.ndarray, PHt: np.ndarray, consider: int) -> bool:
+    """:func:`gpsdr_cli.filters.core.update.unit_update` for the 8 states (R scaled by w)."""
+    return core_update.unit_update(N_STATES, x, P, idx, y, R, w, K, PHt, consider)
+
+
+@njit(cache=True, error_model="numpy")
+def sparse_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: float,
+                  R: float, w: float, K: np.ndarray, PHt: np.ndarray, consider: int,
+                  along_e: float, along_n: float) -> bool:
+    """:func:`gpsdr_cli.filters.core.update.sparse_update` for the 8 states."""
+    return core_update.sparse_update(N_STATES, x, P, H, nz, y, R, w, K, PHt, consider,
+                                     along_e, along_n)
 
 
 @njit(cache=True, error_model="numpy")

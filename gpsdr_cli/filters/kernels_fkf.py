@@ -142,6 +142,7 @@ from .adaptive import nis_2d
 from .core.linalg import cholesky, is_spd
 from .core.packing import pack, unpack
 from .core.rts import rts_step
+from .core.update import dense_update, unit_update
 
 NX = 10
 IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS = range(NX)
@@ -485,57 +486,20 @@ def phi_matrix(T: float, static: bool, par: np.ndarray, Phi: np.ndarray, x: np.n
     Phi[IEPS_N, IEPS_N] = f
 
 
-@njit(cache=True, inline="always")  # inlined: as a call it cost fkf 20 % of its speed
-def apply_gain(x: np.ndarray, P: np.ndarray, s: np.ndarray, k: np.ndarray, sig: float,
-               y: float) -> None:
-    """The shared tail of :func:`update_row` and :func:`unit_row`: K = s / sig into ``k``,
-    x += K y, and P - K s^T - s K^T + sig K K^T on the upper triangle, mirrored."""
-    inv = 1.0 / sig
-    for i in range(NX):
-        k[i] = s[i] * inv
-        x[i] += k[i] * y
-    for i in range(NX):
-        ki = k[i]
-        si = s[i]
-        for j in range(i, NX):
-            v = P[i, j] - ki * s[j] - si * k[j] + sig * ki * k[j]
-            P[i, j] = v
-            P[j, i] = v
-
-
 @njit(cache=True)
 def update_row(x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, r: float,
-               s: np.ndarray, k: np.ndarray) -> float:
-    """Scalar measurement update, Joseph form; returns the innovation variance h P h^T + r.
-
-    ``y`` is the innovation z - h(x); ``s``, ``k`` are length-10 scratch.  The
-    Joseph form ``(I - K h) P (I - K h)^T + K r K^T`` expanded for one row,
-    ``P - K s^T - s K^T + (h s + r) K K^T`` with ``s = P h^T`` -- an identity
-    for *any* gain K, unlike the short form ``P - K s^T`` -- evaluated on the
-    upper triangle and mirrored: O(n^2/2), symmetric by construction.
-    """
-    for i in range(NX):
-        s[i] = 0.0
-    for j in range(NX):                             # s = P h^T over h's non-zeros
-        hj = h[j]
-        if hj != 0.0:
-            for i in range(NX):
-                s[i] += P[i, j] * hj
-    sig = r
-    for j in range(NX):
-        sig += h[j] * s[j]
-    apply_gain(x, P, s, k, sig, y)
-    return sig
+               s: np.ndarray, k: np.ndarray) -> None:
+    """Scalar measurement update of a dense row h with the innovation y = z - h(x) and
+    variance r (:func:`~gpsdr_cli.filters.core.update.dense_update`, Joseph form);
+    ``s``, ``k`` are length-10 scratch (P h^T, the gain)."""
+    dense_update(NX, x, P, h, y, r, 1.0, k, s)
 
 
 @njit(cache=True)
 def unit_row(x: np.ndarray, P: np.ndarray, idx: int, y: float, r: float, s: np.ndarray,
              k: np.ndarray) -> None:
-    """:func:`update_row` for ``h = e_idx`` (one state measured directly), the same floats:
-    ``s`` is P's column, ``h P h^T`` its element (no scan of h)."""
-    for i in range(NX):
-        s[i] = P[i, idx]
-    apply_gain(x, P, s, k, r + s[idx], y)
+    """:func:`update_row` for ``h = e_idx`` (one state measured directly)."""
+    unit_update(NX, x, P, idx, y, r, 1.0, k, s, 0)
 
 
 @njit(cache=True)
@@ -1703,4 +1667,4 @@ def rts_step_fused(x_post: np.ndarray, P_post: np.ndarray, x_prior: np.ndarray,
     for j in range(NX):
         B[IEPS_E, j] = f * P_post[IEPS_E, j]
         B[IEPS_N, j] = f * P_post[IEPS_N, j]
-    rts_step(x_post, P_post, B, x_prior, P_prior, x_sn, P_sn, x_s, P_s, L, dx)
+    rts_step(NX, x_post, P_post, B, x_prior, P_prior, x_sn, P_sn, x_s, P_s, L, dx)

@@ -40,7 +40,7 @@ def test_solve_is_the_column_substitution_bit_for_bit_and_solves() -> None:
         assert cholesky(A, L)
         B = rng.normal(size=(n, n))
         X = B.copy()
-        chol_solve(L, X)
+        chol_solve(n, L, X)
         np.testing.assert_array_equal(X, _solve_by_columns(L, B))
         np.testing.assert_allclose(A @ X, B, rtol=1e-10, atol=1e-10)
 
@@ -71,7 +71,7 @@ def test_rts_step_against_the_textbook_gain() -> None:
     phi_times(Phi, P, B)
     np.testing.assert_allclose(B, Phi @ P, rtol=1e-13, atol=1e-13)
     x_s, P_s = np.zeros(n), np.zeros((n, n))
-    rts_step(x, P, B, x_prior, P_prior, x_sn, P_sn, x_s, P_s, np.zeros((n, n)), np.zeros(n))
+    rts_step(n, x, P, B, x_prior, P_prior, x_sn, P_sn, x_s, P_s, np.zeros((n, n)), np.zeros(n))
     C = P @ Phi.T @ np.linalg.inv(P_prior)
     np.testing.assert_allclose(x_s, x + C @ (x_sn - x_prior), rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(P_s, P + C @ (P_sn - P_prior) @ C.T, rtol=1e-10, atol=1e-10)

@@ -103,7 +103,7 @@ def test_fused_rts_step_is_the_generic_step_bit_for_bit(T: float, static: bool) 
         x_g, P_g = np.zeros(kf.NX), np.zeros((kf.NX, kf.NX))
         B = np.zeros((kf.NX, kf.NX))
         phi_times(Phi, P_post, B)
-        rts_step(x_post, P_post, B, x_prior, P_prior, x_sn, P_sn, x_g, P_g,
+        rts_step(kf.NX, x_post, P_post, B, x_prior, P_prior, x_sn, P_sn, x_g, P_g,
                  np.zeros((kf.NX, kf.NX)), np.zeros(kf.NX))
         x_f, P_f = np.zeros(kf.NX), np.zeros((kf.NX, kf.NX))
         kf.rts_step_fused(x_post, P_post, x_prior, P_prior, T, static,

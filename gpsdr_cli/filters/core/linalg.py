@@ -56,29 +56,28 @@ def cholesky(A: np.ndarray, L: np.ndarray) -> bool:
     return ok
 
 
-@njit(cache=True)
-def chol_solve(L: np.ndarray, B: np.ndarray) -> None:
-    """Solve (L L^T) X = B in place (B becomes X); B is (k, m).
+@njit(cache=True, inline="always")
+def chol_solve(n: int, L: np.ndarray, B: np.ndarray) -> None:
+    """Solve (L L^T) X = B in place (B becomes X); L is (n, n), B (n, n).
 
     Row by row, the independent column index innermost (the compiler vectorises
     it); every element sees the same operations in the same order as a column-by-
-    column substitution.
+    column substitution.  Inlined, with the size ``n`` first: a caller that passes
+    its size as a constant gets loops of a known trip count.
     """
-    k = L.shape[0]
-    m = B.shape[1]
-    for i in range(k):  # forward: L y = b
+    for i in range(n):  # forward: L y = b
         for j in range(i):
             lij = L[i, j]
-            for c in range(m):
+            for c in range(n):
                 B[i, c] -= lij * B[j, c]
-        for c in range(m):
+        for c in range(n):
             B[i, c] = B[i, c] / L[i, i]
-    for i in range(k - 1, -1, -1):  # backward: L^T x = y
-        for j in range(i + 1, k):
+    for i in range(n - 1, -1, -1):  # backward: L^T x = y
+        for j in range(i + 1, n):
             lji = L[j, i]
-            for c in range(m):
+            for c in range(n):
                 B[i, c] -= lji * B[j, c]
-        for c in range(m):
+        for c in range(n):
             B[i, c] = B[i, c] / L[i, i]
 
 
