@@ -62,6 +62,7 @@ from numba import njit
 from ..models.cs_model import N_STATES, cs_sigma_a2, odo_row, omega_row, singer_phi, singer_q
 from .adaptive import adaptive_factor, fading_factor, nis_2d, sage_husa_r
 from .core import update as core_update
+from .core.gate import GATE_FAIL, GATE_RESET, RESET_AFTER_FIRST_REJECT, chi2_gate
 from .core.linalg import cholesky
 from .core.packing import pack
 
@@ -616,11 +617,11 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # change) or a DR error: b goes into the position, whose variance grows by
             # it (no lock-out, like the gate reset; a 30 m step otherwise stayed half
             # in b, the track 16 m off)
-            if (ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN] > prm[P_GATE_THR] * prm[P_GE_VAR]
-                    and not is_static):
-                if b_since < 0.0:
-                    b_since = t
-                if t - b_since >= prm[P_GATE_RESET]:
+            if not is_static:
+                b2 = ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN]
+                verdict, b_since = chi2_gate(b2, prm[P_GATE_THR] * prm[P_GE_VAR], t, b_since,
+                                             prm[P_GATE_RESET], RESET_AFTER_FIRST_REJECT, False)
+                if verdict == GATE_RESET:
                     x[0] += ge[GE_BE]
                     x[3] += ge[GE_BN]
                     add_e += ge[GE_BE] * ge[GE_BE]
@@ -629,10 +630,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
                     P[3, 3] += ge[GE_BN] * ge[GE_BN]
                     ge[GE_BE] = 0.0
                     ge[GE_BN] = 0.0
-                    b_since = -1.0
                     info[I_GATE_RESETS] += 1.0
-            elif not is_static:
-                b_since = -1.0
         ye = z_e - x[0] - ge[GE_BE]
         yn = z_n - x[3] - ge[GE_BN]
     # innovation whitening (aekf.innovation_whitening, Mehra 1970): an optimal filter's
@@ -673,21 +671,18 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     r_fac = 1.0
     if gate and n_fix >= prm[P_GATE_WARMUP]:  # no gate before the filter has converged
         thr = prm[P_GATE_THR]
-        if nis > thr:
-            if rej_since < 0.0:
-                rej_since = t
-            if t - rej_since >= prm[P_GATE_RESET]:
-                # no lock-out: accept and inflate P by the innovation.  First, also in
-                # inflate mode: fixes that have disagreed for gate_reset_s are a new
-                # truth (a datum change), not an error to down-weight forever (with the
-                # GNSS error states, down-weighted fixes of a 30 m step went into b and
-                # the track stayed 16 m off)
-                reset = True
-                rej_since = -1.0
-                info[I_GATE_RESETS] += 1.0
-            elif (inflate_on is not None and nis <= thr * prm[P_GATE_INFLATE_MAX]
+        verdict, rej_since = chi2_gate(nis, thr, t, rej_since, prm[P_GATE_RESET],
+                                       RESET_AFTER_FIRST_REJECT, False)
+        if verdict == GATE_RESET:
+            # no lock-out: accept and inflate P by the innovation.  First, also in
+            # inflate mode: fixes that have disagreed for gate_reset_s are a new
+            # truth (a datum change), not an error to down-weight forever
+            reset = True
+            info[I_GATE_RESETS] += 1.0
+        elif verdict == GATE_FAIL:
+            if (inflate_on is not None and nis <= thr * prm[P_GATE_INFLATE_MAX]
                     and t - rej_since >= prm[P_GATE_INFLATE_AFTER]):
-                # robust "opposite lever" (ALGORITHMS.md 3) once the fixes have
+                # robust down-weighting (docs/algorithms.md#gate) once the fixes have
                 # disagreed for gate_inflate_after_s (a short multipath burst is still
                 # rejected): accept with R scaled so that the NIS equals the gate
                 r_fac = nis / thr
@@ -695,8 +690,6 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             else:
                 accept = False
                 rej = True
-        else:
-            rej_since = -1.0
     if accept:
         if innov_on is not None and r_fac == 1.0 and not gap:  # seed 001: P(k|k-1) /= alpha (not on a fix the
             # gate down-weighted as an outlier: in reject mode it would not be used at all)

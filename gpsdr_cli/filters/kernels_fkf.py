@@ -139,6 +139,7 @@ from numba import njit, types
 from numba.extending import overload
 
 from .adaptive import nis_2d
+from .core.gate import GATE_FAIL, GATE_PASS, GATE_RESET, RESET_AFTER_LAST_ACCEPT, chi2_gate
 from .core.linalg import cholesky, is_spd
 from .core.packing import pack, unpack
 from .core.rts import rts_step
@@ -1296,13 +1297,15 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                     accept = True
                     a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
                     t_last_fix = t_now
-                    if chi2 > 0.0 and nis > chi2 and n_acc >= par[K_GATE_WARMUP]:
-                        if (t_now - t_last_acc > par[K_GATE_RESET_S]
-                                or a_rej * rej_share + (1.0 - a_rej) > 0.5):
-                            # no lock-p_out: every fix rejected for gate_reset_s, or most of
-                            # the recent ones -- the state, not the fixes, is then the outlier
+                    if chi2 > 0.0 and n_acc >= par[K_GATE_WARMUP]:
+                        # no lock-out: every fix rejected for gate_reset_s, or most of the
+                        # recent ones -- the state, not the fixes, is then the outlier
+                        verdict, _ = chi2_gate(nis, chi2, t_now, t_last_acc, par[K_GATE_RESET_S],
+                                               RESET_AFTER_LAST_ACCEPT,
+                                               a_rej * rej_share + (1.0 - a_rej) > 0.5)
+                        if verdict == GATE_RESET:
                             p_counters[C_GATE_RESETS] += 1
-                        else:
+                        elif verdict == GATE_FAIL:
                             accept = False
                     rej_share = a_rej * rej_share + (0.0 if accept else 1.0 - a_rej)
                     if accept:
@@ -1387,17 +1390,21 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                         pred = heading_row(x2, h)
                         y = wrap_pi(theta[kx] - pred)
                         rh = rfac[2] * r_head
-                        if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph(P2, h) + rh):
-                            if t_now - t_head_acc > par[K_GATE_RESET_S]:
-                                # every heading rejected for gate_reset_s (e.g. a large gyro
-                                # bias outran q_w): re-align, q_w absorbs the discrepancy
-                                x2[IQW] += y
-                                central = False         # not a Kalman row: fuse the two
-                                P2[IQW, IQW] += y * y
-                                t_head_acc = t_now
-                                p_counters[C_HEAD_REALIGN] += 1
-                            else:
-                                p_counters[C_HEAD_REJECTED] += 1
+                        verdict = np.int64(GATE_PASS)
+                        if par[K_HEAD_CHI2] > 0.0:
+                            verdict, _ = chi2_gate(y * y, par[K_HEAD_CHI2] * (hph(P2, h) + rh), t_now,
+                                                   t_head_acc, par[K_GATE_RESET_S],
+                                                   RESET_AFTER_LAST_ACCEPT, False)
+                        if verdict == GATE_RESET:
+                            # every heading rejected for gate_reset_s (e.g. a large gyro
+                            # bias outran q_w): re-align, q_w absorbs the discrepancy
+                            x2[IQW] += y
+                            central = False         # not a Kalman row: fuse the two
+                            P2[IQW, IQW] += y * y
+                            t_head_acc = t_now
+                            p_counters[C_HEAD_REALIGN] += 1
+                        elif verdict == GATE_FAIL:
+                            p_counters[C_HEAD_REJECTED] += 1
                         else:
                             local_and_central_row(x2, P2, xg, Pg, central, h, y, rh, s, kk)
                             t_head_acc = t_now

@@ -76,3 +76,37 @@ def test_rts_step_against_the_textbook_gain() -> None:
     np.testing.assert_allclose(x_s, x + C @ (x_sn - x_prior), rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(P_s, P + C @ (P_sn - P_prior) @ C.T, rtol=1e-10, atol=1e-10)
     np.testing.assert_array_equal(P_s, P_s.T)
+
+
+def test_gate_resets_after_the_first_rejection_rule() -> None:
+    """ekf/aekf: rejected from the first failing fix until gate_reset_s (>=) has passed."""
+    from gpsdr_cli.filters.core.gate import (
+        GATE_FAIL,
+        GATE_PASS,
+        GATE_RESET,
+        RESET_AFTER_FIRST_REJECT,
+        chi2_gate,
+    )
+    rule = RESET_AFTER_FIRST_REJECT
+    assert chi2_gate(1.0, 9.2, 0.0, -1.0, 5.0, rule, False) == (GATE_PASS, -1.0)
+    assert chi2_gate(50.0, 9.2, 10.0, -1.0, 5.0, rule, False) == (GATE_FAIL, 10.0)
+    assert chi2_gate(50.0, 9.2, 14.8, 10.0, 5.0, rule, False) == (GATE_FAIL, 10.0)
+    assert chi2_gate(50.0, 9.2, 15.0, 10.0, 5.0, rule, False) == (GATE_RESET, -1.0)
+    assert chi2_gate(1.0, 9.2, 12.0, 10.0, 5.0, rule, False) == (GATE_PASS, -1.0)  # run ends
+    assert chi2_gate(float("nan"), 9.2, 12.0, 10.0, 5.0, rule, False)[0] == GATE_PASS
+
+
+def test_gate_resets_after_the_last_acceptance_rule() -> None:
+    """fkf/fafkf: rejected until more than gate_reset_s after the last accepted fix."""
+    from gpsdr_cli.filters.core.gate import (
+        GATE_FAIL,
+        GATE_PASS,
+        GATE_RESET,
+        RESET_AFTER_LAST_ACCEPT,
+        chi2_gate,
+    )
+    rule = RESET_AFTER_LAST_ACCEPT
+    assert chi2_gate(1.0, 9.2, 20.0, 10.0, 5.0, rule, False) == (GATE_PASS, 10.0)
+    assert chi2_gate(50.0, 9.2, 15.0, 10.0, 5.0, rule, False) == (GATE_FAIL, 10.0)
+    assert chi2_gate(50.0, 9.2, 15.2, 10.0, 5.0, rule, False) == (GATE_RESET, 10.0)
+    assert chi2_gate(50.0, 9.2, 11.0, 10.0, 5.0, rule, True) == (GATE_RESET, 10.0)
