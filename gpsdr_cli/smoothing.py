@@ -1,4 +1,4 @@
-"""Fixed-interval Rauch-Tung-Striebel smoother over the ekf/aekf forward pass (ALGORITHMS.md 5).
+"""Fixed-interval Rauch-Tung-Striebel smoother over the ekf/aekf forward pass (docs/algorithms.md#rts).
 
 Checkpointed: the forward kernel (:mod:`gpsdr_cli.filters.kernels_aekf`) keeps,
 per epoch, only the posterior state (8 floats) and the seven scalars from which
@@ -94,7 +94,7 @@ def ge_prior(G: np.ndarray, gw: np.ndarray, x: np.ndarray, T: float, alpha: floa
     """The GNSS error block of k-1 -> the prior of k the forward pass used (kernels_aekf.ge_epoch).
 
     ``x``: the predicted, turned mean (from rebuild_prior); ``pr`` the stored prior scalars
-    (f_b, the gyro rate of the turn, fading, the seed 001 factor).
+    (f_b, the gyro rate of the turn, fading, the innovation adaptive factor).
     """
     gw[GW_PRED, 0] = T
     gw[GW_PRED, 1] = math.exp(-T / tau_eps)
@@ -105,7 +105,7 @@ def ge_prior(G: np.ndarray, gw: np.ndarray, x: np.ndarray, T: float, alpha: floa
     if math.isfinite(pr[Q_W]):
         ge_turn(gw, x, T, pr[Q_W])
     ge_epoch(G, gw, np.int64(0), T > 0.0, alpha, var_b)  # int64 and bool: the kernel's types
-    if pr[Q_GAIN] != 1.0:  # seed 001 factor: the kinematic rows of P(x, b) too
+    if pr[Q_GAIN] != 1.0:  # innovation adaptive factor: the kinematic rows of P(x, b) too
         for i in range(12):
             G[i] *= math.sqrt(pr[Q_GAIN])
 

@@ -1,4 +1,4 @@
-"""AEKF: seed 000's adaptive EKF on the current statistical model (ALGORITHMS.md 1, 3, 4, 5).
+"""AEKF: Fang et al.'s adaptive EKF on the current statistical model (docs/algorithms.md#aekf).
 
 ``run(epochs, params)`` prepares arrays and calls the compiled kernel
 :func:`gpsdr_cli.filters.kernels_aekf.cs_filter_kernel`; the same preparation
@@ -7,7 +7,7 @@ serves the non-adaptive baseline :mod:`gpsdr_cli.filters.ekf` (``adaptive=False`
 What is adaptive here (``[gnss]``, ``[aekf]``, ``[adaptive]`` in config.py):
 
 - Q: per axis ``sigma_a^2`` from the current acceleration estimate
-  (seed 000 eqs. (14)-(15)) scaled by the regime's K_a;
+  (Fang et al. eqs. (14)-(15)) scaled by the regime's K_a;
 - R and K_a from PDOP: three regimes (``pdop_mode = "regimes"``: good <
   pdop_good <= medium < pdop_poor <= poor) or ``"continuous"``: log k and log K_a
   interpolated linearly over PDOP through (pdop_good, good),
@@ -17,10 +17,10 @@ What is adaptive here (``[gnss]``, ``[aekf]``, ``[adaptive]`` in config.py):
   base sigma already carries the quality).  Between fixes K_a keeps the last
   GNSS record's regime; inside a GNSS outage (``epochs.gnss_outage``) it is the
   poor regime's ("no fix: DR dominates");
-- options for every filter: seed 001 adaptive factor, fading memory,
+- options for every filter: innovation adaptive factor, fading memory,
   Sage-Husa R, chi-square gate, standstill (ZUPT + held position).
 
-Our choices beyond seed 000 (``[aekf]``, ``[gnss]``; the benchmark chose the
+Our choices beyond Fang et al. (``[aekf]``, ``[gnss]``; the benchmark chose the
 defaults, ``turn_propagation = false`` and ``gate_mode = "reject"`` give the
 earlier behaviour): the gyro turns the velocity and acceleration in the
 prediction (heading driven by the gyro in mean and covariance, the drift
@@ -91,7 +91,7 @@ def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarr
 
     ``adaptive=False`` (ekf): one sigma for the whole drive, the median over the
     fixes of the base sigma ``sqrt((sd_e^2 + sd_n^2)/2)``; K_a = 1 everywhere.
-    ``adaptive=True`` (aekf): seed 000's PDOP regimes or their continuous form.
+    ``adaptive=True`` (aekf): Fang et al.'s PDOP regimes or their continuous form.
     """
     g = params["gnss"]
     n = len(epochs)
@@ -118,7 +118,7 @@ def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarr
 
 
 def pdop_factors(pdop: np.ndarray, g: dict) -> tuple[np.ndarray, np.ndarray]:
-    """R factor k and Q factor K_a for each PDOP (seed 000's table; NaN PDOP -> good)."""
+    """R factor k and Q factor K_a for each PDOP (Fang et al.'s table; NaN PDOP -> good)."""
     good, poor = float(g["pdop_good"]), float(g["pdop_poor"])
     ks = np.array([g["k_good"], g["k_medium"], g["k_poor"]], float)
     kas = np.array([g["ka_good"], g["ka_medium"], g["ka_poor"]], float)
@@ -347,7 +347,7 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.P_AMIN] = a["a_min_mps2"]
     prm[kn.P_SIGMA_A] = a["sigma_a_mps2"]
     prm[kn.P_TAU_EPS] = gy["bias_tau_s"]
-    prm[kn.P_Q_EPS] = 2.0 * gy["bias_sd_radps"] ** 2 / gy["bias_tau_s"]  # ALGORITHMS.md 1
+    prm[kn.P_Q_EPS] = 2.0 * gy["bias_sd_radps"] ** 2 / gy["bias_tau_s"]  # docs/algorithms.md#cs-model
     prm[kn.P_Q_KS] = od["scale_rw_sd"] ** 2
     prm[kn.P_R_OMEGA] = gy["noise_sd_radps"] ** 2
     prm[kn.P_R_ODO] = od["noise_sd_mps"] ** 2
@@ -693,5 +693,5 @@ def _result(epochs: Epochs, x: np.ndarray, pcov: np.ndarray, sd: np.ndarray,
 
 @register("aekf")
 def run(epochs: Epochs, params: Params) -> FilterResult:
-    """seed 000 AEKF (adaptive Q from the acceleration, PDOP-driven R and K_a) with options."""
+    """Fang et al. AEKF (adaptive Q from the acceleration, PDOP-driven R and K_a) with options."""
     return run_cs(epochs, params, adaptive=True, name="aekf")

@@ -1,4 +1,4 @@
-"""``fkf``: federated Kalman filter of GNSS and dead reckoning (seed 002, Tang et al.).
+"""``fkf``: federated Kalman filter of GNSS and dead reckoning (Tang et al.).
 
 Two local filters share the 10-state model of
 :mod:`gpsdr_cli.filters.kernels_fkf` (which documents Phi, Q, H and the
@@ -629,7 +629,7 @@ def distance_rows(t_s: np.ndarray, o: np.ndarray, speed: np.ndarray, interval_s:
     did 1-mm rows at every heading epoch (the old default).  ``q_s`` is metres
     per row, so ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the
     speed-equivalent random walk of 0.002 at 100 Hz (0.2 m/s per sqrt(s)).
-    ``interval_s <= 0``: every record (seed 002).
+    ``interval_s <= 0``: every record (Tang et al.).
     """
     m = len(o)
     if m < 2:
@@ -1020,5 +1020,5 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
 
 @register("fkf")
 def run(epochs: Epochs, params: Params) -> FilterResult:
-    """Federated Kalman filter (seed 002's FKF baseline): covariance-weighted fusion, fixed R."""
+    """Federated Kalman filter (Tang et al.'s FKF baseline): covariance-weighted fusion, fixed R."""
     return run_federated("fkf", epochs, params)

@@ -2,29 +2,29 @@
 
 One kernel, :func:`cs_filter_kernel`, runs the whole forward pass over the epoch
 arrays (no per-epoch Python objects).  Model: :mod:`gpsdr_cli.models.cs_model`
-(seed 000, ALGORITHMS.md section 1); conventions: :mod:`gpsdr_cli.conventions`
+(Fang et al., docs/algorithms.md#cs-model); conventions: :mod:`gpsdr_cli.conventions`
 (ENU metres, heading clockwise from north, ``omega = d(psi)/dt = -yaw_rate``).
 
-Per epoch k (asynchronous cycle, ALGORITHMS.md 0):
+Per epoch k (asynchronous cycle, docs/algorithms.md#cycle):
 
 1. predict with the actual step ``T = dt[k]``: mean by the Newton matrix
    (current statistical model), covariance by the Singer blocks, exploiting
    the block structure (two 3x3 axis blocks + two scalars) instead of 8x8
    products; fading memory multiplies ``Phi P Phi^T``; in static mode
-   (seed 004) the axes are held (no propagation, no position noise); with
+   (Zeng et al.) the axes are held (no propagation, no position noise); with
    ``aekf.turn_propagation`` (our choice) the gyro then turns the velocity and
    acceleration (:func:`turn_predict`);
 2. GNSS fix (if any): chi-square gate on the 2-D NIS (none before
    ``gnss.gate_warmup_fixes`` accepted fixes; a no-lock-out reset; in
    ``gate_mode = "inflate"``, once fixes have failed the gate for
    ``gate_inflate_after_s``, a fix between the gate and ``gate_inflate_max``
-   times it is accepted with R scaled by NIS/gate), seed 001 adaptive factor on
+   times it is accepted with R scaled by NIS/gate), innovation adaptive factor on
    P(k|k-1), Sage-Husa scale on R, then two sequential scalar updates (e, n);
 3. odometer (if any): below ``standstill.speed_mps`` a zero-velocity update of
    v_e, v_n, a_e, a_n; else the speed ``u = k_s |v|`` (with
    ``aekf.odo_along_track`` its gains projected on the velocity direction);
 4. gyro (if any): at standstill the rate measures the drift alone; above
-   ``omega_min_speed_mps`` the seed 000 heading-rate row (with the turn
+   ``omega_min_speed_mps`` the Fang et al. heading-rate row (with the turn
    propagation: skipped, or reduced to "no lateral residual acceleration",
    ``aekf.turn_omega_row``); in between skipped.
 
@@ -79,7 +79,7 @@ F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_
 F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
 F_HEADING_FLOOR, F_LATERAL_ACC, F_WHITEN, F_ZUPT_POS, F_GE, F_ODO_CONSIDER = 14, 15, 16, 17, 18, 19
 N_FLG = 20
-#: values of flg[F_TURN_OMEGA] (the seed 000 yaw-rate row when aekf.turn_propagation is on)
+#: values of flg[F_TURN_OMEGA] (the Fang et al. yaw-rate row when aekf.turn_propagation is on)
 OMEGA_SKIP, OMEGA_LATERAL = 0, 1
 #: values of flg[F_GATE_MODE] (gnss.gate_mode)
 GATE_REJECT, GATE_INFLATE = 0, 1
@@ -144,9 +144,9 @@ def kernel_options(flg: np.ndarray) -> dict[str, int]:
 
 @njit(cache=True, inline="always", error_model="numpy")
 def predict_mean(x: np.ndarray, T: float, f_eps: float, hold: bool) -> None:
-    """Current statistical mean propagation (abar = a_hat): Newton per axis (seed 000).
+    """Current statistical mean propagation (abar = a_hat): Newton per axis (Fang et al.).
 
-    ``f_eps`` multiplies the drift: exp(-T/tau_eps) for seed 000's literal
+    ``f_eps`` multiplies the drift: exp(-T/tau_eps) for Fang et al.'s literal
     Gauss-Markov mean, 1 for our default (``aekf.drift_mean_decay = false``): the
     drift's mean is held like a random constant (a turn-on bias does not decay
     toward zero in an outage) while its covariance stays the Gauss-Markov one.
@@ -165,7 +165,7 @@ def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float
 
     Row then column operations on the two 3x3 axis blocks: ~200 flops instead
     of two dense 8x8 products.  ``hold``: static mode, axis blocks not propagated
-    and no position noise (seed 004).
+    and no position noise (Zeng et al.).
     """
     n = N_STATES
     if not hold:
@@ -234,7 +234,7 @@ def sparse_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y
 
 @njit(cache=True, error_model="numpy")
 def inflate_kinematic(P: np.ndarray, g: float) -> None:
-    """seed 001 adaptive factor, P(k|k-1) /= alpha with g = 1/alpha, on the kinematic block.
+    """innovation adaptive factor, P(k|k-1) /= alpha with g = 1/alpha, on the kinematic block.
 
     Our choice: only the six kinematic states (position, velocity, acceleration)
     are inflated, as ``D P D`` with ``D = diag(sqrt(g) x 6, 1, 1)`` (a congruence,
@@ -255,7 +255,7 @@ def inflate_kinematic(P: np.ndarray, g: float) -> None:
 def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -> None:
     """Rotate velocity and acceleration by the gyro heading increment (aekf.turn_propagation).
 
-    Our choice (ALGORITHMS.md 1 leaves the heading out of the state): after the
+    Our choice (docs/algorithms.md#cs-model leaves the heading out of the state): after the
     current statistical prediction, ``(v_e, v_n)`` and ``(a_e, a_n)`` turn
     clockwise by ``dpsi = (w - eps) T`` where ``w = -yaw_rate`` is the gyro's
     heading rate (CCW-positive gyro, heading clockwise) and ``eps`` the drift
@@ -339,7 +339,7 @@ def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
 
 
 # ---------------------------------------------------------------- GNSS error states
-# aekf.gnss_err_states (our choice, after the fkf's seed 002 error states; issue #4): the fix
+# aekf.gnss_err_states (our choice, after the fkf's Tang et al. error states; issue #4): the fix
 # error is white noise plus a first-order Gauss-Markov bias b = (b_e, b_n) per axis
 # (multipath), z = (e, n) + b + v.  The 10-state covariance is kept in two parts: the 8x8 P
 # of the kinematic model, whose code is the same with and without b, and the block ``ge`` =
@@ -571,7 +571,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     kernel; ``add_e, add_n`` the position variance added to P(k|k-1) so far
     (m^2).  The options are the kernel's None-or-int keyword arguments (numba
     prunes a None one before type inference).  Returns the updated ``add_e,
-    add_n``, the seed 001 factor g applied to P(k|k-1), the number of DR rows
+    add_n``, the innovation adaptive factor g applied to P(k|k-1), the number of DR rows
     queued in ``gw`` for the block, ``ge_pred``, the NIS, and whether the fix was used
     and whether the gate rejected it.
     """
@@ -656,7 +656,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         f_wh = max(f_wh, wh_static)
     re = r_e * sh_r * f_wh
     rn = r_n * sh_r * f_wh
-    # NIS, gate and the seed 001 factor with the nominal R: the whitening factor scales
+    # NIS, gate and the innovation adaptive factor with the nominal R: the whitening factor scales
     # the information of a fix, not the spread of its error (which the NIS tests)
     s00 = P[0, 0] + r_e * sh_r
     s11 = P[3, 3] + r_n * sh_r
@@ -691,8 +691,9 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
                 accept = False
                 rej = True
     if accept:
-        if innov_on is not None and r_fac == 1.0 and not gap:  # seed 001: P(k|k-1) /= alpha (not on a fix the
-            # gate down-weighted as an outlier: in reject mode it would not be used at all)
+        if innov_on is not None and r_fac == 1.0 and not gap:
+            # innovation adaptive factor: P(k|k-1) /= alpha (not on a fix the gate
+            # down-weighted as an outlier: in reject mode it would not be used at all)
             af = adaptive_factor(ye, yn, s00 + s11, prm[P_INNOV_C])
             if af < 1.0:
                 g = 1.0 / af
@@ -705,7 +706,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             add_n += yn * yn
             P[0, 0] += ye * ye
             P[3, 3] += yn * yn
-        if sage_on is not None:  # seed 004 Sage-Husa on a scale of R, with the divergence guard
+        if sage_on is not None:  # Zeng et al. Sage-Husa on a scale of R, with the divergence guard
             sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e + r_n)
             sh_r = sage_husa_r(sh_r, sh_m, prm[P_SH_B], sample, prm[P_SH_RMIN],
                                prm[P_SH_RMAX])
@@ -888,9 +889,9 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # propagated: held like a standstill, the position variance grown by (speed bound x T)^2
         gap = T > prm[P_MAX_GAP]
         hold = (standstill and is_static) or gap
-        # ---- 1. predict (seed 000 CS model; seed 004 static hold; fading memory)
+        # ---- 1. predict (Fang et al. CS model; Zeng et al. static hold; fading memory)
         if k > 0 and T > 0.0:
-            if adapt_q:  # seed 000 eqs. (14)-(15)
+            if adapt_q:  # Fang et al. eqs. (14)-(15)
                 s2e = cs_sigma_a2(x[2], prm[P_AMAX], prm[P_AMIN], ka[k], sigma_a)
                 s2n = cs_sigma_a2(x[5], prm[P_AMAX], prm[P_AMIN], ka[k], sigma_a)
             else:
@@ -1049,7 +1050,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     n_rows = ge_push(gw, n_rows, float(idx), H, PHt, r_c, y)
         static_out[k] = is_static
         hold_out[k] = hold
-        # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
+        # ---- 4. gyro: heading rate (Fang et al.), or the drift alone at standstill
         if has_gyro[k]:
             if is_static:
                 y = -yaw[k] - x[6]
@@ -1063,7 +1064,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 h = omega_row(x, H)
                 z = -yaw[k]
                 if turn_off is None:  # OMEGA_LATERAL: the turn is in the prediction; what is left of the
-                    # seed 000 row says the residual acceleration has no lateral part (it
+                    # Fang et al. row says the residual acceleration has no lateral part (it
                     # corrects v too: with v, eps or both as consider states the 10 minute
                     # outage of tests/test_faults.py ended 2-3 x farther off)
                     z = 0.0

@@ -1,4 +1,4 @@
-"""Compiled kernels of the federated filters ``fkf`` and ``fafkf`` (seed 002, Tang et al.).
+"""Compiled kernels of the federated filters ``fkf`` and ``fafkf`` (Tang et al.).
 
 One forward pass for both filters (:func:`federated_pass`, the filter chosen
 by :func:`kernel_flags`), which with smoothing also runs the backward RTS
@@ -9,10 +9,10 @@ epoch's stored x and P.  All over plain arrays: no Python object per epoch.
 Conventions (:mod:`gpsdr_cli.conventions`): metres in the local ENU frame,
 seconds, radians; heading ``psi = atan2(v_e, v_n)`` clockwise from north.
 
-Model (ALGORITHMS.md section 2), shared by both local filters::
+Model (docs/algorithms.md#fkf), shared by both local filters::
 
     x = [e, v_e, a_e, n, v_n, a_n, eps_e, eps_n, q_w, q_s]          (indices 0..9)
-    Phi = diag(Phi_e(T), Phi_n(T), exp(-T/tau_eps), exp(-T/tau_eps), I2)   # seed 002 eq. (2)
+    Phi = diag(Phi_e(T), Phi_n(T), exp(-T/tau_eps), exp(-T/tau_eps), I2)   # Tang et al. eq. (2)
     Phi_e = Phi_n = [[1, T, T^2/2], [0, 1, T], [0, 0, 1]]    # eq. (3), erratum: T^2/2
 
 ``eps_e, eps_n`` GNSS position error (Gauss-Markov, ``tau_eps``; our choice
@@ -29,7 +29,7 @@ Q (our choice, the paper gives none): per axis the white-jerk discretisation
 q_w, q_s ``rw_sd^2 T``.  Phi is applied in place using its block structure
 (row and column operations), never as a dense 10x10 product.
 
-Standstill (seed 004 static mode): at epochs flagged static the kinematic
+Standstill (Zeng et al. static mode): at epochs flagged static the kinematic
 blocks are held (Phi = I, no kinematic Q: "x(k|k-1) = x(k-1)") and both local
 filters apply a zero-velocity update ``v_e = v_n = a_e = a_n = 0``.
 Coasting (our choice): while nothing measures the speed -- no odometer row or
@@ -40,7 +40,7 @@ filter takes zero-acceleration rows ``a_e = a_n = 0`` with ``r = q_c / T``
 white-jerk model otherwise carries a drive-off's acceleration through a GNSS
 outage (simulated urban seed 2, 10 s: 26 m/s for 12, fkf 7.33 -> 4.57 m).
 
-GNSS local filter (seed 002 eqs. (4)-(6), erratum: row 2 selects n)::
+GNSS local filter (Tang et al. eqs. (4)-(6), erratum: row 2 selects n)::
 
     z1 = [e + eps_e, n + eps_n],  R1 = diag(f_e sd_e^2, f_n sd_n^2)
 
@@ -94,7 +94,7 @@ P symmetrised after each.
 Master fusion (each epoch):
 
 * covariance weighting (fkf): ``P_g = (sum_i P_i^-1)^-1``,
-  ``x_g = P_g sum_i P_i^-1 x_i`` (seed 002 section 4 / Carlson 1990), every
+  ``x_g = P_g sum_i P_i^-1 x_i`` (Tang et al. section 4 / Carlson 1990), every
   inverse through a Cholesky factor and solves.  In NR mode a filter's
   information is taken only over the states it can observe (the marginal of
   its P over them): the GNSS filter never contributes q_w, q_s, the DR filter
@@ -110,7 +110,7 @@ Master fusion (each epoch):
   (:func:`local_and_central_row`) -- one O(n^2) row instead of a 10x10
   fusion per epoch.  The two are the same up to rounding; :func:`fuse_two`
   still serves epochs where a P_i was capped or q_w re-aligned (not rows).
-* fuzzy weights (fafkf, seed 002 eq. (19)-(20)): ``x_g = W1 x1 + W2 x2`` with
+* fuzzy weights (fafkf, Tang et al. eq. (19)-(20)): ``x_g = W1 x1 + W2 x2`` with
   diagonal weight matrices ``W1 + W2 = I``; ``P_g = W1 P1 W1 + W2 P2 W2``
   (the covariance of that combination when the local errors are bounded by
   blockdiag(P1, P2), Carlson's invariant).  Shared states (position, velocity,
@@ -120,13 +120,13 @@ Master fusion (each epoch):
 * fuzzy shares (fafkf, ``weights = "shares"``): covariance weighting as for
   fkf, the controller's beta the FR information share ``c_1``.
 
-Modes: NR (no reset, seed 002's choice) keeps the local filters apart; FR
+Modes: NR (no reset, Tang et al.'s choice) keeps the local filters apart; FR
 (fusion-reset, Carlson 1990) sets ``x_i = x_g``, ``P_i = P_g / c_i`` after
 each fusion and predicts with ``Q_i = Q / c_i`` (shares ``c_1 + c_2 = 1``),
 which keeps the fused covariance consistent.  fkf uses ``c_1 = beta_gnss``;
 fafkf the position-block (or scalar) beta of the epoch.
 
-Adaptive R (fafkf, seed 002 section 3): see :mod:`gpsdr_cli.filters.fuzzy`;
+Adaptive R (fafkf, Tang et al. section 3): see :mod:`gpsdr_cli.filters.fuzzy`;
 the controller's table is interpolated here, once per measurement row.
 """
 
@@ -348,7 +348,7 @@ def interp2_unit(table: np.ndarray, a: float, b: float) -> float:
 @njit(cache=True)
 def predict(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: np.ndarray,
             d: np.ndarray) -> None:
-    """x <- Phi x, P <- Phi P Phi^T + D Q D over a step of T s (seed 002 eqs. (1)-(3)).
+    """x <- Phi x, P <- Phi P Phi^T + D Q D over a step of T s (Tang et al. eqs. (1)-(3)).
 
     ``d`` (length 10) scales Q per state: ``(D Q D)_ij = d_i Q_ij d_j``; all ones
     for the master, ``1/sqrt(c_i)`` for a local filter after a fusion-reset.
@@ -414,7 +414,7 @@ def eps_decay(x: np.ndarray, T: float, par: np.ndarray) -> float:
     Multipath decorrelates with the antenna's displacement (the reflecting
     geometry changes), not with time alone: ``1/tau_eff = 1/tau + |v|/D``,
     ``|v|`` the speed of the state being predicted, ``D = [fkf]
-    gnss_err_dist_m`` (<= 0: time only, seed 002).
+    gnss_err_dist_m`` (<= 0: time only, Tang et al.).
     """
     rate = 1.0 / par[K_TAU_EPS]
     if par[K_EPS_DIST] > 0.0:
@@ -556,7 +556,7 @@ def hph(P: np.ndarray, h: np.ndarray) -> float:
 @njit(cache=True)
 def zupt(x: np.ndarray, P: np.ndarray, sd: float, h: np.ndarray, s: np.ndarray,
          k: np.ndarray) -> None:
-    """Zero-velocity update: v_e = v_n = a_e = a_n = 0 with sigma ``sd`` (seed 004 static mode)."""
+    """Zero-velocity update: v_e = v_n = a_e = a_n = 0 with sigma ``sd`` (Zeng et al. static mode)."""
     for idx in (IVE, IVN, IAE, IAN):
         h[:] = 0.0
         h[idx] = 1.0
@@ -567,7 +567,7 @@ def zupt(x: np.ndarray, P: np.ndarray, sd: float, h: np.ndarray, s: np.ndarray,
 def heading_row(x: np.ndarray, h: np.ndarray) -> float:
     """Fill h with the heading row at x; return the prediction atan2(v_e, v_n) + q_w (rad).
 
-    Caller guarantees v_e^2 + v_n^2 >= omega_min_speed^2 > 0.  seed 002 eqs. (11)-(12).
+    Caller guarantees v_e^2 + v_n^2 >= omega_min_speed^2 > 0.  Tang et al. eqs. (11)-(12).
     """
     ve = x[IVE]
     vn = x[IVN]
@@ -583,7 +583,7 @@ def heading_row(x: np.ndarray, h: np.ndarray) -> float:
 def distance_row(x: np.ndarray, h: np.ndarray, t_m: float, v_lin: float, psi_hint: float) -> float:
     """Fill h with the odometer-distance row; return the prediction T_m |v| + q_s (m).
 
-    seed 002 eqs. (13)-(14) with the erratum (divide by v, not v2).  Below
+    Tang et al. eqs. (13)-(14) with the erratum (divide by v, not v2).  Below
     ``v_lin`` the speed is linearised along the heading ``psi_hint`` instead.
     """
     ve = x[IVE]
@@ -606,7 +606,7 @@ def distance_row(x: np.ndarray, h: np.ndarray, t_m: float, v_lin: float, psi_hin
 def adapt_r(j: int, r2: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt: np.ndarray,
             par: np.ndarray, r_table: np.ndarray, rfac: np.ndarray, u_last: np.ndarray,
             rsum: np.ndarray) -> bool:
-    """Covariance matching for component j (seed 002 eqs. (15)-(18)) + the fuzzy R controller.
+    """Covariance matching for component j (Tang et al. eqs. (15)-(18)) + the fuzzy R controller.
 
     Pushes the squared prior residual (clipped to ``res_clip x Te``) into the
     window; once it holds M values: ``Ra = mean``, ``u = (Te - Ra)/Te``,
@@ -627,7 +627,7 @@ def adapt_r(j: int, r2: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt
     cnt[j] += 1
     if cnt[j] < m:
         return False
-    ra = rsum[j] / m                                # seed 002 eq. (16)
+    ra = rsum[j] / m                                # Tang et al. eq. (16)
     u = (te - ra) / te                              # Dis_jj / Te_jj, eqs. (17)-(18)
     u = min(max(u, -1.0), 1.0)
     u_last[j] = u
@@ -766,7 +766,7 @@ def fuse_two(x1: np.ndarray, P1: np.ndarray, x2: np.ndarray, P2: np.ndarray,
 
 @njit(cache=True)
 def normalise_pair(a: float, b: float, log_scale: bool) -> tuple[float, float]:
-    """Normalise two non-negative evaluation factors to [0, 1] (ALGORITHMS.md 2, our choice).
+    """Normalise two non-negative evaluation factors to [0, 1] (docs/algorithms.md#fafkf, our choice).
 
     share: ``a/(a+b)`` (both 0 when both are 0: equally perfect);
     log: ``0.5 + 0.25 log10(a/b)`` clipped to [0, 1] (two decades either side saturate).
@@ -794,7 +794,7 @@ def in_block(i: int, block: int) -> bool:
 
 @njit(cache=True)
 def block_pe(P: np.ndarray, d: np.ndarray, block: int) -> float:
-    """PE = tr(M M^T), M = D^-1 P D^-1, over a state block (seed 002 section 4).
+    """PE = tr(M M^T), M = D^-1 P D^-1, over a state block (Tang et al. section 4).
 
     ``d`` is the filter's reset scaling (ones in NR mode), so M is its
     covariance before the reset's inflation; blocks: see :func:`in_block`.
@@ -834,7 +834,7 @@ def pe_scalar(P: np.ndarray, d: float) -> float:
 @njit(cache=True)
 def fuzzy_beta(pe1: float, pe2: float, de1n: float, de2n: float, log_scale: bool,
                w_table: np.ndarray) -> float:
-    """beta_1 = W_1/(W_1 + W_2) from the fusion controller (seed 002 eq. (20))."""
+    """beta_1 = W_1/(W_1 + W_2) from the fusion controller (Tang et al. eq. (20))."""
     p1, p2 = normalise_pair(pe1, pe2, log_scale)
     w1 = interp2_unit(w_table, p1, de1n)
     w2 = interp2_unit(w_table, p2, de2n)
@@ -844,7 +844,7 @@ def fuzzy_beta(pe1: float, pe2: float, de1n: float, de2n: float, log_scale: bool
 @njit(cache=True)
 def fuse_convex(x1: np.ndarray, P1: np.ndarray, x2: np.ndarray, P2: np.ndarray,
                 w: np.ndarray, xg: np.ndarray, Pg: np.ndarray) -> None:
-    """x_g = W x1 + (I - W) x2, P_g = W P1 W + (I - W) P2 (I - W), W = diag(w) (seed 002 eq. (19))."""
+    """x_g = W x1 + (I - W) x2, P_g = W P1 W + (I - W) P2 (I - W), W = diag(w) (Tang et al. eq. (19))."""
     for i in range(NX):
         wi = w[i]
         ui = 1.0 - wi
@@ -1371,7 +1371,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                         do_dist = True
                     r_head = par[K_HEAD_SD] ** 2
                     r_dist = (par[K_ODO_SD] * t_m[kx]) ** 2
-                    if adaptive:                        # prior residuals, seed 002 eq. (15)
+                    if adaptive:                        # prior residuals, Tang et al. eq. (15)
                         if do_head:
                             pred = heading_row(x2, h)
                             y = wrap_pi(theta[kx] - pred)
