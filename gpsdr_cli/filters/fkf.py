@@ -68,7 +68,7 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
 Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
 
 * ``fkf``: the *fused* sequence is smoothed by a fixed-interval RTS pass
-  (:func:`~gpsdr_cli.filters.linalg.rts_step`, written out for this Phi in
+  (:func:`~gpsdr_cli.filters.core.rts.rts_step`, written out for this Phi in
   :func:`~.kernels_fkf.rts_step_fused`: the same floats) with the master's own
   prediction ``Phi x_g``, ``Phi P_g Phi^T + Q``, Phi and Q recomputed from
   ``dt``.  It needs the fused x and P_g of every epoch; the forward pass keeps
