@@ -51,18 +51,18 @@ from .filters.kernels_aekf import (
     N_GE,
     N_GE_PACKED,
     N_PACKED,
-    P_ALPHA,
-    P_EPS_MEAN_DECAY,
-    P_GE_VAR,
-    P_Q_EPS,
-    P_Q_KS,
-    P_R_OMEGA,
-    P_SCALE_VAR,
-    P_TAU_EPS,
-    Q_FB,
-    Q_GAIN,
-    Q_LAM,
-    Q_W,
+    PAR_ALPHA,
+    PAR_EPS_MEAN_DECAY,
+    PAR_GE_VAR,
+    PAR_Q_EPS,
+    PAR_Q_KS,
+    PAR_R_OMEGA,
+    PAR_SCALE_VAR,
+    PAR_TAU_EPS,
+    PRI_FB,
+    PRI_GAIN,
+    PRI_LAM,
+    PRI_W,
     ge_epoch,
     ge_turn,
     predict_mean,
@@ -98,16 +98,16 @@ def ge_prior(G: np.ndarray, gw: np.ndarray, x: np.ndarray, T: float, alpha: floa
     """
     gw[GW_PRED, 0] = T
     gw[GW_PRED, 1] = math.exp(-T / tau_eps)
-    gw[GW_PRED, 2] = pr[Q_LAM]
+    gw[GW_PRED, 2] = pr[PRI_LAM]
     gw[GW_PRED, 3] = 1.0 if hold else 0.0
-    gw[GW_PRED, 4] = pr[Q_FB]
+    gw[GW_PRED, 4] = pr[PRI_FB]
     gw[GW_PRED, 5] = 0.0
-    if math.isfinite(pr[Q_W]):
-        ge_turn(gw, x, T, pr[Q_W])
+    if math.isfinite(pr[PRI_W]):
+        ge_turn(gw, x, T, pr[PRI_W])
     ge_epoch(G, gw, np.int64(0), T > 0.0, alpha, var_b)  # int64 and bool: the kernel's types
-    if pr[Q_GAIN] != 1.0:  # innovation adaptive factor: the kinematic rows of P(x, b) too
+    if pr[PRI_GAIN] != 1.0:  # innovation adaptive factor: the kinematic rows of P(x, b) too
         for i in range(12):
-            G[i] *= math.sqrt(pr[Q_GAIN])
+            G[i] *= math.sqrt(pr[PRI_GAIN])
 
 
 @njit(cache=True)
@@ -136,7 +136,7 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
     (``b_io[:, k]`` forward posterior in, smoothed out; their covariances stored
     after the packed P); the step is then a 10-state RTS step whose prior is
     rebuilt with the 8-state one (:func:`~gpsdr_cli.filters.kernels_aekf.rebuild_prior`) and whose
-    transition has ``f_b = prior_store[k + 1, Q_FB]`` for b.  ``x_s_next``,
+    transition has ``f_b = prior_store[k + 1, PRI_FB]`` for b.  ``x_s_next``,
     ``P_s_next`` are then 10-long / 10 x 10.
 
     ``x_io[:, k]`` holds the forward posterior and receives the smoothed state;
@@ -147,8 +147,8 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
     """
     n8 = N_STATES
     n = N_STATES + 2 if ge_on else N_STATES
-    alpha = prm[P_ALPHA]
-    tau_eps = prm[P_TAU_EPS]
+    alpha = prm[PAR_ALPHA]
+    tau_eps = prm[PAR_TAU_EPS]
     P8 = np.zeros((n8, n8))
     G = np.zeros(N_GE if ge_on else 0)
     gw = np.zeros((GW_ROWS, N_STATES))
@@ -185,20 +185,20 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
             x_post[i] = x8[i]
         if T > 0.0:
             pr = prior_store[k + 1]
-            f_mean = math.exp(-T / tau_eps) if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0
+            f_mean = math.exp(-T / tau_eps) if prm[PAR_EPS_MEAN_DECAY] != 0.0 else 1.0
             predict_mean(x8, T, f_mean, hold[k + 1])
             _phi_dense(T, alpha, tau_eps, hold[k + 1], F8)
-            w = pr[Q_W]
+            w = pr[PRI_W]
             if math.isfinite(w):  # aekf.turn_propagation: F = J Phi at the predicted mean
                 turn_jacobian(F8, x8, T, w)
             if ge_on:
                 G[GE_BE] = x_post[n8]
                 G[GE_BN] = x_post[n8 + 1]
             # the prior as the forward pass built it, the GNSS error block with it
-            rebuild_prior(P8, x8, T, alpha, tau_eps, prm[P_Q_EPS], prm[P_Q_KS],
-                          prm[P_R_OMEGA], pr, hold[k + 1], qbuf, prm[P_SCALE_VAR])
+            rebuild_prior(P8, x8, T, alpha, tau_eps, prm[PAR_Q_EPS], prm[PAR_Q_KS],
+                          prm[PAR_R_OMEGA], pr, hold[k + 1], qbuf, prm[PAR_SCALE_VAR])
             if ge_on:
-                ge_prior(G, gw, x8, T, alpha, tau_eps, pr, hold[k + 1], prm[P_GE_VAR])
+                ge_prior(G, gw, x8, T, alpha, tau_eps, pr, hold[k + 1], prm[PAR_GE_VAR])
             for i in range(n8):
                 x_prior[i] = x8[i]
                 for j in range(n8):
@@ -212,8 +212,8 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
                     F[i, n8 + 1] = 0.0
                     F[n8, i] = 0.0
                     F[n8 + 1, i] = 0.0
-                F[n8, n8] = pr[Q_FB]
-                F[n8 + 1, n8 + 1] = pr[Q_FB]
+                F[n8, n8] = pr[PRI_FB]
+                F[n8 + 1, n8 + 1] = pr[PRI_FB]
                 F[n8, n8 + 1] = 0.0
                 F[n8 + 1, n8] = 0.0
             else:

@@ -34,7 +34,7 @@ blocks are held (Phi = I, no kinematic Q: "x(k|k-1) = x(k-1)") and both local
 filters apply a zero-velocity update ``v_e = v_n = a_e = a_n = 0``.
 Coasting (our choice): while nothing measures the speed -- no odometer row or
 zero-velocity update for ``[fkf] dr_stale_s`` and no accepted fix for the
-outage gap; ``K_COAST_Q`` > 0 only on drives without an odometer -- the DR
+outage gap; ``PAR_COAST_Q`` > 0 only on drives without an odometer -- the DR
 filter takes zero-acceleration rows ``a_e = a_n = 0`` with ``r = q_c / T``
 (information ``T / q_c`` per step, so the rate does not matter): the
 white-jerk model otherwise carries a drive-off's acceleration through a GNSS
@@ -149,37 +149,37 @@ NX = 10
 IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS = range(NX)
 
 # ---- float parameter vector (built by fkf.kernel_parameters) ---------------------------
-K_TAU_EPS = 0      # s, correlation time of eps_e, eps_n
-K_EPS_SD = 1       # m, steady-state sigma of eps_e, eps_n
-K_JERK_PSD = 2     # m^2/s^5, white-jerk spectral density of each axis
-K_QW_RW = 3        # rad/sqrt(s), random walk of q_w
-K_QS_RW = 4        # m/sqrt(s), random walk of q_s
-K_HEAD_SD = 5      # rad, sigma of the heading measurement Theta
-K_ODO_SD = 6       # m/s, odometer speed sigma (distance sigma = this x T_m)
-K_ZUPT_SD = 7      # m/s (and m/s^2), sigma of the zero-velocity pseudo-measurements
-K_OMEGA_MIN = 8    # m/s, heading row skipped below this predicted speed
-K_GATE_CHI2 = 9    # chi-square(2) gate threshold; <= 0 disables the gate
-K_GATE_RESET_S = 10  # s, accept again after this long with every fix rejected
-K_R_MIN = 11       # lower clamp of the R adaptation factor
-K_R_MAX = 12       # upper clamp
-K_DELTA_MAX = 13   # largest |Delta| of one R adaptation step
-K_RES_CLIP = 14    # r^2 clipped to this x Te before entering the window
-K_BETA_GNSS = 15   # fkf FR: information share of the GNSS filter
-K_V_LIN = 16       # m/s, below this the distance row is linearised along the heading
-K_HEAD_CHI2 = 17   # chi-square(1) gate on the heading innovation; <= 0 disables it
-K_GNSS_STALE_S = 18  # s, GNSS filter without an accepted fix for longer: left out of the fusion
-K_DR_STALE_S = 19  # s, DR filter without any update for longer: left out of the fusion
-K_GATE_WARMUP = 20  # no GNSS gate before this many fixes were accepted
-K_EPS_DIST = 21    # m, eps_e, eps_n also decorrelate over this distance driven; <= 0: off
-K_GVEL_VAR = 22    # (m/s)^2, variance of the receiver velocity rows; <= 0: not used
-# eps regimes (select_eps writes K_TAU_EPS, K_EPS_SD, K_EPS_DIST from these each epoch):
-K_TAU_EPS_C = 23   # s, clear sky (the latest fix's PDOP < [fkf] gnss_err_pdop)
-K_EPS_SD_C = 24    # m
-K_EPS_DIST_C = 25  # m; <= 0: time only
-K_TAU_EPS_O = 26   # s, obstructed sky (PDOP >= gnss_err_pdop): multipath
-K_EPS_SD_O = 27    # m
-K_EPS_DIST_O = 28  # m; <= 0: time only
-K_COAST_Q = 29     # m^2/s^3: zero-acceleration rows r = this / T while nothing measures the speed; 0: off
+PAR_TAU_EPS = 0      # s, correlation time of eps_e, eps_n
+PAR_EPS_SD = 1       # m, steady-state sigma of eps_e, eps_n
+PAR_JERK_PSD = 2     # m^2/s^5, white-jerk spectral density of each axis
+PAR_QW_RW = 3        # rad/sqrt(s), random walk of q_w
+PAR_QS_RW = 4        # m/sqrt(s), random walk of q_s
+PAR_HEAD_SD = 5      # rad, sigma of the heading measurement Theta
+PAR_ODO_SD = 6       # m/s, odometer speed sigma (distance sigma = this x T_m)
+PAR_ZUPT_SD = 7      # m/s (and m/s^2), sigma of the zero-velocity pseudo-measurements
+PAR_OMEGA_MIN = 8    # m/s, heading row skipped below this predicted speed
+PAR_GATE_CHI2 = 9    # chi-square(2) gate threshold; <= 0 disables the gate
+PAR_GATE_RESET_S = 10  # s, accept again after this long with every fix rejected
+PAR_R_MIN = 11       # lower clamp of the R adaptation factor
+PAR_R_MAX = 12       # upper clamp
+PAR_DELTA_MAX = 13   # largest |Delta| of one R adaptation step
+PAR_RES_CLIP = 14    # r^2 clipped to this x Te before entering the window
+PAR_BETA_GNSS = 15   # fkf FR: information share of the GNSS filter
+PAR_V_LIN = 16       # m/s, below this the distance row is linearised along the heading
+PAR_HEAD_CHI2 = 17   # chi-square(1) gate on the heading innovation; <= 0 disables it
+PAR_GNSS_STALE_S = 18  # s, GNSS filter without an accepted fix for longer: left out of the fusion
+PAR_DR_STALE_S = 19  # s, DR filter without any update for longer: left out of the fusion
+PAR_GATE_WARMUP = 20  # no GNSS gate before this many fixes were accepted
+PAR_EPS_DIST = 21    # m, eps_e, eps_n also decorrelate over this distance driven; <= 0: off
+PAR_GVEL_VAR = 22    # (m/s)^2, variance of the receiver velocity rows; <= 0: not used
+# eps regimes (select_eps writes PAR_TAU_EPS, PAR_EPS_SD, PAR_EPS_DIST from these each epoch):
+PAR_TAU_EPS_C = 23   # s, clear sky (the latest fix's PDOP < [fkf] gnss_err_pdop)
+PAR_EPS_SD_C = 24    # m
+PAR_EPS_DIST_C = 25  # m; <= 0: time only
+PAR_TAU_EPS_O = 26   # s, obstructed sky (PDOP >= gnss_err_pdop): multipath
+PAR_EPS_SD_O = 27    # m
+PAR_EPS_DIST_O = 28  # m; <= 0: time only
+PAR_COAST_Q = 29     # m^2/s^3: zero-acceleration rows r = this / T while nothing measures the speed; 0: off
 N_PAR = 30
 
 #: heading row only while v^2 >= this x var(speed), var(speed) = u^T P_vv u, u = v/|v|:
@@ -193,16 +193,16 @@ SMOOTH_RESTART_NEES = 25.0
 
 
 # ---- integer flags --------------------------------------------------------------------
-F_MODE_FR = 0      # 1: fusion-reset, 0: no reset
-F_ADAPT_R = 1      # 1: fuzzy adaptive R
-F_FUSION = 2       # 0: covariance weighting, 1: fuzzy scalar weight, 2: fuzzy block weights,
+FLG_MODE_FR = 0      # 1: fusion-reset, 0: no reset
+FLG_ADAPT_R = 1      # 1: fuzzy adaptive R
+FLG_FUSION = 2       # 0: covariance weighting, 1: fuzzy scalar weight, 2: fuzzy block weights,
                    # 3: covariance weighting with fuzzy information shares
-F_NORM = 3         # 0: share, 1: log
-F_WINDOW = 4       # M, residual window length
-F_GNSS_ON = 5      # the GNSS local filter exists (the drive has fixes)
-F_DR_ON = 6        # the DR local filter exists (the drive has gyro or odometer)
-F_STORE = 7        # store the fused x, P per epoch for the smoother
-F_CHECK_SPD = 8    # count epochs where a P fails the SPD test (tests)
+FLG_NORM = 3         # 0: share, 1: log
+FLG_WINDOW = 4       # M, residual window length
+FLG_GNSS_ON = 5      # the GNSS local filter exists (the drive has fixes)
+FLG_DR_ON = 6        # the DR local filter exists (the drive has gyro or odometer)
+FLG_STORE = 7        # store the fused x, P per epoch for the smoother
+FLG_CHECK_SPD = 8    # count epochs where a P fails the SPD test (tests)
 N_FLAGS = 9
 
 FUSE_COV = 0
@@ -238,15 +238,15 @@ NPACK = NX * (NX + 1) // 2
 V_X1, V_X2, V_XG, V_D1, V_D2 = range(5)         # local states, fused state, reset scalings
 M_P1, M_P2, M_PG = range(3)                      # local and fused covariances
 A_RFAC, A_RSUM, A_ULAST = range(3)               # R factors, window sums, last u per component
-S_T_NOW = 0        # s since the first epoch (the sum of dt, as the pass accumulates it)
-S_T_LAST_ACC = 1   # s, last accepted GNSS fix
-S_T_LAST_DR = 2    # s, last DR update of any kind
-S_T_LAST_DIST = 3  # s, last odometer distance or ZUPT update
-S_T_HEAD_ACC = 4   # s, last accepted heading
-S_PSI_HINT = 5     # rad, latest heading measurement minus q_w (distance-row linearisation)
-S_N_ACC = 6        # GNSS fixes accepted so far
-S_REJ_SHARE = 7    # recent share of gated fixes (EWMA)
-S_T_LAST_FIX = 8   # s, last fix seen
+ST_T_NOW = 0        # s since the first epoch (the sum of dt, as the pass accumulates it)
+ST_T_LAST_ACC = 1   # s, last accepted GNSS fix
+ST_T_LAST_DR = 2    # s, last DR update of any kind
+ST_T_LAST_DIST = 3  # s, last odometer distance or ZUPT update
+ST_T_HEAD_ACC = 4   # s, last accepted heading
+ST_PSI_HINT = 5     # rad, latest heading measurement minus q_w (distance-row linearisation)
+ST_N_ACC = 6        # GNSS fixes accepted so far
+ST_REJ_SHARE = 7    # recent share of gated fixes (EWMA)
+ST_T_LAST_FIX = 8   # s, last fix seen
 N_SCALARS = 9
 
 #: Ceiling on each state's sigma after a prediction (m, m/s, m/s^2, m, m/s, m/s^2, m, m,
@@ -378,7 +378,7 @@ def predict_uncapped(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: 
             for i in range(NX):                     # columns: (Phi P) Phi^T
                 P[i, b] += T * P[i, b + 1] + h2 * P[i, b + 2]
                 P[i, b + 1] += T * P[i, b + 2]
-        q = par[K_JERK_PSD]
+        q = par[PAR_JERK_PSD]
         T2 = T * T
         T3 = T2 * T
         for b in range(0, 6, 3):                    # white-jerk Q per axis
@@ -400,11 +400,11 @@ def predict_uncapped(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: 
             P[s, j] *= f
         for i in range(NX):
             P[i, s] *= f
-    qe = par[K_EPS_SD] ** 2 * (1.0 - f * f)
+    qe = par[PAR_EPS_SD] ** 2 * (1.0 - f * f)
     P[IEPS_E, IEPS_E] += qe * d[IEPS_E] ** 2
     P[IEPS_N, IEPS_N] += qe * d[IEPS_N] ** 2
-    P[IQW, IQW] += par[K_QW_RW] ** 2 * T * d[IQW] ** 2   # random walks q_w, q_s
-    P[IQS, IQS] += par[K_QS_RW] ** 2 * T * d[IQS] ** 2
+    P[IQW, IQW] += par[PAR_QW_RW] ** 2 * T * d[IQW] ** 2   # random walks q_w, q_s
+    P[IQS, IQS] += par[PAR_QS_RW] ** 2 * T * d[IQS] ** 2
 
 
 @njit(cache=True)
@@ -416,39 +416,39 @@ def eps_decay(x: np.ndarray, T: float, par: np.ndarray) -> float:
     ``|v|`` the speed of the state being predicted, ``D = [fkf]
     gnss_err_dist_m`` (<= 0: time only, Tang et al.).
     """
-    rate = 1.0 / par[K_TAU_EPS]
-    if par[K_EPS_DIST] > 0.0:
-        rate += math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN]) / par[K_EPS_DIST]
+    rate = 1.0 / par[PAR_TAU_EPS]
+    if par[PAR_EPS_DIST] > 0.0:
+        rate += math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN]) / par[PAR_EPS_DIST]
     return math.exp(-T * rate)
 
 
 @njit(cache=True)
 def select_eps(par: np.ndarray, w: float) -> None:
     """The eps model of a step into an epoch of regime ``w``
-    (:func:`gpsdr_cli.filters.fkf.multipath_regime`): ``par[K_TAU_EPS, K_EPS_SD,
-    K_EPS_DIST]`` from the clear-sky (``w <= 0``) or obstructed-sky (``w >= 1``)
+    (:func:`gpsdr_cli.filters.fkf.multipath_regime`): ``par[PAR_TAU_EPS, PAR_EPS_SD,
+    PAR_EPS_DIST]`` from the clear-sky (``w <= 0``) or obstructed-sky (``w >= 1``)
     regime, in between blended in rate and variance (``1/tau``, ``1/D``, ``sd^2``
     linear in w).  Copied, so a regime's floats are the parameter's own.  The
     variance of eps relaxes to a new regime's at the process's own rate (Q =
     ``sd^2 (1 - f^2)``); the regime itself changes gradually (a share over a window).
     """
     if w <= 0.0:
-        par[K_TAU_EPS] = par[K_TAU_EPS_C]
-        par[K_EPS_SD] = par[K_EPS_SD_C]
-        par[K_EPS_DIST] = par[K_EPS_DIST_C]
+        par[PAR_TAU_EPS] = par[PAR_TAU_EPS_C]
+        par[PAR_EPS_SD] = par[PAR_EPS_SD_C]
+        par[PAR_EPS_DIST] = par[PAR_EPS_DIST_C]
     elif w >= 1.0:
-        par[K_TAU_EPS] = par[K_TAU_EPS_O]
-        par[K_EPS_SD] = par[K_EPS_SD_O]
-        par[K_EPS_DIST] = par[K_EPS_DIST_O]
+        par[PAR_TAU_EPS] = par[PAR_TAU_EPS_O]
+        par[PAR_EPS_SD] = par[PAR_EPS_SD_O]
+        par[PAR_EPS_DIST] = par[PAR_EPS_DIST_O]
     else:
-        par[K_TAU_EPS] = 1.0 / ((1.0 - w) / par[K_TAU_EPS_C] + w / par[K_TAU_EPS_O])
-        par[K_EPS_SD] = math.sqrt((1.0 - w) * par[K_EPS_SD_C] ** 2 + w * par[K_EPS_SD_O] ** 2)
+        par[PAR_TAU_EPS] = 1.0 / ((1.0 - w) / par[PAR_TAU_EPS_C] + w / par[PAR_TAU_EPS_O])
+        par[PAR_EPS_SD] = math.sqrt((1.0 - w) * par[PAR_EPS_SD_C] ** 2 + w * par[PAR_EPS_SD_O] ** 2)
         inv = 0.0
-        if par[K_EPS_DIST_C] > 0.0:
-            inv += (1.0 - w) / par[K_EPS_DIST_C]
-        if par[K_EPS_DIST_O] > 0.0:
-            inv += w / par[K_EPS_DIST_O]
-        par[K_EPS_DIST] = 1.0 / inv if inv > 0.0 else 0.0
+        if par[PAR_EPS_DIST_C] > 0.0:
+            inv += (1.0 - w) / par[PAR_EPS_DIST_C]
+        if par[PAR_EPS_DIST_O] > 0.0:
+            inv += w / par[PAR_EPS_DIST_O]
+        par[PAR_EPS_DIST] = 1.0 / inv if inv > 0.0 else 0.0
 
 
 @njit(cache=True)
@@ -615,7 +615,7 @@ def adapt_r(j: int, r2: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt
     value in and the value out, summed afresh once per M pushes against drift).
     """
     m = ring.shape[1]
-    v = min(r2, par[K_RES_CLIP] * te)
+    v = min(r2, par[PAR_RES_CLIP] * te)
     rsum[j] += v - ring[j, pos[j]]
     ring[j, pos[j]] = v
     pos[j] = (pos[j] + 1) % m
@@ -631,8 +631,8 @@ def adapt_r(j: int, r2: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt
     u = (te - ra) / te                              # Dis_jj / Te_jj, eqs. (17)-(18)
     u = min(max(u, -1.0), 1.0)
     u_last[j] = u
-    f = rfac[j] * (1.0 + par[K_DELTA_MAX] * interp1_uniform(r_table, -1.0, 1.0, u))
-    rfac[j] = min(max(f, par[K_R_MIN]), par[K_R_MAX])
+    f = rfac[j] * (1.0 + par[PAR_DELTA_MAX] * interp1_uniform(r_table, -1.0, 1.0, u))
+    rfac[j] = min(max(f, par[PAR_R_MIN]), par[PAR_R_MAX])
     return True
 
 
@@ -863,21 +863,21 @@ def init_state(x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray,
     ``vec`` (5, 10): x1, x2, x_g, d1, d2; ``mats`` (3, 10, 10): P1, P2, P_g;
     ``aux`` (3, 4): R factors, residual-window sums, last normalised
     discrepancies; ``ring`` (4, M): the residual windows; ``pc`` (2, 4) int:
-    window positions and counts; ``sc``: the scalars ``S_*``.  Everything that
+    window positions and counts; ``sc``: the scalars ``ST_*``.  Everything that
     carries from one epoch to the next lives here, so a run can stop after any
     epoch and resume bit-identically (:func:`save_state`, :func:`load_state`).
     """
-    mode_fr = flags[F_MODE_FR] != 0
-    fusion = flags[F_FUSION]
-    both = flags[F_GNSS_ON] != 0 and flags[F_DR_ON] != 0
-    m_window = max(flags[F_WINDOW], 1)
+    mode_fr = flags[FLG_MODE_FR] != 0
+    fusion = flags[FLG_FUSION]
+    both = flags[FLG_GNSS_ON] != 0 and flags[FLG_DR_ON] != 0
+    m_window = max(flags[FLG_WINDOW], 1)
     vec = np.zeros((5, NX))
     mats = np.zeros((3, NX, NX))
     # local filters; per-state shares c_i, d_i = 1/sqrt(c_i): FR keeps
     # P_i = D_i P_g D_i and predicts with Q_i = D_i Q D_i (c_1 + c_2 = 1 per state)
     c0 = 1.0
     if mode_fr and both:
-        c0 = min(max(par[K_BETA_GNSS], 0.05), 0.95) if fusion == FUSE_COV else 0.5
+        c0 = min(max(par[PAR_BETA_GNSS], 0.05), 0.95) if fusion == FUSE_COV else 0.5
     for i in range(NX):
         vec[V_X1, i] = x0[i]
         vec[V_X2, i] = x0[i]
@@ -898,7 +898,7 @@ def init_state(x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray,
     ring = np.zeros((4, m_window))
     pc = np.zeros((2, 4), np.int64)
     sc = np.zeros(N_SCALARS)
-    sc[S_PSI_HINT] = psi0
+    sc[ST_PSI_HINT] = psi0
     return vec, mats, aux, ring, pc, sc
 
 
@@ -1059,7 +1059,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
     ``beta`` (2, n) the GNSS filter's position and velocity weights, ``rfac``
     (4, n) the R factors (fafkf; (4, 0) without adaptive R).
 
-    With ``flags[F_STORE]`` the pass is smoothed:
+    With ``flags[FLG_STORE]`` the pass is smoothed:
 
     * ``segment`` an int > 0: the forward pass keeps a checkpoint of its whole
       state (:func:`save_state`) before every ``segment`` epochs; then, from the last
@@ -1075,7 +1075,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
     * ``segment`` None: ``xs`` (n, 10), ``Ps`` (n, 55) hold the fused x and
       packed P_g of every epoch, for :func:`smooth_fused`; ``out`` is forward.
 
-    Without ``flags[F_STORE]`` pass ``segment = None``: the checkpointed
+    Without ``flags[FLG_STORE]`` pass ``segment = None``: the checkpointed
     smoother's calls then compile to nothing (:func:`_save_checkpoint` ..), so
     a forward-only cold start does not compile the smoother; numba compiles
     one specialisation per type of ``segment`` (None, int64).
@@ -1096,9 +1096,9 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
     """
     n = dt.shape[0]
     par = par.copy()                                # its eps slots change per epoch (select_eps)
-    store = flags[F_STORE] != 0
-    adaptive = flags[F_ADAPT_R] != 0
-    m_window = max(flags[F_WINDOW], 1)
+    store = flags[FLG_STORE] != 0
+    adaptive = flags[FLG_ADAPT_R] != 0
+    m_window = max(flags[FLG_WINDOW], 1)
     out = np.zeros((N_OUT, n))
     gnss_used = np.zeros(n, np.bool_)
     gnss_rej = np.zeros(n, np.bool_)
@@ -1140,12 +1140,12 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
     x_sn = np.zeros(NX)
     P_sn = np.zeros((NX, NX))
 
-    mode_fr = flags[F_MODE_FR] != 0
-    fusion = flags[F_FUSION]
-    log_scale = flags[F_NORM] != 0
-    gnss_on = flags[F_GNSS_ON] != 0
-    dr_on = flags[F_DR_ON] != 0
-    check = flags[F_CHECK_SPD] != 0
+    mode_fr = flags[FLG_MODE_FR] != 0
+    fusion = flags[FLG_FUSION]
+    log_scale = flags[FLG_NORM] != 0
+    gnss_on = flags[FLG_GNSS_ON] != 0
+    dr_on = flags[FLG_DR_ON] != 0
+    check = flags[FLG_CHECK_SPD] != 0
     both = gnss_on and dr_on
     # FR with one share per filter (all of w equal): see the prediction in the loop
     shared = mode_fr and both and fusion != FUSE_BLOCK
@@ -1221,19 +1221,19 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
             p_store = True
             p_xs, p_Ps = xs_seg, Ps_seg
         k1 = min(k0 + seg, n)
-        t_now = sc[S_T_NOW]
-        t_last_acc = sc[S_T_LAST_ACC]                   # last accepted GNSS fix
-        t_last_dr = sc[S_T_LAST_DR]                     # last DR update of any kind
-        t_last_dist = sc[S_T_LAST_DIST]                 # last odometer distance or ZUPT update
-        t_head_acc = sc[S_T_HEAD_ACC]                   # last accepted heading
-        psi_hint = sc[S_PSI_HINT]
-        n_acc = np.int64(sc[S_N_ACC])                   # GNSS fixes accepted so far
-        rej_share = sc[S_REJ_SHARE]                     # recent share of gated fixes (EWMA)
-        t_last_fix = sc[S_T_LAST_FIX]
-        zupt_sd = par[K_ZUPT_SD]
-        omin2 = par[K_OMEGA_MIN] ** 2
-        chi2 = par[K_GATE_CHI2]
-        tau_rej = par[K_GATE_RESET_S] / math.log(2.0)   # all gated for gate_reset_s: share 1/2
+        t_now = sc[ST_T_NOW]
+        t_last_acc = sc[ST_T_LAST_ACC]                   # last accepted GNSS fix
+        t_last_dr = sc[ST_T_LAST_DR]                     # last DR update of any kind
+        t_last_dist = sc[ST_T_LAST_DIST]                 # last odometer distance or ZUPT update
+        t_head_acc = sc[ST_T_HEAD_ACC]                   # last accepted heading
+        psi_hint = sc[ST_PSI_HINT]
+        n_acc = np.int64(sc[ST_N_ACC])                   # GNSS fixes accepted so far
+        rej_share = sc[ST_REJ_SHARE]                     # recent share of gated fixes (EWMA)
+        t_last_fix = sc[ST_T_LAST_FIX]
+        zupt_sd = par[PAR_ZUPT_SD]
+        omin2 = par[PAR_OMEGA_MIN] ** 2
+        chi2 = par[PAR_GATE_CHI2]
+        tau_rej = par[PAR_GATE_RESET_S] / math.log(2.0)   # all gated for gate_reset_s: share 1/2
         w_eps = -1.0                                    # eps regime in par: none yet (select_eps)
 
         for kx in range(k0, k1):
@@ -1297,10 +1297,10 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                     accept = True
                     a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
                     t_last_fix = t_now
-                    if chi2 > 0.0 and n_acc >= par[K_GATE_WARMUP]:
+                    if chi2 > 0.0 and n_acc >= par[PAR_GATE_WARMUP]:
                         # no lock-out: every fix rejected for gate_reset_s, or most of the
                         # recent ones -- the state, not the fixes, is then the outlier
-                        verdict, _ = chi2_gate(nis, chi2, t_now, t_last_acc, par[K_GATE_RESET_S],
+                        verdict, _ = chi2_gate(nis, chi2, t_now, t_last_acc, par[PAR_GATE_RESET_S],
                                                RESET_AFTER_LAST_ACCEPT,
                                                a_rej * rej_share + (1.0 - a_rej) > 0.5)
                         if verdict == GATE_RESET:
@@ -1319,13 +1319,13 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                         h[IEPS_N] = 1.0
                         local_and_central_row(x1, P1, xg, Pg, central, h,
                                               gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk)
-                        if par[K_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
+                        if par[PAR_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
                                                           or math.isnan(gnss_vn[kx])):
                             # receiver (Doppler) velocity with the accepted fix (our choice)
                             local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVE),
-                                                   gnss_ve[kx] - x1[IVE], par[K_GVEL_VAR], s, kk)
+                                                   gnss_ve[kx] - x1[IVE], par[PAR_GVEL_VAR], s, kk)
                             local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVN),
-                                                   gnss_vn[kx] - x1[IVN], par[K_GVEL_VAR], s, kk)
+                                                   gnss_vn[kx] - x1[IVN], par[PAR_GVEL_VAR], s, kk)
                             p_counters[C_GVEL] += 1
                         p_used[ko] = True
                         p_counters[C_GNSS_USED] += 1
@@ -1344,12 +1344,12 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                     t_last_dr = t_now
                     t_last_dist = t_now
                 else:
-                    if (par[K_COAST_Q] > 0.0 and T > 0.0 and t_now - t_last_dist > par[K_DR_STALE_S]
-                            and t_now - t_last_acc > par[K_GNSS_STALE_S]):
+                    if (par[PAR_COAST_Q] > 0.0 and T > 0.0 and t_now - t_last_dist > par[PAR_DR_STALE_S]
+                            and t_now - t_last_acc > par[PAR_GNSS_STALE_S]):
                         # nothing measures the speed (no odometer, GNSS outage): zero-acceleration
                         # rows, information T / q_c per step, keep the constant-acceleration model
                         # from extrapolating the last acceleration through the outage
-                        rc = par[K_COAST_Q] / T
+                        rc = par[PAR_COAST_Q] / T
                         local_and_central_unit(x2, P2, xg, Pg, central, np.int64(IAE), -x2[IAE],
                                                rc, s, kk)
                         local_and_central_unit(x2, P2, xg, Pg, central, np.int64(IAN), -x2[IAN],
@@ -1362,15 +1362,15 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                         v2 = x2[IVE] ** 2 + x2[IVN] ** 2
                         var_v2 = (x2[IVE] ** 2 * P2[IVE, IVE] + 2.0 * x2[IVE] * x2[IVN] * P2[IVE, IVN]
                                   + x2[IVN] ** 2 * P2[IVN, IVN])      # v^2 x var(speed)
-                        speed_known = t_now - t_last_dist <= par[K_DR_STALE_S]
+                        speed_known = t_now - t_last_dist <= par[PAR_DR_STALE_S]
                         if v2 >= omin2 and (speed_known or v2 * v2 >= HEAD_SPEED_SNR2 * var_v2):
                             do_head = True
                         else:
                             p_counters[C_HEADING_SLOW] += 1
                     if not math.isnan(dist[kx]) and t_m[kx] > 0.0:
                         do_dist = True
-                    r_head = par[K_HEAD_SD] ** 2
-                    r_dist = (par[K_ODO_SD] * t_m[kx]) ** 2
+                    r_head = par[PAR_HEAD_SD] ** 2
+                    r_dist = (par[PAR_ODO_SD] * t_m[kx]) ** 2
                     if adaptive:                        # prior residuals, Tang et al. eq. (15)
                         if do_head:
                             pred = heading_row(x2, h)
@@ -1379,7 +1379,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                                        par, r_table, rfac, u_last, rsum):
                                 p_counters[C_R_ADAPT] += 1
                         if do_dist:
-                            pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
+                            pred = distance_row(x2, h, t_m[kx], par[PAR_V_LIN], psi_hint)
                             y_dist = dist[kx] - pred
                             hph_dist = hph(P2, h)
                             y = y_dist
@@ -1391,9 +1391,9 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                         y = wrap_pi(theta[kx] - pred)
                         rh = rfac[2] * r_head
                         verdict = np.int64(GATE_PASS)
-                        if par[K_HEAD_CHI2] > 0.0:
-                            verdict, _ = chi2_gate(y * y, par[K_HEAD_CHI2] * (hph(P2, h) + rh), t_now,
-                                                   t_head_acc, par[K_GATE_RESET_S],
+                        if par[PAR_HEAD_CHI2] > 0.0:
+                            verdict, _ = chi2_gate(y * y, par[PAR_HEAD_CHI2] * (hph(P2, h) + rh), t_now,
+                                                   t_head_acc, par[PAR_GATE_RESET_S],
                                                    RESET_AFTER_LAST_ACCEPT, False)
                         if verdict == GATE_RESET:
                             # every heading rejected for gate_reset_s (e.g. a large gyro
@@ -1412,12 +1412,12 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                             p_counters[C_HEADING] += 1
                     if do_dist:
                         if not (adaptive and not do_head):  # else h, y, hPh of the window's row
-                            pred = distance_row(x2, h, t_m[kx], par[K_V_LIN], psi_hint)
+                            pred = distance_row(x2, h, t_m[kx], par[PAR_V_LIN], psi_hint)
                             y_dist = dist[kx] - pred
                             hph_dist = hph(P2, h)
                         y = y_dist
                         rd = rfac[3] * r_dist
-                        if par[K_HEAD_CHI2] > 0.0 and y * y > par[K_HEAD_CHI2] * (hph_dist + rd):
+                        if par[PAR_HEAD_CHI2] > 0.0 and y * y > par[PAR_HEAD_CHI2] * (hph_dist + rd):
                             p_counters[C_DIST_REJECTED] += 1      # odometer glitch: gated
                         else:
                             local_and_central_row(x2, P2, xg, Pg, central, h, y, rd, s, kk)
@@ -1426,8 +1426,8 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                             p_counters[C_DIST] += 1
 
             # ---- master fusion -----------------------------------------------------------
-            g_fresh = t_now - t_last_acc <= par[K_GNSS_STALE_S]
-            d_fresh = t_now - t_last_dr <= par[K_DR_STALE_S]
+            g_fresh = t_now - t_last_acc <= par[PAR_GNSS_STALE_S]
+            d_fresh = t_now - t_last_dr <= par[PAR_DR_STALE_S]
             if both and not mode_fr and g_fresh != d_fresh:
                 # NR: a local filter that has had no measurement for a while (GNSS
                 # outage, DR stream gap) contributes nothing -- the GNSS filter's lone
@@ -1452,7 +1452,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                         bp = fuzzy_beta(pe_scalar(P1, d1[0]), pe_scalar(P2, d2[0]),
                                         de1n, de2n, log_scale, w_table)
                     else:
-                        bp = par[K_BETA_GNSS]
+                        bp = par[PAR_BETA_GNSS]
                     if central:
                         pass                            # xg, Pg: the rows applied centrally
                     elif mode_fr:
@@ -1537,15 +1537,15 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
                 for i in range(NX):
                     p_xs[kx - k0, i] = xg[i]
                 pack(Pg, p_Ps[kx - k0])
-        sc[S_T_NOW] = t_now
-        sc[S_T_LAST_ACC] = t_last_acc
-        sc[S_T_LAST_DR] = t_last_dr
-        sc[S_T_LAST_DIST] = t_last_dist
-        sc[S_T_HEAD_ACC] = t_head_acc
-        sc[S_PSI_HINT] = psi_hint
-        sc[S_N_ACC] = n_acc
-        sc[S_REJ_SHARE] = rej_share
-        sc[S_T_LAST_FIX] = t_last_fix
+        sc[ST_T_NOW] = t_now
+        sc[ST_T_LAST_ACC] = t_last_acc
+        sc[ST_T_LAST_DR] = t_last_dr
+        sc[ST_T_LAST_DIST] = t_last_dist
+        sc[ST_T_HEAD_ACC] = t_head_acc
+        sc[ST_PSI_HINT] = psi_hint
+        sc[ST_N_ACC] = n_acc
+        sc[ST_REJ_SHARE] = rej_share
+        sc[ST_T_LAST_FIX] = t_last_fix
         if job >= n_fwd:                            # RTS backward over the segment
             _smooth_segment(segment, xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, eps_w, par,
                             x_sn, P_sn, out, stats)
@@ -1555,15 +1555,15 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
 @njit(cache=True)
 def kernel_flags(fafkf: bool, flags: np.ndarray) -> np.ndarray:
     """The flags the pass runs with: fkf fuses by covariance with fixed R; fafkf adapts R
-    and, unless ``flags[F_FUSION]`` names another fusion, weights by fuzzy blocks."""
+    and, unless ``flags[FLG_FUSION]`` names another fusion, weights by fuzzy blocks."""
     flags = flags.copy()
     if fafkf:
-        if flags[F_FUSION] == FUSE_COV:
-            flags[F_FUSION] = FUSE_BLOCK
-        flags[F_ADAPT_R] = 1
+        if flags[FLG_FUSION] == FUSE_COV:
+            flags[FLG_FUSION] = FUSE_BLOCK
+        flags[FLG_ADAPT_R] = 1
     else:
-        flags[F_FUSION] = FUSE_COV
-        flags[F_ADAPT_R] = 0
+        flags[FLG_FUSION] = FUSE_COV
+        flags[FLG_ADAPT_R] = 0
     return flags
 
 
