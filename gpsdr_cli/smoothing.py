@@ -69,7 +69,7 @@ from .filters.kernels_aekf import (
     rebuild_prior,
     turn_jacobian,
 )
-from .models.cs_model import N_STATES, singer_phi
+from .models.cs_model import IE, IEPS, IKS, IN, N_STATES, singer_phi
 
 
 @njit(cache=True)
@@ -236,11 +236,11 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
             x_s_next[i] = x_s[i]
             for j in range(n):
                 P_s_next[i, j] = P_s[i, j]
-        pcov_out[0, k] = P_s[0, 0]
-        pcov_out[1, k] = P_s[3, 3]
-        pcov_out[2, k] = P_s[0, 3]
-        sd_out[0, k] = math.sqrt(max(P_s[6, 6], 0.0))
-        sd_out[1, k] = math.sqrt(max(P_s[7, 7], 0.0))
+        pcov_out[0, k] = P_s[IE, IE]
+        pcov_out[1, k] = P_s[IN, IN]
+        pcov_out[2, k] = P_s[IE, IN]
+        sd_out[0, k] = math.sqrt(max(P_s[IEPS, IEPS], 0.0))
+        sd_out[1, k] = math.sqrt(max(P_s[IKS, IKS], 0.0))
 
 
 def rts_checkpointed(run_segment: Callable[[int, int, np.ndarray, np.ndarray, np.ndarray,

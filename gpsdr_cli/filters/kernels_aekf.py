@@ -59,7 +59,22 @@ import math
 import numpy as np
 from numba import njit
 
-from ..models.cs_model import N_STATES, cs_sigma_a2, odo_row, omega_row, singer_phi, singer_q
+from ..models.cs_model import (
+    IAE,
+    IAN,
+    IE,
+    IEPS,
+    IKS,
+    IN,
+    IVE,
+    IVN,
+    N_STATES,
+    cs_sigma_a2,
+    odo_row,
+    omega_row,
+    singer_phi,
+    singer_q,
+)
 from .adaptive import adaptive_factor, fading_factor, nis_2d, sage_husa_r
 from .core import update as core_update
 from .core.gate import GATE_FAIL, GATE_RESET, RESET_AFTER_FIRST_REJECT, chi2_gate
@@ -161,7 +176,7 @@ def predict_mean(x: np.ndarray, T: float, f_eps: float, hold: bool) -> None:
         for o in range(0, 6, 3):
             x[o] += T * x[o + 1] + 0.5 * T * T * x[o + 2]
             x[o + 1] += T * x[o + 2]
-    x[6] *= f_eps
+    x[IEPS] *= f_eps
 
 
 @njit(cache=True, error_model="numpy")
@@ -213,8 +228,8 @@ def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float
         P[o + 1, o + 2] += qa * qbuf[4]
         P[o + 2, o + 1] += qa * qbuf[4]
         P[o + 2, o + 2] += qa * qbuf[5]
-    P[6, 6] += q_eps * T
-    P[7, 7] += q_ks * T
+    P[IEPS, IEPS] += q_eps * T
+    P[IKS, IKS] += q_ks * T
     for i in range(n):  # symmetrize (written out: one helper less to compile)
         for j in range(i + 1, n):
             v = 0.5 * (P[i, j] + P[j, i])
@@ -274,21 +289,21 @@ def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -
     GNSS positions (as in a strapdown INS) instead of through the heading-rate row.
     """
     n = N_STATES
-    dpsi = (w - x[6]) * T
+    dpsi = (w - x[IEPS]) * T
     c = math.cos(dpsi)
     s = math.sin(dpsi)
-    ve = x[1]
-    vn = x[4]
-    ae = x[2]
-    an = x[5]
-    x[1] = c * ve + s * vn
-    x[4] = -s * ve + c * vn
-    x[2] = c * ae + s * an
-    x[5] = -s * ae + c * an
-    g1 = x[4]
-    g4 = -x[1]
-    g2 = x[5]
-    g5 = -x[2]
+    ve = x[IVE]
+    vn = x[IVN]
+    ae = x[IAE]
+    an = x[IAN]
+    x[IVE] = c * ve + s * vn
+    x[IVN] = -s * ve + c * vn
+    x[IAE] = c * ae + s * an
+    x[IAN] = -s * ae + c * an
+    g1 = x[IVN]
+    g4 = -x[IVE]
+    g2 = x[IAN]
+    g5 = -x[IAE]
     for j in range(n):  # rows: J P
         p1 = P[1, j]
         p4 = P[4, j]
@@ -325,13 +340,13 @@ def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -
 @njit(cache=True, error_model="numpy")
 def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
     """F <- J F with J the Jacobian of :func:`turn_predict` at its input mean x (dense, smoother)."""
-    dpsi = (w - x[6]) * T
+    dpsi = (w - x[IEPS]) * T
     c = math.cos(dpsi)
     s = math.sin(dpsi)
-    g1 = -s * x[1] + c * x[4]  # v_n' (the rotated velocity), d v_e'/d dpsi
-    g4 = -(c * x[1] + s * x[4])  # -v_e'
-    g2 = -s * x[2] + c * x[5]
-    g5 = -(c * x[2] + s * x[5])
+    g1 = -s * x[IVE] + c * x[IVN]  # v_n' (the rotated velocity), d v_e'/d dpsi
+    g4 = -(c * x[IVE] + s * x[IVN])  # -v_e'
+    g2 = -s * x[IAE] + c * x[IAN]
+    g5 = -(c * x[IAE] + s * x[IAN])
     for j in range(N_STATES):
         p1 = F[1, j]
         p4 = F[4, j]
@@ -456,14 +471,14 @@ def ge_epoch(G: np.ndarray, gw: np.ndarray, n_rows: int, predict: bool, alpha: f
 def ge_turn(gw: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
     """Record the gyro turn of this epoch's prediction for :func:`ge_epoch`: the angle
     (w - eps) T of :func:`turn_predict` and the rows (g1, g4, g2, g5) of its Jacobian."""
-    dpsi = (w - x[6]) * T
+    dpsi = (w - x[IEPS]) * T
     gw[GW_PRED, 5] = 1.0
     gw[GW_PRED, 6] = math.cos(dpsi)
     gw[GW_PRED, 7] = math.sin(dpsi)
-    gw[GW_PRED + 1, 0] = x[4]
-    gw[GW_PRED + 1, 1] = -x[1]
-    gw[GW_PRED + 1, 2] = x[5]
-    gw[GW_PRED + 1, 3] = -x[2]
+    gw[GW_PRED + 1, 0] = x[IVN]
+    gw[GW_PRED + 1, 1] = -x[IVE]
+    gw[GW_PRED + 1, 2] = x[IAN]
+    gw[GW_PRED + 1, 3] = -x[IAE]
 
 
 @njit(cache=True, error_model="numpy")
@@ -543,14 +558,14 @@ def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps:
     if math.isfinite(pr[PRI_W]):
         turn_predict(x, P, T, pr[PRI_W], r_w + scale_var * abs(pr[PRI_W]) / T)
     if pr[PRI_FL_EE] != 0.0 or pr[PRI_FL_NN] != 0.0:  # heading floor
-        P[1, 1] += pr[PRI_FL_EE]
-        P[4, 4] += pr[PRI_FL_NN]
-        P[1, 4] += pr[PRI_FL_EN]
-        P[4, 1] = P[1, 4]
+        P[IVE, IVE] += pr[PRI_FL_EE]
+        P[IVN, IVN] += pr[PRI_FL_NN]
+        P[IVE, IVN] += pr[PRI_FL_EN]
+        P[IVN, IVE] = P[IVE, IVN]
     if pr[PRI_GAIN] != 1.0:
         inflate_kinematic(P, pr[PRI_GAIN])
-    P[0, 0] += pr[PRI_ADD_E]
-    P[3, 3] += pr[PRI_ADD_N]
+    P[IE, IE] += pr[PRI_ADD_E]
+    P[IN, IN] += pr[PRI_ADD_N]
 
 
 
@@ -610,8 +625,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     wh_m = st[ST_WH_M]
     wh_static = st[ST_WH_STATIC]
     b_since = st[ST_B_SINCE]
-    ye = z_e - x[0]
-    yn = z_n - x[3]
+    ye = z_e - x[IE]
+    yn = z_n - x[IN]
     if ge_on is not None:  # z = position + b + v: the predicted fix includes the bias
         if ge_pred:
             ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[PAR_GE_VAR])  # no rows yet
@@ -628,17 +643,17 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
                 verdict, b_since = chi2_gate(b2, prm[PAR_GATE_THR] * prm[PAR_GE_VAR], t, b_since,
                                              prm[PAR_GATE_RESET], RESET_AFTER_FIRST_REJECT, False)
                 if verdict == GATE_RESET:
-                    x[0] += ge[GE_BE]
-                    x[3] += ge[GE_BN]
+                    x[IE] += ge[GE_BE]
+                    x[IN] += ge[GE_BN]
                     add_e += ge[GE_BE] * ge[GE_BE]
                     add_n += ge[GE_BN] * ge[GE_BN]
-                    P[0, 0] += ge[GE_BE] * ge[GE_BE]
-                    P[3, 3] += ge[GE_BN] * ge[GE_BN]
+                    P[IE, IE] += ge[GE_BE] * ge[GE_BE]
+                    P[IN, IN] += ge[GE_BN] * ge[GE_BN]
                     ge[GE_BE] = 0.0
                     ge[GE_BN] = 0.0
                     info[INF_GATE_RESETS] += 1.0
-        ye = z_e - x[0] - ge[GE_BE]
-        yn = z_n - x[3] - ge[GE_BN]
+        ye = z_e - x[IE] - ge[GE_BE]
+        yn = z_n - x[IN] - ge[GE_BN]
     # innovation whitening (aekf.innovation_whitening, Mehra 1970): an optimal filter's
     # innovations are white; a lag-one correlation rho of the normalised innovations
     # says the fixes' errors are time-correlated (multipath) and carry less independent
@@ -664,9 +679,9 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     rn = r_n * sh_r * f_wh
     # NIS, gate and the innovation adaptive factor with the nominal R: the whitening factor scales
     # the information of a fix, not the spread of its error (which the NIS tests)
-    s00 = P[0, 0] + r_e * sh_r
-    s11 = P[3, 3] + r_n * sh_r
-    s01 = P[0, 3]
+    s00 = P[IE, IE] + r_e * sh_r
+    s11 = P[IN, IN] + r_n * sh_r
+    s01 = P[IE, IN]
     if ge_on is not None:  # H = [I_pos, I_b]: S gains 2 P(pos, b) + P(b, b)
         s00 += 2.0 * ge[0] + ge[GE_PEE]
         s11 += 2.0 * ge[7] + ge[GE_PNN]
@@ -710,10 +725,10 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         if reset:
             add_e += ye * ye
             add_n += yn * yn
-            P[0, 0] += ye * ye
-            P[3, 3] += yn * yn
+            P[IE, IE] += ye * ye
+            P[IN, IN] += yn * yn
         if sage_on is not None:  # Zeng et al. Sage-Husa on a scale of R, with the divergence guard
-            sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e + r_n)
+            sample = (ye * ye - P[IE, IE] + yn * yn - P[IN, IN]) / (r_e + r_n)
             sh_r = sage_husa_r(sh_r, sh_m, prm[PAR_SH_B], sample, prm[PAR_SH_RMIN],
                                prm[PAR_SH_RMAX])
             sh_m += 1
@@ -721,14 +736,14 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             rn = r_n * sh_r * f_wh
         if (whiten_off is None and not reset and r_fac == 1.0 and nis <= prm[PAR_WH_NIS]
                 and not is_static  # a stop has its own rule (R x m, above)
-                and P[0, 0] + P[3, 3] < (r_e + r_n) * sh_r):  # converged only
+                and P[IE, IE] + P[IN, IN] < (r_e + r_n) * sh_r):  # converged only
             # normalised innovations; their lag-one product only between fixes at most
             # PAR_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
             # under PAR_WH_NIS: a filter error (a drive-off with an unknown heading, the
             # end of an outage) also makes the innovations correlated, and inflating R
             # then slowed its correction (11 m instead of 7 m, 10 s later)
-            ue = ye / math.sqrt(P[0, 0] + r_e * sh_r)
-            un = yn / math.sqrt(P[3, 3] + r_n * sh_r)
+            ue = ye / math.sqrt(P[IE, IE] + r_e * sh_r)
+            un = yn / math.sqrt(P[IN, IN] + r_n * sh_r)
             d_wh = (1.0 - prm[PAR_WH_B]) / (1.0 - prm[PAR_WH_B] ** (wh_m + 1.0))
             wh_c0 = (1.0 - d_wh) * wh_c0 + d_wh * 0.5 * (ue * ue + un * un)
             if t - wh_t <= prm[PAR_WH_GAP]:
@@ -756,7 +771,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             ok2 = ok1
         else:
             ok1 = unit_update(x, P, i_e, ye, re, 1.0, K, PHt, no_cons)
-            ok2 = unit_update(x, P, i_n, z_n - x[3], rn, 1.0, K, PHt, no_cons)
+            ok2 = unit_update(x, P, i_n, z_n - x[IN], rn, 1.0, K, PHt, no_cons)
         if ok1 and ok2:
             used = True
             n_fix += 1.0
@@ -898,8 +913,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # ---- 1. predict (Fang et al. CS model; Zeng et al. static hold; fading memory)
         if k > 0 and T > 0.0:
             if adapt_q:  # Fang et al. eqs. (14)-(15)
-                s2e = cs_sigma_a2(x[2], prm[PAR_AMAX], prm[PAR_AMIN], ka[k], sigma_a)
-                s2n = cs_sigma_a2(x[5], prm[PAR_AMAX], prm[PAR_AMIN], ka[k], sigma_a)
+                s2e = cs_sigma_a2(x[IAE], prm[PAR_AMAX], prm[PAR_AMIN], ka[k], sigma_a)
+                s2n = cs_sigma_a2(x[IAN], prm[PAR_AMAX], prm[PAR_AMIN], ka[k], sigma_a)
             else:
                 s2e = sigma_a * sigma_a
                 s2n = s2e
@@ -908,12 +923,12 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             if fading_on is not None:
                 lam = fading_factor(prm[PAR_FADING], T)
             f_eps = math.exp(-T / tau_eps)
-            p66 = P[6, 6]
+            p66 = P[IEPS, IEPS]
             predict_mean(x, T, f_eps if prm[PAR_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
             predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[PAR_Q_EPS], prm[PAR_Q_KS], lam, hold, qbuf)
             if ge_on is not None:  # GNSS error states: 1/tau_b = 1/tau + speed/distance (multipath
                 # decorrelates with the antenna's displacement; parked, only with time)
-                sp_b = 0.0 if hold else math.sqrt(x[1] * x[1] + x[4] * x[4])
+                sp_b = 0.0 if hold else math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
                 f_b = math.exp(-T * (prm[PAR_GE_RATE] + sp_b * prm[PAR_GE_DIST_RATE]))
                 gw[GW_PRED, 0] = T
                 gw[GW_PRED, 1] = f_eps
@@ -928,8 +943,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 # larger variance only costs the next fix its precision in float64 (NaN P)
                 add_e = (prm[PAR_GAP_SPEED] * min(T, prm[PAR_MAX_GAP])) ** 2
                 add_n = add_e
-                P[0, 0] += add_e
-                P[3, 3] += add_n
+                P[IE, IE] += add_e
+                P[IN, IN] += add_n
             if turn_off is None and not hold:  # our choice: the gyro turns v and a (aekf.turn_propagation)
                 if has_gyro[k] and math.isfinite(yaw[k]):
                     w_use = -yaw[k]  # the rate read at the end of the step
@@ -959,20 +974,20 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 elif not hold:  # the gyro does not drive the heading in this step: no floor
                     vpsi = 0.0
                     cpe = 0.0
-                sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+                sp = math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
                 if not hold and sp >= omega_min:
-                    ce = x[4] / sp  # cross-track unit: (d v / d psi) / speed
-                    cn = -x[1] / sp
-                    d = sp * sp * vpsi - (ce * ce * P[1, 1] + 2.0 * ce * cn * P[1, 4]
-                                          + cn * cn * P[4, 4])
+                    ce = x[IVN] / sp  # cross-track unit: (d v / d psi) / speed
+                    cn = -x[IVE] / sp
+                    d = sp * sp * vpsi - (ce * ce * P[IVE, IVE] + 2.0 * ce * cn * P[IVE, IVN]
+                                          + cn * cn * P[IVN, IVN])
                     if d > 0.0:
                         fl_ee = d * ce * ce
                         fl_nn = d * cn * cn
                         fl_en = d * ce * cn
-                        P[1, 1] += fl_ee
-                        P[4, 4] += fl_nn
-                        P[1, 4] += fl_en
-                        P[4, 1] = P[1, 4]
+                        P[IVE, IVE] += fl_ee
+                        P[IVN, IVN] += fl_nn
+                        P[IVE, IVN] += fl_en
+                        P[IVN, IVE] = P[IVE, IVN]
         # ---- 2. GNSS position fix
         nis_out[k] = math.nan
         gnss_used[k] = False
@@ -1012,11 +1027,11 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     elif ge_on is not None:
                         n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[PAR_R_ZUPT], y)
             else:
-                sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+                sp = math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
                 use = True
                 if sp >= omega_min:
-                    ue = x[1] / sp
-                    un = x[4] / sp
+                    ue = x[IVE] / sp
+                    un = x[IVN] / sp
                 else:
                     ue = math.sin(psi_mem)
                     un = math.cos(psi_mem)
@@ -1059,14 +1074,14 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # ---- 4. gyro: heading rate (Fang et al.), or the drift alone at standstill
         if has_gyro[k]:
             if is_static:
-                y = -yaw[k] - x[6]
+                y = -yaw[k] - x[IEPS]
                 if not unit_update(x, P, i_eps, y, prm[PAR_R_OMEGA], 1.0, K, PHt, no_cons):
                     info[INF_SKIPPED] += 1.0
                 elif ge_on is not None:
                     n_rows = ge_push(gw, n_rows, 6.0, H, PHt, prm[PAR_R_OMEGA], y)
             elif turn_off is None and omega_skip_on is not None:
                 pass  # the gyro already turned the velocity in the prediction
-            elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
+            elif math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN]) >= omega_min:
                 h = omega_row(x, H)
                 z = -yaw[k]
                 if turn_off is None:  # OMEGA_LATERAL: the turn is in the prediction; what is left of the
@@ -1074,8 +1089,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     # corrects v too: with v, eps or both as consider states the 10 minute
                     # outage of tests/test_faults.py ended 2-3 x farther off)
                     z = 0.0
-                    h -= x[6]
-                    H[6] = 0.0
+                    h -= x[IEPS]
+                    H[IEPS] = 0.0
                 # drift as a consider state while moving (aekf.drift_consider): without an
                 # absolute reference a sustained turn (the Singer covariance lets a decay while
                 # the mean holds it) or a speed update (through P[eps, v]) must not move eps
@@ -1094,19 +1109,19 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         if ge_on is not None:  # noqa: SIM102 (the block: prediction and DR rows; numba prunes a plain test)
             if ge_pred or n_rows > 0:
                 ge_epoch(ge, gw, n_rows, ge_pred, alpha, prm[PAR_GE_VAR])
-        sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+        sp = math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
         if floor_off is None and gnss_used[k] and sp >= heading_min:  # the heading floor restarts from P
-            ce = x[4] / sp
-            cn = -x[1] / sp
-            vpsi = min((ce * ce * P[1, 1] + 2.0 * ce * cn * P[1, 4] + cn * cn * P[4, 4])
+            ce = x[IVN] / sp
+            cn = -x[IVE] / sp
+            vpsi = min((ce * ce * P[IVE, IVE] + 2.0 * ce * cn * P[IVE, IVN] + cn * cn * P[IVN, IVN])
                        / (sp * sp), VPSI_MAX)
-            cpe = (ce * P[1, 6] + cn * P[4, 6]) / sp
+            cpe = (ce * P[IVE, IEPS] + cn * P[IVN, IEPS]) / sp
         # ---- remembered heading for the odometer row near standstill
         if sp >= heading_min:  # slower, while braking, the Newton step can reverse v
-            psi_mem = math.atan2(x[1], x[4])
+            psi_mem = math.atan2(x[IVE], x[IVN])
             heading_known = True
         elif has_gyro[k] and k > 0:
-            psi_mem += (-yaw[k] - x[6]) * T
+            psi_mem += (-yaw[k] - x[IEPS]) * T
         if has_gyro[k] and math.isfinite(yaw[k]):
             w_held = -yaw[k]
             w_t = t
@@ -1115,14 +1130,14 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             x_out[i, k] = x[i]
             if not math.isfinite(x[i]):
                 info[INF_NONFINITE] += 1.0
-        pcov_out[0, k] = P[0, 0]
-        pcov_out[1, k] = P[3, 3]
-        pcov_out[2, k] = P[0, 3]
+        pcov_out[0, k] = P[IE, IE]
+        pcov_out[1, k] = P[IN, IN]
+        pcov_out[2, k] = P[IE, IN]
         if ge_on is not None:
             b_out[0, k] = ge[GE_BE]
             b_out[1, k] = ge[GE_BN]
-        sd_out[0, k] = math.sqrt(max(P[6, 6], 0.0))
-        sd_out[1, k] = math.sqrt(max(P[7, 7], 0.0))
+        sd_out[0, k] = math.sqrt(max(P[IEPS, IEPS], 0.0))
+        sd_out[1, k] = math.sqrt(max(P[IKS, IKS], 0.0))
         for i in range(n):
             if P[i, i] < info[INF_MIN_DIAG] or not math.isfinite(P[i, i]):
                 info[INF_MIN_DIAG] = P[i, i] if math.isfinite(P[i, i]) else -math.inf
