@@ -1,4 +1,4 @@
-"""Fixed-interval Rauch-Tung-Striebel smoother over the ekf/aekf forward pass (ALGORITHMS.md 5).
+"""Fixed-interval Rauch-Tung-Striebel smoother over the ekf/aekf forward pass (docs/algorithms.md#rts).
 
 Checkpointed: the forward kernel (:mod:`gpsdr_cli.filters.kernels_aekf`) keeps,
 per epoch, only the posterior state (8 floats) and the seven scalars from which
@@ -10,7 +10,7 @@ triangle of P(k|k) for that segment only, then walks it backwards; Phi is
 recomputed from dt.  Cost: one extra forward pass.  Memory: about
 (8 + 7) x 8 = 120 B per epoch (43 MB for a one-hour drive at 100 Hz) instead
 of 2 x 64 x 8 for two full covariance stacks (368 MB).  Each backward step is
-:func:`gpsdr_cli.filters.linalg.rts_step` (a Cholesky solve, no inverse).
+:func:`gpsdr_cli.filters.core.rts.rts_step` (a Cholesky solve, no inverse).
 
 Mean transition for the smoother gain: the covariance transition Phi (Singer
 blocks) is the one that produced P(k+1|k), so it is the Phi in
@@ -38,6 +38,8 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
+from .filters.core.packing import unpack
+from .filters.core.rts import phi_times, rts_step
 from .filters.kernels_aekf import (
     GE_BE,
     GE_BN,
@@ -49,27 +51,25 @@ from .filters.kernels_aekf import (
     N_GE,
     N_GE_PACKED,
     N_PACKED,
-    P_ALPHA,
-    P_EPS_MEAN_DECAY,
-    P_GE_VAR,
-    P_Q_EPS,
-    P_Q_KS,
-    P_R_OMEGA,
-    P_SCALE_VAR,
-    P_TAU_EPS,
-    Q_FB,
-    Q_GAIN,
-    Q_LAM,
-    Q_W,
+    PAR_ALPHA,
+    PAR_EPS_MEAN_DECAY,
+    PAR_GE_VAR,
+    PAR_Q_EPS,
+    PAR_Q_KS,
+    PAR_R_OMEGA,
+    PAR_SCALE_VAR,
+    PAR_TAU_EPS,
+    PRI_FB,
+    PRI_GAIN,
+    PRI_LAM,
+    PRI_W,
     ge_epoch,
     ge_turn,
     predict_mean,
     rebuild_prior,
     turn_jacobian,
-    unpack,
 )
-from .filters.linalg import rts_step
-from .models.cs_model import N_STATES, singer_phi
+from .models.cs_model import IE, IEPS, IKS, IN, N_STATES, singer_phi
 
 
 @njit(cache=True)
@@ -94,20 +94,20 @@ def ge_prior(G: np.ndarray, gw: np.ndarray, x: np.ndarray, T: float, alpha: floa
     """The GNSS error block of k-1 -> the prior of k the forward pass used (kernels_aekf.ge_epoch).
 
     ``x``: the predicted, turned mean (from rebuild_prior); ``pr`` the stored prior scalars
-    (f_b, the gyro rate of the turn, fading, the seed 001 factor).
+    (f_b, the gyro rate of the turn, fading, the innovation adaptive factor).
     """
     gw[GW_PRED, 0] = T
     gw[GW_PRED, 1] = math.exp(-T / tau_eps)
-    gw[GW_PRED, 2] = pr[Q_LAM]
+    gw[GW_PRED, 2] = pr[PRI_LAM]
     gw[GW_PRED, 3] = 1.0 if hold else 0.0
-    gw[GW_PRED, 4] = pr[Q_FB]
+    gw[GW_PRED, 4] = pr[PRI_FB]
     gw[GW_PRED, 5] = 0.0
-    if math.isfinite(pr[Q_W]):
-        ge_turn(gw, x, T, pr[Q_W])
+    if math.isfinite(pr[PRI_W]):
+        ge_turn(gw, x, T, pr[PRI_W])
     ge_epoch(G, gw, np.int64(0), T > 0.0, alpha, var_b)  # int64 and bool: the kernel's types
-    if pr[Q_GAIN] != 1.0:  # seed 001 factor: the kinematic rows of P(x, b) too
+    if pr[PRI_GAIN] != 1.0:  # innovation adaptive factor: the kinematic rows of P(x, b) too
         for i in range(12):
-            G[i] *= math.sqrt(pr[Q_GAIN])
+            G[i] *= math.sqrt(pr[PRI_GAIN])
 
 
 @njit(cache=True)
@@ -136,7 +136,7 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
     (``b_io[:, k]`` forward posterior in, smoothed out; their covariances stored
     after the packed P); the step is then a 10-state RTS step whose prior is
     rebuilt with the 8-state one (:func:`~gpsdr_cli.filters.kernels_aekf.rebuild_prior`) and whose
-    transition has ``f_b = prior_store[k + 1, Q_FB]`` for b.  ``x_s_next``,
+    transition has ``f_b = prior_store[k + 1, PRI_FB]`` for b.  ``x_s_next``,
     ``P_s_next`` are then 10-long / 10 x 10.
 
     ``x_io[:, k]`` holds the forward posterior and receives the smoothed state;
@@ -147,8 +147,8 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
     """
     n8 = N_STATES
     n = N_STATES + 2 if ge_on else N_STATES
-    alpha = prm[P_ALPHA]
-    tau_eps = prm[P_TAU_EPS]
+    alpha = prm[PAR_ALPHA]
+    tau_eps = prm[PAR_TAU_EPS]
     P8 = np.zeros((n8, n8))
     G = np.zeros(N_GE if ge_on else 0)
     gw = np.zeros((GW_ROWS, N_STATES))
@@ -159,6 +159,7 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
     F8 = np.zeros((n8, n8))
     L = np.zeros((n, n))
     B = np.zeros((n, n))
+    dx = np.zeros(n)
     x_post = np.zeros(n)
     x_prior = np.zeros(n)
     x8 = np.zeros(n8)
@@ -184,20 +185,20 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
             x_post[i] = x8[i]
         if T > 0.0:
             pr = prior_store[k + 1]
-            f_mean = math.exp(-T / tau_eps) if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0
+            f_mean = math.exp(-T / tau_eps) if prm[PAR_EPS_MEAN_DECAY] != 0.0 else 1.0
             predict_mean(x8, T, f_mean, hold[k + 1])
             _phi_dense(T, alpha, tau_eps, hold[k + 1], F8)
-            w = pr[Q_W]
+            w = pr[PRI_W]
             if math.isfinite(w):  # aekf.turn_propagation: F = J Phi at the predicted mean
                 turn_jacobian(F8, x8, T, w)
             if ge_on:
                 G[GE_BE] = x_post[n8]
                 G[GE_BN] = x_post[n8 + 1]
             # the prior as the forward pass built it, the GNSS error block with it
-            rebuild_prior(P8, x8, T, alpha, tau_eps, prm[P_Q_EPS], prm[P_Q_KS],
-                          prm[P_R_OMEGA], pr, hold[k + 1], qbuf, prm[P_SCALE_VAR])
+            rebuild_prior(P8, x8, T, alpha, tau_eps, prm[PAR_Q_EPS], prm[PAR_Q_KS],
+                          prm[PAR_R_OMEGA], pr, hold[k + 1], qbuf, prm[PAR_SCALE_VAR])
             if ge_on:
-                ge_prior(G, gw, x8, T, alpha, tau_eps, pr, hold[k + 1], prm[P_GE_VAR])
+                ge_prior(G, gw, x8, T, alpha, tau_eps, pr, hold[k + 1], prm[PAR_GE_VAR])
             for i in range(n8):
                 x_prior[i] = x8[i]
                 for j in range(n8):
@@ -211,15 +212,16 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
                     F[i, n8 + 1] = 0.0
                     F[n8, i] = 0.0
                     F[n8 + 1, i] = 0.0
-                F[n8, n8] = pr[Q_FB]
-                F[n8 + 1, n8 + 1] = pr[Q_FB]
+                F[n8, n8] = pr[PRI_FB]
+                F[n8 + 1, n8 + 1] = pr[PRI_FB]
                 F[n8, n8 + 1] = 0.0
                 F[n8 + 1, n8] = 0.0
             else:
                 for i in range(n8):
                     for j in range(n8):
                         P_prior[i, j] = P8[i, j]
-            rts_step(x_post, P_post, x_prior, P_prior, F, x_s_next, P_s_next, x_s, P_s, L, B)
+            phi_times(F, P_post, B)
+            rts_step(n, x_post, P_post, B, x_prior, P_prior, x_s_next, P_s_next, x_s, P_s, L, dx)
         else:  # no time step: the smoothed estimate carries over
             for i in range(n):
                 x_s[i] = x_s_next[i]
@@ -234,11 +236,11 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
             x_s_next[i] = x_s[i]
             for j in range(n):
                 P_s_next[i, j] = P_s[i, j]
-        pcov_out[0, k] = P_s[0, 0]
-        pcov_out[1, k] = P_s[3, 3]
-        pcov_out[2, k] = P_s[0, 3]
-        sd_out[0, k] = math.sqrt(max(P_s[6, 6], 0.0))
-        sd_out[1, k] = math.sqrt(max(P_s[7, 7], 0.0))
+        pcov_out[0, k] = P_s[IE, IE]
+        pcov_out[1, k] = P_s[IN, IN]
+        pcov_out[2, k] = P_s[IE, IN]
+        sd_out[0, k] = math.sqrt(max(P_s[IEPS, IEPS], 0.0))
+        sd_out[1, k] = math.sqrt(max(P_s[IKS, IKS], 0.0))
 
 
 def rts_checkpointed(run_segment: Callable[[int, int, np.ndarray, np.ndarray, np.ndarray,

@@ -7,14 +7,14 @@ All are small numba functions (``cache=True``) on scalars, callable from any
   GNSS position fix (the gate and its no-lock-out reset live in the kernel:
   after ``gate_reset_s`` of continuous rejections a fix is accepted and the
   position variance inflated by the squared innovation).
-- :func:`adaptive_factor`: seed 001's innovation-based adaptive factor
+- :func:`adaptive_factor`: the innovation-factor paper's innovation-based adaptive factor
   ``beta = sqrt(v^T v / tr(C))``, ``alpha = 1`` if ``beta <= c`` else ``c/beta``;
-  used (ALGORITHMS.md 3, Yang's form) as ``P(k|k-1) <- P(k|k-1)/alpha``.
-- :func:`fading_factor`: fading memory (seed 004) ``P(k|k-1) = lambda Phi P Phi^T + Q``
+  used (docs/algorithms.md#adaptive-factor, Yang's form) as ``P(k|k-1) <- P(k|k-1)/alpha``.
+- :func:`fading_factor`: fading memory (Zeng et al.) ``P(k|k-1) = lambda Phi P Phi^T + Q``
   with lambda given per second and applied as ``lambda**T``, so the forgetting
   does not depend on the epoch rate.
 - :func:`sage_husa_r`: Sage-Husa maximum a posteriori estimate of a scale factor on
-  the GNSS R (seed 004), with the divergence guard: each sample and the
+  the GNSS R (Zeng et al.), with the divergence guard: each sample and the
   estimate are clamped to ``[r_min, r_max]`` so R stays positive definite and
   cannot collapse or blow up.
 
@@ -51,7 +51,7 @@ def nis_2d(ye: float, yn: float, s00: float, s01: float, s11: float) -> float:
 
 @njit(cache=True)
 def adaptive_factor(ye: float, yn: float, trace_c: float, c: float) -> float:
-    """seed 001 adaptive factor alpha in (0, 1] from the innovation (y_e, y_n) and tr(C).
+    """innovation adaptive factor alpha in (0, 1] from the innovation (y_e, y_n) and tr(C).
 
     ``C = H P(k|k-1) H^T + R``; ``beta = sqrt(v^T v / tr C)``; ``alpha = 1`` if
     ``beta <= c`` else ``c / beta`` (c = 0.9 in the paper).
@@ -75,7 +75,7 @@ def fading_factor(lambda_per_s: float, T: float) -> float:
 @njit(cache=True)
 def sage_husa_r(r_prev: float, m: int, b: float, sample: float, r_min: float,
                 r_max: float) -> float:
-    """One Sage-Husa step on a dimensionless R scale factor (seed 004).
+    """One Sage-Husa step on a dimensionless R scale factor (Zeng et al.).
 
     ``d_m = (1 - b)/(1 - b^(m+1))``; ``r_m = (1 - d_m) r_(m-1) + d_m * sample`` where
     the caller's sample is ``(y^T y - H P(k|k-1) H^T) / R_nominal`` (the unbiased

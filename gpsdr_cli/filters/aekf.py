@@ -1,4 +1,4 @@
-"""AEKF: seed 000's adaptive EKF on the current statistical model (ALGORITHMS.md 1, 3, 4, 5).
+"""AEKF: Fang et al.'s adaptive EKF on the current statistical model (docs/algorithms.md#aekf).
 
 ``run(epochs, params)`` prepares arrays and calls the compiled kernel
 :func:`gpsdr_cli.filters.kernels_aekf.cs_filter_kernel`; the same preparation
@@ -7,7 +7,7 @@ serves the non-adaptive baseline :mod:`gpsdr_cli.filters.ekf` (``adaptive=False`
 What is adaptive here (``[gnss]``, ``[aekf]``, ``[adaptive]`` in config.py):
 
 - Q: per axis ``sigma_a^2`` from the current acceleration estimate
-  (seed 000 eqs. (14)-(15)) scaled by the regime's K_a;
+  (Fang et al. eqs. (14)-(15)) scaled by the regime's K_a;
 - R and K_a from PDOP: three regimes (``pdop_mode = "regimes"``: good <
   pdop_good <= medium < pdop_poor <= poor) or ``"continuous"``: log k and log K_a
   interpolated linearly over PDOP through (pdop_good, good),
@@ -17,10 +17,10 @@ What is adaptive here (``[gnss]``, ``[aekf]``, ``[adaptive]`` in config.py):
   base sigma already carries the quality).  Between fixes K_a keeps the last
   GNSS record's regime; inside a GNSS outage (``epochs.gnss_outage``) it is the
   poor regime's ("no fix: DR dominates");
-- options for every filter: seed 001 adaptive factor, fading memory,
+- options for every filter: innovation adaptive factor, fading memory,
   Sage-Husa R, chi-square gate, standstill (ZUPT + held position).
 
-Our choices beyond seed 000 (``[aekf]``, ``[gnss]``; the benchmark chose the
+Our choices beyond Fang et al. (``[aekf]``, ``[gnss]``; the benchmark chose the
 defaults, ``turn_propagation = false`` and ``gate_mode = "reject"`` give the
 earlier behaviour): the gyro turns the velocity and acceleration in the
 prediction (heading driven by the gyro in mean and covariance, the drift
@@ -91,7 +91,7 @@ def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarr
 
     ``adaptive=False`` (ekf): one sigma for the whole drive, the median over the
     fixes of the base sigma ``sqrt((sd_e^2 + sd_n^2)/2)``; K_a = 1 everywhere.
-    ``adaptive=True`` (aekf): seed 000's PDOP regimes or their continuous form.
+    ``adaptive=True`` (aekf): Fang et al.'s PDOP regimes or their continuous form.
     """
     g = params["gnss"]
     n = len(epochs)
@@ -118,7 +118,7 @@ def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarr
 
 
 def pdop_factors(pdop: np.ndarray, g: dict) -> tuple[np.ndarray, np.ndarray]:
-    """R factor k and Q factor K_a for each PDOP (seed 000's table; NaN PDOP -> good)."""
+    """R factor k and Q factor K_a for each PDOP (Fang et al.'s table; NaN PDOP -> good)."""
     good, poor = float(g["pdop_good"]), float(g["pdop_poor"])
     ks = np.array([g["k_good"], g["k_medium"], g["k_poor"]], float)
     kas = np.array([g["ka_good"], g["ka_medium"], g["ka_poor"]], float)
@@ -338,87 +338,87 @@ def sensor_masks(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray
 
 
 def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The kernel's float parameter vector and integer flags (see kernels_aekf P_*/F_*)."""
+    """The kernel's float parameter vector and integer flags (see kernels_aekf PAR_*/FLG_*)."""
     a, ad, st, g = params["aekf"], params["adaptive"], params["standstill"], params["gnss"]
     gy, od = params["gyro"], params["odo"]
     prm = np.zeros(kn.N_PRM)
-    prm[kn.P_ALPHA] = 1.0 / a["tau_a_s"]
-    prm[kn.P_AMAX] = a["a_max_mps2"]
-    prm[kn.P_AMIN] = a["a_min_mps2"]
-    prm[kn.P_SIGMA_A] = a["sigma_a_mps2"]
-    prm[kn.P_TAU_EPS] = gy["bias_tau_s"]
-    prm[kn.P_Q_EPS] = 2.0 * gy["bias_sd_radps"] ** 2 / gy["bias_tau_s"]  # ALGORITHMS.md 1
-    prm[kn.P_Q_KS] = od["scale_rw_sd"] ** 2
-    prm[kn.P_R_OMEGA] = gy["noise_sd_radps"] ** 2
-    prm[kn.P_R_ODO] = od["noise_sd_mps"] ** 2
-    prm[kn.P_STATIC_SPEED] = st["speed_mps"]
-    prm[kn.P_R_ZUPT] = st["zupt_sd_mps"] ** 2
-    prm[kn.P_OMEGA_MIN] = st["omega_min_speed_mps"]
-    prm[kn.P_GATE_THR] = gate_threshold(g["gate_prob"])
-    prm[kn.P_GATE_RESET] = g["gate_reset_s"]
-    prm[kn.P_INNOV_C] = ad["innovation_c"]
-    prm[kn.P_FADING] = ad["fading_lambda"]
-    prm[kn.P_SH_B] = ad["sage_husa_b"]
-    prm[kn.P_SH_RMIN] = ad["sage_husa_r_min"]
-    prm[kn.P_SH_RMAX] = ad["sage_husa_r_max"]
-    prm[kn.P_EPS_MEAN_DECAY] = float(a["drift_mean_decay"])
-    prm[kn.P_GYRO_HOLD] = a["gyro_hold_s"]
-    prm[kn.P_GATE_INFLATE_MAX] = g["gate_inflate_max"]
-    prm[kn.P_GATE_WARMUP] = g["gate_warmup_fixes"]
-    prm[kn.P_GATE_INFLATE_AFTER] = g["gate_inflate_after_s"]
-    prm[kn.P_MAX_GAP] = a["max_gap_s"]
-    prm[kn.P_GAP_SPEED] = MAX_SPEED_MPS
-    prm[kn.P_WH_B] = a["whitening_b"]
-    prm[kn.P_WH_MAX] = a["whitening_max"]
-    prm[kn.P_WH_GAP] = a["whitening_gap_s"]
-    prm[kn.P_WH_NIS] = gate_threshold(a["whitening_nis_prob"])
-    prm[kn.P_SCALE_VAR] = gy["scale_sd"] ** 2
-    prm[kn.P_GVEL_VAR] = a["gnss_velocity_sd_mps"] ** 2 if a["gnss_velocity"] else 0.0
-    prm[kn.P_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
-    prm[kn.P_GE_VAR] = a["gnss_err_sd_m"] ** 2
-    prm[kn.P_GE_RATE] = 1.0 / a["gnss_err_tau_s"]
-    prm[kn.P_GE_DIST_RATE] = 1.0 / a["gnss_err_dist_m"] if a["gnss_err_dist_m"] > 0.0 else 0.0
+    prm[kn.PAR_ALPHA] = 1.0 / a["tau_a_s"]
+    prm[kn.PAR_AMAX] = a["a_max_mps2"]
+    prm[kn.PAR_AMIN] = a["a_min_mps2"]
+    prm[kn.PAR_SIGMA_A] = a["sigma_a_mps2"]
+    prm[kn.PAR_TAU_EPS] = gy["bias_tau_s"]
+    prm[kn.PAR_Q_EPS] = 2.0 * gy["bias_sd_radps"] ** 2 / gy["bias_tau_s"]  # docs/algorithms.md#cs-model
+    prm[kn.PAR_Q_KS] = od["scale_rw_sd"] ** 2
+    prm[kn.PAR_R_OMEGA] = gy["noise_sd_radps"] ** 2
+    prm[kn.PAR_R_ODO] = od["noise_sd_mps"] ** 2
+    prm[kn.PAR_STATIC_SPEED] = st["speed_mps"]
+    prm[kn.PAR_R_ZUPT] = st["zupt_sd_mps"] ** 2
+    prm[kn.PAR_OMEGA_MIN] = st["omega_min_speed_mps"]
+    prm[kn.PAR_GATE_THR] = gate_threshold(g["gate_prob"])
+    prm[kn.PAR_GATE_RESET] = g["gate_reset_s"]
+    prm[kn.PAR_INNOV_C] = ad["innovation_c"]
+    prm[kn.PAR_FADING] = ad["fading_lambda"]
+    prm[kn.PAR_SH_B] = ad["sage_husa_b"]
+    prm[kn.PAR_SH_RMIN] = ad["sage_husa_r_min"]
+    prm[kn.PAR_SH_RMAX] = ad["sage_husa_r_max"]
+    prm[kn.PAR_EPS_MEAN_DECAY] = float(a["drift_mean_decay"])
+    prm[kn.PAR_GYRO_HOLD] = a["gyro_hold_s"]
+    prm[kn.PAR_GATE_INFLATE_MAX] = g["gate_inflate_max"]
+    prm[kn.PAR_GATE_WARMUP] = g["gate_warmup_fixes"]
+    prm[kn.PAR_GATE_INFLATE_AFTER] = g["gate_inflate_after_s"]
+    prm[kn.PAR_MAX_GAP] = a["max_gap_s"]
+    prm[kn.PAR_GAP_SPEED] = MAX_SPEED_MPS
+    prm[kn.PAR_WH_B] = a["whitening_b"]
+    prm[kn.PAR_WH_MAX] = a["whitening_max"]
+    prm[kn.PAR_WH_GAP] = a["whitening_gap_s"]
+    prm[kn.PAR_WH_NIS] = gate_threshold(a["whitening_nis_prob"])
+    prm[kn.PAR_SCALE_VAR] = gy["scale_sd"] ** 2
+    prm[kn.PAR_GVEL_VAR] = a["gnss_velocity_sd_mps"] ** 2 if a["gnss_velocity"] else 0.0
+    prm[kn.PAR_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
+    prm[kn.PAR_GE_VAR] = a["gnss_err_sd_m"] ** 2
+    prm[kn.PAR_GE_RATE] = 1.0 / a["gnss_err_tau_s"]
+    prm[kn.PAR_GE_DIST_RATE] = 1.0 / a["gnss_err_dist_m"] if a["gnss_err_dist_m"] > 0.0 else 0.0
     flg = np.zeros(kn.N_FLG, np.int64)
-    flg[kn.F_ADAPT_Q] = int(adaptive)
-    flg[kn.F_STANDSTILL] = int(st["enabled"])
-    flg[kn.F_GATE] = int(g["gate"])
-    flg[kn.F_INNOV] = int(ad["innovation_factor"])
-    flg[kn.F_FADING] = int(ad["fading"])
-    flg[kn.F_SAGE_HUSA] = int(ad["sage_husa"])
-    flg[kn.F_CHECK_SPD] = int(a["check_spd"])
-    flg[kn.F_STORE] = int(store)
-    flg[kn.F_GE] = int(a["gnss_err_states"])
+    flg[kn.FLG_ADAPT_Q] = int(adaptive)
+    flg[kn.FLG_STANDSTILL] = int(st["enabled"])
+    flg[kn.FLG_GATE] = int(g["gate"])
+    flg[kn.FLG_INNOV] = int(ad["innovation_factor"])
+    flg[kn.FLG_FADING] = int(ad["fading"])
+    flg[kn.FLG_SAGE_HUSA] = int(ad["sage_husa"])
+    flg[kn.FLG_CHECK_SPD] = int(a["check_spd"])
+    flg[kn.FLG_STORE] = int(store)
+    flg[kn.FLG_GE] = int(a["gnss_err_states"])
     modes = {"never": 0, "outage": 1, "always": 2}
     if a["drift_consider"] not in modes:
         raise ConfigError(f"aekf.drift_consider = {a['drift_consider']!r}: expected one of "
                           f"{', '.join(modes)}")
-    flg[kn.F_DRIFT_CONSIDER] = modes[a["drift_consider"]]
+    flg[kn.FLG_DRIFT_CONSIDER] = modes[a["drift_consider"]]
     if a["odo_consider"] not in modes:
         raise ConfigError(f"aekf.odo_consider = {a['odo_consider']!r}: expected one of "
                           f"{', '.join(modes)}")
-    flg[kn.F_ODO_CONSIDER] = modes[a["odo_consider"]]
-    flg[kn.F_HEADING_CONSIDER] = int(a["heading_consider"])
-    flg[kn.F_TURN] = int(a["turn_propagation"])
-    flg[kn.F_ODO_ALONG] = int(a["odo_along_track"])
-    flg[kn.F_HEADING_FLOOR] = int(a["heading_floor"])
+    flg[kn.FLG_ODO_CONSIDER] = modes[a["odo_consider"]]
+    flg[kn.FLG_HEADING_CONSIDER] = int(a["heading_consider"])
+    flg[kn.FLG_TURN] = int(a["turn_propagation"])
+    flg[kn.FLG_ODO_ALONG] = int(a["odo_along_track"])
+    flg[kn.FLG_HEADING_FLOOR] = int(a["heading_floor"])
     if a["lateral_acc_only"] not in modes:
         raise ConfigError(f"aekf.lateral_acc_only = {a['lateral_acc_only']!r}: expected one of "
                           f"{', '.join(modes)}")
-    flg[kn.F_LATERAL_ACC] = modes[a["lateral_acc_only"]]
-    flg[kn.F_WHITEN] = int(adaptive and a["innovation_whitening"])  # the ekf keeps a fixed R
+    flg[kn.FLG_LATERAL_ACC] = modes[a["lateral_acc_only"]]
+    flg[kn.FLG_WHITEN] = int(adaptive and a["innovation_whitening"])  # the ekf keeps a fixed R
     if st["zupt_keeps_position"] not in modes:
         raise ConfigError(f"standstill.zupt_keeps_position = {st['zupt_keeps_position']!r}: expected "
                           f"one of {', '.join(modes)}")
-    flg[kn.F_ZUPT_POS] = modes[st["zupt_keeps_position"]]
+    flg[kn.FLG_ZUPT_POS] = modes[st["zupt_keeps_position"]]
     rows = {"skip": kn.OMEGA_SKIP, "lateral": kn.OMEGA_LATERAL}
     if a["turn_omega_row"] not in rows:
         raise ConfigError(f"aekf.turn_omega_row = {a['turn_omega_row']!r}: expected one of "
                           f"{', '.join(rows)}")
-    flg[kn.F_TURN_OMEGA] = rows[a["turn_omega_row"]]
+    flg[kn.FLG_TURN_OMEGA] = rows[a["turn_omega_row"]]
     gates = {"reject": kn.GATE_REJECT, "inflate": kn.GATE_INFLATE}
     if g["gate_mode"] not in gates:
         raise ConfigError(f"gnss.gate_mode = {g['gate_mode']!r}: expected one of {', '.join(gates)}")
-    flg[kn.F_GATE_MODE] = gates[g["gate_mode"]]
+    flg[kn.FLG_GATE_MODE] = gates[g["gate_mode"]]
     return prm, flg
 
 
@@ -503,20 +503,20 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     r_e, r_n, ka, sigma_const = gnss_noise(epochs, params, adaptive)
     x0, P0, psi0, heading_known = initial_state(epochs, params)
     prm, flg = kernel_params(params, adaptive, smooth)
-    prm[kn.P_COAST_Q] = coast_psd(epochs, params)
-    prm[kn.P_OFF_VVAR], prm[kn.P_OFF_AVAR] = drive_off_var(params)
+    prm[kn.PAR_COAST_Q] = coast_psd(epochs, params)
+    prm[kn.PAR_OFF_VVAR], prm[kn.PAR_OFF_AVAR] = drive_off_var(params)
     st = np.zeros(kn.N_ST)
-    st[kn.S_PSI] = psi0
-    st[kn.S_REJ_SINCE] = -1.0
-    st[kn.S_SH_R] = 1.0
-    st[kn.S_HEADING_KNOWN] = float(heading_known)
-    st[kn.S_W] = 0.0
-    st[kn.S_W_T] = -math.inf  # no gyro rate held yet
-    st[kn.S_ODO_T] = -math.inf  # no odometer record yet
-    st[kn.S_VPSI] = initial_heading_var(x0, P0, heading_known, params)
-    st[kn.S_WH_T] = -math.inf  # no previous innovation yet
-    st[kn.S_WH_T2] = -math.inf
-    st[kn.S_B_SINCE] = -1.0  # the bias gate's timer: not running
+    st[kn.ST_PSI] = psi0
+    st[kn.ST_REJ_SINCE] = -1.0
+    st[kn.ST_SH_R] = 1.0
+    st[kn.ST_HEADING_KNOWN] = float(heading_known)
+    st[kn.ST_W] = 0.0
+    st[kn.ST_W_T] = -math.inf  # no gyro rate held yet
+    st[kn.ST_ODO_T] = -math.inf  # no odometer record yet
+    st[kn.ST_VPSI] = initial_heading_var(x0, P0, heading_known, params)
+    st[kn.ST_WH_T] = -math.inf  # no previous innovation yet
+    st[kn.ST_WH_T2] = -math.inf
+    st[kn.ST_B_SINCE] = -1.0  # the bias gate's timer: not running
     f64 = np.float64
     x_out = np.empty((N_STATES, n))  # rows: contiguous track columns, no copies
     pcov = np.empty((3, n))
@@ -530,7 +530,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     P_seg = np.empty((seg if smooth else 0, kn.N_PACKED + kn.N_GE_PACKED))
     prior_store = np.empty((n if smooth else 0, kn.N_PRIOR))
     info_v = np.zeros(kn.N_INFO)
-    info_v[kn.I_MIN_DIAG] = math.inf
+    info_v[kn.INF_MIN_DIAG] = math.inf
     c64 = np.ascontiguousarray  # no copies of the (already contiguous) inputs: memory
     use_gyro, use_odo = sensor_masks(epochs, params)
     use_odo, odo_speed, gnss_still = odometer_inputs(epochs, params, use_odo)
@@ -568,28 +568,28 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         "filter": name,
         "gnss_rejected": int(gnss_rej.sum()),
         "gnss_used": int(gnss_used.sum()),
-        "gate_resets": int(info_v[kn.I_GATE_RESETS]),
-        "gnss_inflated": int(info_v[kn.I_INFLATED]),
+        "gate_resets": int(info_v[kn.INF_GATE_RESETS]),
+        "gnss_inflated": int(info_v[kn.INF_INFLATED]),
         "gyro_implausible": int(np.count_nonzero(epochs.has_gyro & ~use_gyro)),  # incl. clipped
         "odo_implausible": int(np.count_nonzero(epochs.has_odo & ~use_odo)),
-        "updates_skipped": int(info_v[kn.I_SKIPPED]),
-        "nonfinite_states": int(info_v[kn.I_NONFINITE]),
-        "min_p_diag": float(info_v[kn.I_MIN_DIAG]) if n else math.nan,
+        "updates_skipped": int(info_v[kn.INF_SKIPPED]),
+        "nonfinite_states": int(info_v[kn.INF_NONFINITE]),
+        "min_p_diag": float(info_v[kn.INF_MIN_DIAG]) if n else math.nan,
         "spd_checked": bool(params["aekf"]["check_spd"]),
-        "spd_failures": int(info_v[kn.I_SPD_FAIL]),
+        "spd_failures": int(info_v[kn.INF_SPD_FAIL]),
         "smoothed": smooth,
         "ekf_gnss_sigma_m": sigma_const,
         "gnss_err_states": bool(params["aekf"]["gnss_err_states"]),
         "gnss_standstill_epochs": gnss_still,
         "coast_epochs": int(np.count_nonzero(epochs.gnss_outage & ~static & (epochs.dt_s > 0.0)))
-        if prm[kn.P_COAST_Q] > 0.0 and not epochs.has_odo.any() else 0,
+        if prm[kn.PAR_COAST_Q] > 0.0 and not epochs.has_odo.any() else 0,
     }
     if ge_wanted and not params["aekf"]["gnss_err_states"]:
         info["gnss_err_states_off"] = (f"the receiver gives its velocity at {epochs.velocity_share:.0%} "
                                        f"of the fixes (< aekf.gnss_err_min_velocity_share)")
     if smooth and n:
         rts_checkpointed(run_segment, checkpoints, epochs.dt_s, hold, prm, x_out, prior_store,
-                         pcov, sd, P_seg, b_out, bool(flg[kn.F_GE]))
+                         pcov, sd, P_seg, b_out, bool(flg[kn.FLG_GE]))
     del P_seg, checkpoints
     return _result(epochs, x_out, pcov, sd, gnss_used, gnss_rej, nis, static, info, b_out)
 
@@ -603,13 +603,13 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
     :func:`run_cs` gives them (the same options from ``params``), so numba compiles, or
     loads from its cache, the specialisations the kernel then uses.  In order:
 
-    [0] ``joseph_apply``, which both halves call (before the fork: once);
-    [1] (helper) the GNSS fix's helpers ``nis_2d``, ``ge_fix_update``, ``ge_push``,
-    ``unit_update``; [2] (helper, once [3] is done) :func:`kernels_aekf.gnss_fix
+    [0] ``unit_update``, which both halves call (before the fork: once);
+    [1] (helper) the GNSS fix's helpers ``nis_2d``, ``ge_fix_update``, ``ge_push``;
+    [2] (helper, once [3] is done) :func:`kernels_aekf.gnss_fix
     <gpsdr_cli.filters.kernels_aekf.gnss_fix>`, which loads [3]'s ``ge_epoch`` from the
     cache;
     [3] ``ge_epoch``; [4] what only the kernel's 100-Hz path calls (``predict_cov``,
-    ``turn_predict``, ``ge_turn``, ``row_update``, ``pack``).
+    ``turn_predict``, ``ge_turn``, ``sparse_update``, ``pack``).
 
     The kernel, compiled after all of them where [3] and [4] ran, finds them compiled in
     its process or in the cache.  A type that drifted from the kernel's only costs time
@@ -626,8 +626,8 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
                 np.zeros((kn.GW_ROWS, N_STATES)), ge0.copy())
 
     def shared() -> None:
-        _, P, wk, _, _ = state()
-        kn.joseph_apply(P, wk[1], wk[2], 1.0, 1.0, wk[3])
+        x, P, wk, _, _ = state()
+        kn.unit_update(x, P, no_cons, 0.0, 1.0, 1.0, wk[1], wk[2], no_cons)
 
     def fix_helpers() -> None:
         x, P, wk, gw, ge = state()
@@ -635,30 +635,29 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
         if ge_on:
             kn.ge_fix_update(x, P, ge, 0.0, 0.0, 1.0, 1.0, wk[1], False)
             kn.ge_push(gw, no_cons, 1.0, wk[0], wk[2], 1.0, 0.0)
-        kn.unit_update(x, P, no_cons, 0.0, 1.0, wk[1], wk[2], wk[3], no_cons)
 
     def fix() -> None:
         x, P, wk, gw, ge = state()
         kn.gnss_fix(1.0, 1.0, 1.0, 1.0, math.nan, math.nan, x, P, np.zeros(kn.N_ST), prm, ge, gw,
-                    wk, np.zeros(kn.N_INFO), 0.0, False, False, bool(flg[kn.F_GATE]), False, 0.0,
+                    wk, np.zeros(kn.N_INFO), 0.0, False, False, bool(flg[kn.FLG_GATE]), False, 0.0,
                     0.0, *(opts.get(k) for k in ("innov_on", "sage_on", "whiten_off",
                                                  "inflate_on", "ge_on")))
 
     def block() -> None:
         _, _, _, gw, ge = state()
         if ge_on:
-            kn.ge_epoch(ge, gw, no_cons, False, prm[kn.P_ALPHA], prm[kn.P_GE_VAR])
+            kn.ge_epoch(ge, gw, no_cons, False, prm[kn.PAR_ALPHA], prm[kn.PAR_GE_VAR])
 
     def dr_helpers() -> None:
         x, P, wk, gw, _ = state()
-        kn.predict_cov(P, 0.01, prm[kn.P_ALPHA], 1.0, 1.0, 1.0, prm[kn.P_Q_EPS], prm[kn.P_Q_KS],
+        kn.predict_cov(P, 0.01, prm[kn.PAR_ALPHA], 1.0, 1.0, 1.0, prm[kn.PAR_Q_EPS], prm[kn.PAR_Q_KS],
                        1.0, False, wk[4])
-        kn.turn_predict(x, P, 0.01, 0.0, prm[kn.P_R_OMEGA])  # compiled with turn_off too
+        kn.turn_predict(x, P, 0.01, 0.0, prm[kn.PAR_R_OMEGA])  # compiled with turn_off too
         if ge_on:
             kn.ge_turn(gw, x, 0.01, 0.0)
         nz = kn.NZ_ODO.copy()
         nz.flags.writeable = False  # a global array is read-only in the kernel: the same type
-        kn.row_update(x, P, wk[0], nz, 0.0, 1.0, wk[1], wk[2], wk[3], 0, 0.0, 0.0)
+        kn.sparse_update(x, P, wk[0], nz, 0.0, 1.0, 1.0, wk[1], wk[2], 0, 0.0, 0.0)
         if "store_on" in opts:
             kn.pack(P, np.zeros((1, kn.N_PACKED + kn.N_GE_PACKED))[0])
 
@@ -696,5 +695,5 @@ def _result(epochs: Epochs, x: np.ndarray, pcov: np.ndarray, sd: np.ndarray,
 
 @register("aekf")
 def run(epochs: Epochs, params: Params) -> FilterResult:
-    """seed 000 AEKF (adaptive Q from the acceleration, PDOP-driven R and K_a) with options."""
+    """Fang et al. AEKF (adaptive Q from the acceleration, PDOP-driven R and K_a) with options."""
     return run_cs(epochs, params, adaptive=True, name="aekf")

@@ -1,4 +1,4 @@
-"""EKF: the non-adaptive baseline on seed 000's 8-state model (ALGORITHMS.md 1).
+"""EKF: the non-adaptive baseline on Fang et al.'s 8-state model (docs/algorithms.md#cs-model).
 
 Same state, measurements, asynchronous cycle and kernel as :mod:`.aekf`, but
 with FIXED noise: Q from the constant ``aekf.sigma_a_mps2`` (no current

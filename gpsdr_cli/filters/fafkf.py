@@ -1,4 +1,4 @@
-"""``fafkf``: fuzzy adaptive federated Kalman filter (seed 002, Tang et al.).
+"""``fafkf``: fuzzy adaptive federated Kalman filter (Tang et al.).
 
 The local filters, model, inputs, modes and smoothing of :mod:`.fkf`, plus
 the paper's two fuzzy controllers (:mod:`.fuzzy`, interpolated inside the
@@ -48,5 +48,5 @@ from .fkf import run_federated
 
 @register("fafkf")
 def run(epochs: Epochs, params: Params) -> FilterResult:
-    """Fuzzy adaptive federated Kalman filter (seed 002)."""
+    """Fuzzy adaptive federated Kalman filter (Tang et al.)."""
     return run_federated("fafkf", epochs, params)

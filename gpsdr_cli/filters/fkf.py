@@ -1,4 +1,4 @@
-"""``fkf``: federated Kalman filter of GNSS and dead reckoning (seed 002, Tang et al.).
+"""``fkf``: federated Kalman filter of GNSS and dead reckoning (Tang et al.).
 
 Two local filters share the 10-state model of
 :mod:`gpsdr_cli.filters.kernels_fkf` (which documents Phi, Q, H and the
@@ -68,7 +68,7 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
 Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
 
 * ``fkf``: the *fused* sequence is smoothed by a fixed-interval RTS pass
-  (:func:`~gpsdr_cli.filters.linalg.rts_step`, written out for this Phi in
+  (:func:`~gpsdr_cli.filters.core.rts.rts_step`, written out for this Phi in
   :func:`~.kernels_fkf.rts_step_fused`: the same floats) with the master's own
   prediction ``Phi x_g``, ``Phi P_g Phi^T + Q``, Phi and Q recomputed from
   ``dt``.  It needs the fused x and P_g of every epoch; the forward pass keeps
@@ -629,7 +629,7 @@ def distance_rows(t_s: np.ndarray, o: np.ndarray, speed: np.ndarray, interval_s:
     did 1-mm rows at every heading epoch (the old default).  ``q_s`` is metres
     per row, so ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the
     speed-equivalent random walk of 0.002 at 100 Hz (0.2 m/s per sqrt(s)).
-    ``interval_s <= 0``: every record (seed 002).
+    ``interval_s <= 0``: every record (Tang et al.).
     """
     m = len(o)
     if m < 2:
@@ -776,37 +776,37 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
 
     g_p = params["gnss"]
     par = np.zeros(kf.N_PAR)
-    par[kf.K_JERK_PSD] = fp["jerk_psd_m2ps5"]
-    par[kf.K_QW_RW] = fp["heading_err_rw_sd"]
-    par[kf.K_QS_RW] = fp["dist_err_rw_sd"]
-    par[kf.K_HEAD_SD] = fp["heading_sd_rad"]
-    par[kf.K_ODO_SD] = params["odo"]["noise_sd_mps"]
-    par[kf.K_ZUPT_SD] = sp["zupt_sd_mps"]
-    par[kf.K_OMEGA_MIN] = max(sp["omega_min_speed_mps"], 1e-3)
-    par[kf.K_GATE_CHI2] = gate_threshold(g_p["gate_prob"], 2) if g_p["gate"] else 0.0
-    par[kf.K_GATE_RESET_S] = g_p["gate_reset_s"]
+    par[kf.PAR_JERK_PSD] = fp["jerk_psd_m2ps5"]
+    par[kf.PAR_QW_RW] = fp["heading_err_rw_sd"]
+    par[kf.PAR_QS_RW] = fp["dist_err_rw_sd"]
+    par[kf.PAR_HEAD_SD] = fp["heading_sd_rad"]
+    par[kf.PAR_ODO_SD] = params["odo"]["noise_sd_mps"]
+    par[kf.PAR_ZUPT_SD] = sp["zupt_sd_mps"]
+    par[kf.PAR_OMEGA_MIN] = max(sp["omega_min_speed_mps"], 1e-3)
+    par[kf.PAR_GATE_CHI2] = gate_threshold(g_p["gate_prob"], 2) if g_p["gate"] else 0.0
+    par[kf.PAR_GATE_RESET_S] = g_p["gate_reset_s"]
     if not len(o) and fp["no_odo_gate_reset_s"] > 0:   # no odometer: the state is the outlier sooner
-        par[kf.K_GATE_RESET_S] = min(g_p["gate_reset_s"], fp["no_odo_gate_reset_s"])
-    par[kf.K_GATE_WARMUP] = g_p["gate_warmup_fixes"]
-    par[kf.K_GVEL_VAR] = fp["gnss_velocity_sd_mps"] ** 2 if fp["gnss_velocity"] else 0.0
-    par[kf.K_TAU_EPS_C] = fp["gnss_err_tau_s"]
-    par[kf.K_EPS_SD_C] = fp["gnss_err_sd_m"]
-    par[kf.K_EPS_DIST_C] = fp["gnss_err_dist_m"]
-    par[kf.K_TAU_EPS_O] = fp["gnss_err_obstructed_tau_s"]
-    par[kf.K_EPS_SD_O] = fp["gnss_err_obstructed_sd_m"]
-    par[kf.K_EPS_DIST_O] = fp["gnss_err_obstructed_dist_m"]
-    par[kf.K_R_MIN] = ap["r_min_factor"]
-    par[kf.K_R_MAX] = ap["r_max_factor"]
-    par[kf.K_DELTA_MAX] = ap["delta_max"]
-    par[kf.K_RES_CLIP] = ap["residual_clip"]
-    par[kf.K_BETA_GNSS] = fp["beta_gnss"]
-    par[kf.K_V_LIN] = max(fp["v_lin_mps"], 1e-3)
-    par[kf.K_HEAD_CHI2] = chi2_1(g_p["gate_prob"]) if g_p["gate"] else 0.0
-    par[kf.K_GNSS_STALE_S] = epochs.gap_s
-    par[kf.K_DR_STALE_S] = fp["dr_stale_s"]
+        par[kf.PAR_GATE_RESET_S] = min(g_p["gate_reset_s"], fp["no_odo_gate_reset_s"])
+    par[kf.PAR_GATE_WARMUP] = g_p["gate_warmup_fixes"]
+    par[kf.PAR_GVEL_VAR] = fp["gnss_velocity_sd_mps"] ** 2 if fp["gnss_velocity"] else 0.0
+    par[kf.PAR_TAU_EPS_C] = fp["gnss_err_tau_s"]
+    par[kf.PAR_EPS_SD_C] = fp["gnss_err_sd_m"]
+    par[kf.PAR_EPS_DIST_C] = fp["gnss_err_dist_m"]
+    par[kf.PAR_TAU_EPS_O] = fp["gnss_err_obstructed_tau_s"]
+    par[kf.PAR_EPS_SD_O] = fp["gnss_err_obstructed_sd_m"]
+    par[kf.PAR_EPS_DIST_O] = fp["gnss_err_obstructed_dist_m"]
+    par[kf.PAR_R_MIN] = ap["r_min_factor"]
+    par[kf.PAR_R_MAX] = ap["r_max_factor"]
+    par[kf.PAR_DELTA_MAX] = ap["delta_max"]
+    par[kf.PAR_RES_CLIP] = ap["residual_clip"]
+    par[kf.PAR_BETA_GNSS] = fp["beta_gnss"]
+    par[kf.PAR_V_LIN] = max(fp["v_lin_mps"], 1e-3)
+    par[kf.PAR_HEAD_CHI2] = chi2_1(g_p["gate_prob"]) if g_p["gate"] else 0.0
+    par[kf.PAR_GNSS_STALE_S] = epochs.gap_s
+    par[kf.PAR_DR_STALE_S] = fp["dr_stale_s"]
     # no odometer: in GNSS outages nothing measures the speed (kernels_fkf: zero-acceleration rows)
-    par[kf.K_COAST_Q] = fp["coast_acc_psd"]  # the kernel coasts only while no distance is fresh
-    positive = {"fkf.heading_sd_rad": fp["heading_sd_rad"], "odo.noise_sd_mps": par[kf.K_ODO_SD],
+    par[kf.PAR_COAST_Q] = fp["coast_acc_psd"]  # the kernel coasts only while no distance is fresh
+    positive = {"fkf.heading_sd_rad": fp["heading_sd_rad"], "odo.noise_sd_mps": par[kf.PAR_ODO_SD],
                 "standstill.zupt_sd_mps": sp["zupt_sd_mps"], "fkf.gnss_err_sd_m": fp["gnss_err_sd_m"],
                 "fkf.gnss_err_obstructed_sd_m": fp["gnss_err_obstructed_sd_m"],
                 "fkf.gnss_err_tau_s": fp["gnss_err_tau_s"],
@@ -816,29 +816,29 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             raise ConfigError(f"{key} = {value}: expected a value > 0 (a zero sigma makes a "
                               "measurement or state exact, a zero time constant makes the filter "
                               "divide by zero)")
-    if not (par[kf.K_TAU_EPS_C] > 0 and 0 < par[kf.K_R_MIN] <= 1.0 <= par[kf.K_R_MAX]):
+    if not (par[kf.PAR_TAU_EPS_C] > 0 and 0 < par[kf.PAR_R_MIN] <= 1.0 <= par[kf.PAR_R_MAX]):
         raise ConfigError("fkf.gnss_err_tau_s must be > 0 and fafkf.r_min_factor <= 1 <= "
-                          f"fafkf.r_max_factor (got {par[kf.K_TAU_EPS_C]}, {par[kf.K_R_MIN]}, "
-                          f"{par[kf.K_R_MAX]})")
+                          f"fafkf.r_max_factor (got {par[kf.PAR_TAU_EPS_C]}, {par[kf.PAR_R_MIN]}, "
+                          f"{par[kf.PAR_R_MAX]})")
     # the eps model at the start (tau, sigma, distance of the first epoch's regime): the
     # kernel's own blend, which also gives eps's initial sigma
     kf.select_eps(par, float(eps_w[0]) if len(eps_w) else 0.0)
     P0 = np.diag(np.array([
         fp["init_pos_sd_m"], fp["init_vel_sd_mps"], fp["init_acc_sd_mps2"],
         fp["init_pos_sd_m"], fp["init_vel_sd_mps"], fp["init_acc_sd_mps2"],
-        par[kf.K_EPS_SD], par[kf.K_EPS_SD],
+        par[kf.PAR_EPS_SD], par[kf.PAR_EPS_SD],
         fp["init_heading_err_sd_rad"], fp["init_dist_err_sd_m"]]) ** 2)
 
     flags = np.zeros(kf.N_FLAGS, np.int64)
-    flags[kf.F_MODE_FR] = fp["mode"] == "fr"
-    flags[kf.F_FUSION] = {"shares": kf.FUSE_SHARES, "scalar": kf.FUSE_SCALAR,
+    flags[kf.FLG_MODE_FR] = fp["mode"] == "fr"
+    flags[kf.FLG_FUSION] = {"shares": kf.FUSE_SHARES, "scalar": kf.FUSE_SCALAR,
                           "block": kf.FUSE_BLOCK}[ap["weights"]]
-    flags[kf.F_NORM] = ap["normalisation"] == "log"
-    flags[kf.F_WINDOW] = ap["window"]
-    flags[kf.F_GNSS_ON] = gnss_on
-    flags[kf.F_DR_ON] = dr_on
-    flags[kf.F_STORE] = bool(params["filter"]["smooth"])
-    flags[kf.F_CHECK_SPD] = bool(fp["check_spd"])
+    flags[kf.FLG_NORM] = ap["normalisation"] == "log"
+    flags[kf.FLG_WINDOW] = ap["window"]
+    flags[kf.FLG_GNSS_ON] = gnss_on
+    flags[kf.FLG_DR_ON] = dr_on
+    flags[kf.FLG_STORE] = bool(params["filter"]["smooth"])
+    flags[kf.FLG_CHECK_SPD] = bool(fp["check_spd"])
 
     f = np.flatnonzero(epochs.has_gnss)                # only the fix epochs are computed
     spd, crs = epochs.gnss_speed_mps[f], epochs.gnss_course_rad[f]
@@ -949,7 +949,7 @@ def forward(kind: str, prep: Prepared, store: bool, segment: int = 0) -> tuple:
     Returns ``(out, used, rejected, nis, beta, rfac, counters, xs, Ps, smooth_stats)``.
     """
     flags = prep.flags.copy()
-    flags[kf.F_STORE] = store
+    flags[kf.FLG_STORE] = store
     return kf.federated_pass(prep.dt, prep.has_gnss, prep.gnss_e, prep.gnss_n, prep.gnss_var_e,
                              prep.gnss_var_n, prep.gnss_ve, prep.gnss_vn, prep.theta, prep.dist,
                              prep.t_m, prep.static, prep.eps_w, prep.x0, prep.P0, prep.psi0, prep.par,
@@ -977,7 +977,7 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
                                                             prep.eps_w, prep.par)
         smoothing = "rts_fused"
     del xs, Ps
-    static, info, gnss_on = prep.static, dict(prep.info), bool(prep.flags[kf.F_GNSS_ON])
+    static, info, gnss_on = prep.static, dict(prep.info), bool(prep.flags[kf.FLG_GNSS_ON])
     del prep                                        # the inputs: not needed from here on
     if smoothed and not rts and gnss_on and n > 1:
         out_b = forward(kind, prepare(reverse_epochs(epochs), params), False)[0][:, ::-1]
@@ -1024,5 +1024,5 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
 
 @register("fkf")
 def run(epochs: Epochs, params: Params) -> FilterResult:
-    """Federated Kalman filter (seed 002's FKF baseline): covariance-weighted fusion, fixed R."""
+    """Federated Kalman filter (Tang et al.'s FKF baseline): covariance-weighted fusion, fixed R."""
     return run_federated("fkf", epochs, params)

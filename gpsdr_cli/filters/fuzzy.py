@@ -1,11 +1,11 @@
-"""The two Mamdani fuzzy controllers of FAFKF (seed 002, Tang et al., sections 3 and 4).
+"""The two Mamdani fuzzy controllers of FAFKF (Tang et al., sections 3 and 4).
 
 Plain numpy, written to be read and tested against hand-computed values; the
 compiled kernels never call them.  Instead, at import, this module evaluates
 both controllers on a regular grid (their *control surfaces*) and the kernels
 interpolate those tables (:func:`gpsdr_cli.filters.kernels_fkf.interp1_uniform`,
 ``interp2_unit``): one evaluation then costs a few nanoseconds instead of a
-full fuzzy inference per epoch (ALGORITHMS.md section 2: "precompute the
+full fuzzy inference per epoch (docs/algorithms.md#fafkf: "precompute the
 control surfaces").  Hand-written rather than taken from scikit-fuzzy: that
 package is not a dependency, and the whole inference is twenty lines.
 
@@ -16,18 +16,18 @@ edge); rule strength = min of the antecedent memberships (AND); implication
 by clipping (min); aggregation by max; centroid defuzzification on a fine
 grid of the output universe.  Inputs outside their universe are clipped to it.
 
-1. Adaptive R (seed 002 section 3, covariance matching).  Input
+1. Adaptive R (Tang et al. section 3, covariance matching).  Input
    ``u = Dis_jj / Te_jj`` (**our choice**, dimensionless; ``Dis = Te - Ra``,
    so ``u = 1 - Ra_jj/Te_jj``), universe [-1, 1], sets NL NS ZO PS PL centred
-   at -1, -0.5, 0, 0.5, 1.  Rules (seed 002, 1)-5)): NL->PL, NS->PS, ZO->ZO,
+   at -1, -0.5, 0, 0.5, 1.  Rules (Tang et al., 1)-5)): NL->PL, NS->PS, ZO->ZO,
    PS->NS, PL->NL.  Output: a normalised increment in [-1, 1] (same five
    centres); the kernel scales it by ``[fafkf] delta_max`` and applies
    ``R_jj *= 1 + Delta``.  Residuals larger than predicted (``Ra > Te``,
    ``u < 0``) raise R; smaller ones lower it.
-2. Fusion reliability (seed 002 section 4, Table 1).  Inputs PE and DE
+2. Fusion reliability (Tang et al. section 4, Table 1).  Inputs PE and DE
    normalised to [0, 1] by the kernel, sets ZO VS NS NB VB centred at 0, 0.25,
    0.5, 0.75, 1; output W in [0, 1], sets VL NL M NH VH centred at 0, 0.25,
-   0.5, 0.75, 1 (seed 002 Fig. 1 shows five evenly spaced triangles).  Small
+   0.5, 0.75, 1 (Tang et al. Fig. 1 shows five evenly spaced triangles).  Small
    covariance and small residual mismatch give a high reliability.  With
    centroid defuzzification W stays inside [1/12, 11/12]: no filter's weight
    ever reaches exactly 0 or 1.
@@ -49,7 +49,7 @@ R_CENTRES = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
 #: Fusion controller: PE/DE sets from zero to very big, output sets from very low to very high.
 PE_DE_SETS = ("ZO", "VS", "NS", "NB", "VB")
 W_SETS = ("VL", "NL", "M", "NH", "VH")
-#: seed 002 Table 1: rows PE, columns DE, both in the order VB NB NS VS ZO as printed.
+#: Tang et al. Table 1: rows PE, columns DE, both in the order VB NB NS VS ZO as printed.
 RULE_TABLE_PRINTED = (
     ("VL", "VL", "NL", "M", "M"),    # PE = VB
     ("VL", "NL", "NL", "M", "NH"),   # PE = NB

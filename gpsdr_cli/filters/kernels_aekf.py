@@ -2,29 +2,29 @@
 
 One kernel, :func:`cs_filter_kernel`, runs the whole forward pass over the epoch
 arrays (no per-epoch Python objects).  Model: :mod:`gpsdr_cli.models.cs_model`
-(seed 000, ALGORITHMS.md section 1); conventions: :mod:`gpsdr_cli.conventions`
+(Fang et al., docs/algorithms.md#cs-model); conventions: :mod:`gpsdr_cli.conventions`
 (ENU metres, heading clockwise from north, ``omega = d(psi)/dt = -yaw_rate``).
 
-Per epoch k (asynchronous cycle, ALGORITHMS.md 0):
+Per epoch k (asynchronous cycle, docs/algorithms.md#cycle):
 
 1. predict with the actual step ``T = dt[k]``: mean by the Newton matrix
    (current statistical model), covariance by the Singer blocks, exploiting
    the block structure (two 3x3 axis blocks + two scalars) instead of 8x8
    products; fading memory multiplies ``Phi P Phi^T``; in static mode
-   (seed 004) the axes are held (no propagation, no position noise); with
+   (Zeng et al.) the axes are held (no propagation, no position noise); with
    ``aekf.turn_propagation`` (our choice) the gyro then turns the velocity and
    acceleration (:func:`turn_predict`);
 2. GNSS fix (if any): chi-square gate on the 2-D NIS (none before
    ``gnss.gate_warmup_fixes`` accepted fixes; a no-lock-out reset; in
    ``gate_mode = "inflate"``, once fixes have failed the gate for
    ``gate_inflate_after_s``, a fix between the gate and ``gate_inflate_max``
-   times it is accepted with R scaled by NIS/gate), seed 001 adaptive factor on
+   times it is accepted with R scaled by NIS/gate), innovation adaptive factor on
    P(k|k-1), Sage-Husa scale on R, then two sequential scalar updates (e, n);
 3. odometer (if any): below ``standstill.speed_mps`` a zero-velocity update of
    v_e, v_n, a_e, a_n; else the speed ``u = k_s |v|`` (with
    ``aekf.odo_along_track`` its gains projected on the velocity direction);
 4. gyro (if any): at standstill the rate measures the drift alone; above
-   ``omega_min_speed_mps`` the seed 000 heading-rate row (with the turn
+   ``omega_min_speed_mps`` the Fang et al. heading-rate row (with the turn
    propagation: skipped, or reduced to "no lateral residual acceleration",
    ``aekf.turn_omega_row``); in between skipped.
 
@@ -59,44 +59,68 @@ import math
 import numpy as np
 from numba import njit
 
-from ..models.cs_model import N_STATES, cs_sigma_a2, odo_row, omega_row, singer_phi, singer_q
+from ..models.cs_model import (
+    IAE,
+    IAN,
+    IE,
+    IEPS,
+    IKS,
+    IN,
+    IVE,
+    IVN,
+    N_STATES,
+    cs_sigma_a2,
+    odo_row,
+    omega_row,
+    singer_phi,
+    singer_q,
+)
 from .adaptive import adaptive_factor, fading_factor, nis_2d, sage_husa_r
-from .linalg import cholesky
+from .core import update as core_update
+from .core.gate import GATE_FAIL, GATE_RESET, RESET_AFTER_FIRST_REJECT, chi2_gate
+from .core.linalg import cholesky
+from .core.packing import pack
 
-# indices into the float parameter vector ``prm``
-P_ALPHA, P_AMAX, P_AMIN, P_SIGMA_A, P_TAU_EPS, P_Q_EPS, P_Q_KS, P_R_OMEGA, P_R_ODO = range(9)
-P_STATIC_SPEED, P_R_ZUPT, P_OMEGA_MIN, P_GATE_THR, P_GATE_RESET, P_INNOV_C = range(9, 15)
-P_FADING, P_SH_B, P_SH_RMIN, P_SH_RMAX, P_EPS_MEAN_DECAY = range(15, 20)
-P_GYRO_HOLD, P_GATE_INFLATE_MAX, P_GATE_WARMUP, P_GATE_INFLATE_AFTER, P_HEADING_MIN = range(20, 25)
-P_MAX_GAP, P_GAP_SPEED, P_WH_B, P_WH_MAX, P_WH_GAP, P_GVEL_VAR, P_WH_NIS, P_SCALE_VAR = range(25, 33)
-P_GE_VAR, P_GE_RATE, P_GE_DIST_RATE, P_COAST_Q, P_OFF_VVAR, P_OFF_AVAR = range(33, 39)
+# indices into the float parameter vector ``prm`` (PAR_) and the flags ``flg`` (FLG_):
+# prefixes that cannot be read as the matrices P, F, Q, K, S of the filter
+PAR_ALPHA, PAR_AMAX, PAR_AMIN, PAR_SIGMA_A, PAR_TAU_EPS, PAR_Q_EPS, PAR_Q_KS = range(7)
+PAR_R_OMEGA, PAR_R_ODO = 7, 8
+PAR_STATIC_SPEED, PAR_R_ZUPT, PAR_OMEGA_MIN, PAR_GATE_THR, PAR_GATE_RESET, PAR_INNOV_C = range(9, 15)
+PAR_FADING, PAR_SH_B, PAR_SH_RMIN, PAR_SH_RMAX, PAR_EPS_MEAN_DECAY = range(15, 20)
+PAR_GYRO_HOLD, PAR_GATE_INFLATE_MAX, PAR_GATE_WARMUP, PAR_GATE_INFLATE_AFTER, PAR_HEADING_MIN = range(20, 25)
+PAR_MAX_GAP, PAR_GAP_SPEED, PAR_WH_B, PAR_WH_MAX, PAR_WH_GAP, PAR_GVEL_VAR = range(25, 31)
+PAR_WH_NIS, PAR_SCALE_VAR = 31, 32
+PAR_GE_VAR, PAR_GE_RATE, PAR_GE_DIST_RATE, PAR_COAST_Q, PAR_OFF_VVAR, PAR_OFF_AVAR = range(33, 39)
 N_PRM = 39
 # indices into the integer flag vector ``flg``
-F_ADAPT_Q, F_STANDSTILL, F_GATE, F_INNOV, F_FADING, F_SAGE_HUSA, F_CHECK_SPD, F_STORE = range(8)
-F_DRIFT_CONSIDER, F_HEADING_CONSIDER, F_TURN, F_TURN_OMEGA, F_GATE_MODE, F_ODO_ALONG = range(8, 14)
-F_HEADING_FLOOR, F_LATERAL_ACC, F_WHITEN, F_ZUPT_POS, F_GE, F_ODO_CONSIDER = 14, 15, 16, 17, 18, 19
+FLG_ADAPT_Q, FLG_STANDSTILL, FLG_GATE, FLG_INNOV, FLG_FADING, FLG_SAGE_HUSA = range(6)
+FLG_CHECK_SPD, FLG_STORE = 6, 7
+FLG_DRIFT_CONSIDER, FLG_HEADING_CONSIDER, FLG_TURN, FLG_TURN_OMEGA = range(8, 12)
+FLG_GATE_MODE, FLG_ODO_ALONG = 12, 13
+FLG_HEADING_FLOOR, FLG_LATERAL_ACC, FLG_WHITEN, FLG_ZUPT_POS, FLG_GE, FLG_ODO_CONSIDER = range(14, 20)
 N_FLG = 20
-#: values of flg[F_TURN_OMEGA] (the seed 000 yaw-rate row when aekf.turn_propagation is on)
+#: values of flg[FLG_TURN_OMEGA] (the Fang et al. yaw-rate row when aekf.turn_propagation is on)
 OMEGA_SKIP, OMEGA_LATERAL = 0, 1
-#: values of flg[F_GATE_MODE] (gnss.gate_mode)
+#: values of flg[FLG_GATE_MODE] (gnss.gate_mode)
 GATE_REJECT, GATE_INFLATE = 0, 1
 # internal state carried between segments (``st``)
-S_PSI, S_STATIC, S_T, S_REJ_SINCE, S_SH_R, S_SH_M, S_HEADING_KNOWN = range(7)
-S_W, S_W_T, S_N_FIX, S_VPSI, S_CPE = 7, 8, 9, 10, 11
-S_WH_C0, S_WH_C1, S_WH_UE, S_WH_UN, S_WH_T, S_WH_M, S_WH_STATIC = range(12, 19)
-S_WH_C2, S_WH_UE2, S_WH_UN2, S_WH_T2, S_B_SINCE = range(19, 24)
-S_ODO_T = 24  # time of the latest odometer record (s since the start)
+ST_PSI, ST_STATIC, ST_T, ST_REJ_SINCE, ST_SH_R, ST_SH_M, ST_HEADING_KNOWN = range(7)
+ST_W, ST_W_T, ST_N_FIX, ST_VPSI, ST_CPE = 7, 8, 9, 10, 11
+ST_WH_C0, ST_WH_C1, ST_WH_UE, ST_WH_UN, ST_WH_T, ST_WH_M, ST_WH_STATIC = range(12, 19)
+ST_WH_C2, ST_WH_UE2, ST_WH_UN2, ST_WH_T2, ST_B_SINCE = range(19, 24)
+ST_ODO_T = 24  # time of the latest odometer record (s since the start)
 N_ST = 25
 #: a standstill the odometer said is forgotten after this long without an odometer record (s),
 #: as fkf's STALE_ODO_S: an odometer that drops out at a stop must not hold the car for minutes
 STALE_ODO_S = 1.0
 #: largest heading variance (rad^2) of the heading floor: a heading uniform on (-pi, pi]
 VPSI_MAX = math.pi ** 2 / 3.0
-# stored prior scalars per epoch (columns of ``prior_prm``)
-Q_QA_E, Q_QA_N, Q_LAM, Q_GAIN, Q_ADD_E, Q_ADD_N, Q_W, Q_FL_EE, Q_FL_NN, Q_FL_EN, Q_FB = range(11)
+# stored prior scalars per epoch (columns of ``prior_store``: PRI_, the prior's, not Q)
+PRI_QA_E, PRI_QA_N, PRI_LAM, PRI_GAIN, PRI_ADD_E, PRI_ADD_N, PRI_W = range(7)
+PRI_FL_EE, PRI_FL_NN, PRI_FL_EN, PRI_FB = 7, 8, 9, 10
 N_PRIOR = 11
 # counters (``info`` vector)
-I_SPD_FAIL, I_MIN_DIAG, I_SKIPPED, I_GATE_RESETS, I_NONFINITE, I_INFLATED = range(6)
+INF_SPD_FAIL, INF_MIN_DIAG, INF_SKIPPED, INF_GATE_RESETS, INF_NONFINITE, INF_INFLATED = range(6)
 N_INFO = 6
 N_PACKED = N_STATES * (N_STATES + 1) // 2
 #: the GNSS-error block ``ge`` (aekf.gnss_err_states), one flat float64 array: P(x, b) (8 x 2)
@@ -131,44 +155,23 @@ def kernel_options(flg: np.ndarray) -> dict[str, int]:
     one is None in the kernel, and numba compiles none of its code.
     """
     opts = {}
-    for name, on in (("fading_on", flg[F_FADING]), ("innov_on", flg[F_INNOV]),
-                     ("sage_on", flg[F_SAGE_HUSA]), ("check_on", flg[F_CHECK_SPD]),
-                     ("store_on", flg[F_STORE]), ("inflate_on", flg[F_GATE_MODE] == GATE_INFLATE),
-                     ("whiten_off", not flg[F_WHITEN]), ("floor_off", not flg[F_HEADING_FLOOR]),
-                     ("turn_off", not flg[F_TURN]), ("omega_skip_on", flg[F_TURN_OMEGA] == OMEGA_SKIP),
-                     ("along_off", not flg[F_ODO_ALONG]), ("ge_on", flg[F_GE]),
-                     ("heading_consider_on", flg[F_HEADING_CONSIDER])):
+    for name, on in (("fading_on", flg[FLG_FADING]), ("innov_on", flg[FLG_INNOV]),
+                     ("sage_on", flg[FLG_SAGE_HUSA]), ("check_on", flg[FLG_CHECK_SPD]),
+                     ("store_on", flg[FLG_STORE]), ("inflate_on", flg[FLG_GATE_MODE] == GATE_INFLATE),
+                     ("whiten_off", not flg[FLG_WHITEN]), ("floor_off", not flg[FLG_HEADING_FLOOR]),
+                     ("turn_off", not flg[FLG_TURN]), ("omega_skip_on", flg[FLG_TURN_OMEGA] == OMEGA_SKIP),
+                     ("along_off", not flg[FLG_ODO_ALONG]), ("ge_on", flg[FLG_GE]),
+                     ("heading_consider_on", flg[FLG_HEADING_CONSIDER])):
         if on:
             opts[name] = 1
     return opts
 
 
-@njit(cache=True, error_model="numpy")
-def pack(P: np.ndarray, out: np.ndarray) -> None:
-    """Upper triangle of symmetric P, row by row, into ``out`` (length n(n+1)/2)."""
-    m = 0
-    for i in range(N_STATES):
-        for j in range(i, N_STATES):
-            out[m] = P[i, j]
-            m += 1
-
-
-@njit(cache=True, error_model="numpy")
-def unpack(v: np.ndarray, P: np.ndarray) -> None:
-    """Inverse of :func:`pack`."""
-    m = 0
-    for i in range(N_STATES):
-        for j in range(i, N_STATES):
-            P[i, j] = v[m]
-            P[j, i] = v[m]
-            m += 1
-
-
 @njit(cache=True, inline="always", error_model="numpy")
 def predict_mean(x: np.ndarray, T: float, f_eps: float, hold: bool) -> None:
-    """Current statistical mean propagation (abar = a_hat): Newton per axis (seed 000).
+    """Current statistical mean propagation (abar = a_hat): Newton per axis (Fang et al.).
 
-    ``f_eps`` multiplies the drift: exp(-T/tau_eps) for seed 000's literal
+    ``f_eps`` multiplies the drift: exp(-T/tau_eps) for Fang et al.'s literal
     Gauss-Markov mean, 1 for our default (``aekf.drift_mean_decay = false``): the
     drift's mean is held like a random constant (a turn-on bias does not decay
     toward zero in an outage) while its covariance stays the Gauss-Markov one.
@@ -177,7 +180,7 @@ def predict_mean(x: np.ndarray, T: float, f_eps: float, hold: bool) -> None:
         for o in range(0, 6, 3):
             x[o] += T * x[o + 1] + 0.5 * T * T * x[o + 2]
             x[o + 1] += T * x[o + 2]
-    x[6] *= f_eps
+    x[IEPS] *= f_eps
 
 
 @njit(cache=True, error_model="numpy")
@@ -187,7 +190,7 @@ def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float
 
     Row then column operations on the two 3x3 axis blocks: ~200 flops instead
     of two dense 8x8 products.  ``hold``: static mode, axis blocks not propagated
-    and no position noise (seed 004).
+    and no position noise (Zeng et al.).
     """
     n = N_STATES
     if not hold:
@@ -229,8 +232,8 @@ def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float
         P[o + 1, o + 2] += qa * qbuf[4]
         P[o + 2, o + 1] += qa * qbuf[4]
         P[o + 2, o + 2] += qa * qbuf[5]
-    P[6, 6] += q_eps * T
-    P[7, 7] += q_ks * T
+    P[IEPS, IEPS] += q_eps * T
+    P[IKS, IKS] += q_ks * T
     for i in range(n):  # symmetrize (written out: one helper less to compile)
         for j in range(i + 1, n):
             v = 0.5 * (P[i, j] + P[j, i])
@@ -239,95 +242,24 @@ def predict_cov(P: np.ndarray, T: float, alpha: float, f_eps: float, qa_e: float
 
 
 @njit(cache=True, error_model="numpy")
-def joseph_apply(P: np.ndarray, K: np.ndarray, PHt: np.ndarray, HPHt: float, R: float,
-                 Bh: np.ndarray) -> None:
-    """Joseph form for a scalar measurement, P <- (I - K H) P (I - K H)^T + R K K^T, in place.
-
-    With ``B = (I - K H) P = P - K PHt^T`` and ``B H^T = PHt - K (H P H^T)`` (valid
-    for any gain, so also with consider states) the result is
-    ``B - (B H^T) K^T + R K K^T``; evaluated on the upper triangle and mirrored,
-    so P stays exactly symmetric (one O(n^2) pass instead of three).
-    """
-    n = N_STATES
-    for i in range(n):
-        Bh[i] = PHt[i] - K[i] * HPHt
-    for i in range(n):
-        ki = K[i]
-        bi = Bh[i]
-        for j in range(i, n):
-            v = P[i, j] - ki * PHt[j] - bi * K[j] + R * ki * K[j]
-            P[i, j] = v
-            P[j, i] = v
+def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float, w: float,
+                K: np.ndarray, PHt: np.ndarray, consider: int) -> bool:
+    """:func:`gpsdr_cli.filters.core.update.unit_update` for the 8 states (R scaled by w)."""
+    return core_update.unit_update(N_STATES, x, P, idx, y, R, w, K, PHt, consider)
 
 
 @njit(cache=True, error_model="numpy")
-def unit_update(x: np.ndarray, P: np.ndarray, idx: int, y: float, R: float,
-                K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int) -> bool:
-    """Scalar update with H = unit row ``idx`` (Joseph form).  False if S is not positive.
-
-    ``consider``: bit mask of states whose gain is zero (see :func:`row_update`).
-    """
-    n = N_STATES
-    HPHt = P[idx, idx]
-    S = HPHt + R
-    if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
-        return False
-    for i in range(n):
-        PHt[i] = P[i, idx]
-        K[i] = 0.0 if (consider >> i) & 1 else PHt[i] / S
-    for i in range(n):
-        x[i] += K[i] * y
-    joseph_apply(P, K, PHt, HPHt, R, Bh)
-    return True
-
-
-@njit(cache=True, error_model="numpy")
-def row_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: float, R: float,
-               K: np.ndarray, PHt: np.ndarray, Bh: np.ndarray, consider: int,
-               along_e: float, along_n: float) -> bool:
-    """Scalar update with a sparse Jacobian row H (nonzeros at indices ``nz``), Joseph form.
-
-    False if S is not positive.  ``consider >= 0``: Schmidt-Kalman "consider"
-    their gain is set to zero (they are not corrected by this
-    measurement) while its uncertainty still enters S and the
-    cross-covariances; the Joseph form keeps P exact for such a suboptimal gain.
-    ``(along_e, along_n)`` a unit vector: the gains of the (e, n), (v_e, v_n) and
-    (a_e, a_n) pairs are projected on it (the measurement corrects those states
-    along that direction only; again exact P through the Joseph form).
-    """
-    n = N_STATES
-    nnz = nz.shape[0]
-    HPHt = 0.0
-    for i in range(n):
-        s = 0.0
-        for q in range(nnz):
-            s += P[i, nz[q]] * H[nz[q]]
-        PHt[i] = s
-    for q in range(nnz):
-        HPHt += H[nz[q]] * PHt[nz[q]]
-    S = HPHt + R
-    if not (S > 0.0) or not math.isfinite(S) or not math.isfinite(y):
-        return False
-    for i in range(n):
-        K[i] = PHt[i] / S
-    if consider > 0:
-        for i in range(n):
-            if (consider >> i) & 1:
-                K[i] = 0.0
-    if along_e != 0.0 or along_n != 0.0:
-        for o in range(3):
-            dot = K[o] * along_e + K[o + 3] * along_n
-            K[o] = dot * along_e
-            K[o + 3] = dot * along_n
-    for i in range(n):
-        x[i] += K[i] * y
-    joseph_apply(P, K, PHt, HPHt, R, Bh)
-    return True
+def sparse_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.ndarray, y: float,
+                  R: float, w: float, K: np.ndarray, PHt: np.ndarray, consider: int,
+                  along_e: float, along_n: float) -> bool:
+    """:func:`gpsdr_cli.filters.core.update.sparse_update` for the 8 states."""
+    return core_update.sparse_update(N_STATES, x, P, H, nz, y, R, w, K, PHt, consider,
+                                     along_e, along_n)
 
 
 @njit(cache=True, error_model="numpy")
 def inflate_kinematic(P: np.ndarray, g: float) -> None:
-    """seed 001 adaptive factor, P(k|k-1) /= alpha with g = 1/alpha, on the kinematic block.
+    """innovation adaptive factor, P(k|k-1) /= alpha with g = 1/alpha, on the kinematic block.
 
     Our choice: only the six kinematic states (position, velocity, acceleration)
     are inflated, as ``D P D`` with ``D = diag(sqrt(g) x 6, 1, 1)`` (a congruence,
@@ -348,7 +280,7 @@ def inflate_kinematic(P: np.ndarray, g: float) -> None:
 def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -> None:
     """Rotate velocity and acceleration by the gyro heading increment (aekf.turn_propagation).
 
-    Our choice (ALGORITHMS.md 1 leaves the heading out of the state): after the
+    Our choice (docs/algorithms.md#cs-model leaves the heading out of the state): after the
     current statistical prediction, ``(v_e, v_n)`` and ``(a_e, a_n)`` turn
     clockwise by ``dpsi = (w - eps) T`` where ``w = -yaw_rate`` is the gyro's
     heading rate (CCW-positive gyro, heading clockwise) and ``eps`` the drift
@@ -361,21 +293,21 @@ def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -
     GNSS positions (as in a strapdown INS) instead of through the heading-rate row.
     """
     n = N_STATES
-    dpsi = (w - x[6]) * T
+    dpsi = (w - x[IEPS]) * T
     c = math.cos(dpsi)
     s = math.sin(dpsi)
-    ve = x[1]
-    vn = x[4]
-    ae = x[2]
-    an = x[5]
-    x[1] = c * ve + s * vn
-    x[4] = -s * ve + c * vn
-    x[2] = c * ae + s * an
-    x[5] = -s * ae + c * an
-    g1 = x[4]
-    g4 = -x[1]
-    g2 = x[5]
-    g5 = -x[2]
+    ve = x[IVE]
+    vn = x[IVN]
+    ae = x[IAE]
+    an = x[IAN]
+    x[IVE] = c * ve + s * vn
+    x[IVN] = -s * ve + c * vn
+    x[IAE] = c * ae + s * an
+    x[IAN] = -s * ae + c * an
+    g1 = x[IVN]
+    g4 = -x[IVE]
+    g2 = x[IAN]
+    g5 = -x[IAE]
     for j in range(n):  # rows: J P
         p1 = P[1, j]
         p4 = P[4, j]
@@ -412,13 +344,13 @@ def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -
 @njit(cache=True, error_model="numpy")
 def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
     """F <- J F with J the Jacobian of :func:`turn_predict` at its input mean x (dense, smoother)."""
-    dpsi = (w - x[6]) * T
+    dpsi = (w - x[IEPS]) * T
     c = math.cos(dpsi)
     s = math.sin(dpsi)
-    g1 = -s * x[1] + c * x[4]  # v_n' (the rotated velocity), d v_e'/d dpsi
-    g4 = -(c * x[1] + s * x[4])  # -v_e'
-    g2 = -s * x[2] + c * x[5]
-    g5 = -(c * x[2] + s * x[5])
+    g1 = -s * x[IVE] + c * x[IVN]  # v_n' (the rotated velocity), d v_e'/d dpsi
+    g4 = -(c * x[IVE] + s * x[IVN])  # -v_e'
+    g2 = -s * x[IAE] + c * x[IAN]
+    g5 = -(c * x[IAE] + s * x[IAN])
     for j in range(N_STATES):
         p1 = F[1, j]
         p4 = F[4, j]
@@ -432,7 +364,7 @@ def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
 
 
 # ---------------------------------------------------------------- GNSS error states
-# aekf.gnss_err_states (our choice, after the fkf's seed 002 error states; issue #4): the fix
+# aekf.gnss_err_states (our choice, after the fkf's Tang et al. error states; issue #4): the fix
 # error is white noise plus a first-order Gauss-Markov bias b = (b_e, b_n) per axis
 # (multipath), z = (e, n) + b + v.  The 10-state covariance is kept in two parts: the 8x8 P
 # of the kinematic model, whose code is the same with and without b, and the block ``ge`` =
@@ -543,14 +475,14 @@ def ge_epoch(G: np.ndarray, gw: np.ndarray, n_rows: int, predict: bool, alpha: f
 def ge_turn(gw: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
     """Record the gyro turn of this epoch's prediction for :func:`ge_epoch`: the angle
     (w - eps) T of :func:`turn_predict` and the rows (g1, g4, g2, g5) of its Jacobian."""
-    dpsi = (w - x[6]) * T
+    dpsi = (w - x[IEPS]) * T
     gw[GW_PRED, 5] = 1.0
     gw[GW_PRED, 6] = math.cos(dpsi)
     gw[GW_PRED, 7] = math.sin(dpsi)
-    gw[GW_PRED + 1, 0] = x[4]
-    gw[GW_PRED + 1, 1] = -x[1]
-    gw[GW_PRED + 1, 2] = x[5]
-    gw[GW_PRED + 1, 3] = -x[2]
+    gw[GW_PRED + 1, 0] = x[IVN]
+    gw[GW_PRED + 1, 1] = -x[IVE]
+    gw[GW_PRED + 1, 2] = x[IAN]
+    gw[GW_PRED + 1, 3] = -x[IAE]
 
 
 @njit(cache=True, error_model="numpy")
@@ -622,22 +554,22 @@ def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps:
     """P(k-1|k-1) -> the P(k|k-1) the forward pass used (predict, turn, adaptive factor, gate reset).
 
     ``x`` enters as the current statistical prediction of the mean and leaves
-    rotated when the forward pass turned it (``pr[Q_W]`` finite); the heading
-    floor's deficit (``pr[Q_FL_*]``) is added after the turn, as in the forward pass.
+    rotated when the forward pass turned it (``pr[PRI_W]`` finite); the heading
+    floor's deficit (``pr[PRI_FL_*]``) is added after the turn, as in the forward pass.
     """
     f_eps = math.exp(-T / tau_eps)
-    predict_cov(P, T, alpha, f_eps, pr[Q_QA_E], pr[Q_QA_N], q_eps, q_ks, pr[Q_LAM], hold, qbuf)
-    if math.isfinite(pr[Q_W]):
-        turn_predict(x, P, T, pr[Q_W], r_w + scale_var * abs(pr[Q_W]) / T)
-    if pr[Q_FL_EE] != 0.0 or pr[Q_FL_NN] != 0.0:  # heading floor
-        P[1, 1] += pr[Q_FL_EE]
-        P[4, 4] += pr[Q_FL_NN]
-        P[1, 4] += pr[Q_FL_EN]
-        P[4, 1] = P[1, 4]
-    if pr[Q_GAIN] != 1.0:
-        inflate_kinematic(P, pr[Q_GAIN])
-    P[0, 0] += pr[Q_ADD_E]
-    P[3, 3] += pr[Q_ADD_N]
+    predict_cov(P, T, alpha, f_eps, pr[PRI_QA_E], pr[PRI_QA_N], q_eps, q_ks, pr[PRI_LAM], hold, qbuf)
+    if math.isfinite(pr[PRI_W]):
+        turn_predict(x, P, T, pr[PRI_W], r_w + scale_var * abs(pr[PRI_W]) / T)
+    if pr[PRI_FL_EE] != 0.0 or pr[PRI_FL_NN] != 0.0:  # heading floor
+        P[IVE, IVE] += pr[PRI_FL_EE]
+        P[IVN, IVN] += pr[PRI_FL_NN]
+        P[IVE, IVN] += pr[PRI_FL_EN]
+        P[IVN, IVE] = P[IVE, IVN]
+    if pr[PRI_GAIN] != 1.0:
+        inflate_kinematic(P, pr[PRI_GAIN])
+    P[IE, IE] += pr[PRI_ADD_E]
+    P[IN, IN] += pr[PRI_ADD_N]
 
 
 
@@ -654,7 +586,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     Its own function for the cold start: numba's type inference and SSA
     reconstruction grow faster than linearly with a function's size, and this
     block was half of the kernel's body (cold compile of the kernel 7.4 s).  Its
-    memory (gate timers, Sage-Husa, whitening, fix count: the S_* entries) lives
+    memory (gate timers, Sage-Husa, whitening, fix count: the ST_* entries) lives
     in ``st`` only, so the 100-Hz path between fixes carries none of it.  The epoch's
     fix ``z_e, z_n`` (m), variances ``r_e, r_n`` (m^2) and receiver velocity ``gv_e,
     gv_n`` (m/s, NaN when none) come as values, not arrays: a call passes every array
@@ -664,15 +596,14 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     kernel; ``add_e, add_n`` the position variance added to P(k|k-1) so far
     (m^2).  The options are the kernel's None-or-int keyword arguments (numba
     prunes a None one before type inference).  Returns the updated ``add_e,
-    add_n``, the seed 001 factor g applied to P(k|k-1), the number of DR rows
+    add_n``, the innovation adaptive factor g applied to P(k|k-1), the number of DR rows
     queued in ``gw`` for the block, ``ge_pred``, the NIS, and whether the fix was used
     and whether the gate rejected it.
     """
     H = wk[0]
     K = wk[1]
     PHt = wk[2]
-    Bh = wk[3]
-    alpha = prm[P_ALPHA]
+    alpha = prm[PAR_ALPHA]
     # state indices and the empty consider mask as int64 values (see cs_filter_kernel)
     i_e = np.int64(0)
     i_n = np.int64(3)
@@ -682,59 +613,56 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     rej = False
     n_rows = np.int64(0)  # not the literal 0: one ge_push specialisation, not two
 
-    rej_since = st[S_REJ_SINCE]
-    sh_r = st[S_SH_R]
-    sh_m = int(st[S_SH_M])
-    n_fix = st[S_N_FIX]
-    wh_c0 = st[S_WH_C0]
-    wh_c1 = st[S_WH_C1]
-    wh_c2 = st[S_WH_C2]
-    wh_ue = st[S_WH_UE]
-    wh_un = st[S_WH_UN]
-    wh_ue2 = st[S_WH_UE2]
-    wh_un2 = st[S_WH_UN2]
-    wh_t = st[S_WH_T]
-    wh_t2 = st[S_WH_T2]
-    wh_m = st[S_WH_M]
-    wh_static = st[S_WH_STATIC]
-    b_since = st[S_B_SINCE]
-    ye = z_e - x[0]
-    yn = z_n - x[3]
+    rej_since = st[ST_REJ_SINCE]
+    sh_r = st[ST_SH_R]
+    sh_m = int(st[ST_SH_M])
+    n_fix = st[ST_N_FIX]
+    wh_c0 = st[ST_WH_C0]
+    wh_c1 = st[ST_WH_C1]
+    wh_c2 = st[ST_WH_C2]
+    wh_ue = st[ST_WH_UE]
+    wh_un = st[ST_WH_UN]
+    wh_ue2 = st[ST_WH_UE2]
+    wh_un2 = st[ST_WH_UN2]
+    wh_t = st[ST_WH_T]
+    wh_t2 = st[ST_WH_T2]
+    wh_m = st[ST_WH_M]
+    wh_static = st[ST_WH_STATIC]
+    b_since = st[ST_B_SINCE]
+    ye = z_e - x[IE]
+    yn = z_n - x[IN]
     if ge_on is not None:  # z = position + b + v: the predicted fix includes the bias
         if ge_pred:
-            ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[P_GE_VAR])  # no rows yet
+            ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[PAR_GE_VAR])  # no rows yet
             ge_pred = False
-        if gate and n_fix >= prm[P_GATE_WARMUP]:
+        if gate and n_fix >= prm[PAR_GATE_WARMUP]:
             # bias gate (our choice): multipath decorrelates as the car moves; an
             # estimated b outside the gate of its stationary distribution for
             # gate_reset_s while moving is not multipath but fixes that moved (a datum
             # change) or a DR error: b goes into the position, whose variance grows by
             # it (no lock-out, like the gate reset; a 30 m step otherwise stayed half
             # in b, the track 16 m off)
-            if (ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN] > prm[P_GATE_THR] * prm[P_GE_VAR]
-                    and not is_static):
-                if b_since < 0.0:
-                    b_since = t
-                if t - b_since >= prm[P_GATE_RESET]:
-                    x[0] += ge[GE_BE]
-                    x[3] += ge[GE_BN]
+            if not is_static:
+                b2 = ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN]
+                verdict, b_since = chi2_gate(b2, prm[PAR_GATE_THR] * prm[PAR_GE_VAR], t, b_since,
+                                             prm[PAR_GATE_RESET], RESET_AFTER_FIRST_REJECT, False)
+                if verdict == GATE_RESET:
+                    x[IE] += ge[GE_BE]
+                    x[IN] += ge[GE_BN]
                     add_e += ge[GE_BE] * ge[GE_BE]
                     add_n += ge[GE_BN] * ge[GE_BN]
-                    P[0, 0] += ge[GE_BE] * ge[GE_BE]
-                    P[3, 3] += ge[GE_BN] * ge[GE_BN]
+                    P[IE, IE] += ge[GE_BE] * ge[GE_BE]
+                    P[IN, IN] += ge[GE_BN] * ge[GE_BN]
                     ge[GE_BE] = 0.0
                     ge[GE_BN] = 0.0
-                    b_since = -1.0
-                    info[I_GATE_RESETS] += 1.0
-            elif not is_static:
-                b_since = -1.0
-        ye = z_e - x[0] - ge[GE_BE]
-        yn = z_n - x[3] - ge[GE_BN]
+                    info[INF_GATE_RESETS] += 1.0
+        ye = z_e - x[IE] - ge[GE_BE]
+        yn = z_n - x[IN] - ge[GE_BN]
     # innovation whitening (aekf.innovation_whitening, Mehra 1970): an optimal filter's
     # innovations are white; a lag-one correlation rho of the normalised innovations
     # says the fixes' errors are time-correlated (multipath) and carry less independent
     # information than R claims: R is scaled by the AR(1) variance factor of an average,
-    # (1 + rho)/(1 - rho), within [1, P_WH_MAX]
+    # (1 + rho)/(1 - rho), within [1, PAR_WH_MAX]
     f_wh = 1.0
     if whiten_off is None and wh_c0 > 0.0 and wh_c1 > 0.0:
         # white + first-order Gauss-Markov innovations: lag-one and lag-two
@@ -744,7 +672,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         r_c = min(max(wh_c2 / wh_c1, 0.0), 0.999)
         s_c = min(wh_c1 / max(r_c, 1e-3), wh_c0)
         f_wh = min(((wh_c0 - s_c) + s_c * (1.0 + r_c) / (1.0 - r_c)) / wh_c0,
-                   prm[P_WH_MAX])
+                   prm[PAR_WH_MAX])
     if whiten_off is None and is_static:
         # parked, the antenna does not move and its multipath does not change: the
         # m-th fix of a stop carries ~1/m of a fix's information (all m together about
@@ -753,11 +681,11 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         f_wh = max(f_wh, wh_static)
     re = r_e * sh_r * f_wh
     rn = r_n * sh_r * f_wh
-    # NIS, gate and the seed 001 factor with the nominal R: the whitening factor scales
+    # NIS, gate and the innovation adaptive factor with the nominal R: the whitening factor scales
     # the information of a fix, not the spread of its error (which the NIS tests)
-    s00 = P[0, 0] + r_e * sh_r
-    s11 = P[3, 3] + r_n * sh_r
-    s01 = P[0, 3]
+    s00 = P[IE, IE] + r_e * sh_r
+    s11 = P[IN, IN] + r_n * sh_r
+    s01 = P[IE, IN]
     if ge_on is not None:  # H = [I_pos, I_b]: S gains 2 P(pos, b) + P(b, b)
         s00 += 2.0 * ge[0] + ge[GE_PEE]
         s11 += 2.0 * ge[7] + ge[GE_PNN]
@@ -766,36 +694,32 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     accept = True
     reset = False
     r_fac = 1.0
-    if gate and n_fix >= prm[P_GATE_WARMUP]:  # no gate before the filter has converged
-        thr = prm[P_GATE_THR]
-        if nis > thr:
-            if rej_since < 0.0:
-                rej_since = t
-            if t - rej_since >= prm[P_GATE_RESET]:
-                # no lock-out: accept and inflate P by the innovation.  First, also in
-                # inflate mode: fixes that have disagreed for gate_reset_s are a new
-                # truth (a datum change), not an error to down-weight forever (with the
-                # GNSS error states, down-weighted fixes of a 30 m step went into b and
-                # the track stayed 16 m off)
-                reset = True
-                rej_since = -1.0
-                info[I_GATE_RESETS] += 1.0
-            elif (inflate_on is not None and nis <= thr * prm[P_GATE_INFLATE_MAX]
-                    and t - rej_since >= prm[P_GATE_INFLATE_AFTER]):
-                # robust "opposite lever" (ALGORITHMS.md 3) once the fixes have
+    if gate and n_fix >= prm[PAR_GATE_WARMUP]:  # no gate before the filter has converged
+        thr = prm[PAR_GATE_THR]
+        verdict, rej_since = chi2_gate(nis, thr, t, rej_since, prm[PAR_GATE_RESET],
+                                       RESET_AFTER_FIRST_REJECT, False)
+        if verdict == GATE_RESET:
+            # no lock-out: accept and inflate P by the innovation.  First, also in
+            # inflate mode: fixes that have disagreed for gate_reset_s are a new
+            # truth (a datum change), not an error to down-weight forever
+            reset = True
+            info[INF_GATE_RESETS] += 1.0
+        elif verdict == GATE_FAIL:
+            if (inflate_on is not None and nis <= thr * prm[PAR_GATE_INFLATE_MAX]
+                    and t - rej_since >= prm[PAR_GATE_INFLATE_AFTER]):
+                # robust down-weighting (docs/algorithms.md#gate) once the fixes have
                 # disagreed for gate_inflate_after_s (a short multipath burst is still
                 # rejected): accept with R scaled so that the NIS equals the gate
                 r_fac = nis / thr
-                info[I_INFLATED] += 1.0
+                info[INF_INFLATED] += 1.0
             else:
                 accept = False
                 rej = True
-        else:
-            rej_since = -1.0
     if accept:
-        if innov_on is not None and r_fac == 1.0 and not gap:  # seed 001: P(k|k-1) /= alpha (not on a fix the
-            # gate down-weighted as an outlier: in reject mode it would not be used at all)
-            af = adaptive_factor(ye, yn, s00 + s11, prm[P_INNOV_C])
+        if innov_on is not None and r_fac == 1.0 and not gap:
+            # innovation adaptive factor: P(k|k-1) /= alpha (not on a fix the gate
+            # down-weighted as an outlier: in reject mode it would not be used at all)
+            af = adaptive_factor(ye, yn, s00 + s11, prm[PAR_INNOV_C])
             if af < 1.0:
                 g = 1.0 / af
                 inflate_kinematic(P, g)
@@ -805,30 +729,30 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         if reset:
             add_e += ye * ye
             add_n += yn * yn
-            P[0, 0] += ye * ye
-            P[3, 3] += yn * yn
-        if sage_on is not None:  # seed 004 Sage-Husa on a scale of R, with the divergence guard
-            sample = (ye * ye - P[0, 0] + yn * yn - P[3, 3]) / (r_e + r_n)
-            sh_r = sage_husa_r(sh_r, sh_m, prm[P_SH_B], sample, prm[P_SH_RMIN],
-                               prm[P_SH_RMAX])
+            P[IE, IE] += ye * ye
+            P[IN, IN] += yn * yn
+        if sage_on is not None:  # Zeng et al. Sage-Husa on a scale of R, with the divergence guard
+            sample = (ye * ye - P[IE, IE] + yn * yn - P[IN, IN]) / (r_e + r_n)
+            sh_r = sage_husa_r(sh_r, sh_m, prm[PAR_SH_B], sample, prm[PAR_SH_RMIN],
+                               prm[PAR_SH_RMAX])
             sh_m += 1
             re = r_e * sh_r * f_wh
             rn = r_n * sh_r * f_wh
-        if (whiten_off is None and not reset and r_fac == 1.0 and nis <= prm[P_WH_NIS]
+        if (whiten_off is None and not reset and r_fac == 1.0 and nis <= prm[PAR_WH_NIS]
                 and not is_static  # a stop has its own rule (R x m, above)
-                and P[0, 0] + P[3, 3] < (r_e + r_n) * sh_r):  # converged only
+                and P[IE, IE] + P[IN, IN] < (r_e + r_n) * sh_r):  # converged only
             # normalised innovations; their lag-one product only between fixes at most
-            # P_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
-            # under P_WH_NIS: a filter error (a drive-off with an unknown heading, the
+            # PAR_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
+            # under PAR_WH_NIS: a filter error (a drive-off with an unknown heading, the
             # end of an outage) also makes the innovations correlated, and inflating R
             # then slowed its correction (11 m instead of 7 m, 10 s later)
-            ue = ye / math.sqrt(P[0, 0] + r_e * sh_r)
-            un = yn / math.sqrt(P[3, 3] + r_n * sh_r)
-            d_wh = (1.0 - prm[P_WH_B]) / (1.0 - prm[P_WH_B] ** (wh_m + 1.0))
+            ue = ye / math.sqrt(P[IE, IE] + r_e * sh_r)
+            un = yn / math.sqrt(P[IN, IN] + r_n * sh_r)
+            d_wh = (1.0 - prm[PAR_WH_B]) / (1.0 - prm[PAR_WH_B] ** (wh_m + 1.0))
             wh_c0 = (1.0 - d_wh) * wh_c0 + d_wh * 0.5 * (ue * ue + un * un)
-            if t - wh_t <= prm[P_WH_GAP]:
+            if t - wh_t <= prm[PAR_WH_GAP]:
                 wh_c1 = (1.0 - d_wh) * wh_c1 + d_wh * 0.5 * (ue * wh_ue + un * wh_un)
-            if t - wh_t2 <= 2.0 * prm[P_WH_GAP]:
+            if t - wh_t2 <= 2.0 * prm[PAR_WH_GAP]:
                 wh_c2 = (1.0 - d_wh) * wh_c2 + d_wh * 0.5 * (ue * wh_ue2 + un * wh_un2)
             wh_ue2 = wh_ue
             wh_un2 = wh_un
@@ -846,41 +770,41 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # states absorbed a drive-off's wrong heading (15 m); then b is a consider
             # state (it widens S only)
             est_b = is_static or (math.isfinite(gv_e) and math.isfinite(gv_n)
-                                  and prm[P_GVEL_VAR] > 0.0)
+                                  and prm[PAR_GVEL_VAR] > 0.0)
             ok1 = ge_fix_update(x, P, ge, z_e, z_n, re, rn, K, est_b)
             ok2 = ok1
         else:
-            ok1 = unit_update(x, P, i_e, ye, re, K, PHt, Bh, no_cons)
-            ok2 = unit_update(x, P, i_n, z_n - x[3], rn, K, PHt, Bh, no_cons)
+            ok1 = unit_update(x, P, i_e, ye, re, 1.0, K, PHt, no_cons)
+            ok2 = unit_update(x, P, i_n, z_n - x[IN], rn, 1.0, K, PHt, no_cons)
         if ok1 and ok2:
             used = True
             n_fix += 1.0
-            if math.isfinite(gv_e) and math.isfinite(gv_n) and prm[P_GVEL_VAR] > 0.0:
+            if math.isfinite(gv_e) and math.isfinite(gv_n) and prm[PAR_GVEL_VAR] > 0.0:
                 # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
                 for idx in (1, 4):
                     y = (gv_e if idx == 1 else gv_n) - x[idx]
-                    ok_v = unit_update(x, P, idx, y, prm[P_GVEL_VAR], K, PHt, Bh, no_cons)
+                    ok_v = unit_update(x, P, idx, y, prm[PAR_GVEL_VAR], 1.0, K, PHt, no_cons)
                     if ge_on is not None:  # noqa: SIM102 (a plain test: numba prunes it when off)
                         if ok_v:
-                            n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[P_GVEL_VAR], y)
+                            n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[PAR_GVEL_VAR], y)
         else:
-            info[I_SKIPPED] += 1.0
-    st[S_REJ_SINCE] = rej_since
-    st[S_SH_R] = sh_r
-    st[S_SH_M] = sh_m
-    st[S_N_FIX] = n_fix
-    st[S_WH_C0] = wh_c0
-    st[S_WH_C1] = wh_c1
-    st[S_WH_C2] = wh_c2
-    st[S_WH_UE] = wh_ue
-    st[S_WH_UN] = wh_un
-    st[S_WH_UE2] = wh_ue2
-    st[S_WH_UN2] = wh_un2
-    st[S_WH_T] = wh_t
-    st[S_WH_T2] = wh_t2
-    st[S_WH_M] = wh_m
-    st[S_WH_STATIC] = wh_static
-    st[S_B_SINCE] = b_since
+            info[INF_SKIPPED] += 1.0
+    st[ST_REJ_SINCE] = rej_since
+    st[ST_SH_R] = sh_r
+    st[ST_SH_M] = sh_m
+    st[ST_N_FIX] = n_fix
+    st[ST_WH_C0] = wh_c0
+    st[ST_WH_C1] = wh_c1
+    st[ST_WH_C2] = wh_c2
+    st[ST_WH_UE] = wh_ue
+    st[ST_WH_UN] = wh_un
+    st[ST_WH_UE2] = wh_ue2
+    st[ST_WH_UN2] = wh_un2
+    st[ST_WH_T] = wh_t
+    st[ST_WH_T2] = wh_t2
+    st[ST_WH_M] = wh_m
+    st[ST_WH_STATIC] = wh_static
+    st[ST_B_SINCE] = b_since
     return add_e, add_n, g, n_rows, ge_pred, nis, used, rej
 
 
@@ -911,21 +835,21 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     ``odo`` speed m/s; ``outage`` epoch inside a GNSS outage.
     Runs epochs ``k_start <= k < k_end`` from the state ``x, P`` (after epoch
     k_start - 1, or the initial state at epoch 0), updated in place, and the
-    internal state ``st`` (S_* indices: remembered heading, static flag, time,
+    internal state ``st`` (ST_* indices: remembered heading, static flag, time,
     gate and Sage-Husa memory), read at the start and written at the end; so
     the pass can be cut into segments and a segment re-run bit for bit from a
-    checkpoint (the checkpointed smoother).  ``prm``/``flg``: P_*/F_* indices.
+    checkpoint (the checkpointed smoother).  ``prm``/``flg``: PAR_*/FLG_* indices.
     Outputs (one row per quantity, so every track column is a contiguous view):
     ``x_out`` (8, n) posterior states; ``pcov_out`` (3, n) var_e, var_n, cov_en;
-    ``sd_out`` (2, n) sigma of eps and k_s; when ``flg[F_STORE]``,
+    ``sd_out`` (2, n) sigma of eps and k_s; when ``flg[FLG_STORE]``,
     ``P_store[k - p_off]`` the packed P(k|k) and ``prior_store[k]`` the prior
-    scalars; ``info`` counters (I_*), accumulated (the caller initialises them);
+    scalars; ``info`` counters (INF_*), accumulated (the caller initialises them);
     ``wk`` (5, 8) scratch rows (H, K, P H^T, B H^T, the Singer q).
     ``ge`` (N_GE,): the GNSS error block (aekf.gnss_err_states; GE_* layout: P(x, b),
     P(b, b), b), read and updated in place like x, P (empty when off); ``gw``
     (GW_ROWS, 8) its work rows; ``b_out`` (2, n) the posterior b per epoch; with
-    ``flg[F_STORE]`` the block's covariances follow the packed P in ``P_store`` and the
-    bias transition f_b is ``prior_store[k, Q_FB]``.
+    ``flg[FLG_STORE]`` the block's covariances follow the packed P in ``P_store`` and the
+    bias transition f_b is ``prior_store[k, PRI_FB]``.
     The options that are off by default come as keyword arguments that are None
     when off (``*_on``; ``*_off`` for those on by default): numba prunes the branches of a None
     argument before type
@@ -936,38 +860,37 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     H = wk[0]
     K = wk[1]
     PHt = wk[2]
-    Bh = wk[3]
     qbuf = wk[4]
     if check_on is not None:
         L = np.empty((n, n))  # Cholesky scratch of the SPD check (tests)
-    alpha = prm[P_ALPHA]
-    tau_eps = prm[P_TAU_EPS]
-    adapt_q = flg[F_ADAPT_Q] != 0
-    standstill = flg[F_STANDSTILL] != 0
-    gate = flg[F_GATE] != 0
-    heading_known = st[S_HEADING_KNOWN] != 0.0
-    drift_consider = flg[F_DRIFT_CONSIDER]
-    odo_consider = flg[F_ODO_CONSIDER]
-    coast_q = prm[P_COAST_Q]
-    off_vvar = prm[P_OFF_VVAR]
-    off_avar = prm[P_OFF_AVAR]
-    omega_min = prm[P_OMEGA_MIN]
-    sigma_a = prm[P_SIGMA_A]
-    psi_mem = st[S_PSI]
-    is_static = st[S_STATIC] != 0.0
-    t = st[S_T]
-    r_w = prm[P_R_OMEGA]
-    w_held = st[S_W]
-    w_t = st[S_W_T]
-    odo_t = st[S_ODO_T]
-    vpsi = st[S_VPSI]
-    cpe = st[S_CPE]
-    heading_min = prm[P_HEADING_MIN]
+    alpha = prm[PAR_ALPHA]
+    tau_eps = prm[PAR_TAU_EPS]
+    adapt_q = flg[FLG_ADAPT_Q] != 0
+    standstill = flg[FLG_STANDSTILL] != 0
+    gate = flg[FLG_GATE] != 0
+    heading_known = st[ST_HEADING_KNOWN] != 0.0
+    drift_consider = flg[FLG_DRIFT_CONSIDER]
+    odo_consider = flg[FLG_ODO_CONSIDER]
+    coast_q = prm[PAR_COAST_Q]
+    off_vvar = prm[PAR_OFF_VVAR]
+    off_avar = prm[PAR_OFF_AVAR]
+    omega_min = prm[PAR_OMEGA_MIN]
+    sigma_a = prm[PAR_SIGMA_A]
+    psi_mem = st[ST_PSI]
+    is_static = st[ST_STATIC] != 0.0
+    t = st[ST_T]
+    r_w = prm[PAR_R_OMEGA]
+    w_held = st[ST_W]
+    w_t = st[ST_W_T]
+    odo_t = st[ST_ODO_T]
+    vpsi = st[ST_VPSI]
+    cpe = st[ST_CPE]
+    heading_min = prm[PAR_HEADING_MIN]
     # standstill.zupt_keeps_position: the zero-velocity update does not move the position (a stop
     # says nothing about where the car is), but P's velocity-position correlation (a heading
     # error's, which shrinks with the speed in truth and not in the linear model) made it halve
     # the position sigma at every stop in an outage
-    zupt_pos = flg[F_ZUPT_POS]  # 0 never, 1 in GNSS outages, 2 always
+    zupt_pos = flg[FLG_ZUPT_POS]  # 0 never, 1 in GNSS outages, 2 always
     # state indices and the empty consider mask as int64 values, not integer literals: numba
     # compiles a helper once per literal argument (cold start: 4 copies of unit_update)
     i_eps = np.int64(6)
@@ -990,30 +913,30 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         ge_pred = np.bool_(False)  # a bool, not the literal False: gnss_fix's type with ge off
         # a step longer than aekf.max_gap_s (a logger pause, a far-future stamp) is not
         # propagated: held like a standstill, the position variance grown by (speed bound x T)^2
-        gap = T > prm[P_MAX_GAP]
+        gap = T > prm[PAR_MAX_GAP]
         if is_static and t + T - odo_t > STALE_ODO_S:
             is_static = False
         hold = (standstill and is_static) or gap
-        # ---- 1. predict (seed 000 CS model; seed 004 static hold; fading memory)
+        # ---- 1. predict (Fang et al. CS model; Zeng et al. static hold; fading memory)
         if k > 0 and T > 0.0:
-            if adapt_q:  # seed 000 eqs. (14)-(15)
-                s2e = cs_sigma_a2(x[2], prm[P_AMAX], prm[P_AMIN], ka[k], sigma_a)
-                s2n = cs_sigma_a2(x[5], prm[P_AMAX], prm[P_AMIN], ka[k], sigma_a)
+            if adapt_q:  # Fang et al. eqs. (14)-(15)
+                s2e = cs_sigma_a2(x[IAE], prm[PAR_AMAX], prm[PAR_AMIN], ka[k], sigma_a)
+                s2n = cs_sigma_a2(x[IAN], prm[PAR_AMAX], prm[PAR_AMIN], ka[k], sigma_a)
             else:
                 s2e = sigma_a * sigma_a
                 s2n = s2e
             qa_e = 2.0 * alpha * s2e
             qa_n = 2.0 * alpha * s2n
             if fading_on is not None:
-                lam = fading_factor(prm[P_FADING], T)
+                lam = fading_factor(prm[PAR_FADING], T)
             f_eps = math.exp(-T / tau_eps)
-            p66 = P[6, 6]
-            predict_mean(x, T, f_eps if prm[P_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
-            predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[P_Q_EPS], prm[P_Q_KS], lam, hold, qbuf)
+            p66 = P[IEPS, IEPS]
+            predict_mean(x, T, f_eps if prm[PAR_EPS_MEAN_DECAY] != 0.0 else 1.0, hold)
+            predict_cov(P, T, alpha, f_eps, qa_e, qa_n, prm[PAR_Q_EPS], prm[PAR_Q_KS], lam, hold, qbuf)
             if ge_on is not None:  # GNSS error states: 1/tau_b = 1/tau + speed/distance (multipath
                 # decorrelates with the antenna's displacement; parked, only with time)
-                sp_b = 0.0 if hold else math.sqrt(x[1] * x[1] + x[4] * x[4])
-                f_b = math.exp(-T * (prm[P_GE_RATE] + sp_b * prm[P_GE_DIST_RATE]))
+                sp_b = 0.0 if hold else math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
+                f_b = math.exp(-T * (prm[PAR_GE_RATE] + sp_b * prm[PAR_GE_DIST_RATE]))
                 gw[GW_PRED, 0] = T
                 gw[GW_PRED, 1] = f_eps
                 gw[GW_PRED, 2] = lam
@@ -1025,20 +948,20 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             if gap:
                 # capped at max_gap_s: past it the position is as good as unknown, and a
                 # larger variance only costs the next fix its precision in float64 (NaN P)
-                add_e = (prm[P_GAP_SPEED] * min(T, prm[P_MAX_GAP])) ** 2
+                add_e = (prm[PAR_GAP_SPEED] * min(T, prm[PAR_MAX_GAP])) ** 2
                 add_n = add_e
-                P[0, 0] += add_e
-                P[3, 3] += add_n
+                P[IE, IE] += add_e
+                P[IN, IN] += add_n
             if turn_off is None and not hold:  # our choice: the gyro turns v and a (aekf.turn_propagation)
                 if has_gyro[k] and math.isfinite(yaw[k]):
                     w_use = -yaw[k]  # the rate read at the end of the step
-                elif t - w_t <= prm[P_GYRO_HOLD]:
+                elif t - w_t <= prm[PAR_GYRO_HOLD]:
                     w_use = w_held  # a slower gyro: its last rate, held briefly
                 if math.isfinite(w_use):
                     # gyro.scale_sd (our choice): a scale error turns the heading by s x the
                     # angle turned; as a random walk per radian turned its variance grows by
                     # scale_sd^2 |w T| (a 90 deg turn: 0.36 deg for 0.5 %, exact 0.45 deg)
-                    r_turn = r_w + prm[P_SCALE_VAR] * abs(w_use) / T
+                    r_turn = r_w + prm[PAR_SCALE_VAR] * abs(w_use) / T
                     turn_predict(x, P, T, w_use, r_turn)
                     if ge_on is not None:  # the turn's Jacobian, for P(x, b) in ge_epoch
                         ge_turn(gw, x, T, w_use)
@@ -1058,20 +981,20 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                 elif not hold:  # the gyro does not drive the heading in this step: no floor
                     vpsi = 0.0
                     cpe = 0.0
-                sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+                sp = math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
                 if not hold and sp >= omega_min:
-                    ce = x[4] / sp  # cross-track unit: (d v / d psi) / speed
-                    cn = -x[1] / sp
-                    d = sp * sp * vpsi - (ce * ce * P[1, 1] + 2.0 * ce * cn * P[1, 4]
-                                          + cn * cn * P[4, 4])
+                    ce = x[IVN] / sp  # cross-track unit: (d v / d psi) / speed
+                    cn = -x[IVE] / sp
+                    d = sp * sp * vpsi - (ce * ce * P[IVE, IVE] + 2.0 * ce * cn * P[IVE, IVN]
+                                          + cn * cn * P[IVN, IVN])
                     if d > 0.0:
                         fl_ee = d * ce * ce
                         fl_nn = d * cn * cn
                         fl_en = d * ce * cn
-                        P[1, 1] += fl_ee
-                        P[4, 4] += fl_nn
-                        P[1, 4] += fl_en
-                        P[4, 1] = P[1, 4]
+                        P[IVE, IVE] += fl_ee
+                        P[IVN, IVN] += fl_nn
+                        P[IVE, IVN] += fl_en
+                        P[IVN, IVE] = P[IVE, IVN]
         # ---- 2. GNSS position fix
         nis_out[k] = math.nan
         gnss_used[k] = False
@@ -1086,7 +1009,7 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             u = odo[k]
             odo_t = t
             was_static = is_static
-            is_static = standstill and u < prm[P_STATIC_SPEED]
+            is_static = standstill and u < prm[PAR_STATIC_SPEED]
             if was_static and not is_static and heading_known:
                 # drive-off (aekf.drive_off_*): the stop's zero-velocity updates left v and a known
                 # to mm/s, and the record that ends it says the car moves off at an acceleration
@@ -1102,21 +1025,21 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     P[i, j] += var * ue * un
                     P[j, i] = P[i, j]
             if whiten_off is None and not is_static:  # (a store to st at 100 Hz only if used)
-                st[S_WH_STATIC] = 0.0  # a new stop starts a new count of its fixes
+                st[ST_WH_STATIC] = 0.0  # a new stop starts a new count of its fixes
             if is_static:
                 zupt_cons = CONS_POS if (zupt_pos == 2 or (zupt_pos == 1 and outage[k])) else 0
                 for idx in (1, 4, 2, 5):
                     y = -x[idx]
-                    if not unit_update(x, P, idx, y, prm[P_R_ZUPT], K, PHt, Bh, zupt_cons):
-                        info[I_SKIPPED] += 1.0
+                    if not unit_update(x, P, idx, y, prm[PAR_R_ZUPT], 1.0, K, PHt, zupt_cons):
+                        info[INF_SKIPPED] += 1.0
                     elif ge_on is not None:
-                        n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[P_R_ZUPT], y)
+                        n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[PAR_R_ZUPT], y)
             else:
-                sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+                sp = math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
                 use = True
                 if sp >= omega_min:
-                    ue = x[1] / sp
-                    un = x[4] / sp
+                    ue = x[IVE] / sp
+                    un = x[IVN] / sp
                 else:
                     ue = math.sin(psi_mem)
                     un = math.cos(psi_mem)
@@ -1135,12 +1058,12 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                         cons |= CONS_KS | CONS_POS
                     pe = ue if along_off is None else 0.0
                     pn = un if along_off is None else 0.0
-                    if not row_update(x, P, H, NZ_ODO, u - h, prm[P_R_ODO], K, PHt, Bh, cons, pe, pn):
-                        info[I_SKIPPED] += 1.0
+                    if not sparse_update(x, P, H, NZ_ODO, u - h, prm[PAR_R_ODO], 1.0, K, PHt, cons, pe, pn):
+                        info[INF_SKIPPED] += 1.0
                     elif ge_on is not None:
                         for i in range(n):
                             gw[GW_H + n_rows, i] = H[i]
-                        n_rows = ge_push(gw, n_rows, GW_ODO, H, PHt, prm[P_R_ODO], u - h)
+                        n_rows = ge_push(gw, n_rows, GW_ODO, H, PHt, prm[PAR_R_ODO], u - h)
         if coast_q > 0.0 and outage[k] and not is_static and T > 0.0 and t - odo_t > STALE_ODO_S:
             # coasting (aekf.coast_acc_psd; a drive without an odometer, in a GNSS outage): nothing
             # measures the speed, and the current statistical model's mean (abar = a_hat) carries
@@ -1150,62 +1073,63 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             r_c = coast_q / T
             for idx in (2, 5):
                 y = -x[idx]
-                if not unit_update(x, P, idx, y, r_c, K, PHt, Bh, no_cons):
-                    info[I_SKIPPED] += 1.0
+                if not unit_update(x, P, idx, y, r_c, 1.0, K, PHt, no_cons):
+                    info[INF_SKIPPED] += 1.0
                 elif ge_on is not None:
                     n_rows = ge_push(gw, n_rows, float(idx), H, PHt, r_c, y)
         static_out[k] = is_static
         hold_out[k] = hold
-        # ---- 4. gyro: heading rate (seed 000), or the drift alone at standstill
+        # ---- 4. gyro: heading rate (Fang et al.), or the drift alone at standstill
         if has_gyro[k]:
             if is_static:
-                y = -yaw[k] - x[6]
-                if not unit_update(x, P, i_eps, y, prm[P_R_OMEGA], K, PHt, Bh, no_cons):
-                    info[I_SKIPPED] += 1.0
+                y = -yaw[k] - x[IEPS]
+                if not unit_update(x, P, i_eps, y, prm[PAR_R_OMEGA], 1.0, K, PHt, no_cons):
+                    info[INF_SKIPPED] += 1.0
                 elif ge_on is not None:
-                    n_rows = ge_push(gw, n_rows, 6.0, H, PHt, prm[P_R_OMEGA], y)
+                    n_rows = ge_push(gw, n_rows, 6.0, H, PHt, prm[PAR_R_OMEGA], y)
             elif turn_off is None and omega_skip_on is not None:
                 pass  # the gyro already turned the velocity in the prediction
-            elif math.sqrt(x[1] * x[1] + x[4] * x[4]) >= omega_min:
+            elif math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN]) >= omega_min:
                 h = omega_row(x, H)
                 z = -yaw[k]
                 if turn_off is None:  # OMEGA_LATERAL: the turn is in the prediction; what is left of the
-                    # seed 000 row says the residual acceleration has no lateral part (it
+                    # Fang et al. row says the residual acceleration has no lateral part (it
                     # corrects v too: with v, eps or both as consider states the 10 minute
                     # outage of tests/test_faults.py ended 2-3 x farther off)
                     z = 0.0
-                    h -= x[6]
-                    H[6] = 0.0
+                    h -= x[IEPS]
+                    H[IEPS] = 0.0
                 # drift as a consider state while moving (aekf.drift_consider): without an
                 # absolute reference a sustained turn (the Singer covariance lets a decay while
                 # the mean holds it) or a speed update (through P[eps, v]) must not move eps
                 cons = CONS_EPS if (drift_consider == 2 or (drift_consider == 1 and outage[k])) else 0
                 if heading_consider_on is not None and outage[k]:
                     cons |= CONS_VEL
-                if turn_off is None and (flg[F_LATERAL_ACC] == 2 or (flg[F_LATERAL_ACC] == 1 and outage[k])):
+                lat = flg[FLG_LATERAL_ACC]
+                if turn_off is None and (lat == 2 or (lat == 1 and outage[k])):
                     cons |= CONS_NOT_ACC
-                if not row_update(x, P, H, NZ_OMEGA, z - h, prm[P_R_OMEGA], K, PHt, Bh, cons, 0.0, 0.0):
-                    info[I_SKIPPED] += 1.0
+                if not sparse_update(x, P, H, NZ_OMEGA, z - h, prm[PAR_R_OMEGA], 1.0, K, PHt, cons, 0.0, 0.0):
+                    info[INF_SKIPPED] += 1.0
                 elif ge_on is not None:
                     for i in range(n):
                         gw[GW_H + n_rows, i] = H[i]
-                    n_rows = ge_push(gw, n_rows, GW_OMEGA, H, PHt, prm[P_R_OMEGA], z - h)
+                    n_rows = ge_push(gw, n_rows, GW_OMEGA, H, PHt, prm[PAR_R_OMEGA], z - h)
         if ge_on is not None:  # noqa: SIM102 (the block: prediction and DR rows; numba prunes a plain test)
             if ge_pred or n_rows > 0:
-                ge_epoch(ge, gw, n_rows, ge_pred, alpha, prm[P_GE_VAR])
-        sp = math.sqrt(x[1] * x[1] + x[4] * x[4])
+                ge_epoch(ge, gw, n_rows, ge_pred, alpha, prm[PAR_GE_VAR])
+        sp = math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
         if floor_off is None and gnss_used[k] and sp >= heading_min:  # the heading floor restarts from P
-            ce = x[4] / sp
-            cn = -x[1] / sp
-            vpsi = min((ce * ce * P[1, 1] + 2.0 * ce * cn * P[1, 4] + cn * cn * P[4, 4])
+            ce = x[IVN] / sp
+            cn = -x[IVE] / sp
+            vpsi = min((ce * ce * P[IVE, IVE] + 2.0 * ce * cn * P[IVE, IVN] + cn * cn * P[IVN, IVN])
                        / (sp * sp), VPSI_MAX)
-            cpe = (ce * P[1, 6] + cn * P[4, 6]) / sp
+            cpe = (ce * P[IVE, IEPS] + cn * P[IVN, IEPS]) / sp
         # ---- remembered heading for the odometer row near standstill
         if sp >= heading_min:  # slower, while braking, the Newton step can reverse v
-            psi_mem = math.atan2(x[1], x[4])
+            psi_mem = math.atan2(x[IVE], x[IVN])
             heading_known = True
         elif has_gyro[k] and k > 0:
-            psi_mem += (-yaw[k] - x[6]) * T
+            psi_mem += (-yaw[k] - x[IEPS]) * T
         if has_gyro[k] and math.isfinite(yaw[k]):
             w_held = -yaw[k]
             w_t = t
@@ -1213,42 +1137,42 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         for i in range(n):
             x_out[i, k] = x[i]
             if not math.isfinite(x[i]):
-                info[I_NONFINITE] += 1.0
-        pcov_out[0, k] = P[0, 0]
-        pcov_out[1, k] = P[3, 3]
-        pcov_out[2, k] = P[0, 3]
+                info[INF_NONFINITE] += 1.0
+        pcov_out[0, k] = P[IE, IE]
+        pcov_out[1, k] = P[IN, IN]
+        pcov_out[2, k] = P[IE, IN]
         if ge_on is not None:
             b_out[0, k] = ge[GE_BE]
             b_out[1, k] = ge[GE_BN]
-        sd_out[0, k] = math.sqrt(max(P[6, 6], 0.0))
-        sd_out[1, k] = math.sqrt(max(P[7, 7], 0.0))
+        sd_out[0, k] = math.sqrt(max(P[IEPS, IEPS], 0.0))
+        sd_out[1, k] = math.sqrt(max(P[IKS, IKS], 0.0))
         for i in range(n):
-            if P[i, i] < info[I_MIN_DIAG] or not math.isfinite(P[i, i]):
-                info[I_MIN_DIAG] = P[i, i] if math.isfinite(P[i, i]) else -math.inf
+            if P[i, i] < info[INF_MIN_DIAG] or not math.isfinite(P[i, i]):
+                info[INF_MIN_DIAG] = P[i, i] if math.isfinite(P[i, i]) else -math.inf
         if check_on is not None and not cholesky(P, L):
-            info[I_SPD_FAIL] += 1.0
+            info[INF_SPD_FAIL] += 1.0
         if store_on is not None:
             pack(P, P_store[k - p_off])
             if ge_on is not None:
                 for i in range(N_GE_PACKED):
                     P_store[k - p_off, N_PACKED + i] = ge[i]
-            prior_store[k, Q_FB] = f_b
-            prior_store[k, Q_QA_E] = qa_e
-            prior_store[k, Q_QA_N] = qa_n
-            prior_store[k, Q_LAM] = lam
-            prior_store[k, Q_GAIN] = g
-            prior_store[k, Q_ADD_E] = add_e
-            prior_store[k, Q_ADD_N] = add_n
-            prior_store[k, Q_W] = w_use
-            prior_store[k, Q_FL_EE] = fl_ee
-            prior_store[k, Q_FL_NN] = fl_nn
-            prior_store[k, Q_FL_EN] = fl_en
-    st[S_PSI] = psi_mem
-    st[S_STATIC] = 1.0 if is_static else 0.0
-    st[S_T] = t
-    st[S_HEADING_KNOWN] = 1.0 if heading_known else 0.0
-    st[S_W] = w_held
-    st[S_W_T] = w_t
-    st[S_ODO_T] = odo_t
-    st[S_VPSI] = vpsi
-    st[S_CPE] = cpe
+            prior_store[k, PRI_FB] = f_b
+            prior_store[k, PRI_QA_E] = qa_e
+            prior_store[k, PRI_QA_N] = qa_n
+            prior_store[k, PRI_LAM] = lam
+            prior_store[k, PRI_GAIN] = g
+            prior_store[k, PRI_ADD_E] = add_e
+            prior_store[k, PRI_ADD_N] = add_n
+            prior_store[k, PRI_W] = w_use
+            prior_store[k, PRI_FL_EE] = fl_ee
+            prior_store[k, PRI_FL_NN] = fl_nn
+            prior_store[k, PRI_FL_EN] = fl_en
+    st[ST_PSI] = psi_mem
+    st[ST_STATIC] = 1.0 if is_static else 0.0
+    st[ST_T] = t
+    st[ST_HEADING_KNOWN] = 1.0 if heading_known else 0.0
+    st[ST_W] = w_held
+    st[ST_W_T] = w_t
+    st[ST_ODO_T] = odo_t
+    st[ST_VPSI] = vpsi
+    st[ST_CPE] = cpe

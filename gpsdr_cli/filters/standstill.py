@@ -51,7 +51,7 @@ def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params,
     ``k+1`` closes the interval before it: a look-ahead of one fix interval, so
     the zero-velocity update ends when the car drives off, not one fix later.
 
-    Why (our choice, beyond seed 002): without an odometer nothing else tells
+    Why (our choice, beyond Tang et al.): without an odometer nothing else tells
     the filters that the car stopped.  The constant-acceleration model then let
     the velocity wander on GNSS noise (~1 m/s at a stop), its variance grew
     while a multipath burst was gated, the burst's 8th fix (27 m off) passed

@@ -1,4 +1,4 @@
-"""The 8-state "current statistical" GNSS/DR model of seed 000 (ALGORITHMS.md section 1).
+"""The 8-state "current statistical" GNSS/DR model of Fang et al. (docs/algorithms.md#cs-model).
 
 State ``x = [e, v_e, a_e, n, v_n, a_n, eps, k_s]`` (m, m/s, m/s^2 per axis in the
 local ENU frame; ``eps`` gyro drift of d(psi)/dt in rad/s, first-order
@@ -9,7 +9,7 @@ rate is ``omega = d(psi)/dt = -yaw_rate`` (gyro CCW-positive, see
 
 Mean propagation (current statistical model, abar = a_hat): Newton matrix per
 axis.  Covariance propagation: Singer discretisation per axis with alpha = 1/tau_a
-(seed 000; Singer 1970).  Phi is block diagonal: two identical 3x3 axis blocks,
+(Fang et al.; Singer 1970).  Phi is block diagonal: two identical 3x3 axis blocks,
 ``exp(-T/tau_eps)`` and 1; the kernels exploit that, these helpers also build
 the dense matrices for the reference implementation and the FilterPy benchmark.
 
@@ -28,11 +28,11 @@ from numba import njit
 N_STATES = 8
 IE, IVE, IAE, IN, IVN, IAN, IEPS, IKS = 0, 1, 2, 3, 4, 5, 6, 7
 
-#: Below this alpha*T the Singer Q uses its small-T series (seed 000's q(T));
+#: Below this alpha*T the Singer Q uses its small-T series (Fang et al.'s q(T));
 #: above it, the exact expressions (their cancellation error is < 1e-8 relative there).
 SINGER_SERIES_MAX_AT = 0.05
 
-#: (4 - pi)/pi of the current statistical model's Rayleigh-type variance (seed 000 eq. (14)).
+#: (4 - pi)/pi of the current statistical model's Rayleigh-type variance (Fang et al. eq. (14)).
 CS_VAR_FACTOR = (4.0 - math.pi) / math.pi
 
 
@@ -40,7 +40,7 @@ CS_VAR_FACTOR = (4.0 - math.pi) / math.pi
 def singer_phi(T: float, alpha: float) -> tuple[float, float, float]:
     """Singer transition corner terms (phi13, phi23, phi33) for step T (s), alpha = 1/tau_a (1/s).
 
-    Phi_a = [[1, T, phi13], [0, 1, phi23], [0, 0, phi33]] (ALGORITHMS.md 1).
+    Phi_a = [[1, T, phi13], [0, 1, phi23], [0, 0, phi33]] (docs/algorithms.md#cs-model).
     """
     aT = alpha * T
     if aT < 1e-6:
@@ -54,7 +54,7 @@ def singer_phi(T: float, alpha: float) -> tuple[float, float, float]:
 def singer_q(T: float, alpha: float, q: np.ndarray) -> None:
     """Per-axis Singer q(T) into q = [q11, q12, q13, q22, q23, q33]; Q_axis = 2 alpha sigma_a^2 q.
 
-    alpha*T < SINGER_SERIES_MAX_AT: seed 000's small-T form
+    alpha*T < SINGER_SERIES_MAX_AT: Fang et al.'s small-T form
     [[T^5/20, T^4/8, T^3/6], [T^4/8, T^3/3, T^2/2], [T^3/6, T^2/2, T]];
     above it the exact Singer (1970) expressions, which stay bounded for long
     steps (a gap of minutes between epochs) where the series would explode.
@@ -89,7 +89,7 @@ def cs_sigma_a2(a_hat: float, a_max: float, a_min_mag: float, ka: float,
                 sigma_floor: float) -> float:
     """Adaptive acceleration variance (m^2/s^4) of the current statistical model.
 
-    seed 000 eqs. (14)-(15) with the regime factor K_a:
+    Fang et al. eqs. (14)-(15) with the regime factor K_a:
     ``K_a^2 (4-pi)/pi (a_max - a_hat)^2`` for a_hat > 0,
     ``K_a^2 (4-pi)/pi (a_min_mag + a_hat)^2`` for a_hat < 0; a_hat is clipped
     to the bounds so the bracket never goes negative.  Floor (our choice):
@@ -111,7 +111,7 @@ def cs_sigma_a2(a_hat: float, a_max: float, a_min_mag: float, ka: float,
 
 @njit(cache=True, inline="always", error_model="numpy")
 def omega_row(x: np.ndarray, H: np.ndarray) -> float:
-    """Heading-rate measurement h(x) (rad/s, clockwise+) and its Jacobian row into H (seed 000).
+    """Heading-rate measurement h(x) (rad/s, clockwise+) and its Jacobian row into H (Fang et al.).
 
     ``omega = (v_n a_e - v_e a_n)/(v_e^2 + v_n^2) + eps``.  The caller must
     ensure the speed is above the standstill threshold (the row is singular at v = 0).
@@ -133,10 +133,10 @@ def omega_row(x: np.ndarray, H: np.ndarray) -> float:
 def odo_row(x: np.ndarray, ue: float, un: float, H: np.ndarray) -> float:
     """Odometer speed measurement u = k_s * v along the unit direction (ue, un), and its row.
 
-    seed 000 measures the distance ``s = k_s T sqrt(v_e^2+v_n^2)``; we use the
+    Fang et al. measures the distance ``s = k_s T sqrt(v_e^2+v_n^2)``; we use the
     speed ``u = s/T`` (the same information, with sigma_s/T = noise_sd_mps), so
     the row does not depend on the sampling interval.  With (ue, un) the current
-    velocity direction this is exactly ``k_s |v|`` and the Jacobian of seed 000
+    velocity direction this is exactly ``k_s |v|`` and the Jacobian of Fang et al.
     divided by T; below the direction threshold the caller passes the remembered
     heading (sin psi, cos psi) so the row stays defined at v ~ 0.
     """
@@ -183,7 +183,7 @@ def q_matrix(T: float, alpha: float, qa_e: float, qa_n: float, q_eps: float, q_k
              hold: bool = False) -> np.ndarray:
     """Dense 8x8 process noise: per axis ``qa * q(T)`` with qa = 2 alpha sigma_a^2; eps, k_s white.
 
-    ``hold`` (static mode, seed 004): position rows/columns get no noise.
+    ``hold`` (static mode, Zeng et al.): position rows/columns get no noise.
     """
     q = np.empty(6)
     singer_q(T, alpha, q)

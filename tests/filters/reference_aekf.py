@@ -123,8 +123,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
     prm, _ = kernel_params(params, adaptive, smooth)
     coast = coast_psd(epochs, params)
     off_v, off_a = drive_off_var(params)
-    alpha, tau_eps = prm[kn.P_ALPHA], prm[kn.P_TAU_EPS]
-    sigma_a = prm[kn.P_SIGMA_A]
+    alpha, tau_eps = prm[kn.PAR_ALPHA], prm[kn.PAR_TAU_EPS]
+    sigma_a = prm[kn.PAR_SIGMA_A]
     st = params["standstill"]
     standstill = bool(st["enabled"])
     omega_min = st["omega_min_speed_mps"]
@@ -169,16 +169,16 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         F = np.eye(m)
         if k > 0 and T > 0:
             if adaptive:  # Fang et al. eqs. (14)-(15)
-                s2e = sa_py(x[2], prm[kn.P_AMAX], prm[kn.P_AMIN], ka[k], sigma_a)
-                s2n = sa_py(x[5], prm[kn.P_AMAX], prm[kn.P_AMIN], ka[k], sigma_a)
+                s2e = sa_py(x[2], prm[kn.PAR_AMAX], prm[kn.PAR_AMIN], ka[k], sigma_a)
+                s2n = sa_py(x[5], prm[kn.PAR_AMAX], prm[kn.PAR_AMIN], ka[k], sigma_a)
             else:
                 s2e = s2n = sigma_a ** 2
-            lam = prm[kn.P_FADING] ** T if ad["fading"] and prm[kn.P_FADING] > 1 else 1.0
+            lam = prm[kn.PAR_FADING] ** T if ad["fading"] and prm[kn.PAR_FADING] > 1 else 1.0
             p66 = P[6, 6]
             w = math.nan
             F = phi_matrix(T, alpha, tau_eps, hold)
-            Q = q_matrix(T, alpha, 2 * alpha * s2e, 2 * alpha * s2n, prm[kn.P_Q_EPS],
-                         prm[kn.P_Q_KS], hold)
+            Q = q_matrix(T, alpha, 2 * alpha * s2e, 2 * alpha * s2n, prm[kn.PAR_Q_EPS],
+                         prm[kn.PAR_Q_KS], hold)
             Fm = newton_matrix(T, tau_eps, hold, params["aekf"]["drift_mean_decay"])
             if ge:  # b: Gauss-Markov, 1/tau_b = 1/tau + speed/distance (speed after the prediction)
                 v_pred = 0.0 if hold else math.hypot(*(Fm @ x[:8])[[1, 4]])
@@ -222,10 +222,10 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             z = np.array([epochs.gnss_e[k], epochs.gnss_n[k]])
             if ge and params["gnss"]["gate"] and n_fix >= params["gnss"]["gate_warmup_fixes"]:
                 # bias gate: b outside its stationary gate for gate_reset_s while moving -> position
-                if x[8] ** 2 + x[9] ** 2 > prm[kn.P_GATE_THR] * var_b and not is_static:
+                if x[8] ** 2 + x[9] ** 2 > prm[kn.PAR_GATE_THR] * var_b and not is_static:
                     if b_since < 0:
                         b_since = t
-                    if t - b_since >= prm[kn.P_GATE_RESET]:
+                    if t - b_since >= prm[kn.PAR_GATE_RESET]:
                         x = x.copy()
                         x[0] += x[8]
                         x[3] += x[9]
@@ -253,13 +253,13 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
             S = Hg @ P @ Hg.T + R
             nis[k] = float(y @ np.linalg.solve(S, y))
             accept, reset, r_fac = True, False, 1.0
-            thr = prm[kn.P_GATE_THR]
+            thr = prm[kn.PAR_GATE_THR]
             gn = params["gnss"]
             if gate and n_fix >= gn["gate_warmup_fixes"]:
                 if nis[k] > thr:
                     if rej_since < 0:
                         rej_since = t
-                    if t - rej_since >= prm[kn.P_GATE_RESET]:  # no lock-out, first
+                    if t - rej_since >= prm[kn.PAR_GATE_RESET]:  # no lock-out, first
                         reset, rej_since = True, -1.0
                     elif (gn["gate_mode"] == "inflate" and nis[k] <= thr * gn["gate_inflate_max"]
                             and t - rej_since >= gn["gate_inflate_after_s"]):

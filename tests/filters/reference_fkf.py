@@ -32,9 +32,9 @@ VEL_BLOCK = [kf.IVE, kf.IAE, kf.IVN, kf.IAN]
 def eps_factor(T: float, par: np.ndarray, x: np.ndarray) -> float:
     """Gauss-Markov factor of eps over T: time constant tau, and the distance |v| T driven
     over the decorrelation distance D (when D > 0)."""
-    rate = 1.0 / par[kf.K_TAU_EPS]
-    if par[kf.K_EPS_DIST] > 0:
-        rate += math.hypot(x[1], x[4]) / par[kf.K_EPS_DIST]
+    rate = 1.0 / par[kf.PAR_TAU_EPS]
+    if par[kf.PAR_EPS_DIST] > 0:
+        rate += math.hypot(x[1], x[4]) / par[kf.PAR_EPS_DIST]
     return math.exp(-T * rate)
 
 
@@ -42,8 +42,8 @@ def regime_par(par: np.ndarray, w: float) -> np.ndarray:
     """``par`` with the eps model of a step into regime ``w`` (0 clear sky, 1 obstructed,
     between: 1/tau, 1/D and sd^2 interpolated linearly; a distance <= 0 adds no rate)."""
     out = par.copy()
-    c = (par[kf.K_TAU_EPS_C], par[kf.K_EPS_SD_C], par[kf.K_EPS_DIST_C])
-    o = (par[kf.K_TAU_EPS_O], par[kf.K_EPS_SD_O], par[kf.K_EPS_DIST_O])
+    c = (par[kf.PAR_TAU_EPS_C], par[kf.PAR_EPS_SD_C], par[kf.PAR_EPS_DIST_C])
+    o = (par[kf.PAR_TAU_EPS_O], par[kf.PAR_EPS_SD_O], par[kf.PAR_EPS_DIST_O])
     if w <= 0 or w >= 1:
         tau, sd, dist = c if w <= 0 else o
     else:
@@ -51,7 +51,7 @@ def regime_par(par: np.ndarray, w: float) -> np.ndarray:
         sd = math.sqrt((1 - w) * c[1] ** 2 + w * o[1] ** 2)
         inv = (1 - w) * (1 / c[2] if c[2] > 0 else 0) + w * (1 / o[2] if o[2] > 0 else 0)
         dist = 1 / inv if inv > 0 else 0.0
-    out[kf.K_TAU_EPS], out[kf.K_EPS_SD], out[kf.K_EPS_DIST] = tau, sd, dist
+    out[kf.PAR_TAU_EPS], out[kf.PAR_EPS_SD], out[kf.PAR_EPS_DIST] = tau, sd, dist
     return out
 
 
@@ -70,16 +70,16 @@ def Q_of(T: float, static: bool, par: np.ndarray, x: np.ndarray) -> np.ndarray:
     """White-jerk kinematics, stationary Gauss-Markov eps, random-walk q_w, q_s."""
     Q = np.zeros((NX, NX))
     if not static:
-        q = par[kf.K_JERK_PSD]
+        q = par[kf.PAR_JERK_PSD]
         axis = q * np.array([[T**5 / 20, T**4 / 8, T**3 / 6],
                              [T**4 / 8, T**3 / 3, T**2 / 2],
                              [T**3 / 6, T**2 / 2, T]])
         Q[0:3, 0:3] = axis
         Q[3:6, 3:6] = axis
     f = eps_factor(T, par, x)
-    Q[6, 6] = Q[7, 7] = par[kf.K_EPS_SD] ** 2 * (1 - f * f)
-    Q[8, 8] = par[kf.K_QW_RW] ** 2 * T
-    Q[9, 9] = par[kf.K_QS_RW] ** 2 * T
+    Q[6, 6] = Q[7, 7] = par[kf.PAR_EPS_SD] ** 2 * (1 - f * f)
+    Q[8, 8] = par[kf.PAR_QW_RW] ** 2 * T
+    Q[9, 9] = par[kf.PAR_QS_RW] ** 2 * T
     return Q
 
 
@@ -144,7 +144,7 @@ class Window:
 
     def push(self, r2: float, Te: float, par: np.ndarray) -> None:
         M = len(self.buf)
-        self.buf[self.pos] = min(r2, par[kf.K_RES_CLIP] * Te)
+        self.buf[self.pos] = min(r2, par[kf.PAR_RES_CLIP] * Te)
         self.pos = (self.pos + 1) % M
         self.count += 1
         if self.count < M:
@@ -155,9 +155,9 @@ class Window:
         Ra /= M
         u = min(max((Te - Ra) / Te, -1.0), 1.0)
         self.u = u
-        delta = par[kf.K_DELTA_MAX] * np.interp(u, np.linspace(-1, 1, len(fuzzy.R_TABLE)),
+        delta = par[kf.PAR_DELTA_MAX] * np.interp(u, np.linspace(-1, 1, len(fuzzy.R_TABLE)),
                                                 fuzzy.R_TABLE)
-        self.factor = min(max(self.factor * (1 + delta), par[kf.K_R_MIN]), par[kf.K_R_MAX])
+        self.factor = min(max(self.factor * (1 + delta), par[kf.PAR_R_MIN]), par[kf.PAR_R_MAX])
 
 
 def bilinear(table: np.ndarray, a: float, b: float) -> float:
@@ -192,25 +192,25 @@ def beta(P1: np.ndarray, P2: np.ndarray, d1: np.ndarray, d2: np.ndarray, idx: li
 def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, np.ndarray]:
     """Forward pass (and RTS when ``smooth``) of fkf or fafkf; returns the fused track."""
     par, flags = prep.par, prep.flags
-    fr = bool(flags[kf.F_MODE_FR])
+    fr = bool(flags[kf.FLG_MODE_FR])
     adaptive = kind == "fafkf"
     fusion = kf.FUSE_COV if kind == "fkf" else (
-        flags[kf.F_FUSION] if flags[kf.F_FUSION] != kf.FUSE_COV else kf.FUSE_BLOCK)
-    log = bool(flags[kf.F_NORM])
-    gnss_on, dr_on = bool(flags[kf.F_GNSS_ON]), bool(flags[kf.F_DR_ON])
+        flags[kf.FLG_FUSION] if flags[kf.FLG_FUSION] != kf.FUSE_COV else kf.FUSE_BLOCK)
+    log = bool(flags[kf.FLG_NORM])
+    gnss_on, dr_on = bool(flags[kf.FLG_GNSS_ON]), bool(flags[kf.FLG_DR_ON])
     both = gnss_on and dr_on
     n = len(prep.dt)
     d1, d2 = np.ones(NX), np.ones(NX)
     if fr and both:
-        c0 = min(max(par[kf.K_BETA_GNSS], 0.05), 0.95) if fusion == kf.FUSE_COV else 0.5
+        c0 = min(max(par[kf.PAR_BETA_GNSS], 0.05), 0.95) if fusion == kf.FUSE_COV else 0.5
         d1[:], d2[:] = 1 / math.sqrt(c0), 1 / math.sqrt(1 - c0)
     x1, x2 = prep.x0.copy(), prep.x0.copy()
     P1, P2 = prep.P0 * np.outer(d1, d1), prep.P0 * np.outer(d2, d2)
     xg, Pg = prep.x0.copy(), prep.P0.copy()
     own1 = list(range(NX)) if fr else [0, 1, 2, 3, 4, 5, 6, 7]
     own2 = list(range(NX)) if fr else [0, 1, 2, 3, 4, 5, 8, 9]
-    win = [Window(int(flags[kf.F_WINDOW])) for _ in range(4)]
-    zupt_R = par[kf.K_ZUPT_SD] ** 2
+    win = [Window(int(flags[kf.FLG_WINDOW])) for _ in range(4)]
+    zupt_R = par[kf.PAR_ZUPT_SD] ** 2
     t, t_acc, t_dr, t_head, psi_hint = 0.0, 0.0, 0.0, 0.0, prep.psi0
     t_dist = 0.0
     n_acc, share, t_fix = 0, 0.0, 0.0
@@ -251,12 +251,12 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 R = np.diag([win[0].factor * R0[0], win[1].factor * R0[1]])
                 S = HPH + R
                 nis = float(y @ np.linalg.solve(S, y))
-                chi2 = par[kf.K_GATE_CHI2]
-                tau = par[kf.K_GATE_RESET_S] / math.log(2.0)
+                chi2 = par[kf.PAR_GATE_CHI2]
+                tau = par[kf.PAR_GATE_RESET_S] / math.log(2.0)
                 a = math.exp(-(t - t_fix) / tau) if tau > 0 else 0.0
                 t_fix = t
-                accept = not (chi2 > 0 and nis > chi2 and n_acc >= par[kf.K_GATE_WARMUP]
-                              and t - t_acc <= par[kf.K_GATE_RESET_S]
+                accept = not (chi2 > 0 and nis > chi2 and n_acc >= par[kf.PAR_GATE_WARMUP]
+                              and t - t_acc <= par[kf.PAR_GATE_RESET_S]
                               and a * share + (1 - a) <= 0.5)
                 share = a * share + (1 - a) * (not accept)
                 if accept:
@@ -264,11 +264,11 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                         H, h = row(name, x1)
                         x1, P1 = kf_update(x1, P1, H, z[j] - h, R[j, j])
                     gv = (prep.gnss_ve[k], prep.gnss_vn[k])
-                    if par[kf.K_GVEL_VAR] > 0 and not np.isnan(gv).any():
+                    if par[kf.PAR_GVEL_VAR] > 0 and not np.isnan(gv).any():
                         for j, i in enumerate((1, 4)):            # receiver velocity v_e, v_n
                             H = np.zeros(NX)
                             H[i] = 1
-                            x1, P1 = kf_update(x1, P1, H, gv[j] - x1[i], par[kf.K_GVEL_VAR])
+                            x1, P1 = kf_update(x1, P1, H, gv[j] - x1[i], par[kf.PAR_GVEL_VAR])
                     used[k] = True
                     n_acc += 1
                     t_acc = t
@@ -279,39 +279,39 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 x2, P2 = zupt(x2, P2)
                 t_dr = t_dist = t
             else:
-                if (par[kf.K_COAST_Q] > 0 and T > 0 and t - t_dist > par[kf.K_DR_STALE_S]
-                        and t - t_acc > par[kf.K_GNSS_STALE_S]):    # no speed measured: a = 0 rows
+                if (par[kf.PAR_COAST_Q] > 0 and T > 0 and t - t_dist > par[kf.PAR_DR_STALE_S]
+                        and t - t_acc > par[kf.PAR_GNSS_STALE_S]):    # no speed measured: a = 0 rows
                     for i in (2, 5):
                         H = np.zeros(NX)
                         H[i] = 1
-                        x2, P2 = kf_update(x2, P2, H, -x2[i], par[kf.K_COAST_Q] / T)
+                        x2, P2 = kf_update(x2, P2, H, -x2[i], par[kf.PAR_COAST_Q] / T)
                 th, dist, t_m = prep.theta[k], prep.dist[k], prep.t_m[k]
                 do_head = do_dist = False
                 if not math.isnan(th):
                     psi_hint = th - x2[8]
                     v2 = x2[1] ** 2 + x2[4] ** 2
-                    speed_known = t - t_dist <= par[kf.K_DR_STALE_S]
-                    do_head = (v2 >= par[kf.K_OMEGA_MIN] ** 2 and speed_known) or (
-                        v2 >= par[kf.K_OMEGA_MIN] ** 2
+                    speed_known = t - t_dist <= par[kf.PAR_DR_STALE_S]
+                    do_head = (v2 >= par[kf.PAR_OMEGA_MIN] ** 2 and speed_known) or (
+                        v2 >= par[kf.PAR_OMEGA_MIN] ** 2
                         and v2 * v2 >= kf.HEAD_SPEED_SNR2 * (x2[[1, 4]] @ P2[np.ix_([1, 4], [1, 4])]
                                                                 @ x2[[1, 4]]))
                 if not math.isnan(dist) and t_m > 0:
                     do_dist = True
-                R_head = par[kf.K_HEAD_SD] ** 2
-                R_dist = (par[kf.K_ODO_SD] * t_m) ** 2
+                R_head = par[kf.PAR_HEAD_SD] ** 2
+                R_dist = (par[kf.PAR_ODO_SD] * t_m) ** 2
                 if adaptive:
                     if do_head:
                         H, h = row("heading", x2)
                         win[2].push(wrap(th - h) ** 2, H @ P2 @ H + win[2].factor * R_head, par)
                     if do_dist:
-                        H, h = row("dist", x2, t_m, par[kf.K_V_LIN], psi_hint)
+                        H, h = row("dist", x2, t_m, par[kf.PAR_V_LIN], psi_hint)
                         win[3].push((dist - h) ** 2, H @ P2 @ H + win[3].factor * R_dist, par)
                 if do_head:
                     H, h = row("heading", x2)
                     y, R = wrap(th - h), win[2].factor * R_head
-                    chi2 = par[kf.K_HEAD_CHI2]
+                    chi2 = par[kf.PAR_HEAD_CHI2]
                     if chi2 > 0 and y * y > chi2 * (H @ P2 @ H + R):
-                        if t - t_head > par[kf.K_GATE_RESET_S]:     # re-align q_w
+                        if t - t_head > par[kf.PAR_GATE_RESET_S]:     # re-align q_w
                             x2 = x2.copy()
                             x2[8] += y
                             P2 = P2.copy()
@@ -321,14 +321,14 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                         x2, P2 = kf_update(x2, P2, H, y, R)
                         t_head = t_dr = t
                 if do_dist:
-                    H, h = row("dist", x2, t_m, par[kf.K_V_LIN], psi_hint)
+                    H, h = row("dist", x2, t_m, par[kf.PAR_V_LIN], psi_hint)
                     y, R = dist - h, win[3].factor * R_dist
-                    chi2 = par[kf.K_HEAD_CHI2]
+                    chi2 = par[kf.PAR_HEAD_CHI2]
                     if not (chi2 > 0 and y * y > chi2 * (H @ P2 @ H + R)):
                         x2, P2 = kf_update(x2, P2, H, y, R)
                         t_dr = t_dist = t
-        g_fresh = t - t_acc <= par[kf.K_GNSS_STALE_S]
-        d_fresh = t - t_dr <= par[kf.K_DR_STALE_S]
+        g_fresh = t - t_acc <= par[kf.PAR_GNSS_STALE_S]
+        d_fresh = t - t_dr <= par[kf.PAR_DR_STALE_S]
         if both and not fr and g_fresh != d_fresh:        # NR: a stale filter is left out
             if g_fresh:
                 xg, Pg = x1.copy(), P1.copy()
@@ -354,7 +354,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                     w = np.full(NX, bp)
                     beta_out[k] = [bp, bp]
                 else:
-                    w = np.full(NX, par[kf.K_BETA_GNSS])
+                    w = np.full(NX, par[kf.PAR_BETA_GNSS])
                     beta_out[k] = [0.5 * (Pg[0, 0] / P1[0, 0] + Pg[3, 3] / P1[3, 3]),
                                    0.5 * (Pg[1, 1] / P1[1, 1] + Pg[4, 4] / P1[4, 4])]
             else:

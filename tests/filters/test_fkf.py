@@ -172,14 +172,14 @@ def test_select_eps_blends_rates_and_variances(w: float) -> None:
     got = par.copy()
     kf.select_eps(got, w)
     want = regime_par(par, w)
-    for k in (kf.K_TAU_EPS, kf.K_EPS_SD, kf.K_EPS_DIST):
+    for k in (kf.PAR_TAU_EPS, kf.PAR_EPS_SD, kf.PAR_EPS_DIST):
         assert got[k] == pytest.approx(want[k], rel=1e-12)
     # the rate at 10 m/s: 1/60 + 0 at w = 0, 1/180 + 10/50 at w = 1
     x = np.zeros(kf.NX)
     x[kf.IVE] = 10.0
     rate = -math.log(kf.eps_decay(x, 1.0, got))
     assert rate == pytest.approx((1 - w) / 60.0 + w * (1 / 180.0 + 10.0 / 50.0), rel=1e-12)
-    assert got[kf.K_EPS_SD] ** 2 == pytest.approx((1 - w) * 1.0 + w * 9.0, rel=1e-12)
+    assert got[kf.PAR_EPS_SD] ** 2 == pytest.approx((1 - w) * 1.0 + w * 9.0, rel=1e-12)
 
 
 def test_multipath_regime_is_the_share_of_high_pdop_fixes() -> None:

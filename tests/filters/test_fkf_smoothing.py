@@ -11,7 +11,7 @@ from gpsdr_cli import config
 from gpsdr_cli.align import build_epochs
 from gpsdr_cli.filters import fkf, get
 from gpsdr_cli.filters import kernels_fkf as kf
-from gpsdr_cli.filters.linalg import rts_step
+from gpsdr_cli.filters.core.rts import phi_times, rts_step
 from gpsdr_cli.simulate import simulate_drive
 from tests.filters.reference_fkf import tiny_drive
 
@@ -101,8 +101,10 @@ def test_fused_rts_step_is_the_generic_step_bit_for_bit(T: float, static: bool) 
         Phi = np.zeros((kf.NX, kf.NX))
         kf.phi_matrix(T, static, par, Phi, x_post)
         x_g, P_g = np.zeros(kf.NX), np.zeros((kf.NX, kf.NX))
-        rts_step(x_post, P_post, x_prior, P_prior, Phi, x_sn, P_sn, x_g, P_g,
-                 np.zeros((kf.NX, kf.NX)), np.zeros((kf.NX, kf.NX)))
+        B = np.zeros((kf.NX, kf.NX))
+        phi_times(Phi, P_post, B)
+        rts_step(kf.NX, x_post, P_post, B, x_prior, P_prior, x_sn, P_sn, x_g, P_g,
+                 np.zeros((kf.NX, kf.NX)), np.zeros(kf.NX))
         x_f, P_f = np.zeros(kf.NX), np.zeros((kf.NX, kf.NX))
         kf.rts_step_fused(x_post, P_post, x_prior, P_prior, T, static,
                           kf.eps_decay(x_post, T, par), x_sn, P_sn, x_f, P_f,
