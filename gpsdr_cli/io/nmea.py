@@ -123,6 +123,10 @@ _POSITION_RANK = (_GGA, _GNS, _RMC, _GLL)
 #: Sentences of one epoch whose positions differ by more than this (deg; 1.1 cm in
 #: latitude) disagree, unless one of them is printed more coarsely.
 _DISAGREE_DEG = 1e-7
+#: ... and unless they differ by at most this many units of the coarser one's last printed
+#: digit: a receiver that rounds GGA and truncates GLL, or computes them a few ms apart,
+#: prints one fix 1-2 units apart (0.0001' of arc: 0.19 m), which is no disagreement
+_SAME_FIX_DIGITS = 2.5
 
 # hex digit value of each byte, -1 if not a hex digit (upper or lower case)
 _HEX = np.full(256, -1, np.int16)
@@ -923,8 +927,8 @@ def _disagreements(parsed: dict[int, dict[str, np.ndarray]], e: dict[str, np.nda
     """Mask of epochs where a position sentence's fix differs from the one taken; refines it.
 
     Differs: by more than :data:`_DISAGREE_DEG` in latitude or longitude, and by more than
-    one unit of the last digit printed by either (an RMC with 4 decimals of minutes
-    beside a GGA with 7 is the same fix, rounded).  Among the sentences that agree with
+    :data:`_SAME_FIX_DIGITS` units of the last digit printed by either (an RMC with 4
+    decimals of minutes beside a GGA with 7 is the same fix, rounded).  Among the sentences that agree with
     the one taken and are printed as finely, the last in file order gives ``e['lat']`` /
     ``e['lon']`` (what gpsd reports for such an epoch: receivers that round GGA and
     truncate GLL differ by one digit).
@@ -939,7 +943,7 @@ def _disagreements(parsed: dict[int, dict[str, np.ndarray]], e: dict[str, np.nda
     order = np.argsort(cat["pos"][m], kind="stable")
     ep, lat, lon, res = (cat[f][m][order] for f in ("ep", "lat", "lon", "res"))
     ref_ok = np.isfinite(e["lat"][ep])
-    tol = np.maximum(_DISAGREE_DEG, np.fmax(res, e["res"][ep]) * 1.0001)
+    tol = np.maximum(_DISAGREE_DEG, np.fmax(res, e["res"][ep]) * _SAME_FIX_DIGITS)
     with np.errstate(invalid="ignore"):
         d = ((np.abs(lat - e["lat"][ep]) > tol) | (np.abs(lon - e["lon"][ep]) > tol)) & ref_ok
     out[ep[d]] = True
