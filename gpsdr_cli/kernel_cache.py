@@ -35,7 +35,7 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 #: Folders (relative to the package) whose every ``.py`` file is kernel-related.
 KERNEL_DIRS: tuple[str, ...] = ("filters", "models")
 #: Single modules that are kernel-related although they do not import numba.
-KERNEL_FILES: tuple[str, ...] = ("smoothing.py", "conventions.py")
+KERNEL_FILES: tuple[str, ...] = ("conventions.py",)
 
 #: The environment variable this module sets, and its marker for child processes.
 ENV_CACHE_DIR = "NUMBA_CACHE_DIR"

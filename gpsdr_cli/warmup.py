@@ -66,7 +66,7 @@ KERNEL_MODULES: dict[str, tuple[str, ...]] = {
     "fafkf": ("filters/kernels_fkf.py",),
 }
 SMOOTHING_MODULES: dict[str, tuple[str, ...]] = {
-    "ekf": ("smoothing.py",), "aekf": ("smoothing.py",),
+    "ekf": ("filters/smoothing.py",), "aekf": ("filters/smoothing.py",),
 }
 
 #: Longest wait for the background compile (s); after it the caller compiles itself.

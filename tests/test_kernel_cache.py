@@ -19,7 +19,7 @@ def _package(root: Path) -> Path:
     for rel, text in {
         "filters/kernels.py": "from numba import njit\nfrom ..models.model import phi\n",
         "models/model.py": "def phi(dt):\n    return 1.0 + dt\n",
-        "smoothing.py": "STEP = 1\n",
+        "conventions.py": "STEP = 1\n",
         "align.py": "import numba\n",
         "cli/main.py": "import click  # no kernel here\n",
         "geodesy.py": "# speaks of numba in a comment only\n",
@@ -38,7 +38,7 @@ def test_an_edit_of_a_callee_changes_the_key(tmp_path: Path) -> None:
     (pkg / "models/model.py").write_text("def phi(dt):\n    return 1.0 + 2.0 * dt\n")
     edited = source_key(pkg)
     assert edited != key  # the kernel in filters/ must not be loaded stale
-    for rel in ("smoothing.py", "align.py", "filters/kernels.py"):
+    for rel in ("conventions.py", "align.py", "filters/kernels.py"):
         before = source_key(pkg)
         (pkg / rel).write_text((pkg / rel).read_text() + "# edited\n")
         assert source_key(pkg) != before, rel

@@ -66,11 +66,11 @@ from ..align import Epochs
 from ..config import Params
 from ..errors import ConfigError
 from ..models.cs_model import N_STATES
-from ..smoothing import rts_checkpointed
 from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
 from .base import FilterResult
+from .smoothing import rts_checkpointed
 
 #: Speed sigma (m/s) assigned to a velocity taken from the receiver's speed and course.
 GNSS_VEL_SD_MPS = 1.0

@@ -1071,7 +1071,7 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
       (epochs whose smoothed P failed the SPD test, restarts).  Cost: one more
       forward pass; memory: ``segment x 65`` floats instead of ``n x 65`` (a
       one-hour drive at 100 Hz: 187 MB -> 2 MB at 4096), as the ekf/aekf
-      smoother does (:func:`gpsdr_cli.smoothing.rts_checkpointed`).
+      smoother does (:func:`gpsdr_cli.filters.smoothing.rts_checkpointed`).
     * ``segment`` None: ``xs`` (n, 10), ``Ps`` (n, 55) hold the fused x and
       packed P_g of every epoch, for :func:`smooth_fused`; ``out`` is forward.
 

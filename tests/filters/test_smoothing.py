@@ -1,4 +1,4 @@
-"""RTS smoothing of the ekf/aekf forward pass (gpsdr_cli/smoothing.py)."""
+"""RTS smoothing of the ekf/aekf forward pass (gpsdr_cli/filters/smoothing.py)."""
 
 from __future__ import annotations
 

@@ -38,9 +38,10 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
-from .filters.core.packing import unpack
-from .filters.core.rts import phi_times, rts_step
-from .filters.kernels_aekf import (
+from ..models.cs_model import IE, IEPS, IKS, IN, N_STATES, singer_phi
+from .core.packing import unpack
+from .core.rts import phi_times, rts_step
+from .kernels_aekf import (
     GE_BE,
     GE_BN,
     GE_PEE,
@@ -69,7 +70,6 @@ from .filters.kernels_aekf import (
     rebuild_prior,
     turn_jacobian,
 )
-from .models.cs_model import IE, IEPS, IKS, IN, N_STATES, singer_phi
 
 
 @njit(cache=True)
