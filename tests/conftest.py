@@ -66,6 +66,18 @@ SAMPLE = REPO / "sample_logs" / "comma2k19"
 SHARED_DATA = REPO.parent / "shared" / "data"
 
 
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item):
+    """A test that reads the real logs beside the repository (``../shared/data``) is
+    skipped, not failed, in a checkout that does not have them."""
+    try:
+        return (yield)
+    except Exception as err:
+        if not SHARED_DATA.exists() and str(SHARED_DATA.parent) in str(err):
+            pytest.skip(f"the real data beside the repository is not here: {SHARED_DATA}")
+        raise
+
+
 @pytest.fixture(scope="session")
 def sample_dir() -> Path:
     """sample_logs/comma2k19: gps.nmea, gyro.csv, odo.csv, truth.csv (60 s, real data)."""
