@@ -344,8 +344,9 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     tp = params["time"]
     parts: list[np.ndarray] = []
     health = dr_health.screen(drive, params)
-    warnings = drive.meta.setdefault("warnings", [])
-    warnings.extend(n for n in health.notes if n not in warnings)
+    if health.notes:
+        warnings = drive.meta.setdefault("warnings", [])
+        warnings.extend(n for n in health.notes if n not in warnings)
 
     gnss_t = np.zeros(0, np.int64)
     g_rec: dict[str, np.ndarray] = {}
