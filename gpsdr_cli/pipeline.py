@@ -423,6 +423,14 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
         epochs, result = lever_arm.apply(epochs, fparams, arm, run_filter)
     else:
         result = run_filter(epochs, fparams)
+    n_screened = int(result.info.get("nlos_screened") or 0)
+    if n_screened:
+        note = (f"reflected signals (NLOS): {n_screened} of {int(epochs.has_gnss.sum())} fixes "
+                "disagree with the whole drive's dead reckoning and were not used "
+                "([gnss] nlos_screen)")
+        warnings = work.meta.setdefault("warnings", [])
+        if note not in warnings:
+            warnings.append(note)
     weight = None
     if smoother == "graph":
         from .graph_smoother import smooth_graph

@@ -34,3 +34,13 @@ def test_screen_off_by_config(nlos) -> None:
     r = run_filter(nlos, copy.deepcopy(nlos.drive), "aekf", overrides={"gnss": {"nlos_screen": False}})
     assert "nlos_screened" not in r.result.info
     assert r.rmse_m > 0.5 * r.gnss_rmse_m  # what the screen buys on this drive
+
+
+def test_fuse_says_how_many_fixes_were_left_out(nlos) -> None:
+    from gpsdr_cli import config
+    from gpsdr_cli.pipeline import fuse
+
+    res = fuse(copy.deepcopy(nlos.drive), config.defaults())
+    lines = [w for w in res.drive_warnings if "NLOS" in w]
+    assert len(lines) == 1 and "fixes disagree with the whole drive's dead reckoning" in lines[0]
+    assert int(res.track["gnss_used"].sum()) < 0.5 * len(nlos.drive.gnss)
