@@ -29,6 +29,19 @@ from ..align import Epochs
 from ..config import Params
 from .base import FilterResult
 
+#: the last screen's (key, fix east positions, has_gnss out, info): a smoothed run's quality
+#: check runs the forward filter again on the same epochs, and would screen them again
+_LAST: list[tuple[tuple, np.ndarray, np.ndarray, dict]] = []
+
+
+def _key(epochs: Epochs, params: Params) -> tuple:
+    """The same drive, filter and parameters (smoothing aside: the probe smooths anyway)."""
+    f = epochs.has_gnss
+    rest = repr({k: v for k, v in params.items() if k != "filter"})
+    return (params["filter"]["name"], rest, len(epochs), int(f.sum()),
+            int(epochs.t_ns[-1] - epochs.t_ns[0]) if len(epochs) else 0,
+            float(np.sum(epochs.gnss_e[f])), float(np.sum(epochs.gnss_n[f])))
+
 
 def screen(epochs: Epochs, params: Params, nlos_drive: bool,
            run: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
@@ -38,6 +51,18 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
     if (not nlos_drive or not g["nlos_screen"] or not epochs.has_gyro.any()
             or not epochs.has_odo.any()):
         return epochs, {}
+    key = _key(epochs, params)
+    if _LAST and _LAST[0][0] == key and np.array_equal(_LAST[0][1], epochs.gnss_e, equal_nan=True):
+        _, _, has_gnss, info = _LAST[0]
+        return dataclasses.replace(epochs, has_gnss=has_gnss.copy()), dict(info)
+    out, info = _screen(epochs, params, run)
+    _LAST[:] = [(key, epochs.gnss_e.copy(), out.has_gnss, dict(info))]
+    return out, info
+
+
+def _screen(epochs: Epochs, params: Params,
+            run: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
+    g = params["gnss"]
     from ..graph_smoother import smooth_graph
 
     probe = copy.deepcopy(params)
