@@ -21,6 +21,7 @@ from gpsdr_cli.accel_speed import speed_track
 from gpsdr_cli.align import build_epochs
 from gpsdr_cli.pipeline import run_filter
 from gpsdr_cli.simulate import GRAVITY_MPS2, simulate_drive
+from gpsdr_cli.testing.sim import run_filter as run_sim
 from tests.conftest import REPO
 
 #: m: the issue's targets, forward with the accelerometer and smoothed (median end error)
@@ -41,15 +42,8 @@ def outage_end_errors(sim, drive, name: str, smooth: bool = False,
                       overrides: dict | None = None) -> tuple[np.ndarray, dict]:
     """The error (m, against the truth) at the last epoch before the first fix after each
     of the scenario's outages, through :func:`gpsdr_cli.pipeline.run_filter`."""
-    p = config.defaults()
-    p["filter"]["name"] = name
-    p["filter"]["smooth"] = smooth
-    for section, values in (overrides or {}).items():
-        p[section].update(values)
-    ep = build_epochs(copy.deepcopy(drive), sim.frame, p)
-    r = run_filter(ep, p)
-    tr = sim.truth
-    err = np.hypot(r.e - np.interp(ep.t_ns, tr.t_ns, tr.e), r.n - np.interp(ep.t_ns, tr.t_ns, tr.n))
+    run = run_sim(sim, drive, name, smooth, overrides, pipeline=True)
+    r, ep, err, tr = run.result, run.epochs, run.err_m, sim.truth
     assert np.isfinite(err).all() and np.isfinite(r.var_e).all() and np.isfinite(r.var_n).all()
     g = sim.drive.gnss
     tf = g.t_ns[g.valid]

@@ -38,16 +38,23 @@ class SimRun:
 
 
 def run_filter(sim, drive, name: str, smooth: bool = False,
-               overrides: dict[str, dict] | None = None) -> SimRun:
+               overrides: dict[str, dict] | None = None, *, pipeline: bool = False) -> SimRun:
     """``name`` over ``drive`` (a copy is aligned; the drive is not changed) with the default
-    parameters updated section by section from ``overrides``; errors against ``sim.truth``."""
+    parameters updated section by section from ``overrides``; errors against ``sim.truth``.
+    ``pipeline``: through :func:`gpsdr_cli.pipeline.run_filter` (the lead-in and the
+    no-odometer outage speed), as ``gpsdr fuse`` runs it, not the bare filter."""
     p = config.defaults()
     p["filter"]["name"] = name
     p["filter"]["smooth"] = smooth
     for section, values in (overrides or {}).items():
         p[section].update(values)
     ep = build_epochs(copy.deepcopy(drive), sim.frame, p)
-    r = filters.get(name)(ep, p)
+    if pipeline:
+        from ..pipeline import run_filter as run_pipeline_filter
+
+        r = run_pipeline_filter(ep, p)
+    else:
+        r = filters.get(name)(ep, p)
     tr = sim.truth
     te = np.interp(ep.t_ns, tr.t_ns, tr.e)
     tn = np.interp(ep.t_ns, tr.t_ns, tr.n)
