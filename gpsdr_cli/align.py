@@ -33,7 +33,6 @@ from functools import lru_cache
 import numpy as np
 import pandas as pd
 
-from . import dr_health
 from .config import Params
 from .conventions import FIX_DR, FIX_FLOAT_RTK, FIX_RTK, NS_PER_S
 from .geodesy import LocalFrame
@@ -343,6 +342,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     """Clean, shift, project and merge the drive's streams into :class:`Epochs`."""
     tp = params["time"]
     parts: list[np.ndarray] = []
+    from . import dr_health  # it uses this module's true_runs
+
     health = dr_health.screen(drive, params)
     if health.notes:
         warnings = drive.meta.setdefault("warnings", [])

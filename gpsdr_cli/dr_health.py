@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .align import true_runs
 from .conventions import NS_PER_S
 
 #: a fix's Doppler speed is compared with odometer samples at most this far from it (s)
@@ -46,8 +47,8 @@ class Health:
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Start and end (exclusive) indices of the True runs of ``mask``."""
-    d = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    starts, last = true_runs(mask)
+    return starts, last + 1
 
 
 def _persistent(t_ns: np.ndarray, bad: np.ndarray, min_run_s: float, pad_s: float) -> np.ndarray:
