@@ -337,6 +337,20 @@ def sensor_masks(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray
     return gyro, odo
 
 
+def unknown_rate_var(epochs: Epochs, params: Params) -> float:
+    """Yaw-rate variance (rad^2/s^2) by which the heading floor grows where a gyro drive has
+    no usable reading (kernels_aekf PAR_UNKNOWN_W_VAR; 0: the floor stops, as before).
+
+    Only on a drive with a gyro and with the heading floor: there the lateral row holds the
+    acceleration's turn part near zero, so a turn through a gap (readings clipped or dropped
+    out) would otherwise be predicted straight with a confident heading.  Without a gyro the
+    CS model's manoeuvre variance is the whole model.
+    """
+    if not (epochs.has_gyro.any() and params["aekf"]["heading_floor"]):
+        return 0.0
+    return float(params["gyro"]["unknown_rate_sd_radps"]) ** 2
+
+
 def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarray, np.ndarray]:
     """The kernel's float parameter vector and integer flags (see kernels_aekf PAR_*/FLG_*)."""
     a, ad, st, g = params["aekf"], params["adaptive"], params["standstill"], params["gnss"]
@@ -504,6 +518,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     x0, P0, psi0, heading_known = initial_state(epochs, params)
     prm, flg = kernel_params(params, adaptive, smooth)
     prm[kn.PAR_COAST_Q] = coast_psd(epochs, params)
+    prm[kn.PAR_UNKNOWN_W_VAR] = unknown_rate_var(epochs, params)
     prm[kn.PAR_OFF_VVAR], prm[kn.PAR_OFF_AVAR] = drive_off_var(params)
     st = np.zeros(kn.N_ST)
     st[kn.ST_PSI] = psi0

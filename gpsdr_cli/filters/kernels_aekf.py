@@ -91,7 +91,8 @@ PAR_GYRO_HOLD, PAR_GATE_INFLATE_MAX, PAR_GATE_WARMUP, PAR_GATE_INFLATE_AFTER, PA
 PAR_MAX_GAP, PAR_GAP_SPEED, PAR_WH_B, PAR_WH_MAX, PAR_WH_GAP, PAR_GVEL_VAR = range(25, 31)
 PAR_WH_NIS, PAR_SCALE_VAR = 31, 32
 PAR_GE_VAR, PAR_GE_RATE, PAR_GE_DIST_RATE, PAR_COAST_Q, PAR_OFF_VVAR, PAR_OFF_AVAR = range(33, 39)
-N_PRM = 39
+PAR_UNKNOWN_W_VAR = 39
+N_PRM = 40
 # indices into the integer flag vector ``flg``
 FLG_ADAPT_Q, FLG_STANDSTILL, FLG_GATE, FLG_INNOV, FLG_FADING, FLG_SAGE_HUSA = range(6)
 FLG_CHECK_SPD, FLG_STORE = 6, 7
@@ -109,7 +110,8 @@ ST_W, ST_W_T, ST_N_FIX, ST_VPSI, ST_CPE = 7, 8, 9, 10, 11
 ST_WH_C0, ST_WH_C1, ST_WH_UE, ST_WH_UN, ST_WH_T, ST_WH_M, ST_WH_STATIC = range(12, 19)
 ST_WH_C2, ST_WH_UE2, ST_WH_UN2, ST_WH_T2, ST_B_SINCE = range(19, 24)
 ST_ODO_T = 24  # time of the latest odometer record (s since the start)
-N_ST = 25
+ST_JUMP_E, ST_JUMP_N = 25, 26  # this epoch's bias-gate move of b into the position (m; 0: none)
+N_ST = 27
 #: a standstill the odometer said is forgotten after this long without an odometer record (s),
 #: as fkf's STALE_ODO_S: an odometer that drops out at a stop must not hold the car for minutes
 STALE_ODO_S = 1.0
@@ -118,7 +120,8 @@ VPSI_MAX = math.pi ** 2 / 3.0
 # stored prior scalars per epoch (columns of ``prior_store``: PRI_, the prior's, not Q)
 PRI_QA_E, PRI_QA_N, PRI_LAM, PRI_GAIN, PRI_ADD_E, PRI_ADD_N, PRI_W = range(7)
 PRI_FL_EE, PRI_FL_NN, PRI_FL_EN, PRI_FB = 7, 8, 9, 10
-N_PRIOR = 11
+PRI_JUMP_E, PRI_JUMP_N = 11, 12  # the bias gate's mean move of b into the position (m)
+N_PRIOR = 13
 # counters (``info`` vector)
 INF_SPD_FAIL, INF_MIN_DIAG, INF_SKIPPED, INF_GATE_RESETS, INF_NONFINITE, INF_INFLATED = range(6)
 N_INFO = 6
@@ -649,6 +652,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
                 if verdict == GATE_RESET:
                     x[IE] += ge[GE_BE]
                     x[IN] += ge[GE_BN]
+                    st[ST_JUMP_E] = ge[GE_BE]  # part of the prior's mean, for the smoother
+                    st[ST_JUMP_N] = ge[GE_BN]
                     add_e += ge[GE_BE] * ge[GE_BE]
                     add_n += ge[GE_BN] * ge[GE_BN]
                     P[IE, IE] += ge[GE_BE] * ge[GE_BE]
@@ -914,6 +919,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
         # a step longer than aekf.max_gap_s (a logger pause, a far-future stamp) is not
         # propagated: held like a standstill, the position variance grown by (speed bound x T)^2
         gap = T > prm[PAR_MAX_GAP]
+        st[ST_JUMP_E] = 0.0
+        st[ST_JUMP_N] = 0.0
         if is_static and t + T - odo_t > STALE_ODO_S:
             is_static = False
         hold = (standstill and is_static) or gap
@@ -978,6 +985,14 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                     r_h = r_turn if math.isfinite(w_use) else r_w
                     vpsi = min(vpsi + T * T * (p66 + r_h) - 2.0 * T * cpe, VPSI_MAX)
                     cpe = f_eps * (cpe - T * p66)
+                elif not hold and outage[k] and prm[PAR_UNKNOWN_W_VAR] > 0.0 and w_t > -math.inf:
+                    # a gyro drive whose readings stopped (clipped, dropped out): the turn they
+                    # would have measured is unknown, its angle grows as the gap times a typical
+                    # yaw rate (gyro.unknown_rate_sd_radps), and a turn through the gap must not
+                    # be predicted straight with a confident heading
+                    tg = t - w_t
+                    tg0 = max(tg - T, 0.0)
+                    vpsi = min(vpsi + prm[PAR_UNKNOWN_W_VAR] * (tg * tg - tg0 * tg0), VPSI_MAX)
                 elif not hold:  # the gyro does not drive the heading in this step: no floor
                     vpsi = 0.0
                     cpe = 0.0
@@ -1167,6 +1182,8 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
             prior_store[k, PRI_FL_EE] = fl_ee
             prior_store[k, PRI_FL_NN] = fl_nn
             prior_store[k, PRI_FL_EN] = fl_en
+            prior_store[k, PRI_JUMP_E] = st[ST_JUMP_E]
+            prior_store[k, PRI_JUMP_N] = st[ST_JUMP_N]
     st[ST_PSI] = psi_mem
     st[ST_STATIC] = 1.0 if is_static else 0.0
     st[ST_T] = t

@@ -62,6 +62,8 @@ from .kernels_aekf import (
     PAR_TAU_EPS,
     PRI_FB,
     PRI_GAIN,
+    PRI_JUMP_E,
+    PRI_JUMP_N,
     PRI_LAM,
     PRI_W,
     ge_epoch,
@@ -207,6 +209,11 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
                 _join(P8, G, P_prior)
                 x_prior[n8] = G[GE_BE]
                 x_prior[n8 + 1] = G[GE_BN]
+                # the bias gate moved b into the position before this epoch's fix
+                x_prior[IE] += pr[PRI_JUMP_E]
+                x_prior[IN] += pr[PRI_JUMP_N]
+                x_prior[n8] -= pr[PRI_JUMP_E]
+                x_prior[n8 + 1] -= pr[PRI_JUMP_N]
                 for i in range(n8):
                     F[i, n8] = 0.0
                     F[i, n8 + 1] = 0.0

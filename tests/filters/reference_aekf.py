@@ -33,6 +33,7 @@ from gpsdr_cli.filters.aekf import (
     kernel_params,
     odometer_inputs,
     sensor_masks,
+    unknown_rate_var,
 )
 from gpsdr_cli.models.cs_model import cs_sigma_a2, newton_matrix, phi_matrix, q_matrix
 
@@ -122,6 +123,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         P = embed(P, m, var_b)
     prm, _ = kernel_params(params, adaptive, smooth)
     coast = coast_psd(epochs, params)
+    var_w = unknown_rate_var(epochs, params)
     off_v, off_a = drive_off_var(params)
     alpha, tau_eps = prm[kn.PAR_ALPHA], prm[kn.PAR_TAU_EPS]
     sigma_a = prm[kn.PAR_SIGMA_A]
@@ -208,6 +210,10 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                                  else 0.0)
                     vpsi = min(vpsi + T * T * (p66 + r_h) - 2 * T * cpe, kn.VPSI_MAX)
                     cpe = math.exp(-T / tau_eps) * (cpe - T * p66)
+                elif not hold and epochs.gnss_outage[k] and var_w > 0 and w_t > -math.inf:  # gyro gap
+                    tg = t - w_t
+                    tg0 = max(tg - T, 0.0)
+                    vpsi = min(vpsi + var_w * (tg * tg - tg0 * tg0), kn.VPSI_MAX)
                 elif not hold:
                     vpsi = cpe = 0.0
                 v = math.hypot(x[1], x[4])
@@ -233,6 +239,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                         x[8] = x[9] = 0.0
                         b_since = -1.0
                         Ps_prior[k] = P  # part of P(k|k-1), as the gate reset
+                        xs_prior[k] = x  # ... and the mean's move, of x(k|k-1)
                 elif not is_static:
                     b_since = -1.0
             Hg = np.zeros((2, m))
