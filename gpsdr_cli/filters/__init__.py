@@ -39,7 +39,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
         def run(epochs, params):  # every filter sees the same GNSS error model
             from .nlos_screen import screen
 
-            model_epochs, model_params = gnss_error_model(epochs, params, name)
+            model_epochs, model_params = gnss_error_model(epochs, params)
             # gnss_error_model copies the parameters only for an RTK or an NLOS drive
             nlos = (model_params is not params
                     and epochs.rtk_fixed_share < float(params["gnss"]["rtk_share"]))
@@ -47,7 +47,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             screened, info = screen(epochs, params, nlos, fn)
             if info.get("nlos_screened"):  # the fixes left are judged afresh
                 model_epochs, model_params = gnss_error_model(
-                    dataclasses.replace(epochs, has_gnss=screened.has_gnss), params, name)
+                    dataclasses.replace(epochs, has_gnss=screened.has_gnss), params)
             result = fn(model_epochs, model_params)
             result.info.update(info)
             return result

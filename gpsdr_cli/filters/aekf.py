@@ -70,6 +70,7 @@ from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
 from .base import FilterResult
+from .gnss_model import centimetre_fixes
 from .smoothing import rts_checkpointed
 
 #: Speed sigma (m/s) assigned to a velocity taken from the receiver's speed and course.
@@ -90,7 +91,11 @@ def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarr
     """Per-epoch GNSS variances r_e, r_n (m^2) and K_a, and the constant sigma of the ekf.
 
     ``adaptive=False`` (ekf): one sigma for the whole drive, the median over the
-    fixes of the base sigma ``sqrt((sd_e^2 + sd_n^2)/2)``; K_a = 1 everywhere.
+    fixes of the base sigma ``sqrt((sd_e^2 + sd_n^2)/2)``; K_a = 1 everywhere.  On a drive
+    that mixes centimetre (RTK-fixed) fixes with others, the centimetre fixes' median: the
+    median of either class would weigh the other wrongly by two orders of magnitude, and
+    the others (float, autonomous, centimetre fixes judged false) by their own sigmas:
+    the GNSS model tells these apart, and one median of them follows a false fix.
     ``adaptive=True`` (aekf): Fang et al.'s PDOP regimes or their continuous form.
     """
     g = params["gnss"]
@@ -98,12 +103,17 @@ def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarr
     fix = epochs.has_gnss
     sd_e = np.where(fix, epochs.gnss_sd_e, np.nan)
     sd_n = np.where(fix, epochs.gnss_sd_n, np.nan)
+    base = np.sqrt(0.5 * (sd_e ** 2 + sd_n ** 2))
     if fix.any():
-        sigma_const = float(np.median(np.sqrt(0.5 * (sd_e[fix] ** 2 + sd_n[fix] ** 2))))
+        sigma_const = float(np.median(base[fix]))
     else:
         sigma_const = float(g["sigma_default_m"])
     if not adaptive:
         r = np.where(fix, sigma_const ** 2, np.nan)
+        cm = centimetre_fixes(epochs, params)
+        if cm.any() and (fix & ~cm).any():
+            r[cm] = float(np.median(base[cm])) ** 2
+            r[fix & ~cm] = base[fix & ~cm] ** 2
         return r, r.copy(), np.ones(n), sigma_const
     k_fix, ka_rec = pdop_factors(epochs.pdop, g)
     r_e = np.where(fix, (k_fix * sd_e) ** 2, np.nan)

@@ -71,13 +71,13 @@ def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
     return out
 
 
-def gnss_error_model(epochs: Epochs, params: Params, name: str = "") -> tuple[Epochs, Params]:
+def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     """``(epochs, params)`` with each fix's sigma and the GNSS error states' sigmas for
-    this drive's fix quality and its agreement with the dead reckoning, for filter
-    ``name`` (ekf takes one sigma for every fix: see :func:`rtk_error_model`)."""
+    this drive's fix quality and its agreement with the dead reckoning, the same for every
+    filter."""
     g = params["gnss"]
     if epochs.rtk_fixed_share >= float(g["rtk_share"]):
-        return rtk_error_model(epochs, params, name)
+        return rtk_error_model(epochs, params)
     thr = float(g["nlos_mismatch_m"])
     if not thr > 0.0:
         return epochs, params
@@ -242,15 +242,15 @@ def mark_false_fixes(epochs: Epochs, params: Params) -> Epochs:
     return dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n)
 
 
-def rtk_error_model(epochs: Epochs, params: Params, name: str = "") -> tuple[Epochs, Params]:
+def rtk_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     """A drive whose fixes are mostly RTK fixed: the centimetre fixes are taken at their
     word -- the GNSS error states pinned at ``[gnss] rtk_err_sd_m``, the standstill from
     the receiver's speed below ``rtk_standstill_speed_mps`` -- and every other fix (float, autonomous, or a
     centimetre fix judged false by :func:`mark_false_fixes`) gets its sigma x
     ``rtk_free_sd_factor``: its error, decimetres to metres, holds for seconds, which a
-    white sigma at each fix would count as independent.  ekf weighs every fix with one
-    sigma (the median: centimetres here), so pinned states would make it follow the float
-    and false fixes at centimetres; its states keep ``rtk_ekf_err_sd_m``."""
+    white sigma at each fix would count as independent.  (ekf, with one sigma per fix class
+    rather than per fix, takes the centimetre fixes' and the others' medians apart:
+    :func:`gpsdr_cli.filters.aekf.gnss_noise`.)"""
     g = params["gnss"]
     cm = centimetre_fixes(epochs, params)
     free = epochs.has_gnss & ~cm
@@ -263,7 +263,7 @@ def rtk_error_model(epochs: Epochs, params: Params, name: str = "") -> tuple[Epo
         epochs = dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n)
     out = copy.deepcopy(params)
     sd = float(g["rtk_err_sd_m"])
-    out["aekf"]["gnss_err_sd_m"] = float(g["rtk_ekf_err_sd_m"]) if name == "ekf" else sd
+    out["aekf"]["gnss_err_sd_m"] = sd
     out["fkf"]["gnss_err_sd_m"] = out["fkf"]["gnss_err_obstructed_sd_m"] = sd
     # an RTK receiver's Doppler speed is good to centimetres per second: the standstill from
     # it may end sooner, before the pinned states would have to carry the first metre
