@@ -78,6 +78,9 @@ class Epochs:
     accel_mps2: np.ndarray | None = None
     #: share of the usable fixes that are RTK fixed (GGA quality 4)
     rtk_fixed_share: float = 0.0
+    #: the GNSS model's verdict (filters.gnss_model): the fixes disagree with the dead
+    #: reckoning often enough for a drive with reflected signals (NLOS)
+    nlos_drive: bool = False
 
     def __post_init__(self) -> None:
         n = len(self.t_ns)

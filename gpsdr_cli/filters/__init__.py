@@ -40,11 +40,8 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             from .nlos_screen import screen
 
             model_epochs, model_params = gnss_error_model(epochs, params)
-            # gnss_error_model copies the parameters only for an RTK or an NLOS drive
-            nlos = (model_params is not params
-                    and epochs.rtk_fixed_share < float(params["gnss"]["rtk_share"]))
             # the batch fit weighs each fix by its own sigma, not the chord-scaled one
-            screened, info = screen(epochs, params, nlos, fn)
+            screened, info = screen(epochs, params, model_epochs.nlos_drive, fn)
             if info.get("nlos_screened"):  # the fixes left are judged afresh
                 model_epochs, model_params = gnss_error_model(
                     dataclasses.replace(epochs, has_gnss=screened.has_gnss), params)

@@ -74,7 +74,7 @@ def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
 def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     """``(epochs, params)`` with each fix's sigma and the GNSS error states' sigmas for
     this drive's fix quality and its agreement with the dead reckoning, the same for every
-    filter."""
+    filter; ``epochs.nlos_drive`` says whether the drive has reflected signals (NLOS)."""
     g = params["gnss"]
     if epochs.rtk_fixed_share >= float(g["rtk_share"]):
         return rtk_error_model(epochs, params)
@@ -104,8 +104,9 @@ def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     sd_n = epochs.gnss_sd_n.copy()
     sd_e[f] *= scale
     sd_n[f] *= scale
-    epochs = dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n)
-    if bad.sum() >= float(g["nlos_drive_share"]) * known.sum():
+    nlos = bool(bad.sum() >= float(g["nlos_drive_share"]) * known.sum())
+    epochs = dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n, nlos_drive=nlos)
+    if nlos:
         params = copy.deepcopy(params)
         params["aekf"]["gnss_err_sd_m"] = float(g["nlos_err_sd_m"])
     return epochs, params
