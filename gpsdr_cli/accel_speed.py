@@ -39,8 +39,8 @@ accelerometer covers the outage, else :func:`held_speed`'s: the last fix's Doppl
 plus the acceleration the last second of fixes showed, decaying over a few seconds (a
 manoeuvre is short; what the current statistical model should predict with nothing
 measuring the speed).  The across-track variance stays the filter's, the along-track one is
-the fix's plus the distance's.  The smoothed tracks are left as they are (the RTS pass
-already has the fix at the outage's end).  The speed stays >= 0 (a braking car stops, it
+the fix's plus the distance's.  A smoothed track is bridged too, the misclosure at the
+outage's end spread back over it (``smoothed``).  The speed stays >= 0 (a braking car stops, it
 does not reverse).  The filters' own state is not touched: each resumes at the outage's
 first fix as before, so the bridge changes the track's outage epochs and nothing else.
 """
@@ -276,13 +276,19 @@ def _covered(epochs: Epochs, has: np.ndarray) -> np.ndarray:
     return (last >= 0) & (t_s - t_s[np.maximum(last, 0)] <= MAX_ACCEL_AGE_S)
 
 
-def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> FilterResult:
+def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
+                   smoothed: bool = False) -> FilterResult:
     """The forward track through each outage of :func:`outage_spans` dead-reckoned along the
     gyro's heading with the accelerometer's speed (``accel.enabled``) or, without readings,
     the last fixes' speed (:func:`held_speed`, ``accel.gyro_only``); ``result`` is changed in
     place and returned.  ``result.info["accel_bridged_outages"]`` and
     ``["gyro_only_bridged_outages"]`` count them; an outage the gyro does not cover (from
-    where the filter last moved to its end) is left to the filter."""
+    where the filter last moved to its end) is left to the filter.
+
+    ``smoothed``: ``result`` is a smoothed track, which has the fix at the outage's end too.
+    The dead reckoning's misclosure there is spread back over the outage in proportion to the
+    distance's variance (the mean of a random walk pinned at both ends: a Brownian bridge),
+    and the along-track variance shrinks with it."""
     p = params["accel"]
     spans = [(k, m, acc) for k, m, acc in outage_spans(epochs, result, params)
              if (p["enabled"] if acc else p["gyro_only"])]
@@ -335,6 +341,15 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params) -> Filt
         qe, qn, qen = result.var_e[sl], result.var_n[sl], result.cov_en[sl]
         cross = ce * ce * qe + 2 * ce * cn * qen + cn * cn * qn
         along = along0 + s_var
+        if smoothed and m < len(result.e) and len(e) and s_var[-1] > 0.0:
+            # where the dead reckoning would reach the outage's first fix, against the track
+            end_step = v[-1] * dt[m]
+            de = result.e[m] - (e[-1] + end_step * ue[-1])
+            dn = result.n[m] - (n[-1] + end_step * un[-1])
+            w = s_var / s_var[-1]
+            e = e + w * de
+            n = n + w * dn
+            along = along0 + s_var * (1.0 - w)
         result.e[sl], result.n[sl] = e, n
         result.v_e[sl], result.v_n[sl] = v * ue, v * un
         result.var_e[sl] = along * ue * ue + cross * ce * ce

@@ -457,17 +457,16 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
 def run_filter(epochs: Epochs, params: Params) -> FilterResult:
     """The configured filter over ``epochs``: it starts at the first usable fix, and the
     epochs before it (gyro and odometer logged before the receiver had a fix) are
-    dead-reckoned back from it (:mod:`gpsdr_cli.lead_in`).  Forward only, on a drive without an
+    dead-reckoned back from it (:mod:`gpsdr_cli.lead_in`).  On a drive without an
     odometer, the forward accelerometer's speed (without one, the last fixes' speed) carries
     the track through the GNSS outages along the gyro's heading (:mod:`gpsdr_cli.accel_speed`)."""
     from . import filters, lead_in
 
     k_fix, from_fix = lead_in.split(epochs)
     result = filters.get(params["filter"]["name"])(from_fix, params)
-    if not params["filter"]["smooth"]:  # no odometer: the speed through the GNSS outages
-        from .accel_speed import bridge_outages
+    from .accel_speed import bridge_outages  # no odometer: the speed through the GNSS outages
 
-        result = bridge_outages(from_fix, result, params)
+    result = bridge_outages(from_fix, result, params, smoothed=bool(params["filter"]["smooth"]))
     if k_fix:
         result = lead_in.backfill(epochs, k_fix, result)
     return result
