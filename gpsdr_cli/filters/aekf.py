@@ -560,7 +560,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     use_gyro, use_odo = sensor_masks(epochs, params)
     use_odo, odo_speed, gnss_still = odometer_inputs(epochs, params, use_odo)
     gv_e, gv_n = gnss_velocity(epochs, params)
-    inputs = (
+    inputs = kn.CsInputs(
         c64(epochs.dt_s, f64), c64(epochs.has_gnss, bool), c64(epochs.gnss_e, f64),
         c64(epochs.gnss_n, f64), c64(r_e, f64), c64(r_n, f64), c64(ka, f64),
         c64(use_gyro, bool), c64(epochs.yaw_rate_radps, f64), c64(use_odo, bool),
@@ -572,13 +572,13 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     b_out = np.zeros((2, n))  # GNSS error states (aekf.gnss_err_states), zero when off
     ge = initial_gnss_err(params)
     gw = np.zeros((kn.GW_ROWS, N_STATES))  # its work rows
+    outputs = kn.CsOutputs(x_out, pcov, gnss_used, gnss_rej, nis, static, hold, sd, b_out)
 
     def run_segment(k0: int, k1: int, x: np.ndarray, P: np.ndarray, s: np.ndarray,
                     g: np.ndarray, P_buf: np.ndarray, counters: np.ndarray | None = None) -> None:
-        kn.cs_filter_kernel(*inputs, x, P, s, k0, k1, k0, prm, flg, x_out, pcov, gnss_used,
-                            gnss_rej, nis, static, hold, sd, P_buf, prior_store,
-                            np.zeros(kn.N_INFO) if counters is None else counters, wk, g, gw, b_out,
-                            **opts)
+        kn.cs_filter_kernel(inputs, kn.CsState(x, P, s, g), k0, k1, k0, prm, flg, outputs,
+                            kn.CsStore(P_buf, prior_store),
+                            np.zeros(kn.N_INFO) if counters is None else counters, wk, gw, **opts)
 
     x, P = x0.copy(), P0.copy()
     checkpoints: list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []

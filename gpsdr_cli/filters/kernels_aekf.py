@@ -55,6 +55,7 @@ floats per epoch.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
@@ -125,6 +126,21 @@ N_PRIOR = 13
 # counters (``info`` vector)
 INF_SPD_FAIL, INF_MIN_DIAG, INF_SKIPPED, INF_GATE_RESETS, INF_NONFINITE, INF_INFLATED = range(6)
 N_INFO = 6
+
+# the kernel's arguments as records (numba takes namedtuples of arrays as they are)
+#: per-epoch inputs, arrays of n: dt (s), the GNSS fix z_e, z_n (m) and its variances
+#: r_e, r_n (m^2), K_a, the gyro yaw rate (rad/s, CCW+), the odometer speed (m/s), the
+#: outage flag and the receiver velocity gv_e, gv_n (m/s, NaN when none)
+CsInputs = namedtuple("CsInputs", "dt has_gnss z_e z_n r_e r_n ka has_gyro yaw has_odo odo "
+                                  "outage gv_e gv_n")
+#: the filter state a segment starts from, updated in place: x (8), P (8, 8), the ST_* memory
+#: and the GNSS error block (GE_*)
+CsState = namedtuple("CsState", "x P st ge")
+#: per-epoch outputs, one row per quantity
+CsOutputs = namedtuple("CsOutputs", "x_out pcov_out gnss_used gnss_rej nis_out static_out "
+                                    "hold_out sd_out b_out")
+#: what the smoother keeps (with flg[FLG_STORE]): packed P(k|k) of the segment, prior scalars
+CsStore = namedtuple("CsStore", "P_store prior_store")
 N_PACKED = N_STATES * (N_STATES + 1) // 2
 #: the GNSS-error block ``ge`` (aekf.gnss_err_states), one flat float64 array: P(x, b) (8 x 2)
 #: row-major at [2 i + j], then P(b, b) (ee, en, nn) and the mean b (e, n)
@@ -814,17 +830,9 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
 
 
 @njit(cache=True, error_model="numpy")
-def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n: np.ndarray,
-                     r_e: np.ndarray, r_n: np.ndarray, ka: np.ndarray, has_gyro: np.ndarray,
-                     yaw: np.ndarray, has_odo: np.ndarray, odo: np.ndarray, outage: np.ndarray,
-                     gv_e: np.ndarray, gv_n: np.ndarray,
-                     x: np.ndarray, P: np.ndarray, st: np.ndarray, k_start: int, k_end: int,
-                     p_off: int, prm: np.ndarray,
-                     flg: np.ndarray, x_out: np.ndarray, pcov_out: np.ndarray,
-                     gnss_used: np.ndarray, gnss_rej: np.ndarray, nis_out: np.ndarray,
-                     static_out: np.ndarray, hold_out: np.ndarray, sd_out: np.ndarray,
-                     P_store: np.ndarray, prior_store: np.ndarray, info: np.ndarray,
-                     wk: np.ndarray, ge: np.ndarray, gw: np.ndarray, b_out: np.ndarray,
+def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_off: int,
+                     prm: np.ndarray, flg: np.ndarray, out: CsOutputs, store: CsStore,
+                     info: np.ndarray, wk: np.ndarray, gw: np.ndarray,
                      fading_on: int | None = None, innov_on: int | None = None,
                      sage_on: int | None = None, check_on: int | None = None,
                      store_on: int | None = None, inflate_on: int | None = None,
@@ -832,22 +840,22 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
                      turn_off: int | None = None, omega_skip_on: int | None = None,
                      along_off: int | None = None, heading_consider_on: int | None = None,
                      ge_on: int | None = None) -> None:
-    """Forward pass of the ekf/aekf over n epochs; writes the ``*_out`` arrays in place.
+    """Forward pass of the ekf/aekf over n epochs; writes the ``out`` arrays in place.
 
-    Inputs per epoch: ``dt`` s; GNSS ``z_e, z_n`` m with variances ``r_e, r_n`` m^2
-    (already regime-scaled); ``ka`` K_a factor; ``yaw`` gyro yaw rate rad/s (CCW+,
-    so the heading rate is ``-yaw``); inputs are read only where their flag is set;
-    ``odo`` speed m/s; ``outage`` epoch inside a GNSS outage.
-    Runs epochs ``k_start <= k < k_end`` from the state ``x, P`` (after epoch
+    Inputs per epoch (``inp``, :data:`CsInputs`): ``dt`` s; GNSS ``z_e, z_n`` m with
+    variances ``r_e, r_n`` m^2 (already regime-scaled); ``ka`` K_a factor; ``yaw`` gyro yaw
+    rate rad/s (CCW+, so the heading rate is ``-yaw``); inputs are read only where their flag
+    is set; ``odo`` speed m/s; ``outage`` epoch inside a GNSS outage.
+    Runs epochs ``k_start <= k < k_end`` from ``state`` (:data:`CsState`): ``x, P`` (after epoch
     k_start - 1, or the initial state at epoch 0), updated in place, and the
     internal state ``st`` (ST_* indices: remembered heading, static flag, time,
     gate and Sage-Husa memory), read at the start and written at the end; so
     the pass can be cut into segments and a segment re-run bit for bit from a
     checkpoint (the checkpointed smoother).  ``prm``/``flg``: PAR_*/FLG_* indices.
-    Outputs (one row per quantity, so every track column is a contiguous view):
-    ``x_out`` (8, n) posterior states; ``pcov_out`` (3, n) var_e, var_n, cov_en;
-    ``sd_out`` (2, n) sigma of eps and k_s; when ``flg[FLG_STORE]``,
-    ``P_store[k - p_off]`` the packed P(k|k) and ``prior_store[k]`` the prior
+    Outputs (``out``, :data:`CsOutputs`; one row per quantity, so every track column is a
+    contiguous view): ``x_out`` (8, n) posterior states; ``pcov_out`` (3, n) var_e, var_n, cov_en;
+    ``sd_out`` (2, n) sigma of eps and k_s; when ``flg[FLG_STORE]`` (``store``,
+    :data:`CsStore`), ``P_store[k - p_off]`` the packed P(k|k) and ``prior_store[k]`` the prior
     scalars; ``info`` counters (INF_*), accumulated (the caller initialises them);
     ``wk`` (5, 8) scratch rows (H, K, P H^T, B H^T, the Singer q).
     ``ge`` (N_GE,): the GNSS error block (aekf.gnss_err_states; GE_* layout: P(x, b),
@@ -861,6 +869,10 @@ def cs_filter_kernel(dt: np.ndarray, has_gnss: np.ndarray, z_e: np.ndarray, z_n:
     inference, so a default run compiles none of their code and helpers (cold
     start); :func:`kernel_options` builds them from ``flg``.
     """
+    dt, has_gnss, z_e, z_n, r_e, r_n, ka, has_gyro, yaw, has_odo, odo, outage, gv_e, gv_n = inp
+    x, P, st, ge = state
+    x_out, pcov_out, gnss_used, gnss_rej, nis_out, static_out, hold_out, sd_out, b_out = out
+    P_store, prior_store = store
     n = N_STATES
     H = wk[0]
     K = wk[1]
