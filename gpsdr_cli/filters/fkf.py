@@ -251,9 +251,10 @@ def forward(kind: str, prep: Prepared, store: bool, segment: int = 0) -> tuple:
     """
     flags = prep.flags.copy()
     flags[kf.FLG_STORE] = store
-    return kf.federated_pass(prep.dt, prep.has_gnss, prep.gnss_e, prep.gnss_n, prep.gnss_var_e,
-                             prep.gnss_var_n, prep.gnss_ve, prep.gnss_vn, prep.theta, prep.dist,
-                             prep.t_m, prep.static, prep.eps_w, prep.x0, prep.P0, prep.psi0, prep.par,
+    inp = kf.FkfInputs(prep.dt, prep.has_gnss, prep.gnss_e, prep.gnss_n, prep.gnss_var_e,
+                       prep.gnss_var_n, prep.gnss_ve, prep.gnss_vn, prep.theta, prep.dist,
+                       prep.t_m, prep.static, prep.eps_w)
+    return kf.federated_pass(inp, kf.FkfStart(prep.x0, prep.P0, float(prep.psi0)), prep.par,
                              kf.kernel_flags(kind == "fafkf", flags), fuzzy.R_TABLE,
                              fuzzy.W_TABLE, int(segment) if store and segment > 0 else None)
 

@@ -133,6 +133,7 @@ the controller's table is interpolated here, once per measurement row.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit, types
@@ -231,6 +232,15 @@ N_COUNTERS = 15
 # Output columns of the fused track.
 O_E, O_N, O_VE, O_VN, O_VAR_E, O_VAR_N, O_COV_EN = range(7)
 N_OUT = 7
+
+# the pass's arguments as records (numba takes namedtuples as they are)
+#: per-epoch inputs, arrays of n (fkf_inputs.Prepared): dt (s), the fix (m) and its variances
+#: (m^2), the receiver velocity (m/s), the DR heading theta (rad) and distance (m), the odometer
+#: time t_m, the standstill flag and the epoch's eps weight
+FkfInputs = namedtuple("FkfInputs", "dt has_gnss gnss_e gnss_n gnss_var_e gnss_var_n gnss_ve "
+                                    "gnss_vn theta dist t_m static eps_w")
+#: where the pass starts: x0 (NX), P0 (NX, NX) and the initial heading psi0 (rad)
+FkfStart = namedtuple("FkfStart", "x0 P0 psi0")
 
 NPACK = NX * (NX + 1) // 2
 
@@ -1046,11 +1056,7 @@ def store_track(out: np.ndarray, k: int, x: np.ndarray, P: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
-                   gnss_n: np.ndarray, gnss_var_e: np.ndarray, gnss_var_n: np.ndarray,
-                   gnss_ve: np.ndarray, gnss_vn: np.ndarray, theta: np.ndarray,
-                   dist: np.ndarray, t_m: np.ndarray, static: np.ndarray, eps_w: np.ndarray,
-                   x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray, flags: np.ndarray,
+def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.ndarray,
                    r_table: np.ndarray, w_table: np.ndarray, segment: int | None):
     """The forward pass of fkf or fafkf (``flags`` from :func:`kernel_flags`) over all epochs.
 
@@ -1094,6 +1100,9 @@ def federated_pass(dt: np.ndarray, has_gnss: np.ndarray, gnss_e: np.ndarray,
       signature is compiled on its own); no slice assignment between arrays
       (:func:`copy_state`).
     """
+    dt, has_gnss, gnss_e, gnss_n, gnss_var_e, gnss_var_n, gnss_ve, gnss_vn, theta, dist, t_m, \
+        static, eps_w = inp
+    x0, P0, psi0 = start
     n = dt.shape[0]
     par = par.copy()                                # its eps slots change per epoch (select_eps)
     store = flags[FLG_STORE] != 0
