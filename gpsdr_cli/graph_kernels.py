@@ -43,8 +43,8 @@ N_Q = 4
 # parameter vector
 P_SD_ODO, P_Q_DIST, P_POS_FLOOR, P_HEAD_RW, P_GYRO_SCALE, P_NOGYRO_RW, P_ACC_SD = range(7)
 P_BIAS_RW, P_SCALE_RW, P_ZARU_SD, P_VTIE_SD, P_GSPEED_SD, P_GCOURSE_MIN, P_MAX_STEP = range(7, 14)
-P_GYRO_SD, P_STOP_SPEED = 14, 15  # P_GYRO_SD: rad/s x sqrt(sample interval), per sqrt(s)
-N_P = 16
+P_GYRO_SD, P_STOP_SPEED, P_ZUPT_SD = 14, 15, 16  # P_GYRO_SD: rad/s x sqrt(sample interval), per sqrt(s)
+N_P = 17
 
 
 @njit(cache=True)
@@ -226,8 +226,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
         ab[:, :] = 0.0
         g[:] = 0.0
     cost = 0.0
-    J = np.zeros((10, N_2))
-    r = np.zeros(8)
+    J = np.zeros((11, N_2))
+    r = np.zeros(11)  # as many as J has rows (a stopped interval with every factor: 10)
     # ---- prior on keyframe 0 (and, through the random walks, on every b and s)
     for a in range(N_X):
         J[:, :] = 0.0
@@ -323,7 +323,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 J[m, N_X + S] = -odo[k1] / prm[P_VTIE_SD]
                 r[m] = rt
             m += 1
-        # ---- standstill: no heading change (the gyro's reading is then its bias)
+        # ---- standstill: no heading change (the gyro's reading is then its bias); without
+        # an odometer reading at the keyframe, zero speed at it
         if stopped[i]:
             rz = wrap(x[b0 + N_X + PSI] - x[b0 + PSI]) / prm[P_ZARU_SD]
             cost += rz * rz
@@ -332,6 +333,13 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 J[m, PSI] = -1.0 / prm[P_ZARU_SD]
                 r[m] = rz
             m += 1
+            if not odo_ok[k1]:
+                rz = x[b0 + N_X + V] / prm[P_ZUPT_SD]
+                cost += rz * rz
+                if want:
+                    J[m, N_X + V] = 1.0 / prm[P_ZUPT_SD]
+                    r[m] = rz
+                m += 1
         # ---- the GNSS error states: first-order Gauss-Markov per axis
         phi = err_phi[i]
         wsd = err_wsd[i]

@@ -315,16 +315,25 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     else:
         err_wsd = np.ones(1)
 
-    # ---- standstill intervals: the odometer below the threshold over the whole interval
+    # ---- standstill intervals: the odometer below the threshold over the whole interval;
+    # without an odometer the receiver's speed, as the filters take it
+    # (:func:`.filters.standstill.standstill_from_gnss`: epochs (t_k, t_k+1] of still fixes)
     stop_v = float(params["standstill"]["speed_mps"])
-    still_ep = odo_ok & (odo < stop_v)
     stopped = np.zeros(max(n_key - 1, 0), bool)
     if bool(params["standstill"]["enabled"]) and n_key > 1:
-        cs = np.concatenate(([0], np.cumsum(~still_ep)))
-        # epochs key_ep[i] .. key_ep[i+1] all still
-        stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1]]) == 0
-        del cs
-    del still_ep
+        if odo_ok.any():
+            still_ep = odo_ok & (odo < stop_v)
+            cs = np.concatenate(([0], np.cumsum(~still_ep)))
+            # epochs key_ep[i] .. key_ep[i+1] all still
+            stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1]]) == 0
+        else:
+            from .filters.standstill import standstill_from_gnss
+
+            still_ep = standstill_from_gnss(epochs, t_s, qparams)
+            cs = np.concatenate(([0], np.cumsum(~still_ep)))
+            # epochs key_ep[i] + 1 .. key_ep[i+1] all still
+            stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1] + 1]) == 0
+        del cs, still_ep
 
     # ---- parameters of the kernels
     gyro_dt = 0.01
@@ -349,6 +358,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     prm[gk.P_MAX_STEP] = float(gp["max_step_s"])
     prm[gk.P_GYRO_SD] = float(params["gyro"]["noise_sd_radps"]) * math.sqrt(gyro_dt)
     prm[gk.P_STOP_SPEED] = stop_v
+    prm[gk.P_ZUPT_SD] = float(params["standstill"]["zupt_sd_mps"])
 
     # ---- the speed state: a random walk, or on a drive without an odometer the forward
     # accelerometer's integral (its offset, bias + g sin(pitch), in the S slot the odometer
@@ -385,6 +395,9 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         s_rw = np.sqrt(float(pa["bias_rw_var_m2ps5"]) * dt_i
                        + float(pa["grade_rw_var_m2ps4_per_m"]) * np.abs(dd_k) + 1e-12)
         b_acc0 = np.nan_to_num(speed_track(epochs, params).b_mps2)[key_ep]
+    if not have_odo and len(stopped):
+        # stopped without an odometer: the speed state held at zero, nothing to integrate
+        v_psd = np.where(stopped, 0.0, v_psd)
     v_sd = np.sqrt(np.maximum(v_psd * dt_i, 1e-12))
 
     # ---- priors and the initial guess
