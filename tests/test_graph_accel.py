@@ -69,3 +69,30 @@ def test_without_the_accelerometer_the_speed_walks(no_odo) -> None:
     outage = np.asarray(rts2.epochs.gnss_outage, bool)
     assert _rms(err2[outage]) > 5 * _rms(err[outage])
     assert np.all(np.isfinite(err2))
+
+
+@pytest.fixture(scope="module")
+def rtk_park():
+    sim = simulate_drive("rtk", seed=1, duration_s=300.0)
+    return sim, _graph(sim, sim.drive)
+
+
+def test_rtk_park_averages_the_fixes(rtk_park) -> None:
+    """RTK fixes (1-2.5 cm) and no odometer: at the stops (the receiver's speed) the graph
+    holds the car still and averages the fixes there, below their own error, with a sigma
+    that stays honest against the truth; elsewhere it is no worse than aekf + RTS."""
+    sim, (rts, out, err) = rtk_park
+    ep = rts.epochs
+    tr = sim.truth
+    still = np.interp(ep.t_ns, tr.t_ns, tr.speed) < 0.01
+    cm = ep.has_gnss & (np.asarray(ep.gnss_sd_e) < 0.05)
+    fix_err = np.hypot(ep.gnss_e - np.interp(ep.t_ns, tr.t_ns, tr.e),
+                       ep.gnss_n - np.interp(ep.t_ns, tr.t_ns, tr.n))
+    park = cm & still
+    assert park.sum() > 150                           # fixes while stopped
+    assert out.result.static[park].mean() > 0.9
+    assert _rms(fix_err[park]) > 0.015                # m: the fixes' own error there
+    assert _rms(err[park]) < 0.6 * _rms(fix_err[park])
+    sig = np.sqrt(out.result.var_e + out.result.var_n)
+    assert 0.5 <= _rms(sig[park]) / _rms(err[park]) <= 2.0
+    assert _rms(err) < rts.rmse_m
