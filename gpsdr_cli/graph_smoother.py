@@ -317,7 +317,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval;
     # without an odometer the receiver's speed, as the filters take it
-    # (:func:`.filters.standstill.standstill_from_gnss`: epochs (t_k, t_k+1] of still fixes)
+    # (:func:`.filters.standstill.gnss_standstill`: epochs (t_k, t_k+1] of still fixes)
     stop_v = float(params["standstill"]["speed_mps"])
     stopped = np.zeros(max(n_key - 1, 0), bool)
     if bool(params["standstill"]["enabled"]) and n_key > 1:
@@ -326,14 +326,20 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
             cs = np.concatenate(([0], np.cumsum(~still_ep)))
             # epochs key_ep[i] .. key_ep[i+1] all still
             stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1]]) == 0
-        else:
+            del cs, still_ep
+        elif (epochs.velocity_share >= float(params["fkf"]["fix_course_velocity_share"])
+              or not np.asarray(epochs.has_accel, bool).any()):
+            # Without the receiver's speed the filters' stand-in from the fixes' positions
+            # calls a car creeping at up to 1 m/s stopped: against an accelerometer that
+            # measures the speed, a zero speed held there walks the track metres from
+            # centimetre fixes after each stop, so with one it is left out
             from .filters.standstill import standstill_from_gnss
 
             still_ep = standstill_from_gnss(epochs, t_s, qparams)
             cs = np.concatenate(([0], np.cumsum(~still_ep)))
             # epochs key_ep[i] + 1 .. key_ep[i+1] all still
             stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1] + 1]) == 0
-        del cs, still_ep
+            del cs, still_ep
 
     # ---- parameters of the kernels
     gyro_dt = 0.01

@@ -96,3 +96,19 @@ def test_rtk_park_averages_the_fixes(rtk_park) -> None:
     sig = np.sqrt(out.result.var_e + out.result.var_n)
     assert 0.5 <= _rms(sig[park]) / _rms(err[park]) <= 2.0
     assert _rms(err) < rts.rmse_m
+
+
+def test_positions_only_keeps_the_accelerometer() -> None:
+    """A drive without the receiver's speed and course: the stops from the fixes'
+    positions are too coarse to hold the speed at zero against the accelerometer, and the
+    track stays at centimetres to decimetres everywhere (not metres after each stop)."""
+    sim = simulate_drive("no_odometer", seed=1)
+    drive = copy.deepcopy(sim.drive)
+    drive.gnss.speed_mps[:] = np.nan
+    drive.gnss.course_deg[:] = np.nan
+    rts2, out2, err2 = _graph(sim, drive)
+    assert out2.result.info["graph_accel"]
+    assert not out2.result.static.any()
+    assert _rms(err2) < 0.15                          # m
+    assert float(np.max(err2)) < 1.0                  # m
+    assert _rms(err2) < 0.2 * rts2.rmse_m
