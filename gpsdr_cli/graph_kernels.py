@@ -5,8 +5,9 @@ inversion of the banded Cholesky factor, and the interpolation from keyframes to
 Layout: keyframe ``i`` owns the eight unknowns ``8 i + (E, N, PSI, V, B, S, GE, GN)``: east
 and north (m, local frame), heading psi (rad, clockwise from north, unwrapped), speed v
 (m/s), gyro bias b (rad/s, in the yaw rate's sign: ``d(psi)/dt = -(yaw_rate - b)``),
-odometer scale s (true speed = s x odometer speed) and the GNSS error per axis (m: fix =
-position + error + white noise).  Every factor links keyframe i to i + 1 at most,
+odometer scale s (true speed = s x odometer speed; on a drive without an odometer, the
+forward accelerometer's offset in m/s^2: dv/dt = reading - s) and the GNSS error per axis
+(m: fix = position + error + white noise).  Every factor links keyframe i to i + 1 at most,
 so the information matrix is banded with ``BAND = 15`` super-diagonals, stored in LAPACK's
 upper form (``ab[BAND + r - c, c] = H[r, c]`` for r <= c), as
 ``scipy.linalg.solveh_banded`` / ``cholesky_banded`` take it.
@@ -42,8 +43,8 @@ N_Q = 4
 # parameter vector
 P_SD_ODO, P_Q_DIST, P_POS_FLOOR, P_HEAD_RW, P_GYRO_SCALE, P_NOGYRO_RW, P_ACC_SD = range(7)
 P_BIAS_RW, P_SCALE_RW, P_ZARU_SD, P_VTIE_SD, P_GSPEED_SD, P_GCOURSE_MIN, P_MAX_STEP = range(7, 14)
-P_GYRO_SD, P_STOP_SPEED = 14, 15  # P_GYRO_SD: rad/s x sqrt(sample interval), per sqrt(s)
-N_P = 16
+P_GYRO_SD, P_STOP_SPEED, P_ZUPT_SD = 14, 15, 16  # P_GYRO_SD: rad/s x sqrt(sample interval), per sqrt(s)
+N_P = 17
 
 
 @njit(cache=True)
@@ -160,9 +161,10 @@ def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
 
 
 @njit(cache=True)
-def interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, q_out):
+def interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, v_psd, q_out):
     """Covariance of each interval's dead-reckoned displacement (ee, en, nn) and heading
-    change, from the sensors' noise at the state ``x`` (frozen while the state is solved)."""
+    change, from the sensors' noise at the state ``x`` (frozen while the state is solved).
+    ``v_psd``: per interval, the PSD of the speed state's unmodelled acceleration (m^2/s^3)."""
     n_key = len(key_ep)
     for i in range(n_key - 1):
         j0, j1 = key_ep[i], key_ep[i + 1]
@@ -177,7 +179,7 @@ def interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, q_out):
             + prm[P_HEAD_RW] ** 2 * T + prm[P_NOGYRO_RW] ** 2 * t_nogyro + 1e-12
         var_a = var_sp + prm[P_Q_DIST] ** 2 * dist + prm[P_POS_FLOOR] ** 2
         # speed from the interpolated speed state: unmodelled acceleration inside the interval
-        var_a += prm[P_ACC_SD] ** 2 * T ** 3 / 12.0 * _odo_free_share(j0, j1, t_s, odo_ok)
+        var_a += v_psd[i] * T ** 3 / 12.0 * _odo_free_share(j0, j1, t_s, odo_ok)
         var_c = dist * dist * var_psi / 3.0 + prm[P_Q_DIST] ** 2 * dist + prm[P_POS_FLOOR] ** 2
         free = (60.0 * t_free) ** 2  # 60 m/s through a stretch without any record
         var_a += free
@@ -206,12 +208,17 @@ def _odo_free_share(j0, j1, t_s, odo_ok):
 @njit(cache=True)
 def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
               fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs, err_phi, err_wsd,
-              prior_mean, prior_sd, kernel, c, ab, g, want):
+              acc_dv, acc_t, v_sd, s_sd, prior_mean, prior_sd, kernel, c, ab, g, want):
     """Cost of the state ``x`` and, with ``want``, the normal equations H (banded, ``ab``) and
     gradient ``g`` (J^T W r) of every factor at ``x`` (IRLS weights from ``x``).
 
     Fix arrays are per keyframe (NaN: no fix / no speed there).  The GNSS error states
     follow ``eps[i+1] = err_phi[i] eps[i] + w``, sd(w) = ``err_wsd[i]`` (per interval, m).
+    The speed state follows ``v[i+1] = v[i] + acc_dv[i] - s[i] acc_t[i] + w``, sd(w) =
+    ``v_sd[i]``: the forward accelerometer's integral over the interval (m/s) less the
+    offset held in the S slot (m/s^2) over the ``acc_t[i]`` seconds it covers; a drive
+    without an accelerometer has both at 0 (a random walk).  sd of S's random walk:
+    ``s_sd[i]``.
     Returns the cost: the robust cost of the GNSS factors plus the squared whitened
     residuals of the others."""
     n_key = len(key_ep)
@@ -219,8 +226,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
         ab[:, :] = 0.0
         g[:] = 0.0
     cost = 0.0
-    J = np.zeros((10, N_2))
-    r = np.zeros(8)
+    J = np.zeros((11, N_2))
+    r = np.zeros(11)  # as many as J has rows (a stopped interval with every factor: 10)
     # ---- prior on keyframe 0 (and, through the random walks, on every b and s)
     for a in range(N_X):
         J[:, :] = 0.0
@@ -285,14 +292,14 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             J[2, PSI] = -1.0 / sd_psi
             J[2, B] = -t_gyro / sd_psi
             r[2] = rp
-        # ---- random walks of b, s, and the speed state
+        # ---- random walks of b and s; the speed state driven by the accelerometer
         sq = math.sqrt(max(T, 1e-6))
         sdb = prm[P_BIAS_RW] * sq
-        sds = prm[P_SCALE_RW] * sq
-        sdv = prm[P_ACC_SD] * sq
+        sds = s_sd[i]
+        sdv = v_sd[i]
         rb = (x[b0 + N_X + B] - x[b0 + B]) / sdb
         rs = (x[b0 + N_X + S] - x[b0 + S]) / sds
-        rv = (x[b0 + N_X + V] - x[b0 + V]) / sdv
+        rv = (x[b0 + N_X + V] - x[b0 + V] - acc_dv[i] + x[b0 + S] * acc_t[i]) / sdv
         cost += rb * rb + rs * rs + rv * rv
         if want:
             J[3, N_X + B] = 1.0 / sdb
@@ -303,6 +310,7 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             r[4] = rs
             J[5, N_X + V] = 1.0 / sdv
             J[5, V] = -1.0 / sdv
+            J[5, S] = acc_t[i] / sdv
             r[5] = rv
         m = 6
         # ---- the speed state tied to the odometer at keyframe i+1
@@ -315,7 +323,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 J[m, N_X + S] = -odo[k1] / prm[P_VTIE_SD]
                 r[m] = rt
             m += 1
-        # ---- standstill: no heading change (the gyro's reading is then its bias)
+        # ---- standstill: no heading change (the gyro's reading is then its bias); without
+        # an odometer reading at the keyframe, zero speed at it
         if stopped[i]:
             rz = wrap(x[b0 + N_X + PSI] - x[b0 + PSI]) / prm[P_ZARU_SD]
             cost += rz * rz
@@ -324,6 +333,13 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 J[m, PSI] = -1.0 / prm[P_ZARU_SD]
                 r[m] = rz
             m += 1
+            if not odo_ok[k1]:
+                rz = x[b0 + N_X + V] / prm[P_ZUPT_SD]
+                cost += rz * rz
+                if want:
+                    J[m, N_X + V] = 1.0 / prm[P_ZUPT_SD]
+                    r[m] = rz
+                m += 1
         # ---- the GNSS error states: first-order Gauss-Markov per axis
         phi = err_phi[i]
         wsd = err_wsd[i]

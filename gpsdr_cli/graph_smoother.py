@@ -14,8 +14,11 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   (exact in psi, b and s; its Jacobians summed alongside: :mod:`.graph_kernels`), with the
   covariance of the displacement from the sensors' declared noise (``[gyro]``, ``[odo]``)
   plus a per-metre random walk ``[graph] dr_dist_sd``.  Without an odometer the speed
-  state (a random walk in acceleration) carries the position; without a gyro the heading
-  walks freely.  The speed state is tied to s x odometer speed where there is one.
+  state carries the position: driven by the forward accelerometer where there is one
+  (``dv = (a - s) dt``, the S slot then holding the reading's offset, bias + g sin(pitch),
+  m/s^2, a random walk in time and in the distance driven, ``[accel]``), else a random
+  walk in acceleration; without a gyro the heading walks freely.  The speed state is tied
+  to s x odometer speed where there is one.
 * GNSS: position factors with the receiver's sigma after the filters' GNSS quality model
   (:func:`.filters.gnss_model.gnss_error_model`: NLOS-suspect fixes' sigmas scaled) and,
   with the error states, times the PDOP regime's factor; speed and course factors (the
@@ -197,6 +200,8 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         at_max = mag >= mag.max()
         if at_max.sum() >= int(params["gyro"]["saturation_min_count"]):
             yaw_bad |= at_max
+        del at_max
+    del mag
     yaw, gyro_ok = _ffill_ok(t_s, np.asarray(epochs.has_gyro, bool), yaw_raw,
                              float(gp["sensor_max_age_s"]), bad=yaw_bad)
     odo_bad = ~((np.nan_to_num(odo_raw, nan=-1.0) >= 0) & (odo_raw <= max_spd))
@@ -282,6 +287,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     cdist = np.concatenate(([0.0], np.cumsum(0.5 * (spd_all[1:] + spd_all[:-1]) * np.diff(t_s))))
     dt_k = np.diff(tk_s)
     dd_k = np.diff(cdist[key_ep])
+    del spd_all, cdist
     if err_on:
         from .filters.fkf import multipath_regime
 
@@ -309,14 +315,31 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     else:
         err_wsd = np.ones(1)
 
-    # ---- standstill intervals: the odometer below the threshold over the whole interval
+    # ---- standstill intervals: the odometer below the threshold over the whole interval;
+    # without an odometer the receiver's speed, as the filters take it
+    # (:func:`.filters.standstill.gnss_standstill`: epochs (t_k, t_k+1] of still fixes)
     stop_v = float(params["standstill"]["speed_mps"])
-    still_ep = odo_ok & (odo < stop_v)
     stopped = np.zeros(max(n_key - 1, 0), bool)
     if bool(params["standstill"]["enabled"]) and n_key > 1:
-        cs = np.concatenate(([0], np.cumsum(~still_ep)))
-        # epochs key_ep[i] .. key_ep[i+1] all still
-        stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1]]) == 0
+        if odo_ok.any():
+            still_ep = odo_ok & (odo < stop_v)
+            cs = np.concatenate(([0], np.cumsum(~still_ep)))
+            # epochs key_ep[i] .. key_ep[i+1] all still
+            stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1]]) == 0
+            del cs, still_ep
+        elif (epochs.velocity_share >= float(params["fkf"]["fix_course_velocity_share"])
+              or not np.asarray(epochs.has_accel, bool).any()):
+            # Without the receiver's speed the filters' stand-in from the fixes' positions
+            # calls a car creeping at up to 1 m/s stopped: against an accelerometer that
+            # measures the speed, a zero speed held there walks the track metres from
+            # centimetre fixes after each stop, so with one it is left out
+            from .filters.standstill import standstill_from_gnss
+
+            still_ep = standstill_from_gnss(epochs, t_s, qparams)
+            cs = np.concatenate(([0], np.cumsum(~still_ep)))
+            # epochs key_ep[i] + 1 .. key_ep[i+1] all still
+            stopped = (cs[key_ep[1:] + 1] - cs[key_ep[:-1] + 1]) == 0
+            del cs, still_ep
 
     # ---- parameters of the kernels
     gyro_dt = 0.01
@@ -341,10 +364,49 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     prm[gk.P_MAX_STEP] = float(gp["max_step_s"])
     prm[gk.P_GYRO_SD] = float(params["gyro"]["noise_sd_radps"]) * math.sqrt(gyro_dt)
     prm[gk.P_STOP_SPEED] = stop_v
+    prm[gk.P_ZUPT_SD] = float(params["standstill"]["zupt_sd_mps"])
 
-    # ---- priors and the initial guess
+    # ---- the speed state: a random walk, or on a drive without an odometer the forward
+    # accelerometer's integral (its offset, bias + g sin(pitch), in the S slot the odometer
+    # scale would use): through a GNSS outage nothing else measures how the car brakes
     have_gyro = bool(gyro_ok.any())
     have_odo = bool(odo_ok.any())
+    n_int = max(n_key - 1, 1)
+    dt_i = np.maximum(dt_k, 1e-6) if len(dt_k) else np.ones(1)
+    acc_sd2 = float(gp["accel_sd"]) ** 2
+    acc_dv = np.zeros(n_int)
+    acc_t = np.zeros(n_int)
+    v_psd = np.full(n_int, acc_sd2)
+    s_rw = prm[gk.P_SCALE_RW] * np.sqrt(dt_i)
+    acc_on = (not have_odo and bool(params["accel"]["enabled"]) and n_key > 1
+              and bool(np.asarray(epochs.has_accel, bool).any()))
+    b_acc0 = None
+    if acc_on:
+        from .accel_speed import accel_covered, speed_track
+
+        pa = params["accel"]
+        cov = accel_covered(epochs)
+        a_raw = np.where(np.asarray(epochs.has_accel, bool), epochs.accel_mps2, np.nan)
+        a_held, _ = _ffill_ok(t_s, np.isfinite(a_raw), a_raw, math.inf)
+        dt_ep = np.diff(t_s)
+        step_ok = (dt_ep > 0) & (dt_ep <= float(gp["max_step_s"])) & cov[:-1]
+        c_dv = np.concatenate(([0.0], np.cumsum(np.where(step_ok, a_held[:-1] * dt_ep, 0.0))))
+        c_t = np.concatenate(([0.0], np.cumsum(np.where(step_ok, dt_ep, 0.0))))
+        acc_dv = np.diff(c_dv[key_ep])
+        acc_t = np.diff(c_t[key_ep])
+        # the reading's white noise where it covers the interval, the free walk elsewhere
+        v_psd = (acc_sd2 * np.maximum(dt_i - acc_t, 0.0)
+                 + float(pa["noise_psd_m2ps3"]) * acc_t) / dt_i
+        # the offset: the sensor bias wanders in time, g sin(pitch) along the road
+        s_rw = np.sqrt(float(pa["bias_rw_var_m2ps5"]) * dt_i
+                       + float(pa["grade_rw_var_m2ps4_per_m"]) * np.abs(dd_k) + 1e-12)
+        b_acc0 = np.nan_to_num(speed_track(epochs, params).b_mps2)[key_ep]
+    if not have_odo and len(stopped):
+        # stopped without an odometer: the speed state held at zero, nothing to integrate
+        v_psd = np.where(stopped, 0.0, v_psd)
+    v_sd = np.sqrt(np.maximum(v_psd * dt_i, 1e-12))
+
+    # ---- priors and the initial guess
     b_mean = float(gp["gyro_bias_radps"])
     b_sd = float(gp["gyro_bias_sd_radps"])
     b_given = math.isfinite(b_mean)
@@ -359,6 +421,8 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         b_mean, b_sd = 0.0, 1e-6
     if not have_odo:
         s_mean, s_sd = 1.0, 1e-6
+    if acc_on:
+        s_mean, s_sd = float(b_acc0[0]), float(params["accel"]["bias_init_sd_mps2"])
     e0 = np.nan_to_num(np.asarray(init.e, float))
     n0 = np.nan_to_num(np.asarray(init.n, float))
     ve0 = np.nan_to_num(np.asarray(init.v_e, float))
@@ -369,8 +433,10 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     x[gk.N::gk.N_X] = n0[key_ep]
     x[gk.PSI::gk.N_X] = psi0[key_ep]
     x[gk.V::gk.N_X] = np.hypot(ve0, vn0)[key_ep]
+    # per-epoch copies freed before the solve (a 4-hour drive: 11.5 MB each)
+    del e0, n0, ve0, vn0, psi0, yaw_bad, odo_bad, odo_good
     x[gk.B::gk.N_X] = b_mean
-    x[gk.S::gk.N_X] = s_mean
+    x[gk.S::gk.N_X] = s_mean if b_acc0 is None else b_acc0
     prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean, 0.0, 0.0])
     prior_sd = np.array([float(gp["init_pos_sd_m"]), float(gp["init_pos_sd_m"]),
                          float(gp["init_heading_sd_rad"]), float(gp["init_speed_sd_mps"]),
@@ -380,7 +446,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
     n_stages = max(int(gp["gnc_stages"]), 1) if kernel != KERNELS["gauss"] else 1
     stages = [c_final * 2.0 ** (n_stages - 1 - k) for k in range(n_stages)]
-    ab = np.zeros((gk.BAND + 1, n_x))
+    ab = np.zeros((gk.BAND + 1, n_x), order="F")  # LAPACK's layout: factored in place
     g = np.zeros(n_x)
     q = np.zeros((max(n_key - 1, 1), gk.N_Q))
     max_it = int(gp["max_iterations"])
@@ -388,7 +454,8 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     its = 0
     converged = False
     message = ""
-    args_fix = (fe, fn, sde, sdn, gspd, gcrs, err_phi, err_wsd, prior_mean, prior_sd)
+    args_fix = (fe, fn, sde, sdn, gspd, gcrs, err_phi, err_wsd, acc_dv, acc_t, v_sd, s_rw,
+                prior_mean, prior_sd)
 
     def cost_at(xx: np.ndarray, c: float, want: bool) -> float:
         return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
@@ -396,7 +463,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
 
     try:
         for c in stages:
-            gk.interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, q)
+            gk.interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, v_psd, q)
             lam = 1e-6
             stage_done = False
             cost = cost_at(x, c, True)
@@ -444,15 +511,20 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # ---- marginal covariance inside the band (H at the solution, final weights)
     cost_at(x, c_final, True)
     var_e_k = var_n_k = cov_en_k = None
+    g = q = None
     try:
         ab[gk.BAND] += 1e-12
-        cb = cholesky_banded(ab, lower=False, check_finite=False)
+        # factor in place, and keep only the marginals read from the band inverse
+        cb = cholesky_banded(ab, overwrite_ab=True, lower=False, check_finite=False)
+        ab = None
         sb = gk.banded_inverse_band(cb, n_x)
-        var_e_k = sb[gk.BAND, gk.E::gk.N_X]
-        var_n_k = sb[gk.BAND, gk.N::gk.N_X]
-        cov_en_k = sb[gk.BAND - 1, gk.N::gk.N_X]   # H^-1[6i, 6i+1]
-        s_var = sb[gk.BAND, gk.S::gk.N_X]
-        b_var = sb[gk.BAND, gk.B::gk.N_X]
+        cb = None
+        var_e_k = sb[gk.BAND, gk.E::gk.N_X].copy()
+        var_n_k = sb[gk.BAND, gk.N::gk.N_X].copy()
+        cov_en_k = sb[gk.BAND - 1, gk.N::gk.N_X].copy()   # H^-1[8i, 8i+1]
+        s_var = sb[gk.BAND, gk.S::gk.N_X].copy()
+        b_var = sb[gk.BAND, gk.B::gk.N_X].copy()
+        sb = None
     except (LinAlgError, ValueError) as err:
         return GraphOutcome(None, False, its, f"information matrix not positive definite: {err}")
     if not (np.all(np.isfinite(var_e_k)) and np.all(np.isfinite(var_n_k))):
@@ -492,6 +564,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     info.update({"smoothing": "graph", "smoothed": True, "graph_iterations": its,
                  "graph_keyframes": n_key, "graph_kernel": str(gp["kernel"]),
                  "graph_odo_lag_s": lag, "graph_gnss_err_states": err_on,
+                 "graph_accel": acc_on,
                  "graph_fixes_downweighted": n_down,
                  "graph_odo_scale": float(np.mean(s_k)) if have_odo else math.nan,
                  "graph_gyro_bias_radps": float(np.mean(b_k)) if have_gyro else math.nan,
