@@ -41,18 +41,17 @@ def no_odo():
 
 def test_accelerometer_carries_the_outages(no_odo) -> None:
     """15-s outages while braking to a stop and driving off: with the accelerometer's
-    integral as the speed state's motion the graph stays at decimetres inside them, far
-    below aekf + RTS (which has nothing measuring the speed there)."""
+    integral as the speed state's motion the graph stays at decimetres inside them, below
+    aekf + RTS with its track bridged by the same accelerometer (accel_speed)."""
     sim, (rts, out, err) = no_odo
     ep = rts.epochs
     outage = np.asarray(ep.gnss_outage, bool)
     assert len(sim.noise["brake_outages"]) >= 5
     assert outage.sum() > 3000                        # epochs inside outages
     assert out.result.info["graph_accel"]
-    assert _rms(rts.err_m[outage]) > 2.0               # m: the outages are hard for RTS
     assert _rms(err[outage]) < 0.3                     # m
     assert float(np.max(err)) < 1.0                    # m
-    assert _rms(err) < 0.2 * rts.rmse_m
+    assert _rms(err[outage]) < 0.7 * _rms(rts.err_m[outage])
     # the reported sigma covers the error inside the outages, and is not wildly larger
     sig = np.sqrt(out.result.var_e + out.result.var_n)
     assert 1.0 <= _rms(sig[outage]) / _rms(err[outage]) <= 5.0
