@@ -26,7 +26,7 @@ import numpy as np
 sys.path.insert(0, {root!r})
 from gpsdr_cli import config, filters
 from gpsdr_cli.align import build_epochs
-from gpsdr_cli.graph_smoother import smooth_graph
+from gpsdr_cli.filters.graph import smooth_graph
 from gpsdr_cli.simulate import simulate_drive
 
 hours = {hours}

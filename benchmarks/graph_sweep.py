@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gpsdr_cli import config, filters
 from gpsdr_cli.align import build_epochs
-from gpsdr_cli.graph_smoother import smooth_graph
+from gpsdr_cli.filters.graph import smooth_graph
 from gpsdr_cli.simulate import simulate_drive
 from gpsdr_cli.testing.nlos import add_nlos
 

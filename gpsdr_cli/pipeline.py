@@ -433,7 +433,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
             warnings.append(note)
     weight = None
     if smoother == "graph":
-        from .graph_smoother import smooth_graph
+        from .filters.graph import smooth_graph
 
         if progress:
             progress("graph smoother")

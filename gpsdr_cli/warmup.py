@@ -141,7 +141,7 @@ def warm_up(params: Params, *, auto_gnss_offset: bool = False) -> None:
         p["filter"]["smooth"] = smooth
         result = run(epochs, p)
         if graph and smooth:
-            from .graph_smoother import smooth_graph
+            from .filters.graph import smooth_graph
 
             smooth_graph(epochs, result, p)
 
@@ -158,7 +158,7 @@ def cache_is_fresh(params: Params, *, auto_gnss_offset: bool = False) -> bool:
     if params["filter"]["smooth"] or auto_gnss_offset:
         mods += SMOOTHING_MODULES.get(name, ())
     if str(params["filter"].get("smoother", "")) == "graph":
-        mods.append("graph_kernels.py")
+        mods.append("filters/graph_kernels.py")
     root = Path(__file__).resolve().parent
     user_dir = os.environ.get("NUMBA_CACHE_DIR")
     for rel in mods:

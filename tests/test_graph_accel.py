@@ -1,4 +1,4 @@
-"""The batch smoother on a drive without an odometer (gpsdr_cli.graph_smoother): the
+"""The batch smoother on a drive without an odometer (gpsdr_cli.filters.graph): the
 forward accelerometer carries the speed state through the GNSS outages, against the
 simulator's truth."""
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from gpsdr_cli import config
-from gpsdr_cli.graph_smoother import smooth_graph
+from gpsdr_cli.filters.graph import smooth_graph
 from gpsdr_cli.simulate import simulate_drive
 from gpsdr_cli.testing.sim import run_filter
 

@@ -1,4 +1,4 @@
-"""The robust batch smoother (gpsdr_cli.graph_smoother) on seeded simulated drives with
+"""The robust batch smoother (gpsdr_cli.filters.graph) on seeded simulated drives with
 known truth: NLOS steps, an outage, RTK-like fixes, GNSS only, a handful of fixes."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 from gpsdr_cli import config, filters
 from gpsdr_cli.align import build_epochs
-from gpsdr_cli.graph_smoother import parse_prior, smooth_graph
+from gpsdr_cli.filters.graph import parse_prior, smooth_graph
 from gpsdr_cli.simulate import simulate_drive
 from gpsdr_cli.testing.nlos import add_nlos
 
@@ -269,7 +269,7 @@ def test_open_sky_graph_as_good_as_the_best_rts() -> None:
 
 def test_odometer_lag_is_fitted() -> None:
     """The odometer's speed 0.2 s late against the receiver's speed: the fit finds it."""
-    from gpsdr_cli.graph_smoother import odo_lag_s
+    from gpsdr_cli.filters.graph import odo_lag_s
 
     t = np.arange(0.0, 300.0, 0.01)
     v = 10.0 + 5.0 * np.sin(2 * np.pi * t / 20.0)

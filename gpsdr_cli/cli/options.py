@@ -198,7 +198,7 @@ def make_params(config_path: str | None = None, *, filter_name: str | None = Non
         put("filter", "smoother", smooth)
         put("filter", "smooth", smooth != "none")
     if odo_scale is not None or gyro_bias is not None:
-        from ..graph_smoother import parse_prior
+        from ..filters.graph import parse_prior
 
         base = params["graph"]
         if odo_scale is not None:

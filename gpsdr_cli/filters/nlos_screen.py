@@ -6,7 +6,7 @@ for seconds to minutes.  A forward filter cannot tell a slow NLOS bias from a sl
 of its own dead reckoning, and an inflated sigma only slows its pull: on the simulated
 ``urban_nlos`` drive every filter still ended at 20-40 m against the fixes' 32-40 m.
 A post-processor has the whole drive: the robust batch fit of the dead reckoning to
-every fix (:func:`gpsdr_cli.graph_smoother.smooth_graph`, Cauchy kernel) gives each fix a
+every fix (:func:`gpsdr_cli.filters.graph.smooth_graph`, Cauchy kernel) gives each fix a
 weight, and a fix whose weight is below ``[gnss] nlos_screen_min_weight`` (its residual
 beyond the kernel's scale) is not given to the filter at all.  With those fixes left out
 the same filters reach 1.5 m on that drive.
@@ -63,7 +63,7 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
 def _screen(epochs: Epochs, params: Params,
             run: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
     g = params["gnss"]
-    from ..graph_smoother import smooth_graph
+    from .graph import smooth_graph
 
     probe = copy.deepcopy(params)
     probe["filter"]["smooth"] = True

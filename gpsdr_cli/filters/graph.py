@@ -20,12 +20,12 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   walk in acceleration; without a gyro the heading walks freely.  The speed state is tied
   to s x odometer speed where there is one.
 * GNSS: position factors with the receiver's sigma after the filters' GNSS quality model
-  (:func:`.filters.gnss_model.gnss_error_model`: NLOS-suspect fixes' sigmas scaled) and,
+  (:func:`.gnss_model.gnss_error_model`: NLOS-suspect fixes' sigmas scaled) and,
   with the error states, times the PDOP regime's factor; speed and course factors (the
   receiver's Doppler velocity); both under a robust kernel.  A fix is position + GNSS
   error + white noise: the GNSS error is a first-order Gauss-Markov state per axis
   (multipath, two more unknowns per keyframe), with fkf's two sky regimes
-  (:func:`.filters.fkf.multipath_regime`): clear sky decorrelates in time, obstructed
+  (:func:`.fkf.multipath_regime`): clear sky decorrelates in time, obstructed
   sky with the distance driven as well.
   Drives where the quality model marks NLOS fixes (``[graph] nlos_share``) and RTK
   drives keep white fixes instead, their variance inflated by the number of fixes per
@@ -63,10 +63,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .align import Epochs
-from .config import Params
-from .conventions import NS_PER_S
-from .filters.base import FilterResult
+from ..align import Epochs
+from ..config import Params
+from ..conventions import NS_PER_S
+from .base import FilterResult
 
 KERNELS = {"gauss": 0, "huber": 1, "cauchy": 2}
 
@@ -89,7 +89,7 @@ class GraphOutcome:
 
 def parse_prior(text: str, default_sd: float, what: str) -> tuple[float, float]:
     """``"1.02"`` or ``"1.02+-0.005"`` -> (value, sd); the sd defaults to ``default_sd``."""
-    from .errors import UsageError
+    from ..errors import UsageError
 
     s = text.strip().replace("±", "+-")
     val, sep, sd = s.partition("+-")
@@ -218,7 +218,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         odo = np.where(odo_ok, np.interp(t_s + lag, t_s[odo_good], odo_raw[odo_good]), odo)
     # the filters' GNSS quality model: NLOS-suspect fixes' sigmas scaled, the error
     # states' sigma for this drive (RTK, NLOS)
-    from .filters.gnss_model import gnss_error_model
+    from .gnss_model import gnss_error_model
 
     sd_before = np.asarray(epochs.gnss_sd_e, float)
     epochs, qparams = gnss_error_model(epochs, params)
@@ -252,7 +252,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     sdn = np.maximum(sdn, sd_min)
     if err_on and bool(gp["pdop_factors"]):
         # the filters' PDOP regimes (Fang et al.'s R factor k: sigma x k at medium / poor PDOP)
-        from .filters.aekf import pdop_factors
+        from .aekf import pdop_factors
 
         k_fix = pdop_factors(np.asarray(epochs.pdop, float)[key_ep], params["gnss"])[0]
         sde = sde * k_fix
@@ -281,7 +281,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # ---- GNSS error states: first-order Gauss-Markov per axis, 1/tau = 1/tau_s + speed/dist
     # (the ekf/aekf model, its sigma from the quality model); off: pinned at zero
     tk_s = t_s[key_ep]
-    # Two regimes, fkf's (:func:`.filters.fkf.multipath_regime`): under obstruction the
+    # Two regimes, fkf's (:func:`.fkf.multipath_regime`): under obstruction the
     # error decorrelates with the distance driven, in clear sky with time only
     spd_all = np.hypot(np.nan_to_num(init.v_e), np.nan_to_num(init.v_n))
     cdist = np.concatenate(([0.0], np.cumsum(0.5 * (spd_all[1:] + spd_all[:-1]) * np.diff(t_s))))
@@ -289,7 +289,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     dd_k = np.diff(cdist[key_ep])
     del spd_all, cdist
     if err_on:
-        from .filters.fkf import multipath_regime
+        from .fkf import multipath_regime
 
         w_all = multipath_regime(epochs, params)[key_ep]
         err_sd = np.sqrt(w_all * float(gp["gnss_err_sd_m"]) ** 2
@@ -317,7 +317,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval;
     # without an odometer the receiver's speed, as the filters take it
-    # (:func:`.filters.standstill.gnss_standstill`: epochs (t_k, t_k+1] of still fixes)
+    # (:func:`.standstill.gnss_standstill`: epochs (t_k, t_k+1] of still fixes)
     stop_v = float(params["standstill"]["speed_mps"])
     stopped = np.zeros(max(n_key - 1, 0), bool)
     if bool(params["standstill"]["enabled"]) and n_key > 1:
@@ -333,7 +333,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
             # calls a car creeping at up to 1 m/s stopped: against an accelerometer that
             # measures the speed, a zero speed held there walks the track metres from
             # centimetre fixes after each stop, so with one it is left out
-            from .filters.standstill import standstill_from_gnss
+            from .standstill import standstill_from_gnss
 
             still_ep = standstill_from_gnss(epochs, t_s, qparams)
             cs = np.concatenate(([0], np.cumsum(~still_ep)))
@@ -382,7 +382,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
               and bool(np.asarray(epochs.has_accel, bool).any()))
     b_acc0 = None
     if acc_on:
-        from .accel_speed import accel_covered, speed_track
+        from ..accel_speed import accel_covered, speed_track
 
         pa = params["accel"]
         cov = accel_covered(epochs)

@@ -1,4 +1,4 @@
-"""Compiled parts of the batch smoother (:mod:`gpsdr_cli.graph_smoother`): residuals and
+"""Compiled parts of the batch smoother (:mod:`gpsdr_cli.filters.graph`): residuals and
 Jacobians of every factor assembled into the banded normal equations, the selected
 inversion of the banded Cholesky factor, and the interpolation from keyframes to epochs.
 
@@ -18,7 +18,7 @@ keyframes; the heading turns by ``-(yaw_rate[j-1] - b_i) dt`` where the gyro is 
 (``gyro_ok``), else not at all (a heading random walk covers it).  Position uses the
 heading at the middle of the step.  Written by hand (numba): the factors are specific to
 our epoch layout, and a generic factor-graph library with Python-side custom factors costs
-milliseconds per factor (see the module docstring of graph_smoother).
+milliseconds per factor (see the module docstring of filters/graph.py).
 """
 
 from __future__ import annotations
