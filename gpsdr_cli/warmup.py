@@ -209,12 +209,69 @@ def prepare_loading(name: str) -> None:
     registries, numpy support, the BLAS check: ~0.45 s), cache hit or not;
     :meth:`BackgroundWarmUp.wait` does it while the compile runs, not after.
     """
-    from numba.core.registry import cpu_target
-
     from . import filters
 
     filters.get(name)
-    cpu_target.target_context.refresh()
+    refresh_cpu_target()
+
+
+def refresh_cpu_target() -> None:
+    """Initialise numba's CPU target (its extra registries, numpy support) once per process.
+
+    numba's BLAS probe (``numba.np.linalg.ensure_blas``, run when the target loads its
+    numpy registry) imports ``scipy.linalg.cython_blas``, and through it the whole
+    ``scipy.linalg`` package (~0.15-0.35 s and ~12 MB on the one-hour drive: scipy's
+    array-API layer imports numpy.f2py and unittest), although only the extension module
+    itself is probed.  So the extension module alone is loaded for the probe, under its
+    own name, and taken out of ``sys.modules`` again afterwards: a later ``import
+    scipy.linalg`` (the graph smoother) imports the package as usual and finds the same
+    module object (Cython keeps one instance per process).  Nothing changes where scipy
+    is missing or ``scipy.linalg`` is already imported.
+    """
+    from numba.core.registry import cpu_target
+
+    seeded = _seed_cython_blas()
+    try:
+        cpu_target.target_context.refresh()
+    finally:
+        if seeded:
+            package = sys.modules.get("scipy.linalg")
+            if package is None:
+                sys.modules.pop(_CYTHON_BLAS, None)
+            elif not hasattr(package, "cython_blas"):  # imported meanwhile: as an import would
+                package.cython_blas = sys.modules[_CYTHON_BLAS]
+
+
+_CYTHON_BLAS = "scipy.linalg.cython_blas"
+
+
+def _seed_cython_blas() -> bool:
+    """Put ``scipy.linalg.cython_blas`` in ``sys.modules`` without ``scipy.linalg``'s
+    ``__init__``; True if this call did (see :func:`refresh_cpu_target`)."""
+    if _CYTHON_BLAS in sys.modules or "scipy.linalg" in sys.modules:
+        return False
+    import importlib.machinery
+    import importlib.util
+
+    try:
+        import scipy
+    except ImportError:
+        return False
+    folder = os.path.join(os.path.dirname(scipy.__file__), "linalg")
+    found = importlib.machinery.PathFinder.find_spec("cython_blas", [folder])
+    if found is None or not isinstance(found.loader, importlib.machinery.ExtensionFileLoader):
+        return False
+    spec = importlib.util.spec_from_file_location(_CYTHON_BLAS, found.origin)
+    if spec is None or spec.loader is None:
+        return False
+    try:
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[_CYTHON_BLAS] = module
+        spec.loader.exec_module(module)
+    except Exception:  # numba's own probe then imports the package as before
+        sys.modules.pop(_CYTHON_BLAS, None)
+        return False
+    return True
 
 
 class BackgroundWarmUp:

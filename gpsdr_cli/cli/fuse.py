@@ -160,7 +160,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
             from ..pipeline import fuse as run_fuse
 
             res = run_fuse(drive, params, ref, auto_gnss_offset=gnss_offset == "auto",
-                           progress=stages, ready=ahead.wait if ahead else None)
+                           progress=stages, ready=ahead.wait if ahead else _ready(params))
             stages("writing outputs")
             from ..io.parquet import write_table
 
@@ -180,6 +180,18 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
 
     if not quiet:
         _report(res, track_path, stats_out, reference, gnss_offset == "auto")
+
+
+def _ready(params: Any) -> Any:
+    """Without a background compile: load the filter and numba's target the lean way
+    (:func:`gpsdr_cli.warmup.prepare_loading`) just before the first pass."""
+    name = str(params["filter"]["name"])
+
+    def ready() -> None:
+        from ..warmup import prepare_loading
+
+        prepare_loading(name)
+    return ready
 
 
 def _same(a: str | Path, b: str | Path) -> bool:
