@@ -390,10 +390,11 @@ def drop_stray_records(drive: Drive) -> Drive:
 # --------------------------------------------------------------------------- fuse
 
 def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progress | None,
-              ready: Callable[[], object] | None = None,
+              ready: Callable[[], object] | None = None, *, with_qc: bool = False,
               ) -> tuple[Epochs, FilterResult, pd.DataFrame, Drive]:
     """(epochs, result, track, the drive as processed: its ``skipped`` and ``meta["warnings"]``
-    say what aligning it dropped)."""
+    say what aligning it dropped).  ``with_qc``: the track gets the QC columns
+    (:func:`add_qc_columns`)."""
     from . import lever_arm
     from .align import build_epochs
 
@@ -445,12 +446,17 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
             result.info["graph_failed"] = outcome.message
             work.meta.setdefault("warnings", []).append(
                 f"graph smoother: {outcome.message}; the track is the RTS smoother's")
+    # the backward pass before the track table: its epochs and result are gone again when the
+    # table's columns are made, which keeps them out of the peak memory
+    sep = qc_separation(epochs, result, params, progress) if with_qc else None
     track = track_frame(epochs, result, frame)
     if weight is not None:
         track["gnss_weight"] = weight
     if work.gnss is not None and len(work.gnss):
         shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
         track["pdop"] = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
+    if with_qc:
+        track = _with_qc_columns(track, sep, params)
     return epochs, result, track, work
 
 
@@ -479,17 +485,33 @@ def add_qc_columns(track: pd.DataFrame, epochs: Epochs, result: FilterResult,
     backward_pass``) and ``quality`` (int8, 1 best .. 6 worst) appended to ``track``
     (:mod:`gpsdr_cli.qc`).  Both passes are unsmoothed: a smoothed track's own pass
     has seen the backward data."""
+    return _with_qc_columns(track, qc_separation(epochs, result, params, progress), params)
+
+
+def qc_separation(epochs: Epochs, result: FilterResult, params: Params,
+                  progress: Progress | None = None) -> np.ndarray | None:
+    """``separation_m`` of :func:`add_qc_columns` (m per epoch), None without ``[qc]
+    backward_pass``."""
     from . import qc
 
-    if qc.qc_enabled(params):
-        if progress:
-            progress("backward pass")
-        raw = copy.deepcopy(params)
-        raw["filter"]["smooth"] = False
-        fwd = run_filter(epochs, raw) if smoother_of(params) != "none" else result
-        bwd = run_filter(qc.reverse_epochs(epochs), raw)
-        e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
-        track["separation_m"] = qc.separation(fwd.e, fwd.n, e_b, n_b)
+    if not qc.qc_enabled(params):
+        return None
+    if progress:
+        progress("backward pass")
+    raw = copy.deepcopy(params)
+    raw["filter"]["smooth"] = False
+    fwd = run_filter(epochs, raw) if smoother_of(params) != "none" else result
+    bwd = run_filter(qc.reverse_epochs(epochs), raw)
+    e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
+    return qc.separation(fwd.e, fwd.n, e_b, n_b)
+
+
+def _with_qc_columns(track: pd.DataFrame, separation_m: np.ndarray | None,
+                     params: Params) -> pd.DataFrame:
+    from . import qc
+
+    if separation_m is not None:
+        track["separation_m"] = separation_m
     track["quality"] = qc.track_quality(track, params["qc"])
     return track
 
@@ -565,9 +587,8 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             if abs(est.offset_s) < OFFSET_TOL_S:
                 break
         params["time"]["gnss_offset_s"] = offset_auto
-    epochs, result, track, work = _run_once(drive, params, frame, progress, ready)
+    epochs, result, track, work = _run_once(drive, params, frame, progress, ready, with_qc=True)
     skipped = work.skipped
-    track = add_qc_columns(track, epochs, result, params, progress)
 
     if progress:
         progress("statistics")
