@@ -323,6 +323,58 @@ class BackgroundWarmUp:
         self.proc = None
 
 
+class Preload:
+    """:func:`prepare_loading` in a thread of this process while it reads the logs (warm
+    cache: nothing to compile); :meth:`wait` joins it before the first kernel call.
+
+    Importing numba and refreshing its target is ~0.5 s of pure Python, but much of
+    the reading (pyarrow's CSV parse, numpy's sorts and casts on whole columns) runs
+    without the GIL, so on a second CPU part of the start-up hides behind the reading.
+    Any failure in the thread is ignored: :meth:`wait` then does the same work itself.
+    """
+
+    def __init__(self, name: str) -> None:
+        import threading
+
+        self.name = name
+        self._thread: Any = threading.Thread(target=self._run, name="gpsdr-preload",
+                                             daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            prepare_loading(self.name)
+        except BaseException:  # noqa: BLE001 - the caller repeats it and sees the error
+            pass
+
+    def wait(self, timeout_s: float = WAIT_TIMEOUT_S) -> bool:
+        """Join the thread, then make sure the filter and numba's target are ready."""
+        self.cancel(timeout_s)
+        prepare_loading(self.name)
+        return True
+
+    def cancel(self, timeout_s: float = WAIT_TIMEOUT_S) -> None:
+        """Wait for the thread (imports cannot be interrupted; it ends on its own)."""
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            self._thread = None
+
+
+def start_preload(params: Params) -> Preload | None:
+    """A :class:`Preload` for ``params``' filter when a second CPU can run it, else None.
+
+    ``GPSDR_WARM_UP=0`` turns it off with the background compile."""
+    if os.environ.get("GPSDR_WARM_UP", "1") == "0":
+        return None
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cpus = os.cpu_count() or 1
+    if cpus < 2:
+        return None
+    return Preload(str(params["filter"]["name"]))
+
+
 def compile_parts(params: Params) -> tuple[Any, ...]:
     """Parts of the filter's kernel compile (callables) for :func:`_warm_up_in_two`, or ().
 
@@ -451,16 +503,18 @@ def start_background(params: Params, *, auto_gnss_offset: bool = False) -> Backg
     second CPU to run it on, and ``fork`` exists (the child must not re-import
     and re-parse the command line).
     """
-    import multiprocessing as mp
-
-    if os.environ.get("GPSDR_WARM_UP", "1") == "0" or not fork_is_safe():
+    if os.environ.get("GPSDR_WARM_UP", "1") == "0":
         return None
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:
         cpus = os.cpu_count() or 1
-    if cpus < 2 or cache_is_fresh(params, auto_gnss_offset=auto_gnss_offset):
+    # the cache first: a warm run does not import multiprocessing for fork_is_safe
+    if cpus < 2 or cache_is_fresh(params, auto_gnss_offset=auto_gnss_offset) \
+            or not fork_is_safe():
         return None
+    import multiprocessing as mp
+
     flush_std_streams()
     fds = os.pipe()
     proc = mp.get_context("fork").Process(target=_child, args=(params, auto_gnss_offset, fds),

@@ -259,3 +259,19 @@ def test_target_refresh_probes_blas_without_the_scipy_linalg_package() -> None:
     got = dict(line.split(" ", 1) for line in out.splitlines())
     assert got == {"have_blas": "True", "package_imported": "False", "left_in_modules": "False",
                    "attribute": "scipy.linalg.cython_blas", "numba_linalg": "True"}
+
+
+def test_preload_is_joined_before_the_filter_runs() -> None:
+    """The warm path's start-up thread has ended when ``wait`` returns, and the filter is
+    registered; a second ``wait`` (the auto-offset probes call it again) is harmless."""
+    import threading
+
+    from gpsdr_cli import filters, warmup
+    from gpsdr_cli.config import defaults
+
+    pre = warmup.start_preload(defaults())
+    if pre is None:
+        pytest.skip("one CPU: no preload thread")
+    assert pre.wait() and pre.wait()
+    assert not any(t.name == "gpsdr-preload" for t in threading.enumerate())
+    assert "aekf" in filters._REGISTRY

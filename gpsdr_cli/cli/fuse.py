@@ -149,6 +149,10 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
     from ..warmup import start_background
 
     ahead = start_background(params, auto_gnss_offset=gnss_offset == "auto")
+    if ahead is None:  # a warm cache: numba's start-up in a thread while this one reads
+        from ..warmup import start_preload
+
+        ahead = start_preload(params)
     try:
         show = _progress_wanted(quiet, [log, gps, gyro, odo])
         with _cyclic_gc_paused(), _Stages(show) as stages:
