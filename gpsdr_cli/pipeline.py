@@ -162,8 +162,12 @@ def frame_from_metadata(meta: dict[str, str]) -> LocalFrame | None:
 
 # --------------------------------------------------------------------------- track
 
-def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame) -> pd.DataFrame:
-    """The track table: TRACK_COLUMNS then TRACK_EXTRA_COLUMNS, one row per epoch."""
+def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame,
+                pdop: np.ndarray | None = None) -> pd.DataFrame:
+    """The track table: TRACK_COLUMNS then TRACK_EXTRA_COLUMNS, one row per epoch.
+
+    ``pdop``: the column (e.g. :func:`latest_gnss_pdop`); default the epochs' PDOP
+    carried forward."""
     n_ep = len(epochs)
     if len(result) != n_ep:
         raise GpsdrError(f"filter returned {len(result)} epochs for {n_ep} input epochs")
@@ -174,7 +178,8 @@ def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame) -> pd.D
     lat, lon = frame.inverse(e, n)
     # heading clockwise from north: psi = atan2(v_e, v_n)  (conventions charter)
     heading = np.degrees(np.arctan2(v_e, v_n)) % 360.0
-    pdop = pd.Series(np.asarray(epochs.pdop, float)).ffill().to_numpy()  # latest GNSS record
+    if pdop is None:
+        pdop = pd.Series(np.asarray(epochs.pdop, float)).ffill().to_numpy()  # latest GNSS record
     cols: dict[str, Any] = {
         "time": pd.to_datetime(np.asarray(epochs.t_ns, np.int64), unit="ns", utc=True),
         "lat": lat,
@@ -449,12 +454,13 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     # the backward pass before the track table: its epochs and result are gone again when the
     # table's columns are made, which keeps them out of the peak memory
     sep = qc_separation(epochs, result, params, progress) if with_qc else None
-    track = track_frame(epochs, result, frame)
-    if weight is not None:
-        track["gnss_weight"] = weight
+    pdop = None
     if work.gnss is not None and len(work.gnss):
         shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
-        track["pdop"] = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
+        pdop = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
+    track = track_frame(epochs, result, frame, pdop)
+    if weight is not None:
+        track["gnss_weight"] = weight
     if with_qc:
         track = _with_qc_columns(track, sep, params)
     return epochs, result, track, work
@@ -520,8 +526,10 @@ def latest_gnss_pdop(epochs: Epochs, gnss_t_ns: np.ndarray) -> np.ndarray:
     """PDOP of the latest GNSS record at or before each epoch; NaN before the first record
     and where that record carried no PDOP (track_frame's forward fill cannot tell a record
     without PDOP from an epoch without a record)."""
+    from .align import sorted_member
+
     t = np.asarray(epochs.t_ns, np.int64)
-    is_record = np.isin(t, np.asarray(gnss_t_ns, np.int64))
+    is_record = sorted_member(t, np.sort(np.asarray(gnss_t_ns, np.int64)))  # np.isin, faster
     last = np.maximum.accumulate(np.where(is_record, np.arange(len(t)), -1)) if len(t) else \
         np.zeros(0, np.int64)
     pdop = np.asarray(epochs.pdop, float)
