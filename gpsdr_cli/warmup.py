@@ -485,6 +485,11 @@ def _child(params: Params, auto_gnss_offset: bool, fds: tuple[int, int] | None =
     os.dup2(devnull, 1)
     os.dup2(devnull, 2)
     sys.stdout = sys.stderr = open(os.devnull, "w")  # noqa: SIM115 - lives as long as the process
+    # a short-lived compiler: the collector's passes over numba's IR cost more than the
+    # cycles they free (the process and its memory end with the compile)
+    import gc
+
+    gc.disable()
     free_fd = None
     if fds is not None:
         os.close(fds[0])  # the caller's end
