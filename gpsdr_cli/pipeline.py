@@ -162,8 +162,12 @@ def frame_from_metadata(meta: dict[str, str]) -> LocalFrame | None:
 
 # --------------------------------------------------------------------------- track
 
-def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame) -> pd.DataFrame:
-    """The track table: TRACK_COLUMNS then TRACK_EXTRA_COLUMNS, one row per epoch."""
+def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame,
+                pdop: np.ndarray | None = None) -> pd.DataFrame:
+    """The track table: TRACK_COLUMNS then TRACK_EXTRA_COLUMNS, one row per epoch.
+
+    ``pdop``: the column (e.g. :func:`latest_gnss_pdop`); default the epochs' PDOP
+    carried forward."""
     n_ep = len(epochs)
     if len(result) != n_ep:
         raise GpsdrError(f"filter returned {len(result)} epochs for {n_ep} input epochs")
@@ -174,7 +178,8 @@ def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame) -> pd.D
     lat, lon = frame.inverse(e, n)
     # heading clockwise from north: psi = atan2(v_e, v_n)  (conventions charter)
     heading = np.degrees(np.arctan2(v_e, v_n)) % 360.0
-    pdop = pd.Series(np.asarray(epochs.pdop, float)).ffill().to_numpy()  # latest GNSS record
+    if pdop is None:
+        pdop = pd.Series(np.asarray(epochs.pdop, float)).ffill().to_numpy()  # latest GNSS record
     cols: dict[str, Any] = {
         "time": pd.to_datetime(np.asarray(epochs.t_ns, np.int64), unit="ns", utc=True),
         "lat": lat,
@@ -390,10 +395,11 @@ def drop_stray_records(drive: Drive) -> Drive:
 # --------------------------------------------------------------------------- fuse
 
 def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progress | None,
-              ready: Callable[[], object] | None = None,
+              ready: Callable[[], object] | None = None, *, with_qc: bool = False,
               ) -> tuple[Epochs, FilterResult, pd.DataFrame, Drive]:
     """(epochs, result, track, the drive as processed: its ``skipped`` and ``meta["warnings"]``
-    say what aligning it dropped)."""
+    say what aligning it dropped).  ``with_qc``: the track gets the QC columns
+    (:func:`add_qc_columns`)."""
     from . import lever_arm
     from .align import build_epochs
 
@@ -445,12 +451,18 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
             result.info["graph_failed"] = outcome.message
             work.meta.setdefault("warnings", []).append(
                 f"graph smoother: {outcome.message}; the track is the RTS smoother's")
-    track = track_frame(epochs, result, frame)
-    if weight is not None:
-        track["gnss_weight"] = weight
+    # the backward pass before the track table: its epochs and result are gone again when the
+    # table's columns are made, which keeps them out of the peak memory
+    sep = qc_separation(epochs, result, params, progress) if with_qc else None
+    pdop = None
     if work.gnss is not None and len(work.gnss):
         shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
-        track["pdop"] = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
+        pdop = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
+    track = track_frame(epochs, result, frame, pdop)
+    if weight is not None:
+        track["gnss_weight"] = weight
+    if with_qc:
+        track = _with_qc_columns(track, sep, params)
     return epochs, result, track, work
 
 
@@ -478,17 +490,33 @@ def add_qc_columns(track: pd.DataFrame, epochs: Epochs, result: FilterResult,
     backward_pass``) and ``quality`` (int8, 1 best .. 6 worst) appended to ``track``
     (:mod:`gpsdr_cli.qc`).  Both passes are unsmoothed: a smoothed track's own pass
     has seen the backward data."""
+    return _with_qc_columns(track, qc_separation(epochs, result, params, progress), params)
+
+
+def qc_separation(epochs: Epochs, result: FilterResult, params: Params,
+                  progress: Progress | None = None) -> np.ndarray | None:
+    """``separation_m`` of :func:`add_qc_columns` (m per epoch), None without ``[qc]
+    backward_pass``."""
     from . import qc
 
-    if qc.qc_enabled(params):
-        if progress:
-            progress("backward pass")
-        raw = copy.deepcopy(params)
-        raw["filter"]["smooth"] = False
-        fwd = run_filter(epochs, raw) if smoother_of(params) != "none" else result
-        bwd = run_filter(qc.reverse_epochs(epochs), raw)
-        e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
-        track["separation_m"] = qc.separation(fwd.e, fwd.n, e_b, n_b)
+    if not qc.qc_enabled(params):
+        return None
+    if progress:
+        progress("backward pass")
+    raw = copy.deepcopy(params)
+    raw["filter"]["smooth"] = False
+    fwd = run_filter(epochs, raw) if smoother_of(params) != "none" else result
+    bwd = run_filter(qc.reverse_epochs(epochs), raw)
+    e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
+    return qc.separation(fwd.e, fwd.n, e_b, n_b)
+
+
+def _with_qc_columns(track: pd.DataFrame, separation_m: np.ndarray | None,
+                     params: Params) -> pd.DataFrame:
+    from . import qc
+
+    if separation_m is not None:
+        track["separation_m"] = separation_m
     track["quality"] = qc.track_quality(track, params["qc"])
     return track
 
@@ -497,8 +525,10 @@ def latest_gnss_pdop(epochs: Epochs, gnss_t_ns: np.ndarray) -> np.ndarray:
     """PDOP of the latest GNSS record at or before each epoch; NaN before the first record
     and where that record carried no PDOP (track_frame's forward fill cannot tell a record
     without PDOP from an epoch without a record)."""
+    from .align import sorted_member
+
     t = np.asarray(epochs.t_ns, np.int64)
-    is_record = np.isin(t, np.asarray(gnss_t_ns, np.int64))
+    is_record = sorted_member(t, np.sort(np.asarray(gnss_t_ns, np.int64)))  # np.isin, faster
     last = np.maximum.accumulate(np.where(is_record, np.arange(len(t)), -1)) if len(t) else \
         np.zeros(0, np.int64)
     pdop = np.asarray(epochs.pdop, float)
@@ -564,9 +594,8 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             if abs(est.offset_s) < OFFSET_TOL_S:
                 break
         params["time"]["gnss_offset_s"] = offset_auto
-    epochs, result, track, work = _run_once(drive, params, frame, progress, ready)
+    epochs, result, track, work = _run_once(drive, params, frame, progress, ready, with_qc=True)
     skipped = work.skipped
-    track = add_qc_columns(track, epochs, result, params, progress)
 
     if progress:
         progress("statistics")

@@ -67,9 +67,11 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
     """
     n_ep = len(epochs)
     fields: dict[str, object] = {}
+    made_below = ("t_ns", "dt_s", "yaw_rate_radps", "gnss_course_rad")
     for f in dataclasses.fields(Epochs):
         value = getattr(epochs, f.name)
-        fields[f.name] = value[::-1].copy() if isinstance(value, np.ndarray) else value
+        if f.name not in made_below:
+            fields[f.name] = value[::-1].copy() if isinstance(value, np.ndarray) else value
     t = np.asarray(epochs.t_ns, np.int64)
     t_rev = (t[0] + t[-1]) - t[::-1] if n_ep else t.copy()
     fields["t_ns"] = t_rev

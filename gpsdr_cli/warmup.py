@@ -209,12 +209,69 @@ def prepare_loading(name: str) -> None:
     registries, numpy support, the BLAS check: ~0.45 s), cache hit or not;
     :meth:`BackgroundWarmUp.wait` does it while the compile runs, not after.
     """
-    from numba.core.registry import cpu_target
-
     from . import filters
 
     filters.get(name)
-    cpu_target.target_context.refresh()
+    refresh_cpu_target()
+
+
+def refresh_cpu_target() -> None:
+    """Initialise numba's CPU target (its extra registries, numpy support) once per process.
+
+    numba's BLAS probe (``numba.np.linalg.ensure_blas``, run when the target loads its
+    numpy registry) imports ``scipy.linalg.cython_blas``, and through it the whole
+    ``scipy.linalg`` package (~0.15-0.35 s and ~12 MB on the one-hour drive: scipy's
+    array-API layer imports numpy.f2py and unittest), although only the extension module
+    itself is probed.  So the extension module alone is loaded for the probe, under its
+    own name, and taken out of ``sys.modules`` again afterwards: a later ``import
+    scipy.linalg`` (the graph smoother) imports the package as usual and finds the same
+    module object (Cython keeps one instance per process).  Nothing changes where scipy
+    is missing or ``scipy.linalg`` is already imported.
+    """
+    from numba.core.registry import cpu_target
+
+    seeded = _seed_cython_blas()
+    try:
+        cpu_target.target_context.refresh()
+    finally:
+        if seeded:
+            package = sys.modules.get("scipy.linalg")
+            if package is None:
+                sys.modules.pop(_CYTHON_BLAS, None)
+            elif not hasattr(package, "cython_blas"):  # imported meanwhile: as an import would
+                package.cython_blas = sys.modules[_CYTHON_BLAS]
+
+
+_CYTHON_BLAS = "scipy.linalg.cython_blas"
+
+
+def _seed_cython_blas() -> bool:
+    """Put ``scipy.linalg.cython_blas`` in ``sys.modules`` without ``scipy.linalg``'s
+    ``__init__``; True if this call did (see :func:`refresh_cpu_target`)."""
+    if _CYTHON_BLAS in sys.modules or "scipy.linalg" in sys.modules:
+        return False
+    import importlib.machinery
+    import importlib.util
+
+    try:
+        import scipy
+    except ImportError:
+        return False
+    folder = os.path.join(os.path.dirname(scipy.__file__), "linalg")
+    found = importlib.machinery.PathFinder.find_spec("cython_blas", [folder])
+    if found is None or not isinstance(found.loader, importlib.machinery.ExtensionFileLoader):
+        return False
+    spec = importlib.util.spec_from_file_location(_CYTHON_BLAS, found.origin)
+    if spec is None or spec.loader is None:
+        return False
+    try:
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[_CYTHON_BLAS] = module
+        spec.loader.exec_module(module)
+    except Exception:  # numba's own probe then imports the package as before
+        sys.modules.pop(_CYTHON_BLAS, None)
+        return False
+    return True
 
 
 class BackgroundWarmUp:
@@ -264,6 +321,58 @@ class BackgroundWarmUp:
             self.proc.terminate()
             self.proc.join(5.0)
         self.proc = None
+
+
+class Preload:
+    """:func:`prepare_loading` in a thread of this process while it reads the logs (warm
+    cache: nothing to compile); :meth:`wait` joins it before the first kernel call.
+
+    Importing numba and refreshing its target is ~0.5 s of pure Python, but much of
+    the reading (pyarrow's CSV parse, numpy's sorts and casts on whole columns) runs
+    without the GIL, so on a second CPU part of the start-up hides behind the reading.
+    Any failure in the thread is ignored: :meth:`wait` then does the same work itself.
+    """
+
+    def __init__(self, name: str) -> None:
+        import threading
+
+        self.name = name
+        self._thread: Any = threading.Thread(target=self._run, name="gpsdr-preload",
+                                             daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            prepare_loading(self.name)
+        except BaseException:  # noqa: BLE001 - the caller repeats it and sees the error
+            pass
+
+    def wait(self, timeout_s: float = WAIT_TIMEOUT_S) -> bool:
+        """Join the thread, then make sure the filter and numba's target are ready."""
+        self.cancel(timeout_s)
+        prepare_loading(self.name)
+        return True
+
+    def cancel(self, timeout_s: float = WAIT_TIMEOUT_S) -> None:
+        """Wait for the thread (imports cannot be interrupted; it ends on its own)."""
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            self._thread = None
+
+
+def start_preload(params: Params) -> Preload | None:
+    """A :class:`Preload` for ``params``' filter when a second CPU can run it, else None.
+
+    ``GPSDR_WARM_UP=0`` turns it off with the background compile."""
+    if os.environ.get("GPSDR_WARM_UP", "1") == "0":
+        return None
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cpus = os.cpu_count() or 1
+    if cpus < 2:
+        return None
+    return Preload(str(params["filter"]["name"]))
 
 
 def compile_parts(params: Params) -> tuple[Any, ...]:
@@ -376,6 +485,11 @@ def _child(params: Params, auto_gnss_offset: bool, fds: tuple[int, int] | None =
     os.dup2(devnull, 1)
     os.dup2(devnull, 2)
     sys.stdout = sys.stderr = open(os.devnull, "w")  # noqa: SIM115 - lives as long as the process
+    # a short-lived compiler: the collector's passes over numba's IR cost more than the
+    # cycles they free (the process and its memory end with the compile)
+    import gc
+
+    gc.disable()
     free_fd = None
     if fds is not None:
         os.close(fds[0])  # the caller's end
@@ -394,16 +508,18 @@ def start_background(params: Params, *, auto_gnss_offset: bool = False) -> Backg
     second CPU to run it on, and ``fork`` exists (the child must not re-import
     and re-parse the command line).
     """
-    import multiprocessing as mp
-
-    if os.environ.get("GPSDR_WARM_UP", "1") == "0" or not fork_is_safe():
+    if os.environ.get("GPSDR_WARM_UP", "1") == "0":
         return None
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:
         cpus = os.cpu_count() or 1
-    if cpus < 2 or cache_is_fresh(params, auto_gnss_offset=auto_gnss_offset):
+    # the cache first: a warm run does not import multiprocessing for fork_is_safe
+    if cpus < 2 or cache_is_fresh(params, auto_gnss_offset=auto_gnss_offset) \
+            or not fork_is_safe():
         return None
+    import multiprocessing as mp
+
     flush_std_streams()
     fds = os.pipe()
     proc = mp.get_context("fork").Process(target=_child, args=(params, auto_gnss_offset, fds),

@@ -224,3 +224,54 @@ def test_warm_up_signals_a_free_cpu_before_the_kernel_compiles(tmp_path: Path,
         assert order[5:] == "SK", order
     else:
         assert order == "SK", order
+
+
+#: In a fresh interpreter: the target refresh that a warm fuse does before its first kernel.
+BLAS_PROBE = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from gpsdr_cli.warmup import refresh_cpu_target
+    refresh_cpu_target()
+    from numba.np import arraymath
+    print("have_blas", arraymath._HAVE_BLAS)
+    print("package_imported", "scipy.linalg" in sys.modules)
+    print("left_in_modules", "scipy.linalg.cython_blas" in sys.modules)
+    import numba
+    import scipy.linalg
+    print("attribute", scipy.linalg.cython_blas.__name__)
+
+    @numba.njit
+    def solve(a, b):  # BLAS/LAPACK through numba after the lean probe
+        return np.linalg.solve(a, b) + np.dot(a, b)
+
+    a = np.array([[4.0, 1.0], [1.0, 3.0]])
+    b = np.array([1.0, 2.0])
+    print("numba_linalg", bool(np.allclose(solve(a, b), scipy.linalg.solve(a, b) + a @ b)))
+""")
+
+
+def test_target_refresh_probes_blas_without_the_scipy_linalg_package() -> None:
+    """numba's BLAS probe finds BLAS (so its typing is as before), scipy.linalg's package
+    is not imported for it, and a later import of the package and numba's linear algebra
+    work as usual."""
+    out = subprocess.run([sys.executable, "-c", BLAS_PROBE], capture_output=True, text=True,
+                         check=True, env={**os.environ, "PYTHONPATH": str(REPO)}).stdout
+    got = dict(line.split(" ", 1) for line in out.splitlines())
+    assert got == {"have_blas": "True", "package_imported": "False", "left_in_modules": "False",
+                   "attribute": "scipy.linalg.cython_blas", "numba_linalg": "True"}
+
+
+def test_preload_is_joined_before_the_filter_runs() -> None:
+    """The warm path's start-up thread has ended when ``wait`` returns, and the filter is
+    registered; a second ``wait`` (the auto-offset probes call it again) is harmless."""
+    import threading
+
+    from gpsdr_cli import filters, warmup
+    from gpsdr_cli.config import defaults
+
+    pre = warmup.start_preload(defaults())
+    if pre is None:
+        pytest.skip("one CPU: no preload thread")
+    assert pre.wait() and pre.wait()
+    assert not any(t.name == "gpsdr-preload" for t in threading.enumerate())
+    assert "aekf" in filters._REGISTRY
