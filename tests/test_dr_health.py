@@ -80,3 +80,15 @@ def test_clipping_gyro_in_an_outage_not_worse_than_the_fixes(city, name: str) ->
     d = F.gyro_saturation(city.drive, 0.1)
     r = run_filter(city, copy.deepcopy(d), name, smooth=True)
     assert r.rmse_m < 0.9 * r.gnss_rmse_m
+
+
+@pytest.mark.parametrize("name", ["ekf", "aekf"])
+def test_no_gyro_turn_in_an_outage_not_worse_than_the_fixes(city, name: str) -> None:
+    """GNSS and odometer only, the same drive-off turn inside the 10-s outage (seed 2): the CS
+    model's manoeuvre variance, sized for straight-line driving, predicted the turn straight
+    and the smoother moved the stop before it (RMSE outside the outages 9.6 / 14.8 m against
+    the fixes' 7.6 m).  In an outage without gyro readings the heading floor now grows."""
+    d = F.drop_streams(city.drive, "gyro")
+    r = run_filter(city, copy.deepcopy(d), name, smooth=True)
+    out = ~r.epochs.gnss_outage
+    assert np.sqrt(np.mean(r.err_m[out] ** 2)) < 0.9 * r.gnss_rmse_m

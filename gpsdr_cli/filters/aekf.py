@@ -347,16 +347,17 @@ def sensor_masks(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray
     return gyro, odo
 
 
-def unknown_rate_var(epochs: Epochs, params: Params) -> float:
-    """Yaw-rate variance (rad^2/s^2) by which the heading floor grows where a gyro drive has
-    no usable reading (kernels_aekf PAR_UNKNOWN_W_VAR; 0: the floor stops, as before).
+def unknown_rate_var(params: Params) -> float:
+    """Yaw-rate variance (rad^2/s^2) by which the heading floor grows in a GNSS outage while no
+    gyro reading turns the prediction (kernels_aekf PAR_UNKNOWN_W_VAR; 0: the floor stops).
 
-    Only on a drive with a gyro and with the heading floor: there the lateral row holds the
-    acceleration's turn part near zero, so a turn through a gap (readings clipped or dropped
-    out) would otherwise be predicted straight with a confident heading.  Without a gyro the
-    CS model's manoeuvre variance is the whole model.
+    On a gyro drive the lateral row holds the acceleration's turn part near zero, and without
+    a gyro the CS model's manoeuvre variance is sized for straight-line driving: either way a
+    turn through the outage (readings clipped, dropped out, or none at all) would be
+    predicted straight with a confident heading, and a smoother then moves the drive before
+    the outage to meet its end.
     """
-    if not (epochs.has_gyro.any() and params["aekf"]["heading_floor"]):
+    if not params["aekf"]["heading_floor"]:
         return 0.0
     return float(params["gyro"]["unknown_rate_sd_radps"]) ** 2
 
@@ -528,7 +529,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     x0, P0, psi0, heading_known = initial_state(epochs, params)
     prm, flg = kernel_params(params, adaptive, smooth)
     prm[kn.PAR_COAST_Q] = coast_psd(epochs, params)
-    prm[kn.PAR_UNKNOWN_W_VAR] = unknown_rate_var(epochs, params)
+    prm[kn.PAR_UNKNOWN_W_VAR] = unknown_rate_var(params)
     prm[kn.PAR_OFF_VVAR], prm[kn.PAR_OFF_AVAR] = drive_off_var(params)
     st = np.zeros(kn.N_ST)
     st[kn.ST_PSI] = psi0
@@ -537,6 +538,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     st[kn.ST_HEADING_KNOWN] = float(heading_known)
     st[kn.ST_W] = 0.0
     st[kn.ST_W_T] = -math.inf  # no gyro rate held yet
+    st[kn.ST_FIX_T] = -math.inf  # no fix used yet
     st[kn.ST_ODO_T] = -math.inf  # no odometer record yet
     st[kn.ST_VPSI] = initial_heading_var(x0, P0, heading_known, params)
     st[kn.ST_WH_T] = -math.inf  # no previous innovation yet

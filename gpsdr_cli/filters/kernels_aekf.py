@@ -112,7 +112,8 @@ ST_WH_C0, ST_WH_C1, ST_WH_UE, ST_WH_UN, ST_WH_T, ST_WH_M, ST_WH_STATIC = range(1
 ST_WH_C2, ST_WH_UE2, ST_WH_UN2, ST_WH_T2, ST_B_SINCE = range(19, 24)
 ST_ODO_T = 24  # time of the latest odometer record (s since the start)
 ST_JUMP_E, ST_JUMP_N = 25, 26  # this epoch's bias-gate move of b into the position (m; 0: none)
-N_ST = 27
+ST_FIX_T = 27  # time of the latest used GNSS fix (s since the start)
+N_ST = 28
 #: a standstill the odometer said is forgotten after this long without an odometer record (s),
 #: as fkf's STALE_ODO_S: an odometer that drops out at a stop must not hold the car for minutes
 STALE_ODO_S = 1.0
@@ -899,6 +900,7 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
     r_w = prm[PAR_R_OMEGA]
     w_held = st[ST_W]
     w_t = st[ST_W_T]
+    fix_t = st[ST_FIX_T]
     odo_t = st[ST_ODO_T]
     vpsi = st[ST_VPSI]
     cpe = st[ST_CPE]
@@ -997,12 +999,14 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                     r_h = r_turn if math.isfinite(w_use) else r_w
                     vpsi = min(vpsi + T * T * (p66 + r_h) - 2.0 * T * cpe, VPSI_MAX)
                     cpe = f_eps * (cpe - T * p66)
-                elif not hold and outage[k] and prm[PAR_UNKNOWN_W_VAR] > 0.0 and w_t > -math.inf:
-                    # a gyro drive whose readings stopped (clipped, dropped out): the turn they
-                    # would have measured is unknown, its angle grows as the gap times a typical
-                    # yaw rate (gyro.unknown_rate_sd_radps), and a turn through the gap must not
-                    # be predicted straight with a confident heading
-                    tg = t - w_t
+                elif (not hold and outage[k] and prm[PAR_UNKNOWN_W_VAR] > 0.0
+                      and max(w_t, fix_t) > -math.inf):
+                    # in an outage without a gyro reading (none on the drive, or clipped, dropped
+                    # out): the turn since the heading was last known (a reading, or the fix that
+                    # reset this floor) is unknown, its angle grows as that time times a typical
+                    # yaw rate (gyro.unknown_rate_sd_radps); a turn through it must not be
+                    # predicted straight with a confident heading
+                    tg = t - max(w_t, fix_t)
                     tg0 = max(tg - T, 0.0)
                     vpsi = min(vpsi + prm[PAR_UNKNOWN_W_VAR] * (tg * tg - tg0 * tg0), VPSI_MAX)
                 elif not hold:  # the gyro does not drive the heading in this step: no floor
@@ -1031,6 +1035,8 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                 z_e[k], z_n[k], r_e[k], r_n[k], gv_e[k], gv_n[k], x, P, st, prm, ge, gw, wk, info,
                 t, is_static, gap, gate, ge_pred, add_e, add_n, innov_on, sage_on, whiten_off,
                 inflate_on, ge_on)
+            if gnss_used[k]:
+                fix_t = t
         # ---- 3. odometer: ZUPT at standstill, else speed u = k_s |v|
         if has_odo[k]:
             u = odo[k]
@@ -1202,6 +1208,7 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
     st[ST_HEADING_KNOWN] = 1.0 if heading_known else 0.0
     st[ST_W] = w_held
     st[ST_W_T] = w_t
+    st[ST_FIX_T] = fix_t
     st[ST_ODO_T] = odo_t
     st[ST_VPSI] = vpsi
     st[ST_CPE] = cpe

@@ -123,7 +123,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
         P = embed(P, m, var_b)
     prm, _ = kernel_params(params, adaptive, smooth)
     coast = coast_psd(epochs, params)
-    var_w = unknown_rate_var(epochs, params)
+    var_w = unknown_rate_var(params)
+    fix_t = -math.inf  # the latest used fix (s)
     off_v, off_a = drive_off_var(params)
     alpha, tau_eps = prm[kn.PAR_ALPHA], prm[kn.PAR_TAU_EPS]
     sigma_a = prm[kn.PAR_SIGMA_A]
@@ -210,8 +211,8 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                                  else 0.0)
                     vpsi = min(vpsi + T * T * (p66 + r_h) - 2 * T * cpe, kn.VPSI_MAX)
                     cpe = math.exp(-T / tau_eps) * (cpe - T * p66)
-                elif not hold and epochs.gnss_outage[k] and var_w > 0 and w_t > -math.inf:  # gyro gap
-                    tg = t - w_t
+                elif not hold and epochs.gnss_outage[k] and var_w > 0 and max(w_t, fix_t) > -math.inf:
+                    tg = t - max(w_t, fix_t)  # no gyro reading in an outage: an unknown turn
                     tg0 = max(tg - T, 0.0)
                     vpsi = min(vpsi + var_w * (tg * tg - tg0 * tg0), kn.VPSI_MAX)
                 elif not hold:
@@ -315,6 +316,7 @@ def reference_filter(epochs, params, adaptive: bool) -> dict[str, np.ndarray]:
                 x, P = joseph(x, P, Hg[0], z[0] - Hg[0] @ x, re * r_fac, cons_b)
                 x, P = joseph(x, P, Hg[1], z[1] - Hg[1] @ x, rn * r_fac, cons_b)
                 used[k] = True
+                fix_t = t
                 n_fix += 1
                 if a_p["gnss_velocity"] and np.isfinite(gv_e[k]) and np.isfinite(gv_n[k]):
                     r_v = a_p["gnss_velocity_sd_mps"] ** 2
