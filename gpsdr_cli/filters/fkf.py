@@ -57,7 +57,8 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   (:func:`~.standstill.gnss_standstill`), or with positions only the speed between the
   median positions of the fixes either side (:func:`~.standstill.fix_speeds`) below
   ``fix_standstill_speed_mps``.  Without it the velocity ran away at stops: no
-  odometer, nothing else says the car stopped (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill).
+  odometer, nothing else says the car stopped (evidence:
+  docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill).
 * the regime of the GNSS error states eps per epoch, clear or obstructed sky
   (:func:`multipath_regime`: the share of recent fixes with a high PDOP);
   the kernel blends the two eps models by it (our choice, issue #4).

@@ -188,7 +188,8 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     Each window's mean belongs to the mean time of the fixes in it, not to the
     fix it is centred on: next to a GNSS outage the window is one-sided, and a
     gyro bias makes ``d`` a ramp, so the mean placed at the fix lagged it and the
-    track left an outage far off.  Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
+    track left an outage far off.
+    Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     fp = params["fkf"]
     window = fp["heading_course_window_s"]
@@ -260,8 +261,9 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray | None, psi_g: np
     odometer the dead-reckoned chord takes its speed profile from the chords themselves
     (``|g|/dt`` at their mid times); without a gyro (``tg`` None) ``dr`` is the odometer
     distance along the fixes' own chord, straight chords only (for the scale alone).  Chords of a
-    fixed time fail both ways (multipath makes short chords garbage).  Each chord's variance ``var`` counts the eps share that
-    the ends do not have in common, ``2 sigma_eps^2 (1 - exp(-dt/tau - L/dist))``; its
+    fixed time fail both ways (multipath makes short chords garbage).  Each chord's
+    variance ``var`` counts the eps share that the ends do not have in common,
+    ``2 sigma_eps^2 (1 - exp(-dt/tau - L/dist))``; its
     time ``t_mid`` is the distance-weighted mean time of its travel (``int t ds / int ds``
     on the odometer; the midpoint without one), as the heading error it measures is
     weighted by the distance driven.  Longer chords in time lost (``fix_chord_max_s``):
@@ -352,7 +354,8 @@ def chord_course_correction(chords: FixChords, tg: np.ndarray, params: Params) -
     ``|dr_k|^2 / var_k`` (the inverse variance of ``delta_k``); its value there,
     interpolated in time.  A line, not :func:`course_correction`'s mean: the gyro bias
     makes the heading error a ramp (0.3 deg/s: 0.3 rad a minute), and a mean over the
-    one-sided window at the edge of a tunnel lagged it.  Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
+    one-sided window at the edge of a tunnel lagged it.
+    Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     window = params["fkf"]["fix_course_window_s"]
     if window <= 0 or len(chords.t_mid) < 2:
@@ -516,8 +519,9 @@ def distance_rows(t_s: np.ndarray, o: np.ndarray, speed: np.ndarray, interval_s:
     prediction lags the heading, and the rows' gain to the position through P
     was large) and the distance rows by metres on mm of odometer noise.
     Coarser rows *and* a distance row at every heading epoch cut those gains;
-    either alone did not (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs).  ``q_s`` is metres
-    per row, so ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the
+    either alone did not (evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs).
+    ``q_s`` is metres per row, so ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the
     speed-equivalent random walk of 0.002 at 100 Hz (0.2 m/s per sqrt(s)).
     ``interval_s <= 0``: every record (Tang et al.).
     """

@@ -2,8 +2,8 @@
 
 Nothing but the receiver then says when the car stopped; without it the velocity
 wandered on GNSS noise at every stop (fkf: a gated multipath burst then ran the track
-far off; evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill).  :func:`standstill_from_gnss`
-is what the filters call: the receiver's (Doppler) speed, or with positions only
+far off; evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill).
+:func:`standstill_from_gnss` is what the filters call: the receiver's (Doppler) speed, or with positions only
 (fewer than ``[fkf] fix_course_velocity_share`` of the fixes with a speed) the speed
 between the median positions of the fixes either side (:func:`fix_speeds`), into
 :func:`gnss_standstill`.  The keys live in ``[fkf]``, where they were introduced.
