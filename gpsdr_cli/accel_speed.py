@@ -288,7 +288,8 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
 
     ``smoothed``: ``result`` is a smoothed track, which has the fix at the outage's end too;
     only the accelerometer's outages are bridged (a held speed did worse than the smoother's
-    own model between the two ends; evidence: the module docstring's note, #accel-speed).
+    own model between the two ends; evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#accel-speed).
     The dead reckoning's misclosure there is spread back over the outage in proportion to
     the distance's variance (the mean of a random walk pinned at both ends: a Brownian
     bridge), and the along-track variance shrinks with it."""

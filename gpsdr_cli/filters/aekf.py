@@ -255,7 +255,7 @@ def chord_velocity(epochs: Epochs, fixes: np.ndarray, odo_speed: float, params: 
 
     Differencing the first two fixes of a 10-Hz receiver (0.1 s, 2 m sigma) gave a
     velocity sigma of 40 m/s, which the odometer row then split into the wrong speed and
-    odometer scale (evidence: the note named in the module docstring, #aekf).  Along the
+    odometer scale (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#aekf).  Along the
     chord the variance is the odometer's (or the chord
     speed's), across it ``(speed x heading sigma)^2`` with the heading sigma
     ``sqrt(sd0^2 + sd1^2) / length``.
@@ -470,7 +470,8 @@ def odometer_inputs(epochs: Epochs, params: Params, use_odo: np.ndarray
     each standstill epoch (the kernel's zero-velocity update and position hold) and a NaN
     record at the first epoch after each (it ends the standstill; the kernel skips the
     speed row of a NaN).  With positions only the forward pass cannot beat the fixes:
-    nothing measures the speed in an outage (evidence: the module's note, #aekf).
+    nothing measures the speed in an outage (evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#aekf).
     """
     if (epochs.has_odo.any() or not params["standstill"]["enabled"]
             or epochs.n_gnss < 2):
@@ -505,7 +506,7 @@ def drive_off_var(params: Params) -> tuple[float, float]:
     has measured yet.  Without an odometer (a standstill from the GNSS) only the receiver's
     Doppler velocity, from ``gnss_velocity_min_mps`` up, and the fixes then measured it: the
     forward speed ran behind for seconds and the fixes' displacement went into the GNSS
-    error states (evidence: the module's note, #aekf).
+    error states (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#aekf).
     """
     a = params["aekf"]
     return (max(float(a["drive_off_speed_sd_mps"]), 0.0) ** 2,

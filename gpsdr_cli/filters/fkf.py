@@ -45,9 +45,9 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   Per drive, not per fix: a drive with the receiver's velocity keeps its
   course steering bit for bit, and a chord is worth far less than a Doppler
   course beside it.  Without them the gyro bias ran into Theta and the
-  odometer kept its scale error (evidence: the note above, #fkf).  The chords
-  never become velocity rows (they are made of the same fixes the GNSS
-  filter already takes: counted twice).
+  odometer kept its scale error (evidence:
+  docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf).  The chords never become velocity
+  rows (they are made of the same fixes the GNSS filter already takes: counted twice).
 * receiver velocity ``(speed sin(course), speed cos(course))`` at fixes with
   speed >= ``[fkf] gnss_velocity_min_mps`` (else NaN): the GNSS local
   filter's velocity rows (``[fkf] gnss_velocity``).
@@ -89,7 +89,7 @@ Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
   fuzzy-weighted fused sequence is *not* a Kalman posterior
   (its P_g is Carlson's bound, and block weights change the position-velocity
   cross-covariance from epoch to epoch), and RTS over it made the track worse
-  (evidence: the note above, #fkf).  It is
+  (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf).  It is
   smoothed instead as forward + backward: the same filter run over the
   time-reversed drive (:func:`reverse_epochs`), the two tracks fused by their
   position covariances (:func:`combine_two_filter`).  Nothing is stored per

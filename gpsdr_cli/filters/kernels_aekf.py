@@ -285,7 +285,8 @@ def inflate_kinematic(P: np.ndarray, g: float) -> None:
     so P stays positive definite): the gyro drift and odometer scale are
     parameters, not dynamics; inflating them at every 5 Hz fix (the seed's
     c = 0.9 fires on ~44 % of fixes with chi-square innovations) let the drift
-    wander and the open-sky track diverge (evidence: the module's note, #kernels-aekf).
+    wander and the open-sky track diverge (evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf).
     """
     r = math.sqrt(g)
     for i in range(N_STATES):
@@ -390,8 +391,9 @@ def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
 # [P(x, b) (8 x 2), P(b, b), b] (flat, GE_*).  The DR rows have no b column (H_b = 0), so
 # their S and their x gains are the 8-state ones and the block needs only O(8 x 2)
 # corrections.  Speed: those are not applied row by row (a call per row at 100 Hz slowed
-# the filter; #kernels-aekf in the module's note) but once per epoch by :func:`ge_epoch`,
-# from the rows' P H^T, H, R and y that the update helpers left in the work rows ``gw`` (GW_*), in order.
+# the filter; timing: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
+# but once per epoch by :func:`ge_epoch`, from the rows' P H^T, H, R and y that the update
+# helpers left in the work rows ``gw`` (GW_*), in order.
 
 
 @njit(cache=True, error_model="numpy")
@@ -660,7 +662,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # gate_reset_s while moving is not multipath but fixes that moved (a datum
             # change) or a DR error: b goes into the position, whose variance grows by
             # it (no lock-out, like the gate reset; a step in the fixes otherwise stayed
-            # half in b; evidence: the module's note, #kernels-aekf)
+            # half in b; evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
             if not is_static:
                 b2 = ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN]
                 verdict, b_since = chi2_gate(b2, prm[PAR_GATE_THR] * prm[PAR_GE_VAR], t, b_since,
@@ -1041,8 +1043,8 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                 # drive-off (aekf.drive_off_*): the stop's zero-velocity updates left v and a known
                 # to mm/s, and the record that ends it says the car moves off at an acceleration
                 # nothing has measured yet.  Along the remembered heading only: the car drives
-                # off the way it faced, and an isotropic v lost the heading (evidence: the
-                # module's note, #kernels-aekf)
+                # off the way it faced, and an isotropic v lost the heading (evidence:
+                # docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
                 ue = math.sin(psi_mem)
                 un = math.cos(psi_mem)
                 for i, j, var in ((1, 4, off_vvar), (2, 5, off_avar)):
@@ -1079,7 +1081,7 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                     # in every acceleration walked k_s off, and P's position-velocity correlation
                     # moved the position with every speed innovation; with both as consider
                     # states the outage is plain integration of the gyro heading with the odometer
-                    # speed (evidence: the module's note, #kernels-aekf)
+                    # speed (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
                     if odo_consider == 2 or (odo_consider == 1 and outage[k]):
                         cons |= CONS_KS | CONS_POS
                     pe = ue if along_off is None else 0.0

@@ -47,10 +47,10 @@ GNSS local filter (Tang et al. eqs. (4)-(6), erratum: row 2 selects n)::
 plus (our choice, beyond the paper) the receiver's velocity ``z = [v_e, v_n]``
 (RMC/VTG speed and course: Doppler, barely touched by multipath), sigma
 ``[fkf] gnss_velocity_sd_mps``, with each accepted fix while moving (the
-paper's GNSS filter sees positions only; evidence: the note above, #kernels-fkf),
-with a chi-square gate on the 2-dof NIS.  The gate is
-off until ``[gnss] gate_warmup_fixes`` fixes were accepted (the initial state is
-one fix: when that one was an outlier, e.g. the 11 m-off copy of a duplicated NMEA
+paper's GNSS filter sees positions only; evidence:
+docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-fkf), with a chi-square gate on the
+2-dof NIS.  The gate is off until ``[gnss] gate_warmup_fixes`` fixes were accepted (the
+initial state is one fix: when that one was an outlier, e.g. the 11 m-off copy of a duplicated NMEA
 record, the gate otherwise rejected every good fix and kept only the copies, fault
 case ``duplicates``).  No lock-out: a gated fix is accepted
 anyway when every fix was gated for ``gate_reset_s`` or when most recent

@@ -3,10 +3,10 @@
 Nothing but the receiver then says when the car stopped; without it the velocity
 wandered on GNSS noise at every stop (fkf: a gated multipath burst then ran the track
 far off; evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill).
-:func:`standstill_from_gnss` is what the filters call: the receiver's (Doppler) speed, or with positions only
-(fewer than ``[fkf] fix_course_velocity_share`` of the fixes with a speed) the speed
-between the median positions of the fixes either side (:func:`fix_speeds`), into
-:func:`gnss_standstill`.  The keys live in ``[fkf]``, where they were introduced.
+:func:`standstill_from_gnss` is what the filters call: the receiver's (Doppler) speed,
+or with positions only (fewer than ``[fkf] fix_course_velocity_share`` of the fixes
+with a speed) the speed between the median positions of the fixes either side
+(:func:`fix_speeds`), into :func:`gnss_standstill`.  The keys live in ``[fkf]``, where they were introduced.
 
 Plain numpy (once per drive, vectorised): no compiled kernel is needed.
 Conventions (:mod:`gpsdr_cli.conventions`): seconds, metres ENU, radians.
@@ -55,8 +55,8 @@ def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params,
     the filters that the car stopped.  The constant-acceleration model then let
     the velocity wander on GNSS noise (~1 m/s at a stop), its variance grew
     while a multipath burst was gated, a late fix of the burst passed the
-    gate, moved the velocity by metres per second, and every good fix after
-    it was gated until the reset.
+    gate, threw the velocity off, and every good fix after it was gated
+    until the reset.
     ``speeds`` (m/s, one per fix) stands in for the receiver's speed when given
     (positions only: :func:`fix_speeds`).
 
