@@ -4,9 +4,10 @@ accelerometer's, else the last fixes'.
 A drive with a gyro and no odometer has nothing that measures the speed while the fixes are
 out.  The filters' current statistical model carried the last acceleration estimate on
 (its mean is ``abar = a_hat``; the coasting rows, ``coast_acc_psd``, only slow it), and
-through a 15-s outage that turned a passing acceleration into metres per second of speed
-(no_odometer seed 3: 14.4 -> 15.4 m/s while the car braked to a stop); a car that brakes to
-a stop or drives off inside the outage ends it 80-140 m off whatever holds the speed.  A
+through a 15-s outage that turned a passing acceleration into metres per second of speed,
+the wrong way while the car braked; a car that brakes to a stop or drives off inside the
+outage ends it far off whatever holds the speed (evidence:
+docs/decisions/0015-evidence-behind-the-filter-choices.md#accel-speed).  A
 forward accelerometer (``acc_x``, or ``sensor_msgs/Imu`` linear_acceleration.x) measures the
 speed change.
 
@@ -287,10 +288,11 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
 
     ``smoothed``: ``result`` is a smoothed track, which has the fix at the outage's end too;
     only the accelerometer's outages are bridged (a held speed did worse than the smoother's
-    own model between the two ends: positions-only no_odometer seed 1, 9.2 against 3.1 m
-    inside the outages).  The dead reckoning's misclosure there is spread back over the
-    outage in proportion to the distance's variance (the mean of a random walk pinned at both
-    ends: a Brownian bridge), and the along-track variance shrinks with it."""
+    own model between the two ends; evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#accel-speed).
+    The dead reckoning's misclosure there is spread back over the outage in proportion to
+    the distance's variance (the mean of a random walk pinned at both ends: a Brownian
+    bridge), and the along-track variance shrinks with it."""
     p = params["accel"]
     # the accelerometer's speed is the Doppler speed's, carried on: without the receiver's speed
     # at the outage's last fix (a positions-only receiver) it has no start: the held speed

@@ -323,8 +323,8 @@ def flicker_zeros(t_ns: np.ndarray, speed_mps: np.ndarray, stop_mps: float, min_
 
     A wheel-tick odometer at walking pace, or one whose speed is a tick count over a short
     window, reads 1, 0, 0, 1 m/s while the car creeps; each zero said "stopped" and fired a
-    zero-velocity update (10 ticks/m, open sky ekf 1.97 m RMSE against 0.94 m for its oracle;
-    benchmarks/sweep.py).  A real stop lasts longer; the dropped readings are ambiguous, not
+    zero-velocity update (evidence: docs/decisions/0001-defaults-evidence.md,
+    ``standstill.min_stop_s``).  A real stop lasts longer; the dropped readings are ambiguous, not
     wrong, so they are not counted as skipped.  A run at either end of the stream is kept.
     """
     n = len(t_ns)
@@ -456,8 +456,8 @@ def sorted_unique(t: np.ndarray) -> np.ndarray:
     """Distinct values of an int array, ascending.
 
     Sort plus an adjacent-difference mask: numpy 2's ``np.unique`` hashes integer
-    arrays, which is about 10x slower here (0.23 s vs 0.02 s on a one-hour drive's
-    720 k stamps, already sorted per stream)."""
+    arrays, which is about 10x slower here on already sorted stamps (timing:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#align)."""
     t = np.sort(t, kind="stable")
     if len(t) < 2:
         return t

@@ -3,9 +3,8 @@
 A logger usually starts its gyro and odometer before the receiver has a fix (a cold
 start takes 30 s or more).  Every filter starts its state at the first usable fix's
 position, so the epochs before it began from that position at the wrong time and the
-error went into the states: on comma2k19 with the first 10 s of fixes removed, ekf's
-forward RMSE was 97.5 m (max 345 m) and fkf's 58.8 m, against 2.15 m for the fixes
-alone, and smoothing did not recover it (the odometer scale had collapsed to 0.41).
+error went into the states (the odometer scale among them), which smoothing did not
+recover (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#lead-in).
 
 So :func:`split` cuts the drive at the first usable fix, the filter runs from there, and
 :func:`backfill` dead-reckons the epochs before it *backwards* from the filter's first

@@ -1181,7 +1181,8 @@ def oracle_drive(sim: SimDrive, *, multipath_in_sigma: bool = True) -> Drive:
     The oracle also knows which fixes lie: urban_nlos' NLOS fixes are taken out (quality
     0, no position), as a receiver that flagged them would; rtk's false fixes stay, with
     their jump in the true sigma (taking them out leaves 5-30 s gyro-only gaps without an
-    odometer, which the fixes' owner would not choose: seed 1, aekf 5.4 m RMSE).
+    odometer, which the fixes' owner would not choose; evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#simulate).
     """
     g = sim.drive.gnss
     if g is None:

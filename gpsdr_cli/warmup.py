@@ -24,7 +24,7 @@ the filter and its parameters (which options are on), so two things help:
 
 Why a process and not a thread: compiling is pure Python (type inference and
 lowering hold the GIL), so a thread slowed the reading down as much as it
-saved (measured: 6.3-6.8 s cold against 5.9-6.4 s without).
+saved (timing: docs/decisions/0015-evidence-behind-the-filter-choices.md#warmup).
 
 Two compile processes (:func:`_warm_up_in_two`, ekf/aekf): the kernel needs every
 callee compiled before its own compile; the callees fall into two independent

@@ -34,10 +34,9 @@ GNSS error states (``aekf.gnss_err_states``, issue #4, ekf and aekf alike): the 
 error is white noise (the receiver's sigma, R) plus a first-order Gauss-Markov bias per
 axis (multipath: ``gnss_err_sd_m``, correlation time ``1/tau = 1/gnss_err_tau_s +
 speed/gnss_err_dist_m``), estimated as two more states (kernels_aekf GE_*; exact
-10-state Kalman filter and smoother).  Measured on the urban simulator (seeds 1-3): a
-white-noise model fed that error converged within seconds to a 1 m sigma with a 5-6 m
-error (mean e^2/sigma^2 = 12-45) and then held the offset for minutes; with the states
-aekf 3.35 -> 2.20 m forward, 2.07 -> 1.10 m smoothed, NEES 3.  The bias is estimated only
+10-state Kalman filter and smoother).  A white-noise model fed that error converged
+within seconds to a sigma far below its error and then held the offset for minutes
+(evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#aekf).  The bias is estimated only
 while the velocity is known apart from the fixes (receiver velocity, or a standstill),
 else it is a consider state; an estimate outside its stationary gate for
 ``gnss.gate_reset_s`` while moving goes into the position (the bias gate).  A receiver
@@ -45,8 +44,7 @@ that gives positions only (velocity at fewer than ``gnss_err_min_velocity_share`
 fixes: GGA without RMC/VTG, a ROS NavSatFix) runs without the states
 (:func:`gnss_err_states_on`, ``info["gnss_err_states_off"]`` says why): the forward pass
 then keeps b as a consider state throughout, which the RTS smoother, estimating b from
-both ends, does not follow -- it moved the open-sky track 3-5 m off at stops (RTS 2.28 m
-against the forward 0.86 m; without the states 0.67 / 0.83 m).
+both ends, does not follow -- it moved the open-sky track metres off at stops.
 
 Initialisation (our choice, documented in :func:`initial_state`): first usable
 GNSS fix; velocity from the receiver's speed/course, else from the next fix,
@@ -257,8 +255,8 @@ def chord_velocity(epochs: Epochs, fixes: np.ndarray, odo_speed: float, params: 
 
     Differencing the first two fixes of a 10-Hz receiver (0.1 s, 2 m sigma) gave a
     velocity sigma of 40 m/s, which the odometer row then split into the wrong speed and
-    odometer scale (comma2k19 positions only: k_s 0.925 in 4 s, ekf 2.71 m RMSE against
-    2.08 m for the fixes).  Along the chord the variance is the odometer's (or the chord
+    odometer scale (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#aekf).  Along the
+    chord the variance is the odometer's (or the chord
     speed's), across it ``(speed x heading sigma)^2`` with the heading sigma
     ``sqrt(sd0^2 + sd1^2) / length``.
     """
@@ -472,11 +470,9 @@ def odometer_inputs(epochs: Epochs, params: Params, use_odo: np.ndarray
     positions of the fixes either side, :func:`.standstill.fix_speeds`): a zero-speed record at
     each standstill epoch (the kernel's zero-velocity update and position hold) and a NaN
     record at the first epoch after each (it ends the standstill; the kernel skips the
-    speed row of a NaN).  Urban canyon seeds 1-3, aekf forward / RTS m: with the receiver's
-    speed 6.52/3.34, 6.12/3.36, 7.37/2.64 -> 4.23/2.02, 3.83/2.19, 5.82/1.93 (GNSS alone
-    7.5-7.7); stop_and_go seeds 1, 2: 1.87/1.13, 2.07/1.53 -> 0.79/0.95, 0.98/0.95;
-    positions only 9.60/5.89, 10.93/5.71, 15.27/9.77 -> 8.44/5.59, 10.97/5.18, 10.80/5.41
-    (the forward pass cannot beat the fixes there: nothing measures the speed in an outage).
+    speed row of a NaN).  With positions only the forward pass cannot beat the fixes:
+    nothing measures the speed in an outage (evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#aekf).
     """
     if (epochs.has_odo.any() or not params["standstill"]["enabled"]
             or epochs.n_gnss < 2):
@@ -510,8 +506,8 @@ def drive_off_var(params: Params) -> tuple[float, float]:
     but the record that ends the stop says the car moves off, at an acceleration nothing
     has measured yet.  Without an odometer (a standstill from the GNSS) only the receiver's
     Doppler velocity, from ``gnss_velocity_min_mps`` up, and the fixes then measured it: the
-    forward speed ran 1.3 m/s behind for seconds and the fixes' displacement went into the
-    GNSS error states (open sky seed 1, forward 0.97 -> 0.52 m RMSE).
+    forward speed ran behind for seconds and the fixes' displacement went into the GNSS
+    error states (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#aekf).
     """
     a = params["aekf"]
     return (max(float(a["drive_off_speed_sd_mps"]), 0.0) ** 2,

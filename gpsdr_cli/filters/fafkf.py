@@ -20,9 +20,9 @@ kernel :func:`~gpsdr_cli.filters.kernels_fkf.federated_pass`):
    the paper's convex ``x_g = beta x_1 + (1 - beta) x_2``: in FR mode both
    local filters start each epoch from x_g, so that form scales each local
    *update* by its weight -- neither the fix nor the odometer is used in full
-   (seeds 1-3, urban canyon: 4.32 m forward against 3.08 m for fkf; with
-   shares 3.00 m).  Covariance weighting already weighs the filters by their
-   covariances, which the adaptive R inflates when residuals outgrow them.
+   (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fafkf).
+   Covariance weighting already weighs the filters by their covariances, which
+   the adaptive R inflates when residuals outgrow them.
    ``"scalar"``: one beta for all shared states (the paper's convex form);
    ``"block"``: one for the position block [e, n] and one for the
    velocity/acceleration block, each from that block of P.  In FR mode PE is

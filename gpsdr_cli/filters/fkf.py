@@ -32,10 +32,10 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   previous distance row; sigma ``[odo] noise_sd_mps x T_m``.  The odometer
   speed is first scaled to the GNSS speed by :func:`odometer_scale` (our
   choice, beyond the paper: its q_s is an additive error in metres per
-  odometer interval, which cannot hold a wheel-radius error -- comma2k19's CAN
-  speed reads 0.8 % low and the fused track fell 3.5 m behind in 60 s; a
-  scale state ``S = (1 + q_s) T_m v`` instead let (q_s, v) wander along their
-  unobservable ridge in GNSS outages: 1.7 km after 10 min).
+  odometer interval, which cannot hold a wheel-radius error, and the fused
+  track fell behind; a scale state ``S = (1 + q_s) T_m v`` instead let (q_s, v)
+  wander along their unobservable ridge in GNSS outages; evidence:
+  docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf).
 * positions only (the receiver's speed at fewer than ``[fkf]
   fix_course_velocity_share`` of the fixes: NMEA GGA without RMC/VTG, a ROS
   NavSatFix), the course steering and the odometer scale come instead from
@@ -45,10 +45,9 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   Per drive, not per fix: a drive with the receiver's velocity keeps its
   course steering bit for bit, and a chord is worth far less than a Doppler
   course beside it.  Without them the gyro bias ran into Theta and the
-  odometer kept its 2-4 % scale error: fkf open sky seed 1 12.17 / 10.72 m
-  (forward / RTS), urban 13.36 / 11.17, tunnels up to 287 m.  The chords
-  never become velocity rows (they are made of the same fixes the GNSS
-  filter already takes: counted twice).
+  odometer kept its scale error (evidence:
+  docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf).  The chords never become velocity
+  rows (they are made of the same fixes the GNSS filter already takes: counted twice).
 * receiver velocity ``(speed sin(course), speed cos(course))`` at fixes with
   speed >= ``[fkf] gnss_velocity_min_mps`` (else NaN): the GNSS local
   filter's velocity rows (``[fkf] gnss_velocity``).
@@ -58,7 +57,8 @@ This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
   (:func:`~.standstill.gnss_standstill`), or with positions only the speed between the
   median positions of the fixes either side (:func:`~.standstill.fix_speeds`) below
   ``fix_standstill_speed_mps``.  Without it the velocity ran away at stops: no
-  odometer, nothing else says the car stopped (stop_and_go seed 1, fkf 17.3 m).
+  odometer, nothing else says the car stopped (evidence:
+  docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill).
 * the regime of the GNSS error states eps per epoch, clear or obstructed sky
   (:func:`multipath_regime`: the share of recent fixes with a high PDOP);
   the kernel blends the two eps models by it (our choice, issue #4).
@@ -76,8 +76,7 @@ Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
   (4096) epochs, and the smoother re-runs each segment from its checkpoint
   (the same floats) and smooths it (:func:`~.kernels_fkf.federated_pass`):
   65 floats x 4096 epochs in memory instead of x every epoch (a one-hour drive
-  at 100 Hz: 187 MB, which took ``gpsdr fuse --smooth`` to 630 MB peak RSS),
-  for one more forward pass.  In FR mode the covariance-weighted fused
+  at 100 Hz: 187 MB), for one more forward pass.  In FR mode the covariance-weighted fused
   sequence is the centralised filter's (up to the EKF linearisation), so this is the usual RTS
   smoother; in NR mode it is an approximation.  Where the fused sequence is
   not a Kalman posterior (a stale local filter dropped, a heading re-aligned,
@@ -90,7 +89,7 @@ Smoothing (``params["filter"]["smooth"]``), ``info["smoothing"]``:
   fuzzy-weighted fused sequence is *not* a Kalman posterior
   (its P_g is Carlson's bound, and block weights change the position-velocity
   cross-covariance from epoch to epoch), and RTS over it made the track worse
-  (5.2 m instead of 1.0 m RMS on the simulator's open-sky drive).  It is
+  (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf).  It is
   smoothed instead as forward + backward: the same filter run over the
   time-reversed drive (:func:`reverse_epochs`), the two tracks fused by their
   position covariances (:func:`combine_two_filter`).  Nothing is stored per

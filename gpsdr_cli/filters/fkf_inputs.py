@@ -131,17 +131,11 @@ def outage_headings(epochs: Epochs, t_s: np.ndarray, o: np.ndarray, params: Para
     and nothing the direction.  In an outage the white-jerk model carried the lateral
     acceleration the fixes left behind, the velocity's cross-track variance grew to metres
     per second, and each distance row, linearised along a velocity that had turned against
-    P's axes, turned it further: comma2k19 with a 20-s outage, the heading ran from 2.6 to
-    59.6 deg on a straight road and fkf ended 98.8 m off (zero lateral-acceleration rows
-    instead still jumped 22 m on one distance row).  A post-processor knows the course at
-    both ends; on a straight road the heading holds between them, through a highway
-    curve it turns at a roughly constant rate.  Not through a junction: the turn's time
-    is unknown, and a linear heading there was worse than none (simulated urban seed 1,
-    a 57-deg turn in a 5-s outage: 2.2 -> 9.0 m at its end).  Simulated drives without a
-    gyro, seeds 1-3 pooled, fkf forward / RTS: tunnels (30, 60 s with a 69-deg curve,
-    120 s) 611.9 / 611.9 -> 47.1 / 47.1 m; urban canyon 7.66 / 6.44 -> 7.82 / 6.70
-    (GNSS alone 7.59); open sky and stop_and_go unchanged.  Rows every 1 s instead:
-    tunnels 66.7 m, urban 7.69 / 6.56.
+    P's axes, turned it further, even on a straight road.  A post-processor knows the
+    course at both ends; on a straight road the heading holds between them, through a
+    highway curve it turns at a roughly constant rate.  Not through a junction: the turn's
+    time is unknown, and a linear heading there was worse than none.  Evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     none = np.zeros(0, np.int64), np.zeros(0)
     out = epochs.gnss_outage
@@ -193,11 +187,9 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
 
     Each window's mean belongs to the mean time of the fixes in it, not to the
     fix it is centred on: next to a GNSS outage the window is one-sided, and a
-    gyro bias makes ``d`` a ramp, so the mean placed at the fix lagged it.
-    comma2k19 with its uncalibrated gyro (bias about -4 deg/s) and a 20-s
-    outage: the correction at the last fix before it was -66.6 deg where -77.4
-    was due, 2.5 s of lag, and fkf ended the outage 35.9 m off (10.8 % of the
-    distance; ekf 3.2 m); placed at the mean time, 2.7 m.
+    gyro bias makes ``d`` a ramp, so the mean placed at the fix lagged it and the
+    track left an outage far off.
+    Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     fp = params["fkf"]
     window = fp["heading_course_window_s"]
@@ -269,13 +261,14 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray | None, psi_g: np
     odometer the dead-reckoned chord takes its speed profile from the chords themselves
     (``|g|/dt`` at their mid times); without a gyro (``tg`` None) ``dr`` is the odometer
     distance along the fixes' own chord, straight chords only (for the scale alone).  Chords of a
-    fixed time fail both ways: 2 s gave 18.5 m in the urban canyon (multipath makes short
-    chords garbage), 5 s 4.5 m.  Each chord's variance ``var`` counts the eps share that
-    the ends do not have in common, ``2 sigma_eps^2 (1 - exp(-dt/tau - L/dist))``; its
+    fixed time fail both ways (multipath makes short chords garbage).  Each chord's
+    variance ``var`` counts the eps share that the ends do not have in common,
+    ``2 sigma_eps^2 (1 - exp(-dt/tau - L/dist))``; its
     time ``t_mid`` is the distance-weighted mean time of its travel (``int t ds / int ds``
     on the odometer; the midpoint without one), as the heading error it measures is
     weighted by the distance driven.  Longer chords in time lost (``fix_chord_max_s``):
     a 30-s limit let slow chords with a ramping heading error dominate the weights.
+    Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     fp = params["fkf"]
     f = np.flatnonzero(epochs.has_gnss)
@@ -361,8 +354,8 @@ def chord_course_correction(chords: FixChords, tg: np.ndarray, params: Params) -
     ``|dr_k|^2 / var_k`` (the inverse variance of ``delta_k``); its value there,
     interpolated in time.  A line, not :func:`course_correction`'s mean: the gyro bias
     makes the heading error a ramp (0.3 deg/s: 0.3 rad a minute), and a mean over the
-    one-sided window at the edge of a tunnel lagged it by 0.06-0.09 rad (tunnels seed 2:
-    fkf 50.7 m).
+    one-sided window at the edge of a tunnel lagged it.
+    Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     window = params["fkf"]["fix_course_window_s"]
     if window <= 0 or len(chords.t_mid) < 2:
@@ -462,9 +455,9 @@ def multipath_regime(epochs: Epochs, params: Params) -> np.ndarray:
     fix without PDOP (ROS NavSatFix, NMEA without GSA) when its base sigma
     (:func:`gpsdr_cli.align.base_sigma`: the receiver's, else HDOP x UERE, else
     the default) >= ``[fkf] gnss_err_sigma_m`` (2.2 m: PDOP 2 at HDOP = 0.62
-    PDOP and the default UERE 2.5 m, HDOP x UERE/sqrt 2).  Without it the
-    simulated urban MCAP sample (NavSatFix: covariance, no DOP) stayed in the
-    clear-sky regime: fkf 2.70 m forward, 2.60 m RTS.  The regime of a fix is
+    PDOP and the default UERE 2.5 m, HDOP x UERE/sqrt 2).  Without it a
+    receiver with a covariance and no DOP (NavSatFix) stayed in the clear-sky
+    regime.  The regime of a fix is
     the share of obstructed fixes
     in a centred window of ``[fkf] gnss_err_window_s`` (0: its own), and an
     epoch takes the latest fix's (before the first fix, the first one's; across
@@ -474,21 +467,16 @@ def multipath_regime(epochs: Epochs, params: Params) -> np.ndarray:
     Why two models (issue #4): under obstruction the fix error is multipath --
     metres, and decorrelating with the antenna's displacement as the
     reflecting geometry changes, ``1/tau = 1/tau_s + speed/D``
-    (``gnss_err_obstructed_*``).  With one time-only model (1 m, 60 s) the
-    filter read the urban canyon's slow 4-m multipath as position: eps tracked
-    the simulator's true multipath with a correlation of 0.68 and 1.7 m RMS
-    against 4.3 m (seed 1), and fkf stayed 1.14-1.26x its oracle (urban and
-    one-hour drives, seeds 1-3).  In clear sky the error that is left drifts
-    slowly in time, moving or not (orbit, atmosphere, the receiver's own
-    smoothing and latency): on the real comma2k19 drive (PDOP 1.8) any
-    distance decorrelation cost 2-4 cm at the README offset (0.486 ->
-    0.50-0.53 m) and 0.05-0.18 m as logged.  Why a share over a window: PDOP
-    wanders around a threshold within one environment (suburban PDOP 2.2 +-
-    20 %), and a regime that followed each fix let a few seconds of
-    obstruction leave eps's variance at 9 m^2 for minutes of clear sky (open
-    sky 0.46 -> 0.53 m, stop_and_go 0.62 -> 0.68 m) or, with eps rescaled by
-    the ratio of the sigmas at each switch, jumped the track (stop_and_go
-    1.34 m).
+    (``gnss_err_obstructed_*``).  With one time-only model the filter read
+    the urban canyon's slow multipath as position.  In clear sky the error
+    that is left drifts slowly in time, moving or not (orbit, atmosphere, the
+    receiver's own smoothing and latency): a distance decorrelation there
+    made the real drive worse.  Why a share over a window: PDOP wanders
+    around a threshold within one environment (suburban PDOP 2.2 +- 20 %),
+    and a regime that followed each fix let a few seconds of obstruction
+    leave eps's variance at 9 m^2 for minutes of clear sky or, with eps
+    rescaled by the ratio of the sigmas at each switch, jumped the track.
+    Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     n = len(epochs)
     thr = params["fkf"]["gnss_err_pdop"]
@@ -527,16 +515,13 @@ def distance_rows(t_s: np.ndarray, o: np.ndarray, speed: np.ndarray, interval_s:
     each row had a 1-mm sigma (``[odo] noise_sd_mps x T_m``) while successive
     wheel-tick speeds (a moving average) share most of their ticks, so their
     errors are not white; and in a GNSS outage the heading rows then moved the
-    fused position by 1.5-3 m each (in turns the constant-acceleration
-    prediction lags the heading by ~0.03 rad, and the rows' gain to the
-    position through P was ~100 m/rad) and the distance rows by up to 15 m on
-    mm of odometer noise: the one-hour drive's 60-s outages ended up to 69 m
-    (10 %) off, the fused speed 0.6-2 m/s below the odometer's.  With 0.05-s
-    rows *and* a distance row at every heading epoch those gains fell ~100x
-    (one_hour fkf 60-s drift 5.8 -> 0.7 %); coarser rows alone did not help
-    where heading epochs had no distance row (0.03 or 0.04-s slots: 5.8 %), nor
-    did 1-mm rows at every heading epoch (the old default).  ``q_s`` is metres
-    per row, so ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the
+    fused position by metres each (in turns the constant-acceleration
+    prediction lags the heading, and the rows' gain to the position through P
+    was large) and the distance rows by metres on mm of odometer noise.
+    Coarser rows *and* a distance row at every heading epoch cut those gains;
+    either alone did not (evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs).
+    ``q_s`` is metres per row, so ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the
     speed-equivalent random walk of 0.002 at 100 Hz (0.2 m/s per sqrt(s)).
     ``interval_s <= 0``: every record (Tang et al.).
     """

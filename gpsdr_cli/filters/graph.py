@@ -233,7 +233,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
 
     # An NLOS drive (by the quality model) keeps white fixes under the tight kernel: with
     # error states the NLOS steps trade between the error state and the track, and the
-    # solve crawls (urban_nlos: 10 m against 4 m white, in 3x the iterations).
+    # solve crawls (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#graph-smoother).
     # (a share of NLOS-marked fixes: a lower bar than the filters' NLOS drive)
     nlos_drive = nlos_share >= float(gp["nlos_share"])
     # An RTK drive too: centimetre fixes against a 0.3-m error state did not converge.

@@ -38,12 +38,12 @@ before type inference (:func:`kernel_options`), scratch arrays come from the
 caller (no ``np.zeros`` specialisations), state indices are passed as int64
 values, not literals (one signature per helper), and every function uses
 ``error_model="numpy"`` (every division is guarded; no ZeroDivisionError paths
-to lower).  aekf forward on the one-hour drive: cold ``gpsdr fuse`` 7.6 -> 6.0 s.
-The GNSS fix (section 2, 5 Hz) is its own function, :func:`gnss_fix` (issue #5: with
-the GNSS error states the kernel's own compile had grown to ~4 s, numba's type
-inference and SSA growing faster than linearly with a function's size); the 100-Hz
-sections stay in the kernel (a call with their ~15 array arguments per epoch cost
-30 % of the forward speed).  :func:`gpsdr_cli.filters.aekf.compile_parts` splits the
+to lower).  The GNSS fix (section 2, 5 Hz) is its own function, :func:`gnss_fix`
+(issue #5: with the GNSS error states the kernel's own compile had grown slow, numba's
+type inference and SSA growing faster than linearly with a function's size); the
+100-Hz sections stay in the kernel (a call with their ~15 array arguments per epoch
+slowed the forward pass).  Timings: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf.
+:func:`gpsdr_cli.filters.aekf.compile_parts` splits the
 callees' compile over two processes (:mod:`gpsdr_cli.warmup`).
 
 For the RTS smoother the kernel optionally stores the packed upper triangle of
@@ -286,7 +286,8 @@ def inflate_kinematic(P: np.ndarray, g: float) -> None:
     so P stays positive definite): the gyro drift and odometer scale are
     parameters, not dynamics; inflating them at every 5 Hz fix (the seed's
     c = 0.9 fires on ~44 % of fixes with chi-square innovations) let the drift
-    wander and the open-sky error grow from 0.8 m to 85 m.
+    wander and the open-sky track diverge (evidence:
+    docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf).
     """
     r = math.sqrt(g)
     for i in range(N_STATES):
@@ -390,9 +391,10 @@ def turn_jacobian(F: np.ndarray, x: np.ndarray, T: float, w: float) -> None:
 # of the kinematic model, whose code is the same with and without b, and the block ``ge`` =
 # [P(x, b) (8 x 2), P(b, b), b] (flat, GE_*).  The DR rows have no b column (H_b = 0), so
 # their S and their x gains are the 8-state ones and the block needs only O(8 x 2)
-# corrections.  Speed: those are not applied row by row (a call per row at 100 Hz cost
-# 25 % of the filter's speed) but once per epoch by :func:`ge_epoch`, from the rows' P H^T,
-# H, R and y that the update helpers left in the work rows ``gw`` (GW_*), in order.
+# corrections.  Speed: those are not applied row by row (a call per row at 100 Hz slowed
+# the filter; timing: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
+# but once per epoch by :func:`ge_epoch`, from the rows' P H^T, H, R and y that the update
+# helpers left in the work rows ``gw`` (GW_*), in order.
 
 
 @njit(cache=True, error_model="numpy")
@@ -605,12 +607,12 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
 
     Its own function for the cold start: numba's type inference and SSA
     reconstruction grow faster than linearly with a function's size, and this
-    block was half of the kernel's body (cold compile of the kernel 7.4 s).  Its
+    block was half of the kernel's body.  Its
     memory (gate timers, Sage-Husa, whitening, fix count: the ST_* entries) lives
     in ``st`` only, so the 100-Hz path between fixes carries none of it.  The epoch's
     fix ``z_e, z_n`` (m), variances ``r_e, r_n`` (m^2) and receiver velocity ``gv_e,
     gv_n`` (m/s, NaN when none) come as values, not arrays: a call passes every array
-    as ~7 values, and 17 arrays cost 4 % of the forward speed at 5 Hz.  ``t``
+    as ~7 values, and 17 arrays slowed the forward pass.  ``t``
     (s since the start), ``is_static``, ``gap`` (a step not propagated), ``gate``
     and ``ge_pred`` (the GNSS error block's prediction still pending) come from the
     kernel; ``add_e, add_n`` the position variance added to P(k|k-1) so far
@@ -660,8 +662,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # estimated b outside the gate of its stationary distribution for
             # gate_reset_s while moving is not multipath but fixes that moved (a datum
             # change) or a DR error: b goes into the position, whose variance grows by
-            # it (no lock-out, like the gate reset; a 30 m step otherwise stayed half
-            # in b, the track 16 m off)
+            # it (no lock-out, like the gate reset; a step in the fixes otherwise stayed
+            # half in b; evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
             if not is_static:
                 b2 = ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN]
                 verdict, b_since = chi2_gate(b2, prm[PAR_GATE_THR] * prm[PAR_GE_VAR], t, b_since,
@@ -767,7 +769,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # PAR_WH_GAP s apart (an outage restarts the pair).  Only fixes with a NIS
             # under PAR_WH_NIS: a filter error (a drive-off with an unknown heading, the
             # end of an outage) also makes the innovations correlated, and inflating R
-            # then slowed its correction (11 m instead of 7 m, 10 s later)
+            # then slowed its correction
             ue = ye / math.sqrt(P[IE, IE] + r_e * sh_r)
             un = yn / math.sqrt(P[IN, IN] + r_n * sh_r)
             d_wh = (1.0 - prm[PAR_WH_B]) / (1.0 - prm[PAR_WH_B] ** (wh_m + 1.0))
@@ -789,7 +791,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # the bias is estimated only when the velocity is known independently of the
             # fixes, from the receiver (Doppler) or by a standstill (ZUPT): otherwise a
             # slow drift of the fixes cannot be told from a DR heading error, and the
-            # states absorbed a drive-off's wrong heading (15 m); then b is a consider
+            # states absorbed a drive-off's wrong heading; then b is a consider
             # state (it widens S only)
             est_b = is_static or (math.isfinite(gv_e) and math.isfinite(gv_n)
                                   and prm[PAR_GVEL_VAR] > 0.0)
@@ -1046,10 +1048,9 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
             if was_static and not is_static and heading_known:
                 # drive-off (aekf.drive_off_*): the stop's zero-velocity updates left v and a known
                 # to mm/s, and the record that ends it says the car moves off at an acceleration
-                # nothing has measured yet (no odometer: open sky seed 1, the forward speed ran
-                # 1.3 m/s behind for seconds, 1.6 m off).  Along the remembered heading only: the
-                # car drives off the way it faced, and an isotropic v lost the heading (positions
-                # only, open sky 0.74 -> 11.5 m)
+                # nothing has measured yet.  Along the remembered heading only: the car drives
+                # off the way it faced, and an isotropic v lost the heading (evidence:
+                # docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
                 ue = math.sin(psi_mem)
                 un = math.cos(psi_mem)
                 for i, j, var in ((1, 4, off_vvar), (2, 5, off_avar)):
@@ -1084,9 +1085,9 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                     # position (aekf.odo_consider: consider states): nothing else measures the
                     # speed, so the innovation split between k_s and a speed the motion model lags
                     # in every acceleration walked k_s off, and P's position-velocity correlation
-                    # moved the position with every speed innovation (comma2k19, gyro + odometer
-                    # alone: k_s 1.00 -> 1.15, 153 m max; the scale alone 203 m; both 37 m, as plain
-                    # integration of the gyro heading with the odometer speed)
+                    # moved the position with every speed innovation; with both as consider
+                    # states the outage is plain integration of the gyro heading with the odometer
+                    # speed (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
                     if odo_consider == 2 or (odo_consider == 1 and outage[k]):
                         cons |= CONS_KS | CONS_POS
                     pe = ue if along_off is None else 0.0
@@ -1100,7 +1101,7 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
         if coast_q > 0.0 and outage[k] and not is_static and T > 0.0 and t - odo_t > STALE_ODO_S:
             # coasting (aekf.coast_acc_psd; a drive without an odometer, in a GNSS outage): nothing
             # measures the speed, and the current statistical model's mean (abar = a_hat) carries
-            # the last acceleration through the outage (one_hour seed 2: 12 -> 106 m/s in 60 s);
+            # the last acceleration through the outage, and the speed ran away;
             # zero-acceleration rows with r = q_c / T (information T / q_c per step, whatever the
             # rate) hold the speed instead, as fkf's kernels_fkf coasting
             r_c = coast_q / T

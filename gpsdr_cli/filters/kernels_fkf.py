@@ -38,7 +38,7 @@ outage gap; ``PAR_COAST_Q`` > 0 only on drives without an odometer -- the DR
 filter takes zero-acceleration rows ``a_e = a_n = 0`` with ``r = q_c / T``
 (information ``T / q_c`` per step, so the rate does not matter): the
 white-jerk model otherwise carries a drive-off's acceleration through a GNSS
-outage (simulated urban seed 2, 10 s: 26 m/s for 12, fkf 7.33 -> 4.57 m).
+outage (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-fkf).
 
 GNSS local filter (Tang et al. eqs. (4)-(6), erratum: row 2 selects n)::
 
@@ -47,13 +47,12 @@ GNSS local filter (Tang et al. eqs. (4)-(6), erratum: row 2 selects n)::
 plus (our choice, beyond the paper) the receiver's velocity ``z = [v_e, v_n]``
 (RMC/VTG speed and course: Doppler, barely touched by multipath), sigma
 ``[fkf] gnss_velocity_sd_mps``, with each accepted fix while moving (the
-paper's GNSS filter sees positions only; this halved fkf's error in the
-simulated urban canyon, 5.65 -> 3.08 m), with a chi-square gate on the 2-dof NIS.  The gate is off
-until ``[gnss]
-gate_warmup_fixes`` fixes were accepted (the initial state is one fix: when
-that one was an outlier, e.g. the 11 m-off copy of a duplicated NMEA record,
-the gate otherwise rejected every good fix and kept only the copies, fault
-case ``duplicates``: fkf 10.1 m RMSE).  No lock-out: a gated fix is accepted
+paper's GNSS filter sees positions only; evidence:
+docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-fkf), with a chi-square gate on the
+2-dof NIS.  The gate is off until ``[gnss] gate_warmup_fixes`` fixes were accepted (the
+initial state is one fix: when that one was an outlier, e.g. the 11 m-off copy of a duplicated NMEA
+record, the gate otherwise rejected every good fix and kept only the copies, fault
+case ``duplicates``).  No lock-out: a gated fix is accepted
 anyway when every fix was gated for ``gate_reset_s`` or when most recent
 fixes were -- an exponentially weighted share of gated fixes (time constant
 ``gate_reset_s / ln 2``, so an unbroken run reaches 1/2 after
@@ -73,8 +72,8 @@ odometer the speed is measured; fafkf's Carlson-bound P_g would otherwise
 inflate the speed variance in a 10-min outage and lock the heading out) (the variance of the velocity
 along itself, which the heading rows do not reduce: no lock-out; below it the
 direction is noise: a
-stop without an odometer left a GNSS-noise velocity pointing backwards, the
-heading residual near pi moved v by 80 m/s, fault case no_odo: 268 m RMSE); below ``v_lin`` the
+stop without an odometer left a GNSS-noise velocity pointing backwards, and the
+heading residual near pi threw v off, fault case no_odo); below ``v_lin`` the
 distance row is linearised
 along the latest heading instead of ``v/|v|``: no division by a speed that
 can be zero.  Heading residuals are wrapped to (-pi, pi] and gated

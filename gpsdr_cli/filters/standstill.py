@@ -2,11 +2,11 @@
 
 Nothing but the receiver then says when the car stopped; without it the velocity
 wandered on GNSS noise at every stop (fkf: a gated multipath burst then ran the track
-355 m off; ekf/aekf: urban 6.5 -> 4.2 m forward with it).  :func:`standstill_from_gnss`
-is what the filters call: the receiver's (Doppler) speed, or with positions only
-(fewer than ``[fkf] fix_course_velocity_share`` of the fixes with a speed) the speed
-between the median positions of the fixes either side (:func:`fix_speeds`), into
-:func:`gnss_standstill`.  The keys live in ``[fkf]``, where they were introduced.
+far off; evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill).
+:func:`standstill_from_gnss` is what the filters call: the receiver's (Doppler) speed,
+or with positions only (fewer than ``[fkf] fix_course_velocity_share`` of the fixes
+with a speed) the speed between the median positions of the fixes either side
+(:func:`fix_speeds`), into :func:`gnss_standstill`.  The keys live in ``[fkf]``, where they were introduced.
 
 Plain numpy (once per drive, vectorised): no compiled kernel is needed.
 Conventions (:mod:`gpsdr_cli.conventions`): seconds, metres ENU, radians.
@@ -54,9 +54,9 @@ def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params,
     Why (our choice, beyond Tang et al.): without an odometer nothing else tells
     the filters that the car stopped.  The constant-acceleration model then let
     the velocity wander on GNSS noise (~1 m/s at a stop), its variance grew
-    while a multipath burst was gated, the burst's 8th fix (27 m off) passed
-    the gate, moved the velocity by 17 m/s, and every good fix after it was
-    gated until the reset: stop_and_go seed 1, fkf 17.3 m RMSE, 355 m at worst.
+    while a multipath burst was gated, a late fix of the burst passed the
+    gate, threw the velocity off, and every good fix after it was gated
+    until the reset.
     ``speeds`` (m/s, one per fix) stands in for the receiver's speed when given
     (positions only: :func:`fix_speeds`).
 
@@ -64,8 +64,8 @@ def gnss_standstill(epochs: Epochs, t_s: np.ndarray, params: Params,
     was still, every fix in the window after it is still, the two fixes lie within 3
     sigma of each other and the gyro heading ``heading = (t s, psi rad unwrapped)``
     turned less than ``BRIDGE_TURN_RAD`` across it: the car braked into the outage
-    and waited (urban seed 1: an 8-s outage at a stop, the decelerating velocity
-    extrapolated to 76 m off).
+    and waited (without the bridge the decelerating velocity was extrapolated through
+    the stop).  Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill.
     """
     fp = params["fkf"]
     n = len(t_s)
@@ -111,7 +111,7 @@ def fix_speeds(epochs: Epochs, t_s: np.ndarray, window_s: float) -> np.ndarray:
     Medians, not a fitted line: a multipath jump inside the window moves a line's slope by
     metres per second, a median not while under half of a side's fixes jumped.  The
     windows are gathered into NaN-padded rows (:func:`window_medians`): no loop per fix
-    (a one-hour 5-Hz drive: 0.04 s against 0.9 s).
+    (timing: docs/decisions/0015-evidence-behind-the-filter-choices.md#standstill).
     """
     f = np.flatnonzero(epochs.has_gnss)
     tf, e, nn = t_s[f], epochs.gnss_e[f], epochs.gnss_n[f]

@@ -96,9 +96,9 @@ def cs_sigma_a2(a_hat: float, a_max: float, a_min_mag: float, ka: float,
     ``sigma_floor^2`` (m^2/s^4), NOT scaled by K_a, which also covers a_hat at
     a bound.  Why: with the paper's K_a = 0.003 (poor GNSS / no fix) the
     acceleration cannot follow a turn in the ENU frame, the gyro residual
-    leaks into the drift state and a 60 s outage ended 400 m off with a
-    claimed 2 m sigma; with the floor the aekf is never less agile than the
-    fixed-Q ekf.
+    leaks into the drift state and an outage ended far off with a claimed
+    sigma of metres (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#models);
+    with the floor the aekf is never less agile than the fixed-Q ekf.
     """
     if a_hat > 0.0:
         d = a_max - min(a_hat, a_max)
