@@ -81,6 +81,8 @@ class Epochs:
     #: the GNSS model's verdict (filters.gnss_model): the fixes disagree with the dead
     #: reckoning often enough for a drive with reflected signals (NLOS)
     nlos_drive: bool = False
+    #: dr_health left gyro or odometer samples out: the dead reckoning cannot judge the fixes
+    dr_unhealthy: bool = False
 
     def __post_init__(self) -> None:
         n = len(self.t_ns)
@@ -447,9 +449,27 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                     gnss_sd_e=sd_e, gnss_sd_n=sd_n, pdop=pdop, gnss_speed_mps=gspeed,
                     gnss_course_rad=gcourse, has_gyro=has_gyro, yaw_rate_radps=yaw,
                     has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s,
-                    has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share)
+                    has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share,
+                    dr_unhealthy=(health.gyro_ok is not None or health.odo_ok is not None
+                                  or _silent(odo_t, float(params["health"]["odo_silent_s"]),
+                                             t[has_gnss], gspeed[has_gnss])))
     from .filters.gnss_model import mark_false_fixes  # it needs the merged epochs
     return mark_false_fixes(epochs, params)
+
+
+def _silent(t_ns: np.ndarray, gap_s: float, fix_t: np.ndarray, fix_speed: np.ndarray) -> bool:
+    """Whether a stream's records (ns, sorted) pause longer than ``gap_s`` inside its span while
+    the car moves: the receiver's median speed in the pause above 1 m/s, or unknown (a logger
+    that writes the odometer only when it changes is silent at every stop)."""
+    if len(t_ns) < 2:
+        return False
+    for i in np.flatnonzero(np.diff(t_ns) > gap_s * NS_PER_S):
+        lo, hi = np.searchsorted(fix_t, [t_ns[i], t_ns[i + 1]])
+        v = fix_speed[lo:hi]
+        v = v[np.isfinite(v)]
+        if len(v) == 0 or float(np.median(v)) > 1.0:
+            return True
+    return False
 
 
 def sorted_unique(t: np.ndarray) -> np.ndarray:

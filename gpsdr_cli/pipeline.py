@@ -437,6 +437,13 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
         warnings = work.meta.setdefault("warnings", [])
         if note not in warnings:
             warnings.append(note)
+    if result.info.get("nlos_screen_skipped"):
+        note = ("reflected signals (NLOS) suspected, but the gyro or odometer is unhealthy or "
+                "silent for long: the track follows the fixes rather than a dead reckoning that "
+                "cannot judge them")
+        warnings = work.meta.setdefault("warnings", [])
+        if note not in warnings:
+            warnings.append(note)
     weight = None
     if smoother == "graph":
         from .filters.graph import smooth_graph

@@ -41,7 +41,12 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
 
             model_epochs, model_params = gnss_error_model(epochs, params)
             # the batch fit weighs each fix by its own sigma, not the chord-scaled one
-            screened, info = screen(epochs, params, model_epochs.nlos_drive, fn)
+            # ... and only with healthy dead reckoning: a clipped gyro or an odometer that reads
+            # wrong or falls silent cannot outvote fixes (it drove city tracks 250 m off)
+            nlos = model_epochs.nlos_drive and not epochs.dr_unhealthy
+            screened, info = screen(epochs, params, nlos, fn)
+            if model_epochs.nlos_drive and epochs.dr_unhealthy:
+                info["nlos_screen_skipped"] = "the dead reckoning is unhealthy"
             if info.get("nlos_screened"):  # the fixes left are judged afresh
                 model_epochs, model_params = gnss_error_model(
                     dataclasses.replace(epochs, has_gnss=screened.has_gnss), params)
