@@ -27,6 +27,9 @@ from .standstill import standstill_from_gnss
 
 #: seconds: an odometer reading older than this does not decide standstill
 STALE_ODO_S = 1.0
+#: an odometer pause longer than this (s; or 5 record intervals) is a dropout: what the car drove
+#: in it is unknown, so no distance row spans it and the odometer scale is not fitted across it
+ODO_DROPOUT_S = 5.0
 #: fixes with a speed needed to scale the odometer to the GNSS speed
 MIN_SCALE_FIXES = 20
 #: seconds: fixes this far apart give the fallback course for the heading alignment
@@ -439,6 +442,10 @@ def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np
     ok = (epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps)
           & (epochs.gnss_speed_mps >= fp["course_min_speed_mps"])
           & (t_s >= t_odo[0]) & (t_s <= t_odo[-1]))
+    if len(t_odo) > 1:  # not fitted across an odometer dropout (its speed there is unknown)
+        gap = np.flatnonzero(dropouts(np.diff(t_odo)))
+        for a, b in zip(t_odo[gap], t_odo[gap + 1], strict=True):
+            ok &= ~((t_s > a) & (t_s < b))
     k = np.flatnonzero(ok)
     if len(k) < MIN_SCALE_FIXES:
         return ones, 1.0
@@ -523,18 +530,27 @@ def distance_rows(t_s: np.ndarray, o: np.ndarray, speed: np.ndarray, interval_s:
     docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs).
     ``q_s`` is metres per row, so ``[fkf] dist_err_rw_sd = 0.01`` at 0.05 s keeps the
     speed-equivalent random walk of 0.002 at 100 Hz (0.2 m/s per sqrt(s)).
-    ``interval_s <= 0``: every record (Tang et al.).
+    ``interval_s <= 0``: every record (Tang et al.).  An odometer dropout (:func:`dropouts`)
+    ends a row and the next row starts after it: the row across it is NaN (not used).
     """
     m = len(o)
     if m < 2:
         return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
     t_odo = t_s[o]
-    cum = np.concatenate(([0.0], np.cumsum(speed[1:] * np.diff(t_odo))))
+    dt = np.diff(t_odo)
+    gap = dropouts(dt)
+    inc = speed[1:] * dt
+    inc[gap] = 0.0                                   # a dropout: the distance in it is unknown
+    cum = np.concatenate(([0.0], np.cumsum(inc)))
     if interval_s <= 0:
         use = o[1:]
-        return use, cum[1:] - cum[:-1], t_odo[1:] - t_odo[:-1]
+        d = cum[1:] - cum[:-1]
+        d[gap] = np.nan
+        return use, d, t_odo[1:] - t_odo[:-1]
     slot = np.floor(t_odo / interval_s)              # t_odo in time order (epochs are)
     rows = o[np.flatnonzero(slot[1:] != slot[:-1]) + 1]
+    after = o[np.flatnonzero(gap) + 1]               # the first record after each dropout
+    rows = np.union1d(rows, after)
     if heading is not None:
         h = np.flatnonzero(heading)
         h = h[(t_s[h] > t_odo[0]) & (t_s[h] <= t_odo[-1])]
@@ -545,7 +561,16 @@ def distance_rows(t_s: np.ndarray, o: np.ndarray, speed: np.ndarray, interval_s:
     c_row = np.interp(t_row, t_odo, cum)
     dist = np.diff(np.concatenate(([0.0], c_row)))
     t_m = np.diff(np.concatenate(([t_odo[0]], t_row)))
+    if len(after):  # the row that ends at a dropout's end spans it: no row (the next starts there)
+        dist[np.isin(rows, after)] = np.nan
     return rows, dist, t_m
+
+
+def dropouts(dt: np.ndarray) -> np.ndarray:
+    """Which odometer record intervals (s) are dropouts (:data:`ODO_DROPOUT_S`)."""
+    if len(dt) == 0:
+        return np.zeros(0, bool)
+    return dt > max(ODO_DROPOUT_S, 5.0 * float(np.median(dt)))
 
 
 def prepare(epochs: Epochs, params: Params) -> Prepared:
