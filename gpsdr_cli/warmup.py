@@ -360,17 +360,23 @@ class Preload:
             self._thread = None
 
 
-def start_preload(params: Params) -> Preload | None:
-    """A :class:`Preload` for ``params``' filter when a second CPU can run it, else None.
-
-    ``GPSDR_WARM_UP=0`` turns it off with the background compile."""
+def _second_cpu() -> bool:
+    """Whether work beside the main thread may run: ``GPSDR_WARM_UP`` is not 0 and this
+    process may use a second CPU."""
     if os.environ.get("GPSDR_WARM_UP", "1") == "0":
-        return None
+        return False
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:
         cpus = os.cpu_count() or 1
-    if cpus < 2:
+    return cpus >= 2
+
+
+def start_preload(params: Params) -> Preload | None:
+    """A :class:`Preload` for ``params``' filter when a second CPU can run it, else None.
+
+    ``GPSDR_WARM_UP=0`` turns it off with the background compile."""
+    if not _second_cpu():
         return None
     return Preload(str(params["filter"]["name"]))
 
@@ -508,14 +514,8 @@ def start_background(params: Params, *, auto_gnss_offset: bool = False) -> Backg
     second CPU to run it on, and ``fork`` exists (the child must not re-import
     and re-parse the command line).
     """
-    if os.environ.get("GPSDR_WARM_UP", "1") == "0":
-        return None
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cpus = os.cpu_count() or 1
     # the cache first: a warm run does not import multiprocessing for fork_is_safe
-    if cpus < 2 or cache_is_fresh(params, auto_gnss_offset=auto_gnss_offset) \
+    if not _second_cpu() or cache_is_fresh(params, auto_gnss_offset=auto_gnss_offset) \
             or not fork_is_safe():
         return None
     import multiprocessing as mp
