@@ -431,19 +431,13 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
         result = run_filter(epochs, fparams)
     n_screened = int(result.info.get("nlos_screened") or 0)
     if n_screened:
-        note = (f"reflected signals (NLOS): {n_screened} of {int(epochs.has_gnss.sum())} fixes "
-                "disagree with the whole drive's dead reckoning and were not used "
-                "([gnss] nlos_screen)")
-        warnings = work.meta.setdefault("warnings", [])
-        if note not in warnings:
-            warnings.append(note)
+        _warn(work, f"reflected signals (NLOS): {n_screened} of {int(epochs.has_gnss.sum())} "
+                    "fixes disagree with the whole drive's dead reckoning and were not used "
+                    "([gnss] nlos_screen)")
     if result.info.get("nlos_screen_skipped"):
-        note = ("reflected signals (NLOS) suspected, but the gyro or odometer is unhealthy or "
-                "silent for long: the track follows the fixes rather than a dead reckoning that "
-                "cannot judge them")
-        warnings = work.meta.setdefault("warnings", [])
-        if note not in warnings:
-            warnings.append(note)
+        _warn(work, "reflected signals (NLOS) suspected, but the gyro or odometer is unhealthy "
+                    "or silent for long: the track follows the fixes rather than a dead "
+                    "reckoning that cannot judge them")
     weight = None
     if smoother == "graph":
         from .filters.graph import smooth_graph
@@ -471,6 +465,13 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     if with_qc:
         track = _with_qc_columns(track, sep, params)
     return epochs, result, track, work
+
+
+def _warn(work, note: str) -> None:
+    """Add a warning line to the drive's summary, once."""
+    warnings = work.meta.setdefault("warnings", [])
+    if note not in warnings:
+        warnings.append(note)
 
 
 def run_filter(epochs: Epochs, params: Params) -> FilterResult:

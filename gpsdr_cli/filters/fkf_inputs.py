@@ -443,9 +443,11 @@ def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np
           & (epochs.gnss_speed_mps >= fp["course_min_speed_mps"])
           & (t_s >= t_odo[0]) & (t_s <= t_odo[-1]))
     if len(t_odo) > 1:  # not fitted across an odometer dropout (its speed there is unknown)
-        gap = np.flatnonzero(dropouts(np.diff(t_odo)))
-        for a, b in zip(t_odo[gap], t_odo[gap + 1], strict=True):
-            ok &= ~((t_s > a) & (t_s < b))
+        gap = dropouts(np.diff(t_odo))
+        j = np.searchsorted(t_odo, t_s, side="right") - 1     # the record at or before each epoch
+        inside = (j >= 0) & (j < len(gap))
+        inside[inside] &= gap[j[inside]] & (t_s[inside] > t_odo[j[inside]])
+        ok &= ~inside
     k = np.flatnonzero(ok)
     if len(k) < MIN_SCALE_FIXES:
         return ones, 1.0

@@ -38,7 +38,7 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
-from ..models.cs_model import IE, IEPS, IKS, IN, N_STATES, singer_phi
+from ..models.cs_model import IE, IEPS, IKS, IN, N_STATES, phi_into
 from .core.packing import unpack
 from .core.rts import phi_times, rts_step
 from .kernels_aekf import (
@@ -72,22 +72,6 @@ from .kernels_aekf import (
     rebuild_prior,
     turn_jacobian,
 )
-
-
-@njit(cache=True)
-def _phi_dense(T: float, alpha: float, tau_eps: float, hold: bool, F: np.ndarray) -> None:
-    for i in range(N_STATES):
-        for j in range(N_STATES):
-            F[i, j] = 0.0
-        F[i, i] = 1.0
-    if not hold:
-        p13, p23, p33 = singer_phi(T, alpha)
-        for o in (0, 3):
-            F[o, o + 1] = T
-            F[o, o + 2] = p13
-            F[o + 1, o + 2] = p23
-            F[o + 2, o + 2] = p33
-    F[6, 6] = math.exp(-T / tau_eps)
 
 
 @njit(cache=True)
@@ -189,7 +173,7 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
             pr = prior_store[k + 1]
             f_mean = math.exp(-T / tau_eps) if prm[PAR_EPS_MEAN_DECAY] != 0.0 else 1.0
             predict_mean(x8, T, f_mean, hold[k + 1])
-            _phi_dense(T, alpha, tau_eps, hold[k + 1], F8)
+            phi_into(T, alpha, tau_eps, hold[k + 1], F8)
             w = pr[PRI_W]
             if math.isfinite(w):  # aekf.turn_propagation: F = J Phi at the predicted mean
                 turn_jacobian(F8, x8, T, w)

@@ -149,9 +149,14 @@ def odo_row(x: np.ndarray, ue: float, un: float, H: np.ndarray) -> float:
     return x[IKS] * along
 
 
-def phi_matrix(T: float, alpha: float, tau_eps_s: float, hold: bool = False) -> np.ndarray:
-    """Dense 8x8 covariance transition (Singer blocks); ``hold``: static mode, axes not propagated."""
-    F = np.eye(N_STATES)
+@njit(cache=True)
+def phi_into(T: float, alpha: float, tau_eps_s: float, hold: bool, F: np.ndarray) -> None:
+    """The dense 8x8 covariance transition (Singer blocks) into ``F``; ``hold``: static mode,
+    axes not propagated."""
+    for i in range(N_STATES):
+        for j in range(N_STATES):
+            F[i, j] = 0.0
+        F[i, i] = 1.0
     if not hold:
         p13, p23, p33 = singer_phi(T, alpha)
         for o in (0, 3):
@@ -160,6 +165,12 @@ def phi_matrix(T: float, alpha: float, tau_eps_s: float, hold: bool = False) -> 
             F[o + 1, o + 2] = p23
             F[o + 2, o + 2] = p33
     F[IEPS, IEPS] = math.exp(-T / tau_eps_s)
+
+
+def phi_matrix(T: float, alpha: float, tau_eps_s: float, hold: bool = False) -> np.ndarray:
+    """Dense 8x8 covariance transition (Singer blocks); ``hold``: static mode, axes not propagated."""
+    F = np.empty((N_STATES, N_STATES))
+    phi_into(T, alpha, tau_eps_s, bool(hold), F)
     return F
 
 
