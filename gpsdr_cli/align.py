@@ -81,7 +81,8 @@ class Epochs:
     #: the GNSS model's verdict (filters.gnss_model): the fixes disagree with the dead
     #: reckoning often enough for a drive with reflected signals (NLOS)
     nlos_drive: bool = False
-    #: dr_health left gyro or odometer samples out: the dead reckoning cannot judge the fixes
+    #: dr_health left gyro samples out, or odometer samples spanning ``[health] odo_silent_s``
+    #: or more, or the odometer fell silent that long: the dead reckoning cannot judge the fixes
     dr_unhealthy: bool = False
 
     def __post_init__(self) -> None:
@@ -450,7 +451,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                     gnss_course_rad=gcourse, has_gyro=has_gyro, yaw_rate_radps=yaw,
                     has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s,
                     has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share,
-                    dr_unhealthy=(health.gyro_ok is not None or health.odo_ok is not None
+                    dr_unhealthy=(health.gyro_ok is not None
+                                  or health.odo_bad_s >= float(params["health"]["odo_silent_s"])
                                   or _silent(odo_t, float(params["health"]["odo_silent_s"]),
                                              t[has_gnss], gspeed[has_gnss])))
     from .filters.gnss_model import mark_false_fixes  # it needs the merged epochs

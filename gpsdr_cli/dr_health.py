@@ -9,6 +9,11 @@ filter (and the smoother) trusts the dead reckoning more than a single fix:
   simulated city drive where the fixes are at 8 m.  The GNSS Doppler speed sees it: a
   wheel odometer is within a few per cent of it, never metres per second off for a
   second on end.  Without Doppler speed, a car that turns cannot be standing still.
+  But reflected signals (NLOS) bias the Doppler speed by metres per second too, so a
+  disagreement alone does not say which one is wrong: the fixes' own chord over the same
+  seconds (``CHORD_S``) decides.  The odometer is blamed only where the distance between
+  the fixes sides with the Doppler speed; where no chord can be formed, the Doppler speed
+  is believed.
 * **A gyro clipping at its range.**  Every rate beyond the limit reads as the limit, so
   each sharp turn is under-rotated by the same sign and the smoother bends the whole
   drive to match.  Clipping shows as a pile-up of readings at exactly the extreme value,
@@ -34,6 +39,19 @@ NEAREST_FIX_S = 0.6
 STOPPED_MPS = 0.2
 #: a GNSS Doppler speed below this (m/s) confirms a stop the odometer reports
 STOPPED_BY_GNSS_MPS = 0.5
+#: a drop of the odometer's speed faster than this (m/s^2, beyond tyre grip) is a dropout,
+#: judged over this long (s: longer than the quantisation steps of a slow wheel's ticks)
+MAX_DECEL_MPS2 = 10.0
+DROP_LOOKBACK_S = 0.5
+#: a run of zeros that began as a stop is a dropout only on this much motion seen in it (s)
+ZERO_EVIDENCE_S = 3.0
+#: the fixes' chord that arbitrates an odometer-Doppler disagreement spans this long (s) ...
+CHORD_S = 3.0
+#: ... and must side with the Doppler speed by this much (m): two fixes' own scatter, which
+#: at a stop makes any chord longer than the odometer's zero
+CHORD_MARGIN_M = 2.0
+#: mean Earth radius for the chords' local east/north (m); 2-s chords need no projection
+EARTH_RADIUS_M = 6371008.8
 
 
 @dataclass
@@ -43,6 +61,8 @@ class Health:
     gyro_ok: np.ndarray | None = None
     odo_ok: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    #: how long the left-out odometer samples span (s)
+    odo_bad_s: float = 0.0
 
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -93,11 +113,50 @@ def clipped_gyro(rate_radps: np.ndarray, min_rate_radps: float, min_samples: int
     return bad, limits
 
 
+def chord_sides_with_doppler(odo_t: np.ndarray, odo_v: np.ndarray, fix_t: np.ndarray,
+                             fix_speed: np.ndarray, fix_e: np.ndarray, fix_n: np.ndarray,
+                             at: np.ndarray) -> np.ndarray:
+    """Per odometer sample index in ``at``: True where the fixes' chord over ``CHORD_S``
+    around it (m, from ``fix_e``/``fix_n``) is closer to the Doppler speed's distance than
+    to the odometer's by ``CHORD_MARGIN_M``, or where no such chord exists (nothing
+    contradicts the Doppler speed); False where the positions do not side with the Doppler
+    speed (it may be the one that is off, as under reflected signals).  Stamps in ns,
+    speeds m/s."""
+    out = np.ones(len(at), bool)
+    if len(at) == 0 or len(fix_t) < 2 or len(odo_t) < 2:
+        return out
+    half = np.int64(round(0.5 * CHORD_S * NS_PER_S))
+    tol = NEAREST_FIX_S * NS_PER_S
+    ta = odo_t[at]
+    i0 = np.clip(np.searchsorted(fix_t, ta - half), 0, len(fix_t) - 1)
+    i1 = np.clip(np.searchsorted(fix_t, ta + half, side="right") - 1, 0, len(fix_t) - 1)
+    ok = (i1 > i0) & (np.abs(fix_t[i0] - (ta - half)) <= tol) & (np.abs(fix_t[i1] - (ta + half)) <= tol)
+    # no gap between two fixes inside the chord longer than 2 x tol
+    holes = np.concatenate(([0], np.cumsum(np.diff(fix_t) > 2 * tol)))
+    ok &= holes[i1] == holes[i0]
+    if not ok.any():
+        return out
+    chord = np.hypot(fix_e[i1] - fix_e[i0], fix_n[i1] - fix_n[i0])
+    # both distances over [fix_t[i0], fix_t[i1]]: the odometer's from its samples (each held
+    # to the next), the Doppler speed's by the trapezoid over the fixes between
+    odo_dist = np.concatenate(([0.0], np.cumsum(odo_v[:-1] * np.diff(odo_t) / NS_PER_S)))
+    d_odo = np.interp(fix_t[i1], odo_t, odo_dist) - np.interp(fix_t[i0], odo_t, odo_dist)
+    dop = np.concatenate(([0.0], np.cumsum(0.5 * (fix_speed[1:] + fix_speed[:-1])
+                                           * np.diff(fix_t) / NS_PER_S)))
+    d_dop = dop[i1] - dop[i0]
+    out[ok] = (np.abs(chord - d_odo) - np.abs(chord - d_dop))[ok] >= CHORD_MARGIN_M
+    return out
+
+
 def odometer_mismatch(odo_t: np.ndarray, odo_v: np.ndarray, fix_t: np.ndarray,
                       fix_speed: np.ndarray, gyro_t: np.ndarray | None,
-                      gyro_v: np.ndarray | None, p: dict) -> tuple[np.ndarray, str]:
+                      gyro_v: np.ndarray | None, p: dict, fix_e: np.ndarray | None = None,
+                      fix_n: np.ndarray | None = None) -> tuple[np.ndarray, str]:
     """Odometer samples that disagree with the GNSS Doppler speed (or stand still while the
-    gyro turns) for ``min_run_s`` or longer; and what was seen, for the warning."""
+    gyro turns) for ``min_run_s`` or longer; and what was seen, for the warning.  With the
+    fixes' positions (``fix_e``/``fix_n``, m, at ``fix_t``) a Doppler disagreement counts
+    only where the fixes' chord sides with the Doppler speed
+    (:func:`chord_sides_with_doppler`)."""
     n = len(odo_t)
     bad = np.zeros(n, bool)
     why = ""
@@ -117,6 +176,11 @@ def odometer_mismatch(odo_t: np.ndarray, odo_v: np.ndarray, fix_t: np.ndarray,
         stopped = np.abs(odo_v) < STOPPED_MPS
         limit = np.where(stopped, np.minimum(limit, p["odo_zero_moving_mps"]), limit)
         doppler_bad = close & (gap > limit)
+        if fix_e is not None and fix_n is not None and doppler_bad.any():
+            at = np.flatnonzero(doppler_bad)
+            fin = np.isfinite(fv) & np.isfinite(fix_e[ok]) & np.isfinite(fix_n[ok])
+            doppler_bad[at] = chord_sides_with_doppler(
+                odo_t, np.nan_to_num(odo_v), ft[fin], fv[fin], fix_e[ok][fin], fix_n[ok][fin], at)
         confirmed_stop = close & (vg < STOPPED_BY_GNSS_MPS)
         if doppler_bad.any():
             why = "its speed disagrees with the GNSS Doppler speed"
@@ -129,13 +193,21 @@ def odometer_mismatch(odo_t: np.ndarray, odo_v: np.ndarray, fix_t: np.ndarray,
         bad |= turning
     bad = _persistent(odo_t, bad, p["min_run_s"], 0.5)
     # an odometer caught reading 0 while the car moved is not believed for the rest of that
-    # run of zeros (through GNSS gaps, where nothing can check it) unless the GNSS says stopped
+    # run of zeros (through GNSS gaps, where nothing can check it) unless the GNSS says stopped.
+    # A run that began with a drop no brake gives is a dropout; one that began as a stop is
+    # blamed only on ZERO_EVIDENCE_S of motion: reflected signals fake a few m/s at a stop
+    # (Doppler and positions alike), and a real stop left out leaves the heading to them
     starts, ends = _runs(np.abs(odo_v) < STOPPED_MPS)
     for a, b in zip(starts, ends, strict=True):
-        if bad[a:b].any():
-            bad[a:b] = True
-            if confirmed_stop is not None:
-                bad[a:b] &= ~confirmed_stop[a:b]
+        if not bad[a:b].any():
+            continue
+        before = np.interp(odo_t[a] - DROP_LOOKBACK_S * NS_PER_S, odo_t[:a + 1], odo_v[:a + 1])
+        abrupt = a > 0 and before > MAX_DECEL_MPS2 * DROP_LOOKBACK_S
+        dt_s = np.diff(odo_t[a:min(b + 1, n)]) / NS_PER_S  # each sample to the next
+        caught_s = float(np.sum(dt_s[bad[a:a + len(dt_s)]]))
+        bad[a:b] = abrupt or caught_s >= ZERO_EVIDENCE_S
+        if confirmed_stop is not None:
+            bad[a:b] &= ~confirmed_stop[a:b]
     return bad, why
 
 
@@ -175,14 +247,22 @@ def screen(drive, params: dict) -> Health:
         odo_v = np.asarray(drive.odo.speed_mps, float)
         usable = g.valid & (g.fix_quality >= 1)
         fix_t = g.t_ns[usable] + np.int64(round(tp["gnss_offset_s"] * NS_PER_S))
+        lat = np.asarray(g.lat_deg, float)[usable]
+        lon = np.asarray(g.lon_deg, float)[usable]
+        fin = np.isfinite(lat) & np.isfinite(lon)
+        lat0 = np.radians(float(np.median(lat[fin]))) if fin.any() else 0.0
+        lon0 = float(np.median(lon[fin])) if fin.any() else 0.0
+        fix_e = EARTH_RADIUS_M * np.cos(lat0) * np.radians(lon - lon0)
+        fix_n = EARTH_RADIUS_M * np.radians(lat - np.degrees(lat0))
         bad, why = odometer_mismatch(odo_t, odo_v, fix_t, np.asarray(g.speed_mps, float)[usable],
-                                     gyro_t, gyro_v, p)
+                                     gyro_t, gyro_v, p, fix_e, fix_n)
         bad &= np.isfinite(odo_v)
         if bad.any():
             out.odo_ok = ~bad
             starts_i, ends_i = _runs(bad)
             secs = float(sum((odo_t[b - 1] - odo_t[a]) for a, b in zip(starts_i, ends_i,
                                                                        strict=True))) / NS_PER_S
+            out.odo_bad_s = secs
             out.notes.append(
                 f"odometer: {int(bad.sum())} of {len(bad)} readings ({secs:.0f} s in "
                 f"{len(starts_i)} stretch{'es' if len(starts_i) > 1 else ''}, first at "
@@ -191,4 +271,4 @@ def screen(drive, params: dict) -> Health:
     return out
 
 
-__all__ = ["Health", "clipped_gyro", "odometer_mismatch", "screen"]
+__all__ = ["Health", "chord_sides_with_doppler", "clipped_gyro", "odometer_mismatch", "screen"]
