@@ -147,6 +147,11 @@ from .core.update import dense_update, unit_update
 
 NX = 10
 IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS = range(NX)
+#: a stop without a fresh fix corrects the velocity only: there the velocity's innovation is the
+#: moment's deceleration transient (an odometer at 0 m/s has no scale error to integrate), and
+#: read through a position-velocity covariance built over the seconds without fixes it moved
+#: a city track 75 m at a stop (decisions/0015, fkf)
+ZUPT_CONSIDER = (1 << IE) | (1 << IN) | (1 << IEPS_E) | (1 << IEPS_N)
 
 # ---- float parameter vector (built by fkf.kernel_parameters) ---------------------------
 PAR_TAU_EPS = 0      # s, correlation time of eps_e, eps_n
@@ -544,10 +549,13 @@ def local_and_central_row(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.n
 
 @njit(cache=True)
 def zupt_central(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray, central: bool,
-                 sd: float, h: np.ndarray, s: np.ndarray, k: np.ndarray) -> None:
-    """:func:`zupt` on a local filter, its rows also on the fused state when ``central``."""
+                 sd: float, h: np.ndarray, s: np.ndarray, k: np.ndarray, consider: int) -> None:
+    """:func:`zupt` on a local filter, its rows also on the fused state when ``central``;
+    ``consider``: a bit mask of states the rows do not correct."""
     for idx in (IVE, IVN, IAE, IAN):
-        local_and_central_unit(x, P, xc, Pc, central, idx, -x[idx], sd * sd, s, k)
+        if central:
+            unit_update(NX, xc, Pc, idx, -x[idx] + (x[idx] - xc[idx]), sd * sd, 1.0, k, s, consider)
+        unit_update(NX, x, P, idx, -x[idx], sd * sd, 1.0, k, s, consider)
 
 
 @njit(cache=True)
@@ -1278,13 +1286,16 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                     predict(x1, P1, T, st, par, d1)
                 if dr_on:
                     predict(x2, P2, T, st, par, d2)
+            zupt_consider = 0
             if st:
                 p_counters[C_ZUPT] += 1
+                if t_now - t_last_acc > par[PAR_GNSS_STALE_S]:
+                    zupt_consider = ZUPT_CONSIDER
 
             # ---- GNSS local filter -------------------------------------------------------
             if gnss_on:
                 if st:
-                    zupt_central(x1, P1, xg, Pg, central, zupt_sd, h, s, kk)
+                    zupt_central(x1, P1, xg, Pg, central, zupt_sd, h, s, kk, zupt_consider)
                 if has_gnss[kx]:
                     ye = gnss_e[kx] - (x1[IE] + x1[IEPS_E])
                     yn = gnss_n[kx] - (x1[IN] + x1[IEPS_N])
@@ -1348,7 +1359,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
             # ---- DR local filter ---------------------------------------------------------
             if dr_on:
                 if st:
-                    zupt_central(x2, P2, xg, Pg, central, zupt_sd, h, s, kk)
+                    zupt_central(x2, P2, xg, Pg, central, zupt_sd, h, s, kk, zupt_consider)
                     t_last_dr = t_now
                     t_last_dist = t_now
                 else:

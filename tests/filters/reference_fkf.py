@@ -92,11 +92,12 @@ def cap(P: np.ndarray) -> np.ndarray:
     return P * np.outer(D, D)
 
 
-def kf_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """One scalar row: K = P H^T / S, Joseph form."""
+def kf_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
+              consider: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """One scalar row: K = P H^T / S (zero for the ``consider`` states), Joseph form."""
     S = float(H @ P @ H) + R
     K = P @ H / S
+    K[list(consider)] = 0.0
     x = x + K * y
     IKH = np.eye(NX) - np.outer(K, H)
     P = IKH @ P @ IKH.T + R * np.outer(K, K)
@@ -218,17 +219,19 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
     beta_out = np.full((n, 2), np.nan)
     used = np.zeros(n, bool)
 
-    def zupt(x, P):
+    def zupt(x, P, consider):
         for i in (1, 4, 2, 5):
             H = np.zeros(NX)
             H[i] = 1
-            x, P = kf_update(x, P, H, -x[i], zupt_R)
+            x, P = kf_update(x, P, H, -x[i], zupt_R, consider)
         return x, P
 
     for k in range(n):
         T = prep.dt[k] if k > 0 else 0.0
         t += T
         st = bool(prep.static[k])
+        # without a fresh fix a stop corrects the velocity only (kernels_fkf.ZUPT_CONSIDER)
+        zc = (0, 3, 6, 7) if t - t_acc > par[kf.PAR_GNSS_STALE_S] else ()
         if T > 0:
             pk = regime_par(par, prep.eps_w[k])           # the eps model of this step
             Phi1, Q1 = Phi_of(T, st, pk, x1), Q_of(T, st, pk, x1)
@@ -238,7 +241,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
             P2 = cap(Phi2 @ P2 @ Phi2.T + np.outer(d2, d2) * Q2)
         if gnss_on:
             if st:
-                x1, P1 = zupt(x1, P1)
+                x1, P1 = zupt(x1, P1, zc)
             if prep.has_gnss[k]:
                 z = np.array([prep.gnss_e[k], prep.gnss_n[k]])
                 H1 = np.array([row("e", x1)[0], row("n", x1)[0]])
@@ -276,7 +279,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
             t_acc = t
         if dr_on:
             if st:
-                x2, P2 = zupt(x2, P2)
+                x2, P2 = zupt(x2, P2, zc)
                 t_dr = t_dist = t
             else:
                 if (par[kf.PAR_COAST_Q] > 0 and T > 0 and t - t_dist > par[kf.PAR_DR_STALE_S]

@@ -134,6 +134,22 @@ def test_fkf_kernel_reproduces_the_reference(busy_drive, mode: str, smooth: bool
     _assert_sane(result, len(epochs))
 
 
+@pytest.mark.parametrize("mode", ["nr", "fr"])
+def test_stop_without_fixes_corrects_the_velocity_only(mode: str) -> None:
+    """A stop inside a GNSS gap: the zero-velocity rows leave the position (and the GNSS
+    error states) alone, in the kernel as in the reference."""
+    drive, frame, _ = tiny_drive(60.0, turn_radps=0.05, stop=(25, 35), gnss_gap=(20, 40))
+    params = _params(fkf={"mode": mode})
+    epochs = build_epochs(drive, frame, params)
+    prep = fkf.prepare(epochs, params)
+    t_s = (epochs.t_ns - epochs.t_ns[0]) / 1e9
+    assert prep.static[(t_s > 27) & (t_s < 33)].all() and not epochs.has_gnss[(t_s > 21) & (t_s < 39)].any()
+    result = get("fkf")(epochs, params)
+    assert_matches_reference(result, run_reference(prep, "fkf"))
+    stopped = np.flatnonzero((t_s > 27.5) & (t_s < 33))
+    assert np.ptp(result.e[stopped]) < 1e-6 and np.ptp(result.n[stopped]) < 1e-6
+
+
 def _with_pdop(epochs, t_s: np.ndarray):
     """PDOP 1.5 (clear sky) except 4.0 (obstructed) from 15 to 35 s and NaN from 50 s."""
     pdop = np.where((t_s >= 15.0) & (t_s < 35.0), 4.0, 1.5)
