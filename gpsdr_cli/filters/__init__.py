@@ -8,11 +8,13 @@ import, and ``gpsdr --help`` must stay fast).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import importlib
 from collections.abc import Callable
 
+from ..config import Params
 from ..errors import UsageError
 from .base import FilterResult
 
@@ -47,6 +49,9 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             screened, info = screen(epochs, params, nlos, fn)
             if model_epochs.nlos_drive and epochs.dr_unhealthy:
                 info["nlos_screen_skipped"] = "the dead reckoning is unhealthy"
+            if epochs.dr_unhealthy:
+                model_params = follow_the_fixes(model_params)
+                info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"
             if info.get("nlos_screened"):  # the fixes left are judged afresh
                 model_epochs, model_params = gnss_error_model(
                     dataclasses.replace(epochs, has_gnss=screened.has_gnss), params)
@@ -57,6 +62,17 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
         _REGISTRY[name] = run
         return fn
     return deco
+
+
+def follow_the_fixes(params: Params) -> Params:
+    """``params`` without the R factors of a poor PDOP ([gnss] k_medium, k_poor = k_good):
+    they let the dead reckoning outvote the fixes in a city, which an unhealthy dead
+    reckoning must not (a clipping gyro's unmeasured turn put aekf + RTS 20 m off for 150 s,
+    above the fixes; decisions/0010)."""
+    out = copy.deepcopy(params)
+    g = out["gnss"]
+    g["k_medium"] = g["k_poor"] = g["k_good"]
+    return out
 
 
 def get(name: str) -> RunFn:
