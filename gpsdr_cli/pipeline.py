@@ -569,6 +569,11 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
         raise NoDataError(where, "no GNSS, gyro or odometer stream found")
     params = copy.deepcopy(params)
     frame = choose_frame(drive, params)
+    from . import clock_check
+
+    params, clock_notes = clock_check.check(drive, params)
+    for note in clock_notes:
+        _warn(drive, note)
     offset_auto: float | None = None
     offset_note = ""
     if auto_gnss_offset:
