@@ -30,8 +30,7 @@ from .conventions import NS_PER_S
 
 #: the grid of the coarse search (s)
 GRID_S = 0.1
-#: the fine search: +- this around the coarse lag (s) in steps of 5 FINE_STEP_S, then
-#: +- 5 FINE_STEP_S around the best in steps of FINE_STEP_S
+#: the fine search: +- this around the coarse lag (s), in steps of FINE_STEP_S
 FINE_HALF_S = 0.3
 FINE_STEP_S = 0.01
 #: a lag is judged on at least this share of the samples that overlap at zero lag
@@ -88,8 +87,10 @@ def _coarse(t_ref: np.ndarray, v_ref: np.ndarray, t_x: np.ndarray, v_x: np.ndarr
 
     def on_grid(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         idx = np.clip(np.round((t - t0) / GRID_S).astype(np.int64), 0, n - 1)
-        s = np.bincount(idx, weights=v, minlength=n)
-        c = np.bincount(idx, minlength=n).astype(float)
+        s = np.zeros(n)
+        c = np.zeros(n)
+        np.add.at(s, idx, v)
+        np.add.at(c, idx, 1.0)
         m = c > 0
         out = np.zeros(n)
         out[m] = s[m] / c[m]
@@ -136,10 +137,9 @@ def find_offset(t_ref: np.ndarray, v_ref: np.ndarray, t_x: np.ndarray, v_x: np.n
     lag = _coarse(t_ref, v_ref, t_x, v_x, max_s)
     if not math.isfinite(lag):
         return ClockOffset(0.0, False, "no overlap")
-    for half, step in ((FINE_HALF_S, 5 * FINE_STEP_S), (5 * FINE_STEP_S, FINE_STEP_S)):
-        fine = lag + np.arange(-half, half + 0.5 * step, step)
-        fits = [_misfit(t_ref, v_ref, t_x, v_x, float(f))[0] for f in fine]
-        lag = float(fine[int(np.argmin(fits))])
+    fine = lag + np.arange(-FINE_HALF_S, FINE_HALF_S + 0.5 * FINE_STEP_S, FINE_STEP_S)
+    fits = [_misfit(t_ref, v_ref, t_x, v_x, float(f))[0] for f in fine]
+    lag = float(fine[int(np.argmin(fits))])
     best, n_common = _misfit(t_ref, v_ref, t_x, v_x, lag, 0.0)   # both on the same samples
     at_zero, _ = _misfit(t_ref, v_ref, t_x, v_x, 0.0, lag)
     if n_common < 50:  # the clocks barely overlap at zero: compare on each lag's own samples
