@@ -39,13 +39,19 @@ def test_clipping_found_at_the_limit_only(city) -> None:
     assert limits == [] and not bad.any()
 
 
-def test_odometer_zero_while_moving_is_left_out(city) -> None:
-    d = F.odo_dropout(city.drive, 100.0, 300.0, mode="zero")
+def _zero_while_moving(sim, start_s: float, duration_s: float, min_speed_mps: float):
+    """(health, each odometer reading's time since the first (s), the readings inside the
+    injected 0-m/s stretch while the car moves faster than ``min_speed_mps``)."""
+    d = F.odo_dropout(sim.drive, start_s, duration_s, mode="zero")
     h = dr_health.screen(d, config.defaults())
     o = d.odo
     t = (o.t_ns - o.t_ns[0]) / 1e9
-    v = np.interp(o.t_ns, city.truth.t_ns, city.truth.speed)
-    moving = (t >= 100.0) & (t < 400.0) & (v > 1.0)
+    v = np.interp(o.t_ns, sim.truth.t_ns, sim.truth.speed)
+    return h, t, (t >= start_s) & (t < start_s + duration_s) & (v > min_speed_mps)
+
+
+def test_odometer_zero_while_moving_is_left_out(city) -> None:
+    h, t, moving = _zero_while_moving(city, 100.0, 300.0, 1.0)
     assert h.odo_ok is not None and "odometer" in h.notes[0]
     assert np.mean(~h.odo_ok[moving]) > 0.99
     assert np.mean(~h.odo_ok[(t < 95.0) | (t > 405.0)]) < 0.005  # the healthy rest is kept
@@ -107,12 +113,7 @@ def test_reflected_doppler_does_not_condemn_a_healthy_odometer(short_city) -> No
     h = dr_health.screen(short_city.drive, config.defaults())
     assert h.odo_ok is None and h.notes == []
     # ... while an odometer at 0 m/s through 60 s of driving is still caught
-    d = F.odo_dropout(short_city.drive, 100.0, 60.0, mode="zero")
-    h = dr_health.screen(d, config.defaults())
-    o = d.odo
-    t = (o.t_ns - o.t_ns[0]) / 1e9
-    v = np.interp(o.t_ns, short_city.truth.t_ns, short_city.truth.speed)
-    moving = (t >= 100.0) & (t < 160.0) & (v > 2.0)
+    h, _, moving = _zero_while_moving(short_city, 100.0, 60.0, 2.0)
     assert moving.sum() > 50 and np.mean(~h.odo_ok[moving]) > 0.99
 
 
