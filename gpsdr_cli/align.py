@@ -350,7 +350,10 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     parts: list[np.ndarray] = []
     from . import dr_health  # it uses this module's true_runs
 
-    health = dr_health.screen(drive, params)
+    g_en = None  # every GNSS row projected once: the health screen's chords and the epochs
+    if drive.gnss is not None and len(drive.gnss) and frame is not None:
+        g_en = frame.forward(drive.gnss.lat_deg, drive.gnss.lon_deg)
+    health = dr_health.screen(drive, params, g_en)
     if health.notes:
         warnings = drive.meta.setdefault("warnings", [])
         warnings.extend(n for n in health.notes if n not in warnings)
@@ -366,8 +369,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
         usable = g.valid[keep] & (q >= params["gnss"]["min_fix_quality"])
         if not params["gnss"]["use_dr_fixes"]:
             usable &= q != FIX_DR
-        if frame is not None:
-            e, n = frame.forward(g.lat_deg[keep], g.lon_deg[keep])
+        if g_en is not None:
+            e, n = g_en[0][keep], g_en[1][keep]
         else:
             e = n = np.full(len(keep), np.nan)
         usable &= np.isfinite(e) & np.isfinite(n)

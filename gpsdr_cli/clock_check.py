@@ -42,6 +42,9 @@ MIN_SD = {"odo": 1.0, "gyro": 0.03}
 #: a gyro whose own match is not clear takes the odometer's offset unless its misfit there
 #: exceeds this many times its misfit at zero
 SHARED_CLOCK_TOL = 1.05
+#: per stream: its [time] offset key, its name in a warning, the GNSS signal it is timed by
+STREAMS = {"odo": ("odo_offset_s", "odometer", "Doppler speed"),
+           "gyro": ("gyro_offset_s", "gyro", "course rate")}
 #: the course is a rate only above this speed (m/s)
 COURSE_MIN_SPEED_MPS = 3.0
 
@@ -87,10 +90,8 @@ def _coarse(t_ref: np.ndarray, v_ref: np.ndarray, t_x: np.ndarray, v_x: np.ndarr
 
     def on_grid(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         idx = np.clip(np.round((t - t0) / GRID_S).astype(np.int64), 0, n - 1)
-        s = np.zeros(n)
-        c = np.zeros(n)
-        np.add.at(s, idx, v)
-        np.add.at(c, idx, 1.0)
+        s = np.bincount(idx, weights=v, minlength=n)
+        c = np.bincount(idx, minlength=n).astype(float)
         m = c > 0
         out = np.zeros(n)
         out[m] = s[m] / c[m]
@@ -105,8 +106,8 @@ def _coarse(t_ref: np.ndarray, v_ref: np.ndarray, t_x: np.ndarray, v_x: np.ndarr
 
     def xcorr(p: np.ndarray, q: np.ndarray) -> np.ndarray:
         # r[k] = sum_t p[t] q[t - k]: ref at t against x at t - lag, lag = k GRID_S
-        r = np.fft.irfft(np.fft.rfft(p, size) * np.conj(np.fft.rfft(q, size)), size)
-        return r
+        return np.fft.irfft(np.fft.rfft(p, size) * np.conj(np.fft.rfft(q, size)), size)
+
     cnt = xcorr(ma, mb)
     s_aa = xcorr(ma * a * a, mb)
     s_bb = xcorr(ma, mb * b * b)
@@ -175,11 +176,10 @@ def check(drive, params: Params) -> tuple[Params, list[str]]:
         return params, []
     g = drive.gnss
     usable = g.valid & (g.fix_quality >= 1)
-    t_fix = (g.t_ns[usable] - g.t_ns[usable][0]) / NS_PER_S if usable.any() else np.zeros(0)
-    if len(t_fix) < 50:
+    if usable.sum() < 50:
         return params, []
     t_base = g.t_ns[usable][0]
-    t_fix = t_fix + float(tp["gnss_offset_s"])
+    t_fix = (g.t_ns[usable] - t_base) / NS_PER_S + float(tp["gnss_offset_s"])
     speed = np.asarray(g.speed_mps, float)[usable]
     max_s, min_s = float(tp["dr_clock_max_s"]), float(tp["dr_clock_min_s"])
     out, notes = params, []
@@ -205,14 +205,12 @@ def check(drive, params: Params) -> tuple[Params, list[str]]:
                                   f"clock (course-rate misfit {at_odo:.3g} against {at_zero:.3g} "
                                   "at 0)")
         found["gyro"] = res
-    for name, res in found.items():
-        if not res.applied:
-            continue
-        out = copy.deepcopy(out) if out is params else out
-        key = {"odo": "odo_offset_s", "gyro": "gyro_offset_s"}[name]
+    applied = {name: res for name, res in found.items() if res.applied}
+    if applied:
+        out = copy.deepcopy(params)
+    for name, res in applied.items():
+        key, what, ref = STREAMS[name]
         out["time"][key] = res.offset_s
-        what = {"odo": "odometer", "gyro": "gyro"}[name]
-        ref = {"odo": "Doppler speed", "gyro": "course rate"}[name]
         notes.append(f"{what}: its clock is {-res.offset_s:+.2f} s off the receiver's (it "
                      f"matches the GNSS {ref} only so shifted; {res.reason}); its stamps were "
                      f"moved by {res.offset_s:+.2f} s ([time] {key} sets it, "

@@ -50,8 +50,6 @@ CHORD_S = 3.0
 #: ... and must side with the Doppler speed by this much (m): two fixes' own scatter, which
 #: at a stop makes any chord longer than the odometer's zero
 CHORD_MARGIN_M = 2.0
-#: mean Earth radius for the chords' local east/north (m); 2-s chords need no projection
-EARTH_RADIUS_M = 6371008.8
 
 
 @dataclass
@@ -215,8 +213,10 @@ def _when(t_ns: int, t0_ns: int) -> str:
     return f"{(t_ns - t0_ns) / NS_PER_S:.1f} s"
 
 
-def screen(drive, params: dict) -> Health:
-    """The drive's unusable gyro and odometer samples (see the module docstring)."""
+def screen(drive, params: dict, fix_en: tuple[np.ndarray, np.ndarray] | None = None) -> Health:
+    """The drive's unusable gyro and odometer samples (see the module docstring).
+    ``fix_en``: every GNSS row's local east/north (m), as the caller projected them; without
+    it they are projected here, in a frame centred on the first fix."""
     p = params["health"]
     out = Health()
     if not p["enabled"]:
@@ -247,13 +247,12 @@ def screen(drive, params: dict) -> Health:
         odo_v = np.asarray(drive.odo.speed_mps, float)
         usable = g.valid & (g.fix_quality >= 1)
         fix_t = g.t_ns[usable] + np.int64(round(tp["gnss_offset_s"] * NS_PER_S))
-        lat = np.asarray(g.lat_deg, float)[usable]
-        lon = np.asarray(g.lon_deg, float)[usable]
-        fin = np.isfinite(lat) & np.isfinite(lon)
-        lat0 = np.radians(float(np.median(lat[fin]))) if fin.any() else 0.0
-        lon0 = float(np.median(lon[fin])) if fin.any() else 0.0
-        fix_e = EARTH_RADIUS_M * np.cos(lat0) * np.radians(lon - lon0)
-        fix_n = EARTH_RADIUS_M * np.radians(lat - np.degrees(lat0))
+        if fix_en is None and np.any(np.isfinite(g.lat_deg[usable]) & np.isfinite(g.lon_deg[usable])):
+            from .geodesy import LocalFrame
+
+            fix_en = LocalFrame.for_fixes(g.lat_deg[usable], g.lon_deg[usable]).forward(
+                g.lat_deg, g.lon_deg)
+        fix_e, fix_n = (fix_en[0][usable], fix_en[1][usable]) if fix_en is not None else (None, None)
         bad, why = odometer_mismatch(odo_t, odo_v, fix_t, np.asarray(g.speed_mps, float)[usable],
                                      gyro_t, gyro_v, p, fix_e, fix_n)
         bad &= np.isfinite(odo_v)

@@ -49,12 +49,12 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             screened, info = screen(epochs, params, nlos, fn)
             if model_epochs.nlos_drive and epochs.dr_unhealthy:
                 info["nlos_screen_skipped"] = "the dead reckoning is unhealthy"
-            if epochs.dr_unhealthy:
-                model_params = follow_the_fixes(model_params)
-                info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"
             if info.get("nlos_screened"):  # the fixes left are judged afresh
                 model_epochs, model_params = gnss_error_model(
                     dataclasses.replace(epochs, has_gnss=screened.has_gnss), params)
+            if epochs.dr_unhealthy:
+                model_params = follow_the_fixes(model_params)
+                info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"
             result = fn(model_epochs, model_params)
             result.info.update(info)
             return result

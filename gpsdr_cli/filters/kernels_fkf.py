@@ -512,19 +512,20 @@ def update_row(x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, r: float,
 
 @njit(cache=True)
 def unit_row(x: np.ndarray, P: np.ndarray, idx: int, y: float, r: float, s: np.ndarray,
-             k: np.ndarray) -> None:
-    """:func:`update_row` for ``h = e_idx`` (one state measured directly)."""
-    unit_update(NX, x, P, idx, y, r, 1.0, k, s, 0)
+             k: np.ndarray, consider: int = 0) -> None:
+    """:func:`update_row` for ``h = e_idx`` (one state measured directly); ``consider``: a
+    bit mask of states the row does not correct."""
+    unit_update(NX, x, P, idx, y, r, 1.0, k, s, consider)
 
 
 @njit(cache=True)
 def local_and_central_unit(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray,
                            central: bool, idx: int, y: float, r: float, s: np.ndarray,
-                           k: np.ndarray) -> None:
-    """:func:`local_and_central_row` for ``h = e_idx``."""
+                           k: np.ndarray, consider: int = 0) -> None:
+    """:func:`local_and_central_row` for ``h = e_idx`` (``consider``: see :func:`unit_row`)."""
     if central:
-        unit_row(xc, Pc, idx, y + (x[idx] - xc[idx]), r, s, k)
-    unit_row(x, P, idx, y, r, s, k)
+        unit_row(xc, Pc, idx, y + (x[idx] - xc[idx]), r, s, k, consider)
+    unit_row(x, P, idx, y, r, s, k, consider)
 
 
 @njit(cache=True)
@@ -553,9 +554,7 @@ def zupt_central(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray, c
     """:func:`zupt` on a local filter, its rows also on the fused state when ``central``;
     ``consider``: a bit mask of states the rows do not correct."""
     for idx in (IVE, IVN, IAE, IAN):
-        if central:
-            unit_update(NX, xc, Pc, idx, -x[idx] + (x[idx] - xc[idx]), sd * sd, 1.0, k, s, consider)
-        unit_update(NX, x, P, idx, -x[idx], sd * sd, 1.0, k, s, consider)
+        local_and_central_unit(x, P, xc, Pc, central, idx, -x[idx], sd * sd, s, k, consider)
 
 
 @njit(cache=True)
