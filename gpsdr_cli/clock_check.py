@@ -77,6 +77,24 @@ def _misfit(t_ref: np.ndarray, v_ref: np.ndarray, t_x: np.ndarray, v_x: np.ndarr
     return float(np.sqrt(np.mean(d * d))), int(inside.sum())
 
 
+def _misfits(t_ref: np.ndarray, v_ref: np.ndarray, t_x: np.ndarray, v_x: np.ndarray,
+             lags_s: np.ndarray, chunk: int = 16) -> np.ndarray:
+    """:func:`_misfit` at every lag of ``lags_s`` (s), a few lags per numpy call."""
+    out = np.empty(len(lags_s))
+    for a in range(0, len(lags_s), chunk):
+        tq = t_ref[None, :] - lags_s[a:a + chunk, None]
+        m = (tq >= t_x[0]) & (tq <= t_x[-1])
+        x = np.where(m, np.interp(tq, t_x, v_x), 0.0)
+        r = np.where(m, v_ref[None, :], 0.0)
+        cnt = m.sum(axis=1)
+        xx = np.einsum("ij,ij->i", x, x)
+        k = np.where(xx > 0, np.einsum("ij,ij->i", r, x) / np.where(xx > 0, xx, 1.0), 1.0)
+        d = r - k[:, None] * x
+        ms = np.einsum("ij,ij->i", d, d) / np.maximum(cnt, 1)
+        out[a:a + chunk] = np.where(cnt >= 2, np.sqrt(ms), np.inf)
+    return out
+
+
 def _coarse(t_ref: np.ndarray, v_ref: np.ndarray, t_x: np.ndarray, v_x: np.ndarray,
             max_s: float) -> float:
     """The lag (s) within +-max_s minimising the mean squared difference of ref(t) and
@@ -139,7 +157,7 @@ def find_offset(t_ref: np.ndarray, v_ref: np.ndarray, t_x: np.ndarray, v_x: np.n
     if not math.isfinite(lag):
         return ClockOffset(0.0, False, "no overlap")
     fine = lag + np.arange(-FINE_HALF_S, FINE_HALF_S + 0.5 * FINE_STEP_S, FINE_STEP_S)
-    fits = [_misfit(t_ref, v_ref, t_x, v_x, float(f))[0] for f in fine]
+    fits = _misfits(t_ref, v_ref, t_x, v_x, fine)
     lag = float(fine[int(np.argmin(fits))])
     best, n_common = _misfit(t_ref, v_ref, t_x, v_x, lag, 0.0)   # both on the same samples
     at_zero, _ = _misfit(t_ref, v_ref, t_x, v_x, 0.0, lag)
