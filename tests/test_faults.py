@@ -94,6 +94,11 @@ def test_standstill_insertion_moves_everything_after_it() -> None:
     assert in_stop.sum() == 1000 and (o.speed_mps[in_stop] == 0).all()
     g = moved.drive.gnss
     assert ((g.t_ns >= t_stop) & (g.t_ns < t_stop + d_ns)).sum() == 500  # 5 Hz
+    # the gyro keeps its bias through the stop (seed 7 starts at 5.8 mrad/s; a bias that
+    # stepped when the car stopped would move a filter's position through the drift estimate)
+    w = moved.drive.gyro
+    at_rest = w.yaw_rate_radps[(w.t_ns >= t_stop) & (w.t_ns < t_stop + d_ns)]
+    assert abs(float(np.mean(at_rest)) - sim.noise["gyro_bias_initial_radps"]) < 0.001
 
 
 def test_nmea_faults_keep_checksums_valid() -> None:

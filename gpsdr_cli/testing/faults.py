@@ -324,7 +324,7 @@ def _median_dt_ns(t_ns: np.ndarray) -> int:
 
 def insert_standstill(sim: Any, at_s: float, duration_s: float, *, gnss: bool = True,
                       dr_rate_hz: float | None = None, search_s: float = 20.0,
-                      gnss_sd_m: float = 1.5, gyro_bias_radps: float = 0.003,
+                      gnss_sd_m: float = 1.5, gyro_bias_radps: float | None = None,
                       gyro_sd_radps: float = 0.0017453, seed: int = 0) -> tuple[Any, int]:
     """Insert a stop of ``duration_s`` seconds into a simulated drive.
 
@@ -332,8 +332,11 @@ def insert_standstill(sim: Any, at_s: float, duration_s: float, *, gnss: bool = 
     ``at_s``; everything after it (every stream and the truth) moves later by
     ``duration_s``.  During the stop: truth holds position with zero velocity;
     the odometer reads exactly 0 m/s; the gyro reads its bias plus white noise
-    (rad/s); GNSS (when ``gnss``) gives fixes scattered ``gnss_sd_m`` (1-sigma per
-    axis) around the true position, else nothing (a parking garage).
+    (rad/s), the bias being the one it had in the 10 s before the stop unless
+    ``gyro_bias_radps`` says otherwise (a gyro's bias does not step when the car
+    stops, and a step would be a different fault); GNSS (when ``gnss``) gives fixes
+    scattered ``gnss_sd_m`` (1-sigma per axis) around the true position, else nothing
+    (a parking garage).
     ``dr_rate_hz`` sets the DR rate during the stop (default: the stream's own).
 
     Returns the new SimDrive and the stop's start time in ns.
@@ -384,11 +387,28 @@ def insert_standstill(sim: Any, at_s: float, duration_s: float, *, gnss: bool = 
             add.speed_mps = np.zeros(n)
             add.course_deg = np.full(n, np.nan)
         elif name == "gyro":
-            add = YawRates(times, gyro_bias_radps + rng.normal(0.0, gyro_sd_radps, n))
+            bias = (_gyro_bias_before(sim, t_stop) if gyro_bias_radps is None
+                    else gyro_bias_radps)
+            add = YawRates(times, bias + rng.normal(0.0, gyro_sd_radps, n))
         else:
             add = Odometry(times, np.zeros(n))
         setattr(out, name, concat(s, add))
     return with_drive(sim, out, new_truth), t_stop
+
+
+def _gyro_bias_before(sim: Any, t_ns: int, span_s: float = 10.0) -> float:
+    """The gyro's bias (rad/s) over the ``span_s`` seconds before ``t_ns``: its readings
+    less the true yaw rate times its scale (the simulator's noise record), averaged."""
+    g = sim.drive.gyro
+    if g is None or not len(g) or "yaw_rate" not in sim.truth:
+        return 0.003
+    tt = sim.truth["t_ns"].to_numpy(np.int64)
+    sel = (g.t_ns < t_ns) & (g.t_ns >= t_ns - round(span_s * NS_PER_S))
+    if not sel.any():
+        return 0.003
+    omega = np.interp(g.t_ns[sel], tt, sim.truth["yaw_rate"].to_numpy(float))
+    scale = float(getattr(sim, "noise", {}).get("gyro_scale_error", 0.0))
+    return float(np.mean(g.yaw_rate_radps[sel] - (1.0 + scale) * omega))
 
 
 # --------------------------------------------------------------------------------------------
