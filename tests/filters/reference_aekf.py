@@ -56,20 +56,25 @@ def joseph(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
 
 def turn(x: np.ndarray, T: float, w: float, r_w: float) -> tuple[np.ndarray, np.ndarray,
                                                                  np.ndarray]:
-    """aekf.turn_propagation: (x', J, Q_w) of turning v and a clockwise by (w - eps) T (any length >= 8)."""
+    """aekf.turn_propagation: (x', J, Q_w) of turning v and a clockwise by (w - eps) T (any length >= 8),
+    the position moved along the chord: p' = p + (T/2) (v' - v)."""
     dpsi = (w - x[6]) * T
     c, s = math.cos(dpsi), math.sin(dpsi)
+    h = 0.5 * T
     Rm = np.array([[c, s], [-s, c]])  # acts on (east, north), clockwise by dpsi
     xr = x.copy()
     xr[[1, 4]] = Rm @ x[[1, 4]]
     xr[[2, 5]] = Rm @ x[[2, 5]]
+    xr[[0, 3]] = x[[0, 3]] + h * (xr[[1, 4]] - x[[1, 4]])
     m = len(x)
     g = np.zeros(m)  # d x'/d dpsi
     g[1], g[4] = xr[4], -xr[1]
     g[2], g[5] = xr[5], -xr[2]
+    g[0], g[3] = h * g[1], h * g[4]
     J = np.eye(m)
     J[np.ix_([1, 4], [1, 4])] = Rm
     J[np.ix_([2, 5], [2, 5])] = Rm
+    J[np.ix_([0, 3], [1, 4])] += h * (Rm - np.eye(2))
     J[:, 6] += -T * g  # d dpsi / d eps = -T
     return xr, J, r_w * T * T * np.outer(g, g)
 
