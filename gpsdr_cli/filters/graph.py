@@ -32,8 +32,8 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   decorrelation span, under a tighter kernel.
 * Each step between two epochs is integrated with the gyro's rate and the odometer's
   speed at the step's middle, linear between readings: held from the step's start, a
-  5 Hz CAN gyro turned the track half a reading late (open sky, 5 Hz gyro and odometer:
-  0.88 m, 0.37 m at mid-step; ``benchmarks/dr_rate.py``).
+  5 Hz CAN gyro turned the track half a reading late (docs/benchmarks.md, "Dead
+  reckoning at CAN rate").
 * The odometer's speed is read ``[graph] odo_lag_s`` later than its stamp (a speed from
   ticks over a window describes the window's middle); by default that lag is fitted to
   the receiver's speed (:func:`odo_lag_s`).

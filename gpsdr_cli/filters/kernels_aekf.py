@@ -313,7 +313,7 @@ def turn_predict(x: np.ndarray, P: np.ndarray, T: float, w: float, r_w: float) -
     chord: the prediction moved it by ``T v`` with the step's first velocity, and
     the turn adds ``(T/2) (v' - v)``, so the step's displacement is ``T (v + v')/2``
     (to first order, the arc the car drove) instead of lagging half a step of turn
-    (at a 5 Hz gyro, 0.9 m behind along a city drive's turns).  So the gyro drives the heading
+    (docs/benchmarks.md, "Dead reckoning at CAN rate").  So the gyro drives the heading
     in the mean and the covariance, and the drift becomes observable through the
     GNSS positions (as in a strapdown INS) instead of through the heading-rate row.
     """

@@ -396,18 +396,22 @@ def insert_standstill(sim: Any, at_s: float, duration_s: float, *, gnss: bool = 
     return with_drive(sim, out, new_truth), t_stop
 
 
+#: rad/s: the stopped gyro's bias when the drive gives none to keep (no gyro records before it)
+STOP_GYRO_BIAS_RADPS = 0.003
+
+
 def _gyro_bias_before(sim: Any, t_ns: int, span_s: float = 10.0) -> float:
     """The gyro's bias (rad/s) over the ``span_s`` seconds before ``t_ns``: its readings
     less the true yaw rate times its scale (the simulator's noise record), averaged."""
     g = sim.drive.gyro
     if g is None or not len(g) or "yaw_rate" not in sim.truth:
-        return 0.003
-    tt = sim.truth["t_ns"].to_numpy(np.int64)
+        return STOP_GYRO_BIAS_RADPS
     sel = (g.t_ns < t_ns) & (g.t_ns >= t_ns - round(span_s * NS_PER_S))
     if not sel.any():
-        return 0.003
-    omega = np.interp(g.t_ns[sel], tt, sim.truth["yaw_rate"].to_numpy(float))
-    scale = float(getattr(sim, "noise", {}).get("gyro_scale_error", 0.0))
+        return STOP_GYRO_BIAS_RADPS
+    omega = np.interp(g.t_ns[sel], sim.truth["t_ns"].to_numpy(np.int64),
+                      sim.truth["yaw_rate"].to_numpy(float))
+    scale = float(sim.noise.get("gyro_scale_error", 0.0))
     return float(np.mean(g.yaw_rate_radps[sel] - (1.0 + scale) * omega))
 
 
