@@ -400,7 +400,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     """(epochs, result, track, the drive as processed: its ``skipped`` and ``meta["warnings"]``
     say what aligning it dropped).  ``with_qc``: the track gets the QC columns
     (:func:`add_qc_columns`)."""
-    from . import lever_arm
+    from . import lever_arm, qc
     from .align import build_epochs
 
     # build_epochs counts what it drops into the drive's SkipReport: work on a copy so
@@ -413,10 +413,6 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
         where = drive.sources[0].path if drive.sources else None
         raise NoDataError(where, "no GNSS, gyro or odometer record to process")
     smoother = smoother_of(params)
-    if progress:
-        progress(f"running {params['filter']['name']}"
-                 + {"rts": " + RTS smoother", "graph": " + RTS, then the graph smoother",
-                    "none": ""}[smoother])
     if ready is not None:
         ready()  # e.g. a background compile of the kernels (gpsdr_cli.warmup) has finished
     # the filters read the boolean; the graph starts from the RTS solution
@@ -425,6 +421,42 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
         fparams = copy.deepcopy(params)
         fparams["filter"]["smooth"] = smoother != "none"
     arm = lever_arm.arm_of(fparams)
+    # The QC passes first: their arrays are gone (the two tracks kept as e, n) before the
+    # main pass allocates the ones the track table is made of, which lowers the peak memory.
+    # A lever arm changes the epochs the QC passes run on: after the main pass then.
+    early_qc = with_qc and qc.qc_enabled(params) and arm is None
+    qc_en = _qc_passes(epochs, params, progress) if early_qc else None
+    if progress:
+        progress(f"running {params['filter']['name']}"
+                 + {"rts": " + RTS smoother", "graph": " + RTS, then the graph smoother",
+                    "none": ""}[smoother])
+    epochs, result, weight = _main_pass(epochs, fparams, params, arm, work, smoother, progress)
+    if qc_en is not None:
+        e_f, n_f, e_b, n_b = qc_en
+        sep = qc.separation(result.e if e_f is None else e_f,
+                            result.n if n_f is None else n_f, e_b, n_b)
+        del qc_en, e_f, n_f, e_b, n_b
+    else:
+        sep = qc_separation(epochs, result, params, progress) if with_qc else None
+    pdop = None
+    if work.gnss is not None and len(work.gnss):
+        shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
+        pdop = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
+    track = track_frame(epochs, result, frame, pdop)
+    if weight is not None:
+        track["gnss_weight"] = weight
+    if with_qc:
+        track = _with_qc_columns(track, sep, params)
+    return epochs, result, track, work
+
+
+def _main_pass(epochs: Epochs, fparams: Params, params: Params,
+               arm: tuple[float, float, float] | None, work: Drive, smoother: str,
+               progress: Progress | None) -> tuple[Epochs, FilterResult, np.ndarray | None]:
+    """The filter (at the lever arm's reference point, if any), then the graph smoother:
+    (epochs as filtered, result, the graph's per-epoch fix weights or None)."""
+    from . import lever_arm
+
     if arm is not None:
         epochs, result = lever_arm.apply(epochs, fparams, arm, run_filter)
     else:
@@ -452,19 +484,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
             result.info["graph_failed"] = outcome.message
             work.meta.setdefault("warnings", []).append(
                 f"graph smoother: {outcome.message}; the track is the RTS smoother's")
-    # the backward pass before the track table: its epochs and result are gone again when the
-    # table's columns are made, which keeps them out of the peak memory
-    sep = qc_separation(epochs, result, params, progress) if with_qc else None
-    pdop = None
-    if work.gnss is not None and len(work.gnss):
-        shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
-        pdop = latest_gnss_pdop(epochs, work.gnss.t_ns + shift)
-    track = track_frame(epochs, result, frame, pdop)
-    if weight is not None:
-        track["gnss_weight"] = weight
-    if with_qc:
-        track = _with_qc_columns(track, sep, params)
-    return epochs, result, track, work
+    return epochs, result, weight
 
 
 def _warn(work, note: str) -> None:
@@ -517,6 +537,26 @@ def qc_separation(epochs: Epochs, result: FilterResult, params: Params,
     bwd = run_filter(qc.reverse_epochs(epochs), raw)
     e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
     return qc.separation(fwd.e, fwd.n, e_b, n_b)
+
+
+def _qc_passes(epochs: Epochs, params: Params, progress: Progress | None
+               ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray]:
+    """:func:`qc_separation`'s unsmoothed passes as positions (m): (forward e, n, or None,
+    None when the main pass is itself the unsmoothed forward one; backward e, n in forward
+    order)."""
+    from . import qc
+
+    if progress:
+        progress("backward pass")
+    raw = copy.deepcopy(params)
+    raw["filter"]["smooth"] = False
+    # copies: a result's e and n are views of its whole state array
+    e_b, n_b, _, _ = qc.reverse_result_positions(run_filter(qc.reverse_epochs(epochs), raw))
+    e_b, n_b = e_b.copy(), n_b.copy()
+    if smoother_of(params) == "none":
+        return None, None, e_b, n_b
+    fwd = run_filter(epochs, raw)
+    return np.array(fwd.e, float), np.array(fwd.n, float), e_b, n_b
 
 
 def _with_qc_columns(track: pd.DataFrame, separation_m: np.ndarray | None,
