@@ -171,15 +171,15 @@ def to_arrow(df: pd.DataFrame, *, metadata: dict[str, str] | None = None,
 
 def _write_to(table: pa.Table, fh: BinaryIO, fmt: str) -> None:
     if fmt == "parquet":
-        # zstd without dictionary encoding on numbers.  On float columns pyarrow's default
-        # dictionary encoding builds a hash table, gives up past 1 MB and falls back to plain:
-        # on a one-hour track (360 k rows x 19 columns) that tripled the write time.  Measured
-        # (benchmarks/write_parquet.py): snappy+dict 0.18 s / 33 MB, snappy 0.07 s / 30 MB,
-        # zstd 0.08 s / 27 MB.  Text columns (stats, batch report) keep their dictionaries.
+        # zstd; no dictionary on numbers (on floats pyarrow's builds a hash table, gives up
+        # past 1 MB and writes plain anyway); floats BYTE_STREAM_SPLIT, which zstd compresses
+        # faster and smaller (benchmarks/write_parquet.py).  Text keeps its dictionaries.
         text = [f.name for f in table.schema
                 if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)
                 or pa.types.is_dictionary(f.type)]
-        pq.write_table(table, fh, compression="zstd", use_dictionary=text)
+        floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
+        pq.write_table(table, fh, compression="zstd", use_dictionary=text,
+                       use_byte_stream_split=floats)
     else:
         pacsv.write_csv(table, fh)
 
