@@ -84,8 +84,10 @@ class FuseResult:
     track: pd.DataFrame
     stats: pd.DataFrame
     frame: LocalFrame
-    epochs: Epochs
-    result: FilterResult
+    #: None after :meth:`release_arrays`
+    epochs: Epochs | None
+    #: None after :meth:`release_arrays`
+    result: FilterResult | None
     metadata: dict[str, str]
     reference_en: pd.DataFrame | None = None
     #: GNSS time offset used (s); estimated when ``auto_gnss_offset`` was asked for
@@ -94,6 +96,15 @@ class FuseResult:
     params: Params = field(default_factory=dict)
     #: readers' warnings about the inputs (e.g. a truncated MCAP summary)
     drive_warnings: list[str] = field(default_factory=list)
+    _gnss_only: dict[str, float] | None = field(default=None, repr=False)
+
+    def release_arrays(self) -> None:
+        """Free the epochs and the filter's arrays once only the outputs and the summary are
+        wanted (``gpsdr fuse`` before it writes: they were a third of the write's peak
+        memory).  The fixes' own figures are kept for :meth:`gnss_only_summary`."""
+        self._gnss_only = self.gnss_only_summary()
+        self.epochs = None
+        self.result = None
 
     @property
     def gnss_offset_note(self) -> str:
@@ -107,6 +118,8 @@ class FuseResult:
 
     def gnss_only_summary(self) -> dict[str, float]:
         """The same figures for the GNSS fixes alone (empty without a reference)."""
+        if self._gnss_only is not None:
+            return self._gnss_only
         if self.reference_en is None:
             return {}
         from .evaluation import gnss_only_errors, summarise

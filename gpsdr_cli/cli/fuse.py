@@ -168,6 +168,8 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
 
             res = run_fuse(drive, params, ref, auto_gnss_offset=gnss_offset == "auto",
                            progress=stages, ready=ahead.wait if ahead else _ready(params))
+            del drive  # the raw streams, and below the epochs and filter arrays: the outputs
+            res.release_arrays()  # hold what is needed, and the write's peak memory is lower
             stages("writing outputs")
             from ..io.parquet import write_table
 
