@@ -198,3 +198,38 @@ def test_every_filter_with_a_lead_in_and_a_tail(name: str, smooth: bool) -> None
     ends = (t < gnss.t_ns[0]) | (t > gnss.t_ns[-1])      # dead reckoning before/after the fixes
     assert ends.sum() > 1000
     assert np.all(tr["quality"].to_numpy()[ends] >= config.defaults()["qc"]["outage_min_class"])
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_fused_separation_is_that_of_independent_passes(open_sky: simulate.SimDrive,
+                                                        smooth: bool) -> None:
+    # fuse runs the QC passes before the main one: the column must be the distance between
+    # a plain forward pass and the reversed pass, whatever the main pass is
+    p = config.defaults()
+    p["filter"]["smooth"] = smooth
+    res = pipeline.fuse(open_sky.drive, p)
+    raw = copy.deepcopy(res.params)
+    raw["filter"]["smooth"] = False
+    fwd = pipeline.run_filter(res.epochs, raw)
+    bwd = pipeline.run_filter(qc.reverse_epochs(res.epochs), raw)
+    e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
+    expected = np.hypot(fwd.e - e_b, fwd.n - n_b)
+    np.testing.assert_array_equal(res.track["separation_m"].to_numpy(float), expected)
+    # the smoothed main pass is another track: the separation is not measured against it
+    if smooth:
+        assert not np.array_equal(res.track["e"].to_numpy(float), fwd.e)
+
+
+def test_release_arrays_keeps_the_summaries(open_sky: simulate.SimDrive) -> None:
+    from gpsdr_cli.io.reference import Reference
+
+    truth = open_sky.truth
+    ref = Reference(t_ns=truth["t_ns"].to_numpy(np.int64), lat_deg=truth["lat"].to_numpy(float),
+                    lon_deg=truth["lon"].to_numpy(float), alt_m=np.full(len(truth), np.nan),
+                    source="truth")
+    res = pipeline.fuse(open_sky.drive, config.defaults(), ref)
+    fixes, track = res.gnss_only_summary(), res.summary()
+    assert 0.5 < fixes["rmse_m"] < 5.0 and track["rmse_m"] < fixes["rmse_m"]
+    res.release_arrays()
+    assert res.epochs is None and res.result is None
+    assert res.gnss_only_summary() == fixes and res.summary() == track
