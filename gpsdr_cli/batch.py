@@ -305,6 +305,8 @@ def _process_drive(spec: DriveSpec, opts: BatchOptions) -> dict[str, Any]:
 
             ref = read_reference(spec.reference)
         res = fuse(drive, opts.params, ref, auto_gnss_offset=opts.auto_gnss_offset)
+        del drive  # as gpsdr fuse: only the outputs are wanted now (each worker's peak)
+        res.release_arrays()
         stats_p.parent.mkdir(parents=True, exist_ok=True)  # a worker on another machine
         meta = {**res.metadata, **opts.extra_meta, "drive": spec.name,
                 "batch.request": request_key(opts)}
