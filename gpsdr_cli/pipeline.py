@@ -437,20 +437,17 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     # The QC passes first: their arrays are gone (the two tracks kept as e, n) before the
     # main pass allocates the ones the track table is made of, which lowers the peak memory.
     # A lever arm changes the epochs the QC passes run on: after the main pass then.
-    early_qc = with_qc and qc.qc_enabled(params) and arm is None
-    qc_en = _qc_passes(epochs, params, progress) if early_qc else None
+    qc_on = with_qc and qc.qc_enabled(params)
+    qc_en = _qc_passes(epochs, params, progress) if qc_on and arm is None else None
     if progress:
         progress(f"running {params['filter']['name']}"
                  + {"rts": " + RTS smoother", "graph": " + RTS, then the graph smoother",
                     "none": ""}[smoother])
     epochs, result, weight = _main_pass(epochs, fparams, params, arm, work, smoother, progress)
-    if qc_en is not None:
-        e_f, n_f, e_b, n_b = qc_en
-        sep = qc.separation(result.e if e_f is None else e_f,
-                            result.n if n_f is None else n_f, e_b, n_b)
-        del qc_en, e_f, n_f, e_b, n_b
-    else:
-        sep = qc_separation(epochs, result, params, progress) if with_qc else None
+    if qc_on and qc_en is None:
+        qc_en = _qc_passes(epochs, params, progress)
+    sep = _separation(qc_en, result) if qc_on else None
+    del qc_en
     pdop = None
     if work.gnss is not None and len(work.gnss):
         shift = np.int64(round(float(params["time"]["gnss_offset_s"]) * NS_PER_S))
@@ -542,14 +539,7 @@ def qc_separation(epochs: Epochs, result: FilterResult, params: Params,
 
     if not qc.qc_enabled(params):
         return None
-    if progress:
-        progress("backward pass")
-    raw = copy.deepcopy(params)
-    raw["filter"]["smooth"] = False
-    fwd = run_filter(epochs, raw) if smoother_of(params) != "none" else result
-    bwd = run_filter(qc.reverse_epochs(epochs), raw)
-    e_b, n_b, _, _ = qc.reverse_result_positions(bwd)
-    return qc.separation(fwd.e, fwd.n, e_b, n_b)
+    return _separation(_qc_passes(epochs, params, progress), result)
 
 
 def _qc_passes(epochs: Epochs, params: Params, progress: Progress | None
@@ -570,6 +560,17 @@ def _qc_passes(epochs: Epochs, params: Params, progress: Progress | None
         return None, None, e_b, n_b
     fwd = run_filter(epochs, raw)
     return np.array(fwd.e, float), np.array(fwd.n, float), e_b, n_b
+
+
+def _separation(passes: tuple[np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray],
+                result: FilterResult) -> np.ndarray:
+    """The QC passes' separation (m per epoch); ``result`` stands in for the forward pass
+    where :func:`_qc_passes` did not run one."""
+    from . import qc
+
+    e_f, n_f, e_b, n_b = passes
+    return qc.separation(result.e if e_f is None else e_f, result.n if n_f is None else n_f,
+                         e_b, n_b)
 
 
 def _with_qc_columns(track: pd.DataFrame, separation_m: np.ndarray | None,
