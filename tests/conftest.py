@@ -14,11 +14,11 @@ from click.testing import CliRunner, Result
 
 REPO = Path(__file__).resolve().parents[1]
 
-#: Tests that take more than ~2 s each on a warm numba cache (measured with
-#: ``python -m pytest FILE --durations=0``): whole modules, or module::function (every
-#: parametrisation).  ``pytest -m "not slow"`` leaves them out of the edit-test loop;
-#: plain ``pytest`` (the README's command, CI) runs them.  A list here rather than
-#: decorators: one place to keep up to date, and no edits scattered over the test files.
+#: Modules whose tests are slow on a warm numba cache (measured with ``python -m pytest
+#: FILE --durations=0``); single tests are listed in tests/slow_tests.txt.  ``pytest -m
+#: "not slow"`` leaves them out of the edit-test loop; plain ``pytest`` (the README's
+#: command, CI) runs them.  Lists rather than decorators: one place to keep up to date,
+#: and no edits scattered over the test files.
 SLOW_MODULES = frozenset({
     "tests/filters/test_aekf_reference.py",   # the plain-numpy reference, per epoch
     "tests/test_fuzz_e2e.py",                 # gpsdr fuse on many mutated files
@@ -29,30 +29,11 @@ SLOW_MODULES = frozenset({
     "tests/test_dr_health.py",                # faulty city drives, every filter, ~40 s
     "tests/filters/test_nlos_screen.py",      # batch fit + four filters on a city drive
 })
-SLOW_TESTS = frozenset({
-    "tests/filters/test_adaptive.py::test_gate_threshold_matches_chi2",
-    "tests/filters/test_fafkf.py::test_fafkf_kernel_reproduces_the_reference",
-    "tests/filters/test_fafkf.py::test_fafkf_kernel_reproduces_the_reference_across_multipath_regimes",
-    "tests/filters/test_fafkf.py::test_fafkf_smoothing_reproduces_the_reference",
-    "tests/filters/test_fafkf.py::test_fafkf_rts_smoothing_reproduces_the_reference",
-    "tests/filters/test_fkf.py::test_two_filter_combination_matches_reference",
-    "tests/filters/test_fkf.py::test_fkf_kernel_reproduces_the_reference",
-    "tests/filters/test_fkf.py::test_fkf_kernel_reproduces_the_reference_across_multipath_regimes",
-    "tests/filters/test_fkf_no_odometer.py::test_kernel_reproduces_the_reference_without_odometer",
-    "tests/filters/test_fkf_smoothing.py::test_checkpointed_smoother_equals_full_storage",
-    "tests/io/test_fuzz_readers.py::test_random_csv_rows",
-    "tests/io/test_fuzz_readers.py::test_truncated_and_bit_flipped_mcap",
-    "tests/test_batch.py::test_after_a_crash_the_rest_of_the_batch_runs_in_a_new_pool",
-    "tests/test_batch.py::test_a_crashing_worker_fails_only_its_drive",
-    "tests/test_batch.py::test_batch_cli_report_resume_and_force",
-    "tests/test_batch.py::test_batch_on_dask",
-    "tests/test_cli_fuse.py::test_plot",
-    "tests/test_geodesy.py::test_round_trip_property",
-    "tests/test_plot.py::test_report_with_reference",
-    "tests/test_plot.py::test_report_without_reference_and_minimal_track",
-    "tests/test_evaluation.py::test_figures_invariant_under_a_common_shift_and_exact_for_any_offset",
-    "tests/test_align.py::test_duplicates_and_backward_steps_are_dropped_and_counted",
-})
+#: Single slow tests (module::function, every parametrisation), one per line in
+#: tests/slow_tests.txt: more than ~0.25 s each, so that the rest runs in under a minute.
+SLOW_TESTS = frozenset(
+    line.strip() for line in (REPO / "tests" / "slow_tests.txt").read_text().splitlines()
+    if line.strip() and not line.startswith("#"))
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
