@@ -68,10 +68,10 @@ others; ``real_data_targets``):
 * no_odometer (RTK-fixed fixes, gyro and forward accelerometer, 15-s outages while braking
   and accelerating): the end error of the 15-s outages (13-17 s from the last fix), median
   over the seeds' outages, <= 25 m forward, <= 10 m with the accelerometer (the forward track
-  reads it, ``gpsdr_cli.accel_speed``), <= 0.5 m smoothed.  Two dead-reckoning baselines run beside the
-  filters (informational rows, ``hold_baselines``): the last fix's speed held with the gyro's
-  heading, and that speed plus the integrated accelerometer less its bias and gravity as
-  measured over the last 5 s of fixes (no slope model).
+  reads it, ``gpsdr_cli.filters.accel_speed``), <= 0.5 m smoothed.  Two dead-reckoning
+  baselines run beside the filters (informational rows, ``hold_baselines``): the last fix's
+  speed held with the gyro's heading, and that speed plus the integrated accelerometer less
+  its bias and gravity as measured over the last 5 s of fixes (no slope model).
 
 Positions only (``--no-positions-only`` skips them): the shipped filters on open_sky,
 urban_canyon, tunnels and stop_and_go with the fixes' speed and course removed, as a

@@ -6,7 +6,7 @@
 Every simulated scenario (``simulate_drive(name, seed)``) with ``drive.odo = None``, each
 filter forward and smoothed through ``build_epochs`` + :func:`gpsdr_cli.pipeline.run_filter`
 (the registered filter, and forward the accelerometer's speed through the outages,
-:mod:`gpsdr_cli.accel_speed`, as ``gpsdr fuse`` runs them); prints per scenario the range
+:mod:`gpsdr_cli.filters.accel_speed`, as ``gpsdr fuse`` runs them); prints per scenario the range
 over the seeds of the RMSE (m, horizontal, every epoch, against the simulator's truth),
 next to the fixes alone, and for the scenarios with 15-s braking / drive-off outages
 (no_odometer) the median over the seeds' outages of the error at their end.

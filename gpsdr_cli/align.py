@@ -27,86 +27,18 @@ CCW-positive as read; the filters convert it to ``d(psi)/dt = -yaw_rate``).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 import pandas as pd
 
+from . import dr_health
 from .config import Params
 from .conventions import FIX_DR, FIX_FLOAT_RTK, FIX_RTK, NS_PER_S
+from .epochs import Epochs, true_runs
 from .geodesy import LocalFrame
 from .io.drive import Drive, SkipReport
-
-
-@dataclass
-class Epochs:
-    """Arrays of equal length ``n``, one entry per epoch (the filters' input).
-
-    GNSS (at epochs with a usable fix, NaN elsewhere):
-      ``gnss_e, gnss_n`` m; ``gnss_sd_e, gnss_sd_n`` base 1-sigma in m (GST or
-      covariance, else HDOP x UERE, else the default, floored); ``pdop`` at GNSS
-      records (NaN elsewhere); ``gnss_speed_mps``, ``gnss_course_rad`` (clockwise
-      from north) where the receiver gave them.
-    DR: ``yaw_rate_radps`` (CCW-positive), ``odo_speed_mps``; NaN where absent.
-    ``accel_mps2``: forward specific force (m/s^2, positive forward, gravity on a slope
-    included) at the accelerometer's records, on the gyro's clock (``[time]
-    gyro_offset_s``: one IMU), NaN elsewhere; ``has_accel`` marks them.  Both default to
-    "none" (False / NaN) for code that builds epochs without them.
-    ``dt_s[k]`` = t[k] - t[k-1] in seconds (``dt_s[0] = 0``).
-    ``gnss_outage``: the epoch lies in a gap between usable fixes longer than
-    ``gap_s`` (also before the first / after the last fix when that stretch is).
-    """
-
-    t_ns: np.ndarray
-    dt_s: np.ndarray
-    has_gnss: np.ndarray
-    gnss_e: np.ndarray
-    gnss_n: np.ndarray
-    gnss_sd_e: np.ndarray
-    gnss_sd_n: np.ndarray
-    pdop: np.ndarray
-    gnss_speed_mps: np.ndarray
-    gnss_course_rad: np.ndarray
-    has_gyro: np.ndarray
-    yaw_rate_radps: np.ndarray
-    has_odo: np.ndarray
-    odo_speed_mps: np.ndarray
-    gnss_outage: np.ndarray
-    gap_s: float
-    has_accel: np.ndarray | None = None
-    accel_mps2: np.ndarray | None = None
-    #: share of the usable fixes that are RTK fixed (GGA quality 4)
-    rtk_fixed_share: float = 0.0
-    #: the GNSS model's verdict (filters.gnss_model): the fixes disagree with the dead
-    #: reckoning often enough for a drive with reflected signals (NLOS)
-    nlos_drive: bool = False
-    #: dr_health left gyro samples out, or odometer samples spanning ``[health] odo_silent_s``
-    #: or more, or the odometer fell silent that long: the dead reckoning cannot judge the fixes
-    dr_unhealthy: bool = False
-
-    def __post_init__(self) -> None:
-        n = len(self.t_ns)
-        if self.has_accel is None:
-            self.has_accel = np.zeros(n, bool)
-        if self.accel_mps2 is None:
-            self.accel_mps2 = np.full(n, np.nan)
-
-    def __len__(self) -> int:
-        return len(self.t_ns)
-
-    @property
-    def n_gnss(self) -> int:
-        return int(self.has_gnss.sum())
-
-    @property
-    def velocity_share(self) -> float:
-        """Share of the usable fixes that carry the receiver's speed (RMC/VTG); 0 without fixes."""
-        n_fix = self.n_gnss
-        if n_fix == 0:
-            return 0.0
-        return float(np.count_nonzero(self.has_gnss & np.isfinite(self.gnss_speed_mps))) / n_fix
-
+from .rtk_false_fix import mark_false_fixes
 
 #: A stream losing more than this share of its records in cleaning gets a warning.
 LOSS_WARN_SHARE = 0.01
@@ -313,12 +245,6 @@ def base_sigma(sigma_e: np.ndarray, sigma_n: np.ndarray, hdop: np.ndarray,
     return np.maximum(sd_e, g["sigma_min_m"]), np.maximum(sd_n, g["sigma_min_m"])
 
 
-def true_runs(flag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First and last index (inclusive, ascending int arrays) of every run of True in ``flag``."""
-    d = np.diff(np.concatenate(([0], np.asarray(flag, bool).astype(np.int8), [0])))
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
-
-
 def flicker_zeros(t_ns: np.ndarray, speed_mps: np.ndarray, stop_mps: float, min_stop_s: float
                   ) -> np.ndarray:
     """Odometer records to drop: runs of readings below ``stop_mps`` (m/s) that last less than
@@ -348,7 +274,6 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     """Clean, shift, project and merge the drive's streams into :class:`Epochs`."""
     tp = params["time"]
     parts: list[np.ndarray] = []
-    from . import dr_health  # it uses this module's true_runs
 
     g_en = None  # every GNSS row projected once: the health screen's chords and the epochs
     if drive.gnss is not None and len(drive.gnss) and frame is not None:
@@ -458,7 +383,6 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                                   or health.odo_bad_s >= float(params["health"]["odo_silent_s"])
                                   or _silent(odo_t, float(params["health"]["odo_silent_s"]),
                                              t[has_gnss], gspeed[has_gnss])))
-    from .filters.gnss_model import mark_false_fixes  # it needs the merged epochs
     return mark_false_fixes(epochs, params)
 
 

@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .align import true_runs
 from .conventions import NS_PER_S
+from .epochs import true_runs
 
 #: a fix's Doppler speed is compared with odometer samples at most this far from it (s)
 NEAREST_FIX_S = 0.6

@@ -50,9 +50,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from .align import true_runs
 from .config import Params
 from .conventions import NS_PER_S, STATS_COLUMNS
+from .epochs import true_runs
 from .errors import InputError
 
 if TYPE_CHECKING:

@@ -91,3 +91,13 @@ class LocalFrame:
             "origin_lat_deg": repr(self.origin_lat_deg),
             "origin_lon_deg": repr(self.origin_lon_deg),
         }
+
+
+def frame_from_metadata(meta: dict[str, str]) -> LocalFrame | None:
+    """Rebuild the local frame a track file was written in, from its ``frame.crs_wkt`` and
+    ``frame.origin_lat_deg`` / ``frame.origin_lon_deg`` metadata (None if it does not say)."""
+    wkt = meta.get("frame.crs_wkt")
+    if not wkt:
+        return None
+    return LocalFrame(CRS.from_wkt(wkt), float(meta.get("frame.origin_lat_deg", "nan")),
+                      float(meta.get("frame.origin_lon_deg", "nan")))

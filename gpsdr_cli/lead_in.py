@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from .align import Epochs
 from .conventions import NS_PER_S
+from .epochs import Epochs
 from .filters.base import FilterResult
 
 #: a lead-in shorter than this (s) is left to the filter (one GNSS interval or less: the

@@ -48,8 +48,8 @@ import numpy as np
 from .errors import UsageError
 
 if TYPE_CHECKING:
-    from .align import Epochs
     from .config import Params
+    from .epochs import Epochs
     from .filters.base import FilterResult
 
 

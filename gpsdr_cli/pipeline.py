@@ -36,10 +36,10 @@ from .conventions import (
     TRACK_EXTRA_COLUMNS,
 )
 from .errors import GpsdrError, InputError, NoDataError, UsageError
-from .geodesy import LocalFrame
+from .geodesy import LocalFrame, frame_from_metadata
 
 if TYPE_CHECKING:
-    from .align import Epochs
+    from .epochs import Epochs
     from .filters.base import FilterResult
     from .io.drive import Drive
     from .io.reference import Reference
@@ -160,17 +160,6 @@ def choose_frame(drive: Drive, params: Params) -> LocalFrame:
     where = drive.sources[0].path if drive.sources else None
     raise NoDataError(where, "no valid GNSS fix in the drive; for dead reckoning alone set "
                              "[frame] origin_lat_deg, origin_lon_deg and initial_heading_deg")
-
-
-def frame_from_metadata(meta: dict[str, str]) -> LocalFrame | None:
-    """Rebuild the local frame a track file was written in (None if it does not say)."""
-    wkt = meta.get("frame.crs_wkt")
-    if not wkt:
-        return None
-    from pyproj import CRS
-
-    return LocalFrame(CRS.from_wkt(wkt), float(meta.get("frame.origin_lat_deg", "nan")),
-                      float(meta.get("frame.origin_lon_deg", "nan")))
 
 
 # --------------------------------------------------------------------------- track
@@ -509,12 +498,14 @@ def run_filter(epochs: Epochs, params: Params) -> FilterResult:
     epochs before it (gyro and odometer logged before the receiver had a fix) are
     dead-reckoned back from it (:mod:`gpsdr_cli.lead_in`).  On a drive without an
     odometer, the forward accelerometer's speed (without one, the last fixes' speed) carries
-    the track through the GNSS outages along the gyro's heading (:mod:`gpsdr_cli.accel_speed`)."""
+    the track through the GNSS outages along the gyro's heading (:mod:`gpsdr_cli.filters.accel_speed`)."""
     from . import filters, lead_in
 
     k_fix, from_fix = lead_in.split(epochs)
     result = filters.get(params["filter"]["name"])(from_fix, params)
-    from .accel_speed import bridge_outages  # no odometer: the speed through the GNSS outages
+    from .filters.accel_speed import (
+        bridge_outages,  # no odometer: the speed through the GNSS outages
+    )
 
     result = bridge_outages(from_fix, result, params, smoothed=bool(params["filter"]["smooth"]))
     if k_fix:

@@ -45,8 +45,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .align import Epochs, true_runs
 from .conventions import NS_PER_S
+from .epochs import Epochs, true_runs
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -4,7 +4,7 @@ The no_odometer scenario puts its outages where the speed changes most: braking 
 (from ~14 m/s) and driving off, on rolling hills.  Holding the last fix's speed along the
 gyro's heading ends them 80-140 m off (median 94 m over seeds 1-3); the filters, which
 held the speed too and carried their last acceleration estimate on, ended them 94-96 m off.
-With the accelerometer's speed (:mod:`gpsdr_cli.accel_speed`) the forward track ends them
+With the accelerometer's speed (:mod:`gpsdr_cli.filters.accel_speed`) the forward track ends them
 within a few metres; without it, at the last fixes' speed, no worse than the hold.
 """
 
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from gpsdr_cli import config, filters
-from gpsdr_cli.accel_speed import speed_track
 from gpsdr_cli.align import build_epochs
+from gpsdr_cli.filters.accel_speed import speed_track
 from gpsdr_cli.pipeline import run_filter
 from gpsdr_cli.simulate import GRAVITY_MPS2, simulate_drive
 from gpsdr_cli.testing.sim import run_filter as run_sim

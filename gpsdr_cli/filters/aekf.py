@@ -60,15 +60,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..align import Epochs
 from ..config import Params
+from ..epochs import Epochs
 from ..errors import ConfigError
 from ..models.cs_model import N_STATES
+from ..rtk_false_fix import centimetre_fixes
 from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
 from .base import FilterResult
-from .gnss_model import centimetre_fixes
+from .gnss_model import pdop_factors
 from .smoothing import rts_checkpointed
 
 #: Speed sigma (m/s) assigned to a velocity taken from the receiver's speed and course.
@@ -123,23 +124,6 @@ def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarr
     ka = np.where(idx >= 0, ka_rec[np.maximum(idx, 0)], float(g["ka_good"]))
     ka = np.where(epochs.gnss_outage, float(g["ka_poor"]), ka)
     return r_e, r_n, ka, sigma_const
-
-
-def pdop_factors(pdop: np.ndarray, g: dict) -> tuple[np.ndarray, np.ndarray]:
-    """R factor k and Q factor K_a for each PDOP (Fang et al.'s table; NaN PDOP -> good)."""
-    good, poor = float(g["pdop_good"]), float(g["pdop_poor"])
-    ks = np.array([g["k_good"], g["k_medium"], g["k_poor"]], float)
-    kas = np.array([g["ka_good"], g["ka_medium"], g["ka_poor"]], float)
-    p = np.where(np.isfinite(pdop), pdop, -np.inf)
-    mode = g["pdop_mode"]
-    if mode == "regimes":
-        reg = np.where(p < good, 0, np.where(p < poor, 1, 2))
-        return ks[reg], kas[reg]
-    if mode == "continuous":
-        xp = np.array([good, 0.5 * (good + poor), poor])
-        pc = np.clip(p, good, poor)
-        return np.exp(np.interp(pc, xp, np.log(ks))), np.exp(np.interp(pc, xp, np.log(kas)))
-    raise ConfigError(f"gnss.pdop_mode = {mode!r}: expected \"regimes\" or \"continuous\"")
 
 
 def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray, float, bool]:

@@ -13,8 +13,8 @@ can compare like with like.
 
 from __future__ import annotations
 
-from ..align import Epochs
 from ..config import Params
+from ..epochs import Epochs
 from . import register
 from .aekf import run_cs
 from .base import FilterResult

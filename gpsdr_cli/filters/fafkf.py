@@ -39,8 +39,8 @@ Conventions: :mod:`gpsdr_cli.conventions`.
 
 from __future__ import annotations
 
-from ..align import Epochs
 from ..config import Params
+from ..epochs import Epochs
 from . import register
 from .base import FilterResult
 from .fkf import run_federated

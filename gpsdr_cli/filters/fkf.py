@@ -103,8 +103,8 @@ import math
 
 import numpy as np
 
-from ..align import Epochs
 from ..config import Params
+from ..epochs import Epochs
 from ..errors import NoDataError
 from . import fuzzy, register
 from . import kernels_fkf as kf

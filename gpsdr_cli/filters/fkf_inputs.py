@@ -17,9 +17,9 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ..align import Epochs, true_runs
 from ..config import Params
 from ..conventions import NS_PER_S
+from ..epochs import Epochs, true_runs
 from ..errors import ConfigError, NoDataError
 from . import kernels_fkf as kf
 from .adaptive import gate_threshold

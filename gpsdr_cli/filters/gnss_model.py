@@ -32,12 +32,31 @@ import dataclasses
 
 import numpy as np
 
-from ..align import Epochs, true_runs
 from ..config import Params
 from ..conventions import NS_PER_S
+from ..epochs import Epochs, true_runs
+from ..errors import ConfigError
+from ..rtk_false_fix import centimetre_fixes
 
 #: a speed reading older than this (s) is not trusted for the chord check
 SPEED_MAX_AGE_S = 0.5
+
+
+def pdop_factors(pdop: np.ndarray, g: dict) -> tuple[np.ndarray, np.ndarray]:
+    """R factor k and Q factor K_a for each PDOP (Fang et al.'s table; NaN PDOP -> good)."""
+    good, poor = float(g["pdop_good"]), float(g["pdop_poor"])
+    ks = np.array([g["k_good"], g["k_medium"], g["k_poor"]], float)
+    kas = np.array([g["ka_good"], g["ka_medium"], g["ka_poor"]], float)
+    p = np.where(np.isfinite(pdop), pdop, -np.inf)
+    mode = g["pdop_mode"]
+    if mode == "regimes":
+        reg = np.where(p < good, 0, np.where(p < poor, 1, 2))
+        return ks[reg], kas[reg]
+    if mode == "continuous":
+        xp = np.array([good, 0.5 * (good + poor), poor])
+        pc = np.clip(p, good, poor)
+        return np.exp(np.interp(pc, xp, np.log(ks))), np.exp(np.interp(pc, xp, np.log(kas)))
+    raise ConfigError(f"gnss.pdop_mode = {mode!r}: expected \"regimes\" or \"continuous\"")
 
 
 def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
@@ -112,142 +131,12 @@ def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     return epochs, params
 
 
-def centimetre_fixes(epochs: Epochs, params: Params) -> np.ndarray:
-    """Per epoch, a usable fix whose base sigma on both axes is at most ``[gnss] rtk_cm_sd_m``
-    (an RTK-fixed fix: GST or HDOP x ``uere_rtk_fixed_m``)."""
-    sd = np.fmax(epochs.gnss_sd_e, epochs.gnss_sd_n)
-    return epochs.has_gnss & (sd <= float(params["gnss"]["rtk_cm_sd_m"]))
-
-
-def step_estimates(t_s: np.ndarray, e: np.ndarray, n: np.ndarray, sd: np.ndarray,
-                   half: int, max_dt_s: float, v_e: np.ndarray | None = None,
-                   v_n: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per fix i, the position step (m, east and north) between fix i-1 and fix i, and its
-    1-sigma (m per axis), from a least-squares fit over ``half`` fixes either side (weighted
-    by the fixes' sigmas ``sd``, m) of the motion plus a step at t_i: with the receiver's
-    Doppler velocity ``v_e, v_n`` (m/s, finite at every fix) the positions less the velocity's
-    integral are a line in time (a velocity bias), else the positions are a quadratic.
-    A smooth motion has no step; a jump of the fixes has one.  NaN where the window has a gap
-    over ``max_dt_s``, a fix without velocity (``v_e``/``v_n`` given) or leaves the series."""
-    m = len(t_s)
-    se = np.full(m, np.nan)
-    sn = np.full(m, np.nan)
-    ss = np.full(m, np.nan)
-    if m < 2 * half + 1 or half < 2:
-        return se, sn, ss
-    doppler = v_e is not None and v_n is not None
-    brk = np.diff(t_s) > max_dt_s
-    if doppler:  # trapezoidal integral of the velocity; a window with a fix without one: NaN
-        dt = np.diff(t_s)
-        miss = ~(np.isfinite(v_e) & np.isfinite(v_n))
-        v_e, v_n = np.where(miss, 0.0, v_e), np.where(miss, 0.0, v_n)
-        e = e - np.concatenate(([0.0], np.cumsum(0.5 * (v_e[1:] + v_e[:-1]) * dt)))
-        n = n - np.concatenate(([0.0], np.cumsum(0.5 * (v_n[1:] + v_n[:-1]) * dt)))
-        brk = brk | miss[1:] | miss[:-1]
-    centre = np.arange(half, m - half + 1)                       # window [c - half, c + half)
-    idx = centre[:, None] + np.arange(-half, half)[None, :]
-    gap = np.concatenate(([0], np.cumsum(brk)))
-    ok = gap[idx[:, -1]] == gap[idx[:, 0]]
-    centre, idx = centre[ok], idx[ok]
-    if not len(centre):
-        return se, sn, ss
-    tau = t_s[idx] - t_s[centre][:, None]
-    cols = [np.ones_like(tau), tau] + ([] if doppler else [tau * tau])
-    A = np.stack(cols + [(tau >= 0).astype(float)], axis=2)
-    wt = 1.0 / sd[idx] ** 2
-    cov = np.linalg.inv(np.einsum("kij,ki,kil->kjl", A, wt, A))
-    be = np.einsum("kjl,kil,ki,ki->kj", cov, A, wt, e[idx])
-    bn = np.einsum("kjl,kil,ki,ki->kj", cov, A, wt, n[idx])
-    se[centre], sn[centre] = be[:, -1], bn[:, -1]
-    ss[centre] = np.sqrt(cov[:, -1, -1])
-    return se, sn, ss
-
-
-def false_fixes(epochs: Epochs, params: Params, cm: np.ndarray) -> np.ndarray:
-    """Per epoch, the centimetre fixes judged wrong by an RTK false fix (a wrong integer
-    ambiguity): the position jumps by decimetres while the receiver still reports
-    centimetres, holds that offset for seconds, and jumps back when it fixes right.
-
-    The centimetre fixes are cut into segments at every step (:func:`step_estimates` with
-    the receiver's Doppler velocity, above ``[gnss] rtk_step_m`` and ``rtk_step_k`` sigmas,
-    the largest within its window) and at every other fix or gap in between.  A run of
-    segments joined by steps knows each segment's offset from the first; the offset held by
-    the most fixes is the right one (a false fix lasts seconds, the right fix the rest), and
-    the segments more than ``rtk_step_m`` off it are false."""
-    g = params["gnss"]
-    f = np.flatnonzero(cm)
-    out = np.zeros(len(epochs), bool)
-    half = int(g["rtk_step_half_fixes"])
-    if len(f) < 2 * half + 1:
-        return out
-    t = epochs.t_ns[f] / NS_PER_S
-    e, n = epochs.gnss_e[f], epochs.gnss_n[f]
-    sd = np.fmax(epochs.gnss_sd_e[f], epochs.gnss_sd_n[f])
-    max_dt = float(g["rtk_step_max_dt_s"])
-    # the receiver's velocity (a speed with no course: too slow to have one).  Without it
-    # the check is off: a quadratic's misfit in a city turn reached 0.16 m (rtk scenario),
-    # as large as the smallest false fix
-    spd = epochs.gnss_speed_mps[f]
-    crs = np.where(np.isfinite(epochs.gnss_course_rad[f]), epochs.gnss_course_rad[f], 0.0)
-    se, sn, ss = step_estimates(t, e, n, sd, half, max_dt, spd * np.sin(crs), spd * np.cos(crs))
-    size = np.hypot(se, sn)
-    thr = float(g["rtk_step_m"])
-    cand = np.isfinite(size) & (size > thr) & (size > float(g["rtk_step_k"]) * ss * np.sqrt(2.0))
-    # the step sits where its estimate peaks: its neighbours see part of it
-    sz = np.where(np.isfinite(size), size, 0.0)
-    peak = np.ones(len(f), bool)
-    for k in range(1, half + 1):
-        peak[k:] &= sz[k:] >= sz[:-k]
-        peak[:-k] &= sz[:-k] > sz[k:]
-    step = cand & peak
-    # a break: another epoch's fix (not centimetres) or a gap between consecutive cm fixes
-    other = np.cumsum(epochs.has_gnss & ~cm)
-    brk = np.zeros(len(f), bool)
-    brk[1:] = (other[f[1:]] != other[f[:-1]]) | (np.diff(t) > max_dt)
-    seg = np.cumsum(step | brk)                  # segment id per cm fix
-    grp = np.cumsum(brk)                         # run of segments joined by steps
-    off_e = np.cumsum(np.where(step, se, 0.0))   # offset since the drive's first cm fix
-    off_n = np.cumsum(np.where(step, sn, 0.0))
-    bad = np.zeros(len(f), bool)
-    for gid in np.unique(grp):
-        sel = np.flatnonzero(grp == gid)
-        segs = np.unique(seg[sel])
-        if len(segs) < 2:
-            continue
-        first = np.searchsorted(seg, segs)       # each segment's first fix
-        oe, on = off_e[first], off_n[first]
-        cnt = np.array([np.count_nonzero(seg == s) for s in segs])
-        near = np.hypot(oe[:, None] - oe[None, :], on[:, None] - on[None, :]) <= thr
-        ref = int(np.argmax(near.astype(float) @ cnt))    # the offset most fixes hold
-        wrong = ~near[ref]
-        bad[np.isin(seg, segs[wrong])] = True
-    out[f[bad]] = True
-    return out
-
-
-def mark_false_fixes(epochs: Epochs, params: Params) -> Epochs:
-    """``epochs`` with the sigma of every centimetre fix judged false (:func:`false_fixes`)
-    raised to at least ``[gnss] rtk_false_sd_m``: it is no centimetre measurement, and every
-    consumer of the fixes' sigmas (the filters, the graph smoother) must know it."""
-    cm = centimetre_fixes(epochs, params)
-    if not cm.any():
-        return epochs
-    wrong = false_fixes(epochs, params, cm)
-    if not wrong.any():
-        return epochs
-    floor = float(params["gnss"]["rtk_false_sd_m"])
-    sd_e = epochs.gnss_sd_e.copy()
-    sd_n = epochs.gnss_sd_n.copy()
-    sd_e[wrong] = np.fmax(sd_e[wrong], floor)
-    sd_n[wrong] = np.fmax(sd_n[wrong], floor)
-    return dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n)
-
-
 def rtk_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     """A drive whose fixes are mostly RTK fixed: the centimetre fixes are taken at their
     word -- the GNSS error states pinned at ``[gnss] rtk_err_sd_m``, the standstill from
     the receiver's speed below ``rtk_standstill_speed_mps`` -- and every other fix (float, autonomous, or a
-    centimetre fix judged false by :func:`mark_false_fixes`) gets its sigma x
+    centimetre fix judged false by
+    :func:`gpsdr_cli.rtk_false_fix.mark_false_fixes`) gets its sigma x
     ``rtk_free_sd_factor``: its error, decimetres to metres, holds for seconds, which a
     white sigma at each fix would count as independent.  (ekf, with one sigma per fix class
     rather than per fix, takes the centimetre fixes' and the others' medians apart:

@@ -67,9 +67,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..align import Epochs
 from ..config import Params
 from ..conventions import NS_PER_S
+from ..epochs import Epochs
 from .base import FilterResult
 
 KERNELS = {"gauss": 0, "huber": 1, "cauchy": 2}
@@ -264,7 +264,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     sdn = np.maximum(sdn, sd_min)
     if err_on and bool(gp["pdop_factors"]):
         # the filters' PDOP regimes (Fang et al.'s R factor k: sigma x k at medium / poor PDOP)
-        from .aekf import pdop_factors
+        from .gnss_model import pdop_factors
 
         k_fix = pdop_factors(np.asarray(epochs.pdop, float)[key_ep], params["gnss"])[0]
         sde = sde * k_fix
@@ -301,7 +301,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     dd_k = np.diff(cdist[key_ep])
     del spd_all, cdist
     if err_on:
-        from .fkf import multipath_regime
+        from .fkf_inputs import multipath_regime
 
         w_all = multipath_regime(epochs, params)[key_ep]
         err_sd = np.sqrt(w_all * float(gp["gnss_err_sd_m"]) ** 2
@@ -394,7 +394,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
               and bool(np.asarray(epochs.has_accel, bool).any()))
     b_acc0 = None
     if acc_on:
-        from ..accel_speed import accel_covered, speed_track
+        from .accel_speed import accel_covered, speed_track
 
         pa = params["accel"]
         cov = accel_covered(epochs)

@@ -25,8 +25,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..align import Epochs
 from ..config import Params
+from ..epochs import Epochs
 from .base import FilterResult
 
 #: the last screen's (key, fix east positions, has_gnss out, info): a smoothed run's quality

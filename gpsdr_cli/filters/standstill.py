@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..align import Epochs
 from ..config import Params
+from ..epochs import Epochs
 
 #: seconds: two fixes further apart do not make a standstill from the receiver's speed
 MAX_STILL_GAP_S = 2.0

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import config, filters
-from ..align import Epochs, build_epochs
+from ..align import build_epochs
+from ..epochs import Epochs
 from ..filters.base import FilterResult
 
 

@@ -18,7 +18,8 @@ import pytest
 from gpsdr_cli.align import Epochs, build_epochs
 from gpsdr_cli.config import defaults
 from gpsdr_cli.filters import get
-from gpsdr_cli.filters.aekf import initial_state, pdop_factors
+from gpsdr_cli.filters.aekf import initial_state
+from gpsdr_cli.filters.gnss_model import pdop_factors
 from gpsdr_cli.simulate import simulate_drive
 
 from . import horizontal_error, tiny_drive

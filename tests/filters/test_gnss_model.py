@@ -100,7 +100,7 @@ def test_step_estimate_sees_a_jump_on_a_curve():
     from the 40th fix on: the step fit (Doppler velocity integrated) finds the jump to 3 cm
     at that fix and nothing above 0.1 m elsewhere, where a plain difference of fixes sees
     3 m per fix."""
-    from gpsdr_cli.filters.gnss_model import step_estimates
+    from gpsdr_cli.rtk_false_fix import step_estimates
 
     rng = np.random.default_rng(3)
     t = np.arange(80) * 0.25
@@ -124,7 +124,7 @@ def test_false_rtk_fixes_found(seed):
     """rtk scenario: every false fix (a 0.2-1 m jump reported at 1-2.5 cm for 5-30 s) is
     found, and no right one is taken for false; build_epochs gives them the false fixes'
     sigma, so no filter or smoother weighs them at centimetres."""
-    from gpsdr_cli.filters.gnss_model import centimetre_fixes, false_fixes
+    from gpsdr_cli.rtk_false_fix import centimetre_fixes, false_fixes
 
     sim = simulate.simulate_drive("rtk", seed=seed)
     p = config.defaults()
@@ -171,7 +171,7 @@ def test_false_fix_check_needs_the_receivers_velocity():
     quadratic in time misfits city turns by as much as the smallest false fix."""
     import dataclasses
 
-    from gpsdr_cli.filters.gnss_model import centimetre_fixes, false_fixes
+    from gpsdr_cli.rtk_false_fix import centimetre_fixes, false_fixes
 
     sim = simulate.simulate_drive("rtk", seed=1)
     p = config.defaults()

@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from ...errors import InputError, UsageError
-from ..parquet import atomic_output as atomic_output  # the writers' one atomic file
+from .text import time_ns
 
 #: Output suffix -> format name.
 SUFFIXES: dict[str, str] = {".gpx": "gpx", ".kml": "kml", ".geojson": "geojson",
@@ -79,11 +79,6 @@ def check_track(track: pd.DataFrame, source: str | os.PathLike | None) -> None:
         raise InputError(source, f"row {int(back[0]) + 1}: time goes backwards "
                                  f"({track['time'].iloc[back[0] + 1]}); a gpsdr track is "
                                  "time-ordered")
-
-
-def time_ns(track: pd.DataFrame) -> np.ndarray:
-    """The ``time`` column as int64 ns since the UTC epoch."""
-    return track["time"].to_numpy("datetime64[ns]").view(np.int64)
 
 
 def path_length_m(track: pd.DataFrame) -> np.ndarray:

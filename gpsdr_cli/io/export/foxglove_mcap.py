@@ -36,8 +36,9 @@ import pandas as pd
 
 from ... import __version__
 from ...errors import InputError
-from . import atomic_output, time_ns
+from ..parquet import atomic_output
 from .geojson import track_geojson
+from .text import time_ns
 
 FUSED_TOPIC = "/gpsdr/fused"
 TRACK_TOPIC = "/gpsdr/fused_track"
@@ -122,7 +123,7 @@ def rejected_fixes(track: pd.DataFrame, meta: dict[str, str]) -> tuple[int, Iter
     need = {"gnss_e", "gnss_n", "gnss_used"}
     if not need <= set(track.columns):
         return 0, iter(())
-    from ...pipeline import frame_from_metadata
+    from ...geodesy import frame_from_metadata
 
     frame = frame_from_metadata(meta)
     if frame is None:

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from . import atomic_output, time_ns
-from .text import DEG_DECIMALS, iso_times, nullable
+from ..parquet import atomic_output
+from .text import DEG_DECIMALS, iso_times, nullable, time_ns
 
 
 def _floats(track: pd.DataFrame, name: str, decimals: int) -> list[float | None]:

@@ -23,8 +23,8 @@ import numpy as np
 import pandas as pd
 
 from ... import __version__
-from . import atomic_output, time_ns
-from .text import DEG_DECIMALS, elements, escape, integers, iso_times, numbers, quoteattr
+from ..parquet import atomic_output
+from .text import DEG_DECIMALS, elements, escape, integers, iso_times, numbers, quoteattr, time_ns
 
 #: XML namespace of gpsdr's GPX extensions (a URN: it names, it is not fetched).
 NAMESPACE = "urn:gpsdr:gpx:1"

@@ -16,8 +16,8 @@ import os
 import numpy as np
 import pandas as pd
 
-from . import atomic_output, time_ns
-from .text import DEG_DECIMALS, escape, iso_times, numbers
+from ..parquet import atomic_output
+from .text import DEG_DECIMALS, escape, iso_times, numbers, time_ns
 
 
 def write_kml(track: pd.DataFrame, path: str | os.PathLike, *, name: str) -> None:

@@ -2,14 +2,19 @@
 
 Each helper turns one numpy column into a list of strings (one per row), so a writer joins
 rows with ``zip`` instead of building an object per point: that is what keeps a 360 k-point
-export within its time budget (docs/decisions/0006-export-writers.md).
+export within its time budget (docs/decisions/0006-export-writers.md).  Also the track's
+``time`` column as int64 ns (:func:`time_ns`), which every writer reads.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
 from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Decimals for lat/lon in text formats: 1e-10 deg (0.01 mm), so a reader's value is within
 #: 5e-11 deg of the double gpsdr holds.
@@ -59,3 +64,8 @@ def iso_times(t_ns: np.ndarray) -> list[str]:
 
 __all__ = ["DEG_DECIMALS", "elements", "escape", "integers", "iso_times", "nullable",
            "numbers", "quoteattr"]
+
+
+def time_ns(track: pd.DataFrame) -> np.ndarray:
+    """The ``time`` column as int64 ns since the UTC epoch."""
+    return track["time"].to_numpy("datetime64[ns]").view(np.int64)

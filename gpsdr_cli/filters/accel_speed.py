@@ -54,10 +54,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .align import Epochs
-from .config import Params
-from .conventions import NS_PER_S
-from .filters.base import FilterResult
+from ..config import Params
+from ..conventions import NS_PER_S
+from ..epochs import Epochs
+from .base import FilterResult
 
 #: a fix's Doppler speed below this (m/s) is a standstill (the gyro's rest rate is its bias)
 STANDSTILL_MPS = 0.1

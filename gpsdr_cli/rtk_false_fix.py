@@ -1,0 +1,158 @@
+"""RTK false fixes: centimetre fixes that a wrong integer ambiguity put decimetres off.
+
+An RTK receiver that resolves its carrier-phase ambiguities to the wrong integers still
+reports a fixed solution (GGA quality 4) and a GST sigma of centimetres, while its
+position is off by 0.2-1 m; it holds that offset for seconds and jumps back when it
+fixes right.  Taken at its word, such a fix drags the track by the jump.  This check
+runs once per drive, right after the streams are merged
+(:func:`gpsdr_cli.align.build_epochs`), so every consumer of the fixes' sigmas -- the GNSS
+error model, the four filters, both smoothers, the evaluation -- sees the same verdict.
+
+How: the receiver's Doppler velocity predicts each centimetre fix from its neighbours to
+centimetres, so a least-squares fit over a few fixes either side finds each step of the
+position (:func:`step_estimates`); the steps cut the fixes into segments whose offsets
+from one another are known, and the offset most fixes hold is taken as right.
+Without the receiver's velocity the check is off (a quadratic in time misfits a city turn
+by as much as the smallest false fix).  Units: metres, seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .config import Params
+from .conventions import NS_PER_S
+from .epochs import Epochs
+
+
+def centimetre_fixes(epochs: Epochs, params: Params) -> np.ndarray:
+    """Per epoch, a usable fix whose base sigma on both axes is at most ``[gnss] rtk_cm_sd_m``
+    (an RTK-fixed fix: GST or HDOP x ``uere_rtk_fixed_m``)."""
+    sd = np.fmax(epochs.gnss_sd_e, epochs.gnss_sd_n)
+    return epochs.has_gnss & (sd <= float(params["gnss"]["rtk_cm_sd_m"]))
+
+
+def step_estimates(t_s: np.ndarray, e: np.ndarray, n: np.ndarray, sd: np.ndarray,
+                   half: int, max_dt_s: float, v_e: np.ndarray | None = None,
+                   v_n: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per fix i, the position step (m, east and north) between fix i-1 and fix i, and its
+    1-sigma (m per axis), from a least-squares fit over ``half`` fixes either side (weighted
+    by the fixes' sigmas ``sd``, m) of the motion plus a step at t_i: with the receiver's
+    Doppler velocity ``v_e, v_n`` (m/s, finite at every fix) the positions less the velocity's
+    integral are a line in time (a velocity bias), else the positions are a quadratic.
+    A smooth motion has no step; a jump of the fixes has one.  NaN where the window has a gap
+    over ``max_dt_s``, a fix without velocity (``v_e``/``v_n`` given) or leaves the series."""
+    m = len(t_s)
+    se = np.full(m, np.nan)
+    sn = np.full(m, np.nan)
+    ss = np.full(m, np.nan)
+    if m < 2 * half + 1 or half < 2:
+        return se, sn, ss
+    doppler = v_e is not None and v_n is not None
+    brk = np.diff(t_s) > max_dt_s
+    if doppler:  # trapezoidal integral of the velocity; a window with a fix without one: NaN
+        dt = np.diff(t_s)
+        miss = ~(np.isfinite(v_e) & np.isfinite(v_n))
+        v_e, v_n = np.where(miss, 0.0, v_e), np.where(miss, 0.0, v_n)
+        e = e - np.concatenate(([0.0], np.cumsum(0.5 * (v_e[1:] + v_e[:-1]) * dt)))
+        n = n - np.concatenate(([0.0], np.cumsum(0.5 * (v_n[1:] + v_n[:-1]) * dt)))
+        brk = brk | miss[1:] | miss[:-1]
+    centre = np.arange(half, m - half + 1)                       # window [c - half, c + half)
+    idx = centre[:, None] + np.arange(-half, half)[None, :]
+    gap = np.concatenate(([0], np.cumsum(brk)))
+    ok = gap[idx[:, -1]] == gap[idx[:, 0]]
+    centre, idx = centre[ok], idx[ok]
+    if not len(centre):
+        return se, sn, ss
+    tau = t_s[idx] - t_s[centre][:, None]
+    cols = [np.ones_like(tau), tau] + ([] if doppler else [tau * tau])
+    A = np.stack(cols + [(tau >= 0).astype(float)], axis=2)
+    wt = 1.0 / sd[idx] ** 2
+    cov = np.linalg.inv(np.einsum("kij,ki,kil->kjl", A, wt, A))
+    be = np.einsum("kjl,kil,ki,ki->kj", cov, A, wt, e[idx])
+    bn = np.einsum("kjl,kil,ki,ki->kj", cov, A, wt, n[idx])
+    se[centre], sn[centre] = be[:, -1], bn[:, -1]
+    ss[centre] = np.sqrt(cov[:, -1, -1])
+    return se, sn, ss
+
+
+def false_fixes(epochs: Epochs, params: Params, cm: np.ndarray) -> np.ndarray:
+    """Per epoch, the centimetre fixes judged wrong by an RTK false fix (a wrong integer
+    ambiguity): the position jumps by decimetres while the receiver still reports
+    centimetres, holds that offset for seconds, and jumps back when it fixes right.
+
+    The centimetre fixes are cut into segments at every step (:func:`step_estimates` with
+    the receiver's Doppler velocity, above ``[gnss] rtk_step_m`` and ``rtk_step_k`` sigmas,
+    the largest within its window) and at every other fix or gap in between.  A run of
+    segments joined by steps knows each segment's offset from the first; the offset held by
+    the most fixes is the right one (a false fix lasts seconds, the right fix the rest), and
+    the segments more than ``rtk_step_m`` off it are false."""
+    g = params["gnss"]
+    f = np.flatnonzero(cm)
+    out = np.zeros(len(epochs), bool)
+    half = int(g["rtk_step_half_fixes"])
+    if len(f) < 2 * half + 1:
+        return out
+    t = epochs.t_ns[f] / NS_PER_S
+    e, n = epochs.gnss_e[f], epochs.gnss_n[f]
+    sd = np.fmax(epochs.gnss_sd_e[f], epochs.gnss_sd_n[f])
+    max_dt = float(g["rtk_step_max_dt_s"])
+    # the receiver's velocity (a speed with no course: too slow to have one).  Without it
+    # the check is off: a quadratic's misfit in a city turn reached 0.16 m (rtk scenario),
+    # as large as the smallest false fix
+    spd = epochs.gnss_speed_mps[f]
+    crs = np.where(np.isfinite(epochs.gnss_course_rad[f]), epochs.gnss_course_rad[f], 0.0)
+    se, sn, ss = step_estimates(t, e, n, sd, half, max_dt, spd * np.sin(crs), spd * np.cos(crs))
+    size = np.hypot(se, sn)
+    thr = float(g["rtk_step_m"])
+    cand = np.isfinite(size) & (size > thr) & (size > float(g["rtk_step_k"]) * ss * np.sqrt(2.0))
+    # the step sits where its estimate peaks: its neighbours see part of it
+    sz = np.where(np.isfinite(size), size, 0.0)
+    peak = np.ones(len(f), bool)
+    for k in range(1, half + 1):
+        peak[k:] &= sz[k:] >= sz[:-k]
+        peak[:-k] &= sz[:-k] > sz[k:]
+    step = cand & peak
+    # a break: another epoch's fix (not centimetres) or a gap between consecutive cm fixes
+    other = np.cumsum(epochs.has_gnss & ~cm)
+    brk = np.zeros(len(f), bool)
+    brk[1:] = (other[f[1:]] != other[f[:-1]]) | (np.diff(t) > max_dt)
+    seg = np.cumsum(step | brk)                  # segment id per cm fix
+    grp = np.cumsum(brk)                         # run of segments joined by steps
+    off_e = np.cumsum(np.where(step, se, 0.0))   # offset since the drive's first cm fix
+    off_n = np.cumsum(np.where(step, sn, 0.0))
+    bad = np.zeros(len(f), bool)
+    for gid in np.unique(grp):
+        sel = np.flatnonzero(grp == gid)
+        segs = np.unique(seg[sel])
+        if len(segs) < 2:
+            continue
+        first = np.searchsorted(seg, segs)       # each segment's first fix
+        oe, on = off_e[first], off_n[first]
+        cnt = np.array([np.count_nonzero(seg == s) for s in segs])
+        near = np.hypot(oe[:, None] - oe[None, :], on[:, None] - on[None, :]) <= thr
+        ref = int(np.argmax(near.astype(float) @ cnt))    # the offset most fixes hold
+        wrong = ~near[ref]
+        bad[np.isin(seg, segs[wrong])] = True
+    out[f[bad]] = True
+    return out
+
+
+def mark_false_fixes(epochs: Epochs, params: Params) -> Epochs:
+    """``epochs`` with the sigma of every centimetre fix judged false (:func:`false_fixes`)
+    raised to at least ``[gnss] rtk_false_sd_m``: it is no centimetre measurement, and every
+    consumer of the fixes' sigmas (the filters, the graph smoother) must know it."""
+    cm = centimetre_fixes(epochs, params)
+    if not cm.any():
+        return epochs
+    wrong = false_fixes(epochs, params, cm)
+    if not wrong.any():
+        return epochs
+    floor = float(params["gnss"]["rtk_false_sd_m"])
+    sd_e = epochs.gnss_sd_e.copy()
+    sd_n = epochs.gnss_sd_n.copy()
+    sd_e[wrong] = np.fmax(sd_e[wrong], floor)
+    sd_n[wrong] = np.fmax(sd_n[wrong], floor)
+    return dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n)
