@@ -1,12 +1,13 @@
 """gpsdr: post-process vehicle GNSS + gyro + odometer logs with adaptive Kalman filters.
 
-Data flow, one module each: read (``io``) -> align (``align``) -> project
-(``geodesy``) -> filter and smooth (``filters``: the forward passes, their RTS
-smoothers in ``filters.smoothing`` and the fused pass, the robust batch smoother
-``filters.graph``) -> evaluate (``evaluation``, ``qc``) -> write (``io.parquet``,
-``io.export``); ``pipeline`` strings them together and ``cli`` is the thin command
-layer.  Frames, units, signs and the time base
-are declared once in :mod:`gpsdr_cli.conventions`.
+Data flow, one module each: read (``io``) -> align (``align``, which makes the
+``epochs.Epochs`` every later stage reads) -> project (``geodesy``) -> filter and
+smooth (``filters``: the forward passes, their RTS smoothers in ``filters.smoothing``
+and the fused pass, the robust batch smoother ``filters.graph``) -> evaluate
+(``evaluation``, ``qc``) -> write (``io.parquet``, ``io.export``); ``pipeline``
+strings them together and ``cli`` is the thin command layer.  Imports only run down
+that chain (docs/contributing.md).  Frames, units, signs and the time base are
+declared once in :mod:`gpsdr_cli.conventions`.
 """
 
 # Before any kernel module is imported: numba's cache keyed by the kernels' sources.
