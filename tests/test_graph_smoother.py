@@ -294,6 +294,23 @@ def test_odometer_lag_is_fitted() -> None:
     assert odo_lag_s(t, np.zeros(len(t), bool), odo, fix, v, 0.3) == 0.0
 
 
+def test_odometer_lag_is_never_negative() -> None:
+    """The receiver's Doppler speed 0.08 s late (u-blox's velocity filter) and the odometer
+    on time: the best fit would read the odometer 0.08 s early; the lag stays 0."""
+    from gpsdr_cli.filters.graph import odo_lag_s
+
+    t = np.arange(0.0, 300.0, 0.01)
+    v = 10.0 + 5.0 * np.sin(2 * np.pi * t / 20.0)
+    doppler = np.interp(t - 0.08, t, v)
+    fix = np.zeros(len(t), bool)
+    fix[::20] = True
+    assert odo_lag_s(t, np.ones(len(t), bool), v, fix, np.where(fix, doppler, np.nan), 0.3) == 0.0
+    # ... and an odometer 0.05 s late against that late Doppler is still read 0 s late, not
+    # 0.05 - 0.08 s: the two lags are not told apart by the fit, and the odometer's is >= 0
+    odo = np.interp(t - 0.05, t, v)
+    assert odo_lag_s(t, np.ones(len(t), bool), odo, fix, np.where(fix, doppler, np.nan), 0.3) == 0.0
+
+
 def test_no_convergence_falls_back_to_rts() -> None:
     """A solve stopped before it converges: no result, a clear message, and the pipeline
     keeps the RTS track with a warning."""

@@ -36,7 +36,7 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   reckoning at CAN rate").
 * The odometer's speed is read ``[graph] odo_lag_s`` later than its stamp (a speed from
   ticks over a window describes the window's middle); by default that lag is fitted to
-  the receiver's speed (:func:`odo_lag_s`).
+  the receiver's speed (:func:`odo_lag_s`), and never negative.
 * Standstill (odometer below ``[standstill] speed_mps`` over a whole interval): no heading
   change (the gyro's reading is then its bias).  Priors: keyframe 0 loosely at the forward
   filter's smoothed solution (also the initial guess of every keyframe), b and s at the
@@ -128,7 +128,13 @@ def odo_lag_s(t_s: np.ndarray, odo_good: np.ndarray, odo: np.ndarray, has_fix: n
               gnss_speed: np.ndarray, max_lag_s: float, step_s: float = 0.005) -> float:
     """How long (s) the odometer's speed lags the receiver's Doppler speed: the shift that
     best fits one to the other (least squares, one scale fitted, both above 1 m/s), on a
-    ``step_s`` grid within +-``max_lag_s``; 0 without enough of both."""
+    ``step_s`` grid within 0..``max_lag_s``; 0 without enough of both.
+
+    Never negative: an odometer's speed describes the past (a tick count over a window
+    describes the window's middle), never a time after its stamp.  A fit that says
+    otherwise says that the receiver's Doppler speed is late against its own positions,
+    as u-blox's velocity is (comma2k19: 0.06-0.085 s), and reading the odometer that much
+    earlier shifts the whole track back in time (docs/decisions/0020)."""
     f = has_fix & np.isfinite(gnss_speed)
     if odo_good.sum() < 10 or f.sum() < 10 or not max_lag_s > 0:
         return 0.0
@@ -137,7 +143,7 @@ def odo_lag_s(t_s: np.ndarray, odo_good: np.ndarray, odo: np.ndarray, has_fix: n
     inside = (tf >= to[0] + max_lag_s) & (tf <= to[-1] - max_lag_s)
     tf, vf = tf[inside], vf[inside]
     best, best_lag = math.inf, 0.0
-    for lag in np.arange(-max_lag_s, max_lag_s + 0.5 * step_s, step_s):
+    for lag in np.arange(0.0, max_lag_s + 0.5 * step_s, step_s):
         vi = np.interp(tf + lag, to, vo)
         m = (vf > 1.0) & (vi > 1.0)
         if m.sum() < 10:
