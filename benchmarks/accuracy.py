@@ -112,7 +112,8 @@ from gpsdr_cli.evaluation import (
 )
 from gpsdr_cli.simulate import SCENARIOS, oracle_drive, oracle_params, simulate_drive
 
-COMMA = ROOT.parent / "shared" / "data" / "comma2k19"
+#: the real drive, as bundled with the repository (the same files as the dataset's export)
+COMMA = ROOT / "sample_logs" / "comma2k19"
 
 #: Fang et al.'s baseline: GNSS positions only, white-noise R (no multipath states, no velocity)
 AEKF_PLAIN = {"aekf": {"gnss_err_states": False, "gnss_velocity": False}}
