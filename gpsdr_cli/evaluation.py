@@ -189,7 +189,7 @@ def track_errors(track: pd.DataFrame, ref_en: pd.DataFrame) -> pd.DataFrame:
 def gnss_only_errors(epochs_or_track: Any, reference_en: pd.DataFrame) -> np.ndarray:
     """Horizontal errors (m) of the GNSS fixes themselves at the epochs that have one.
 
-    Accepts :class:`~gpsdr_cli.align.Epochs` (``t_ns``, ``gnss_e/n``, ``has_gnss``) or a
+    Accepts :class:`~gpsdr_cli.epochs.Epochs` (``t_ns``, ``gnss_e/n``, ``has_gnss``) or a
     track DataFrame (``time``/``t_ns``, ``gnss_e``, ``gnss_n``).  NaN-free: fixes
     outside the reference's cover are left out.
     """

@@ -13,7 +13,7 @@ Backward pass
     detection and their start at the first fix (``pipeline._run_once``'s lead-in,
     which dead-reckons the epochs before the first fix) see the reversed drive as
     any other: the backward lead-in is the forward tail after the last fix.  Every
-    field of :class:`~gpsdr_cli.align.Epochs` not named here is reversed as is.
+    field of :class:`~gpsdr_cli.epochs.Epochs` not named here is reversed as is.
     The backward pass is never smoothed: forward and backward must not share data
     beyond the measurements, or their separation says nothing.
 

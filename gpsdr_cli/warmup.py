@@ -74,7 +74,7 @@ WAIT_TIMEOUT_S = 300.0
 
 
 def tiny_epochs(duration_s: float = 40.0, rate_hz: float = 100.0, gnss_hz: float = 5.0) -> Any:
-    """A synthetic drive as :class:`~gpsdr_cli.align.Epochs`: every input a filter reads.
+    """A synthetic drive as :class:`~gpsdr_cli.epochs.Epochs`: every input a filter reads.
 
     Parked for 5 s, then accelerating at 1 m/s^2 to 10 m/s heading north-east,
     a 90-degree left turn at 0.2 rad/s from t = 20 s, GNSS fixes (with speed
@@ -84,7 +84,8 @@ def tiny_epochs(duration_s: float = 40.0, rate_hz: float = 100.0, gnss_hz: float
     """
     import numpy as np
 
-    from .align import Epochs, outage_mask
+    from .align import outage_mask
+    from .epochs import Epochs
 
     n = int(duration_s * rate_hz) + 1
     t_s = np.arange(n) / rate_hz

@@ -14,7 +14,7 @@ Conventions (:mod:`gpsdr_cli.conventions`): metres ENU, seconds; heading
 clockwise from north; the gyro's yaw rate is CCW-positive, so the integrated
 heading is ``psi(t) = psi(t_a) - int_{t_a}^t yaw_rate dt``.
 
-This module prepares the kernel's arrays from :class:`~gpsdr_cli.align.Epochs`:
+This module prepares the kernel's arrays from :class:`~gpsdr_cli.epochs.Epochs`:
 
 * ``Theta``: the trapezoid integral of ``-yaw_rate`` over the gyro records,
   aligned at ``t_a`` to the first GNSS course over ground given with speed
