@@ -32,6 +32,7 @@ top of numpy; statsmodels is not a dependency.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +46,14 @@ HUBER_K = 1.345
 WINDOW_S = 3.0
 #: largest offset believed, s (beyond: a clock error, not a latency)
 MAX_OFFSET_S = 2.0
+#: ``gpsdr fuse`` without ``--gnss-offset auto`` suggests it when its own track shows an
+#: offset at least this large (s: 1 m at 20 m/s) ...
+HINT_OFFSET_S = 0.06
+#: ... estimated to this many standard errors.  The forward track's own lag and a wheel
+#: odometer's window (half its period) read as a few hundredths of a second on simulated
+#: drives without latency (+0.00..+0.06 s at 1-3 standard errors); comma2k19 as logged,
+#: whose fixes are ~0.1 s ahead, reads +0.076 s at 38 standard errors.
+HINT_MIN_T = 10.0
 
 
 @dataclass
@@ -126,6 +135,23 @@ def estimate_gnss_offset(track: pd.DataFrame, reference_en: pd.DataFrame | None 
     if reference_en is not None:
         return _by_reference(track, reference_en, fixes, window_s, min_fixes)
     return _differenced(track, fixes, window_s, min_fixes)
+
+
+def offset_hint(track: pd.DataFrame) -> str | None:
+    """A warning line when ``track`` (fused with the offset the user gave) shows the fixes
+    stamped off the dead reckoning's clock: a significant offset of at least
+    :data:`HINT_OFFSET_S` in the along-track residuals.  None otherwise.  About 0.05 s on a
+    one-hour track."""
+    est = estimate_gnss_offset(track)
+    if not (est.identified and math.isfinite(est.offset_s) and math.isfinite(est.stderr_s)):
+        return None
+    if abs(est.offset_s) < HINT_OFFSET_S or abs(est.offset_s) < HINT_MIN_T * est.stderr_s:
+        return None
+    way = "ahead of" if est.offset_s > 0 else "behind"
+    return (f"the GNSS fixes sit {way} the dead reckoning along the track by about "
+            f"{abs(est.offset_s):.2f} s of travel (their error grows with the speed): their time "
+            "stamps look late or early; --gnss-offset auto estimates the offset "
+            "(or give it in seconds)")
 
 
 def estimate_gnss_offset_s(track: pd.DataFrame, reference_en: pd.DataFrame | None = None) -> float:

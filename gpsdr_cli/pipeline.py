@@ -654,6 +654,12 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
         params["time"]["gnss_offset_s"] = offset_auto
     epochs, result, track, work = _run_once(drive, params, frame, progress, ready, with_qc=True)
     skipped = work.skipped
+    if not auto_gnss_offset and (drive.gyro is not None or drive.odo is not None):
+        from .latency import offset_hint
+
+        hint = offset_hint(track)  # the fixes stamped off the dead reckoning's clock
+        if hint:
+            _warn(work, hint)
 
     if progress:
         progress("statistics")

@@ -267,3 +267,17 @@ def test_missing_output_directory_fails_first_and_writes_nothing(gpsdr, drive_di
     assert result.exit_code == 1
     assert "does not exist" in one_line_error(result)
     assert stats.read_bytes() == b"old stats"
+
+
+def test_fixes_stamped_off_the_dead_reckoning_get_a_hint(gpsdr, drive_dir: Path) -> None:
+    """comma2k19 as logged: its fixes sit ~0.1 s ahead (data README), 2 m at highway speed.
+    Without --gnss-offset the summary says so and names the option; calibrated, it is quiet."""
+    logged = gpsdr(["fuse", *streams(drive_dir)])
+    assert logged.exit_code == 0, logged.output
+    hint = [ln for ln in logged.stderr.splitlines() if "time stamps look late or early" in ln]
+    assert len(hint) == 1 and "ahead of" in hint[0] and "--gnss-offset auto" in hint[0]
+    offset = float(hint[0].split("about ")[1].split(" s")[0])
+    assert 0.06 <= offset <= 0.15  # s
+    calibrated = gpsdr(["fuse", *streams(drive_dir), "--gnss-offset", "0.118"])
+    assert calibrated.exit_code == 0, calibrated.output
+    assert "time stamps look" not in calibrated.stderr

@@ -84,3 +84,17 @@ def test_huber_fit_ignores_gross_outliers():
     assert beta[0] == pytest.approx(0.1, abs=0.005)
     assert beta[1] == pytest.approx(0.3, abs=0.05)
     assert np.all(np.isfinite(cov))
+
+
+def test_offset_hint_only_for_a_large_significant_offset():
+    """A track on the truth: fixes stamped 0.15 s early give the hint (ahead), 0.15 s late
+    the mirror one; on time, none."""
+    from gpsdr_cli.latency import offset_hint
+
+    for stamp_s, word in ((0.15, "ahead of"), (-0.15, "behind"), (0.0, None)):
+        sim = simulate_drive("open_sky", seed=0, gnss_stamp_offset_s=stamp_s)  # +-0.007 s
+        hint = offset_hint(truth_track(sim))
+        if word is None:
+            assert hint is None
+        else:
+            assert hint is not None and word in hint and "--gnss-offset auto" in hint
