@@ -71,8 +71,8 @@ from pyproj import CRS, Transformer
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "comma2k19"
 #: the console script of the Python that runs this script (its venv), else the one on PATH
-GPSDR = (Path(sys.executable).with_name("gpsdr") if Path(sys.executable).with_name("gpsdr").exists()
-         else Path(shutil.which("gpsdr") or "gpsdr"))
+_BESIDE = Path(sys.executable).with_name("gpsdr")
+GPSDR = _BESIDE if _BESIDE.exists() else Path(shutil.which("gpsdr") or "gpsdr")
 FILTERS = ("ekf", "aekf", "fkf", "fafkf")
 #: required track columns that must be finite on every row (``pdop`` may be null)
 FINITE_COLUMNS = ("lat", "lon", "e", "n", "v_e", "v_n", "speed", "heading_deg", "sigma_e", "sigma_n")

@@ -503,9 +503,8 @@ def run_filter(epochs: Epochs, params: Params) -> FilterResult:
 
     k_fix, from_fix = lead_in.split(epochs)
     result = filters.get(params["filter"]["name"])(from_fix, params)
-    from .filters.accel_speed import (
-        bridge_outages,  # no odometer: the speed through the GNSS outages
-    )
+    # no odometer: the speed through the GNSS outages
+    from .filters.accel_speed import bridge_outages
 
     result = bridge_outages(from_fix, result, params, smoothed=bool(params["filter"]["smooth"]))
     if k_fix:

@@ -9,6 +9,7 @@ one, else at the package's ``__init__``.
 from __future__ import annotations
 
 import ast
+import graphlib
 from pathlib import Path
 
 import pytest
@@ -60,29 +61,15 @@ def import_graph() -> dict[str, set[str]]:
 
 
 def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
-    """One loop of the graph as a list of modules (first == last), or None."""
-    state: dict[str, int] = {}
-    stack: list[str] = []
-
-    def visit(m: str) -> list[str] | None:
-        state[m] = 1
-        stack.append(m)
-        for t in sorted(graph[m]):
-            if state.get(t) == 1:
-                return stack[stack.index(t):] + [t]
-            if t not in state:
-                found = visit(t)
-                if found:
-                    return found
-        stack.pop()
-        state[m] = 2
-        return None
-
-    for m in sorted(graph):
-        if m not in state:
-            found = visit(m)
-            if found:
-                return found
+    """One loop of the graph in import order, from its smallest module (first == last), or
+    None.  graphlib reads the imports as predecessors, so its loop runs the other way."""
+    try:
+        graphlib.TopologicalSorter(graph).prepare()
+    except graphlib.CycleError as err:
+        loop = err.args[1][:-1][::-1]
+        k = loop.index(min(loop))
+        loop = loop[k:] + loop[:k]
+        return loop + loop[:1]
     return None
 
 

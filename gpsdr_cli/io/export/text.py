@@ -62,10 +62,10 @@ def iso_times(t_ns: np.ndarray) -> list[str]:
     return [s + "Z" for s in text.tolist()]
 
 
-__all__ = ["DEG_DECIMALS", "elements", "escape", "integers", "iso_times", "nullable",
-           "numbers", "quoteattr"]
-
-
 def time_ns(track: pd.DataFrame) -> np.ndarray:
     """The ``time`` column as int64 ns since the UTC epoch."""
     return track["time"].to_numpy("datetime64[ns]").view(np.int64)
+
+
+__all__ = ["DEG_DECIMALS", "elements", "escape", "integers", "iso_times", "nullable",
+           "numbers", "quoteattr", "time_ns"]
