@@ -204,31 +204,36 @@ def _by_reference(track: pd.DataFrame, ref: pd.DataFrame, fixes: np.ndarray, win
 def _differenced(track: pd.DataFrame, fixes: np.ndarray, window_s: float,
                  min_fixes: int, positions: bool = False) -> OffsetEstimate:
     """Differenced regression; ``positions``: take displacements from e/n (a reference)
-    instead of integrating v_e/v_n (a fused track, whose positions follow the GNSS)."""
+    instead of integrating v_e/v_n (a fused track, whose positions follow the GNSS).
+    Every per-epoch series is reduced to the fix epochs as soon as it is made: on an
+    hour at 100 Hz the full-length copies would add tens of MB to ``gpsdr fuse``."""
+    idx = np.flatnonzero(fixes)
     t_all = _t_ns(track)
     ts = (t_all - t_all[0]) / NS_PER_S
-    ve = track["v_e"].to_numpy(float)
-    vn = track["v_n"].to_numpy(float)
-    good_v = np.isfinite(ve) & np.isfinite(vn)
-    ve = np.where(good_v, ve, 0.0)
-    vn = np.where(good_v, vn, 0.0)
+    del t_all
     dt = np.diff(ts)
-    pe = np.concatenate(([0.0], np.cumsum(0.5 * (ve[1:] + ve[:-1]) * dt)))  # integral of v_e
-    pn = np.concatenate(([0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * dt)))
-    if positions:
-        pe = np.nan_to_num(track["e"].to_numpy(float))
-        pn = np.nan_to_num(track["n"].to_numpy(float))
-    bad_cum = np.cumsum(~good_v)
-    outage = (track["gnss_outage"].fillna(False).to_numpy(bool) if "gnss_outage" in track
-              else np.zeros(len(ts), bool))
-    out_cum = np.cumsum(outage)
-
-    idx = np.flatnonzero(fixes)
     tf = ts[idx]
+    del ts
+    good_v = np.isfinite(track["v_e"].to_numpy(float)) & np.isfinite(track["v_n"].to_numpy(float))
+    vel, disp = [], []
+    for axis, pos in (("v_e", "e"), ("v_n", "n")):
+        v = np.where(good_v, track[axis].to_numpy(float), 0.0)
+        vel.append(v[idx])
+        if positions:
+            disp.append(np.nan_to_num(track[pos].to_numpy(float))[idx])
+        else:  # the velocity's integral
+            disp.append(np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)))[idx])
+        del v
+    del dt
+    bad_cum = np.cumsum(~good_v)[idx]
+    del good_v
+    out_cum = (np.cumsum(track["gnss_outage"].fillna(False).to_numpy(bool))[idx]
+               if "gnss_outage" in track else np.zeros(len(idx), np.int64))
+
     j = np.searchsorted(tf, tf + window_s)
     j = np.minimum(j, len(idx) - 1)
-    a, b = idx, idx[j]
-    ok = (np.abs(ts[b] - ts[a] - window_s) < 0.35 * window_s) & (b > a)
+    a, b = np.arange(len(idx)), j               # positions among the fixes
+    ok = (np.abs(tf[b] - tf[a] - window_s) < 0.35 * window_s) & (b > a)
     ok &= (bad_cum[b] - bad_cum[a]) == 0
     ok &= (out_cum[b] - out_cum[a]) == 0
     a, b = a[ok], b[ok]
@@ -236,8 +241,9 @@ def _differenced(track: pd.DataFrame, fixes: np.ndarray, window_s: float,
     if n < min_fixes:
         return OffsetEstimate(0.0, np.nan, n, "none",
                               f"too few fix pairs {window_s:g} s apart ({n} < {min_fixes})")
-    ge = track["gnss_e"].to_numpy(float)
-    gn = track["gnss_n"].to_numpy(float)
+    ge = track["gnss_e"].to_numpy(float)[idx]
+    gn = track["gnss_n"].to_numpy(float)[idx]
+    (ve, vn), (pe, pn) = vel, disp
     r = np.concatenate([(ge[b] - ge[a]) - (pe[b] - pe[a]), (gn[b] - gn[a]) - (pn[b] - pn[a])])
     dv = np.concatenate([ve[b] - ve[a], vn[b] - vn[a]])
     d = np.concatenate([pe[b] - pe[a], pn[b] - pn[a]])
