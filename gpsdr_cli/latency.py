@@ -137,11 +137,12 @@ def estimate_gnss_offset(track: pd.DataFrame, reference_en: pd.DataFrame | None 
     return _differenced(track, fixes, window_s, min_fixes)
 
 
-def offset_hint(track: pd.DataFrame) -> str | None:
+def offset_hint(track: pd.DataFrame, *, odometer: bool = True) -> str | None:
     """A warning line when ``track`` (fused with the offset the user gave) shows the fixes
     stamped off the dead reckoning's clock: a significant offset of at least
     :data:`HINT_OFFSET_S` in the along-track residuals.  None otherwise.  About 0.05 s on a
-    one-hour track."""
+    one-hour track.  ``odometer``: the drive has one, whose own lag reads the same way as
+    fixes stamped early (decisions/0022)."""
     est = estimate_gnss_offset(track)
     if not (est.identified and math.isfinite(est.offset_s) and math.isfinite(est.stderr_s)):
         return None
@@ -151,7 +152,11 @@ def offset_hint(track: pd.DataFrame) -> str | None:
     return (f"the GNSS fixes sit {way} the dead reckoning along the track by about "
             f"{abs(est.offset_s):.2f} s of travel (their error grows with the speed): their time "
             "stamps look late or early; --gnss-offset auto estimates the offset "
-            "(or give it in seconds)")
+            "(or give it in seconds)" + (
+                ".  auto moves the fixes onto the odometer's clock: if the wheel speed is "
+                "the late one (a CAN signal averaged over its period), give a negative "
+                "[time] odo_offset_s in a --config file instead"
+                if odometer and est.offset_s > 0 else ""))
 
 
 def estimate_gnss_offset_s(track: pd.DataFrame, reference_en: pd.DataFrame | None = None) -> float:

@@ -656,7 +656,8 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     if not auto_gnss_offset and (drive.gyro is not None or drive.odo is not None):
         from .latency import offset_hint
 
-        hint = offset_hint(track)  # the fixes stamped off the dead reckoning's clock
+        # the fixes stamped off the dead reckoning's clock
+        hint = offset_hint(track, odometer=drive.odo is not None)
         if hint:
             _warn(work, hint)
 

@@ -98,3 +98,6 @@ def test_offset_hint_only_for_a_large_significant_offset():
             assert hint is None
         else:
             assert hint is not None and word in hint and "--gnss-offset auto" in hint
+            # fixes ahead could as well be a late wheel speed (decisions/0022); behind not
+            assert ("odo_offset_s" in hint) == (stamp_s > 0)
+            assert "odo_offset_s" not in offset_hint(truth_track(sim), odometer=False)
