@@ -11,7 +11,7 @@ the way other tools write their logs rather than as ``gpsdr simulate`` does:
 - ``gps.nmea``: GGA, GSA and RMC at 5 Hz (no GST).
 
 Each revision runs ``python -m gpsdr_cli.cli.main fuse --gps .. --gyro .. --odo ..``
-(the defaults: aekf, RTS smoothing) once to fill the numba cache, then ``--runs``
+(the defaults: aekf, no smoother) once to fill the numba cache, then ``--runs``
 times under ``/usr/bin/time -v``, the two revisions interleaved so both see the same
 load; the table gives the median, min and max of the wall time, the CPU time (user +
 system: on a shared machine it moves less than the wall time) and the peak RSS.
