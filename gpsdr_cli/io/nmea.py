@@ -1,4 +1,5 @@
-"""NMEA 0183 reader: GGA, GNS, RMC, GLL, GSA, VTG, GST and ZDA from any talker -> :class:`GnssFixes`.
+"""NMEA 0183 reader: GGA, GNS, RMC, GLL, GSA, VTG, GST and ZDA from any talker, and the
+proprietary Trimble ``$PTNL,GGK`` and u-blox ``$PUBX,00`` positions -> :class:`GnssFixes`.
 
 Why hand-written instead of pynmea2 / pynmeagps: those parse one sentence at a
 time into Python objects (tens of microseconds per sentence), and they raise or
@@ -14,28 +15,31 @@ sentence, see ``benchmarks/read_nmea.py``):
    upper or lower case.  A sentence without ``*hh`` is read when it is whole
    (see :func:`_complete_without_checksum`; gpsd reads them too) and counted in
    ``meta['sentences_without_checksum']``.
-3. Classify sentences by their first bytes (``np.unique`` over the addresses),
-   locate the fields of each known type by comma offsets, gather each wanted
-   field of all sentences into one fixed-width bytes array and convert it with
-   one numpy cast; only a column holding a non-number falls back to a
-   per-value loop, which marks that field bad.
+3. Classify sentences by their first bytes (``np.unique`` over the addresses; for
+   ``$PTNL``/``$PUBX`` the message id after the address too), locate the fields of
+   each known type by comma offsets, gather each wanted field of all sentences into
+   one fixed-width bytes array and convert it with one numpy cast; only a column
+   holding a non-number falls back to a per-value loop, which marks that field bad.
 4. Group sentences into receiver epochs: a sentence with a time of day
-   (GGA, GNS, RMC, GLL, GST, ZDA) whose time (or date) differs from the previous timed
-   sentence's opens a new epoch; sentences without a time (GSA, VTG) belong to the epoch
-   of the timed sentence before them (the first epoch if none precedes).  One
-   row per epoch that has a position sentence (GGA, GNS, RMC or GLL); within an epoch the last non-empty
-   value of each field wins (so one GSA per constellation merges into one row).
+   (GGA, GNS, RMC, GLL, GST, ZDA, PTNL,GGK, PUBX,00) whose time (or date) differs from the
+   previous timed sentence's opens a new epoch; sentences without a time (GSA, VTG) belong
+   to the epoch of the timed sentence before them (the first epoch if none precedes).  One
+   row per epoch that has a position sentence (GGA, GNS, PTNL,GGK, PUBX,00, RMC or GLL);
+   within an epoch the last non-empty value of each field wins (so one GSA per
+   constellation merges into one row).
 
 Conventions (see :mod:`gpsdr_cli.conventions`): ``t_ns`` int64 ns UTC (time
 of day rounded to the microsecond); lat/lon degrees WGS84 (``ddmm.mmmm`` +
 hemisphere converted); speeds m/s.  Field numbers below follow NMEA 0183 4.11
-with field 0 = the address (``GPGGA``).
+with field 0 = the address (``GPGGA``; ``PTNL`` or ``PUBX``, whose field 1 is the
+message id ``GGK`` or ``00``).
 
 Field choices, documented here once:
 
 - Position, fix quality, satellites, HDOP: from the epoch's most informative
-  position sentence: GGA, else GNS, else RMC, else GLL (GGA and GNS carry quality,
-  satellites, HDOP and altitude, RMC a mode letter, GLL a status).  The kind
+  position sentence: GGA, else GNS, else PTNL,GGK, else PUBX,00, else RMC, else GLL
+  (GGA and GNS carry quality, satellites, HDOP and altitude, GGK and PUBX,00 a quality
+  and the ellipsoidal height, RMC a mode letter, GLL a status).  The kind
   chosen decides even without a fix (a GGA with quality 0 is not overridden
   by an RMC with status ``A``).  RMC and GLL (status ``A``): the NMEA 2.3 mode
   letter gives the quality: A/blank -> 1, D -> 2, P -> 3, R -> 4, F -> 5,
@@ -47,6 +51,24 @@ Field choices, documented here once:
   GGA fix claiming 0 satellites leaves the count to GNS, else unknown).  One GGA
   per constellation in an epoch (``$GPGGA`` + ``$GLGGA``, SiRFstar V): their
   satellites add up; a ``$GN`` GGA of the epoch is the total.
+- Trimble ``$PTNL,GGK`` (field 2 time, 3 date ``mmddyy``, month first, 4-7 position, 8
+  quality 0-15, 9 satellites, 10 PDOP, 11 height ``EHT-5.923``, 12 ``M``), as Trimble's
+  own GGA reports the same solutions (receiver manuals' GGA table): RTK fixed 3, 7 (3D
+  network), 9 (2D network) and xFill 15 -> 4; RTK float 2, 6, 8, Location RTK 12 (RTK
+  degraded to decimetres), OmniSTAR HP/XP 10 and CenterPoint RTX 14 -> 5 (converging
+  precise point solutions are decimetre-level, a float's accuracy, not a fix's); DGPS 4,
+  SBAS 5, OmniSTAR VBS 11 and beacon DGPS 13 -> 2; autonomous 1 -> 1; 0 -> no fix
+  (other values are malformed: the sentence is skipped and counted).  The height is
+  above the ellipsoid: ``alt_m`` as given; a height without the ``EHT`` prefix is not
+  read (counted).  GGK's date dates its epoch like RMC's (RMC and ZDA win where present).
+- u-blox ``$PUBX,00`` (field 2 time, 3-6 position, 7 altRef height above the ellipsoid,
+  8 navStat, 9 hAcc m, 10 vAcc, 11 SOG km/h, 12 COG deg, 13 vVel, 14 diffAge, 15-17
+  HDOP/VDOP/TDOP, 18 satellites): navStat NF/TT -> no fix, DR (dead reckoning only) -> 6,
+  G2/G3/RK (RK: GNSS with dead reckoning) -> 1, D2/D3 -> 2.  hAcc is one radial
+  1-sigma number: ``sigma_n_m = sigma_e_m = hAcc / sqrt(2)`` (as :mod:`gpsdr_cli.io.ubx`
+  reads NAV-PVT's hAcc; GST's per-axis sigmas win in an epoch that has both).  It has no
+  date: its epochs are dated as GGA's are.  Other ``$PTNL`` and ``$PUBX`` messages are
+  counted as unknown proprietary sentences.
 - Sentences of one epoch that disagree on the position (by more than 1e-7 deg
   and more than one unit of the last digit either prints) are counted in
   ``meta['position_disagreements']`` and a note, not as skipped records;
@@ -61,18 +83,19 @@ Field choices, documented here once:
   separation (GGA field 11).  When a receiver leaves the separation empty the
   MSL altitude is kept and ``meta['alt_without_geoid_sep']`` counts those rows.
 - ``pdop``/``vdop`` (and ``hdop`` when GGA has none): GSA, last non-empty of the
-  epoch; the DOPs are the last three fields, before the NMEA 4.1 system id.
+  epoch (else GGK's PDOP, PUBX,00's HDOP and VDOP); the DOPs are the last three
+  fields, before the NMEA 4.1 system id.
   A GSA reporting fix type 1 (no fix) contributes no DOPs; a DOP of 99.99 (the
   receivers' "no DOP" placeholder) is NaN.
 - ``sigma_n_m``/``sigma_e_m``: GST fields 6 and 7 (1-sigma latitude and
   longitude error, metres).
-- ``speed_mps``/``course_deg``: RMC (status ``A``), else VTG (mode not ``N``);
-  knots * 1852/3600.
-- Date: RMC (``ddmmyy``; years 80-99 read as 19xx) or ZDA, per epoch; epochs
+- ``speed_mps``/``course_deg``: RMC (status ``A``), else VTG (mode not ``N``), else
+  PUBX,00 (with a fix); knots * 1852/3600, km/h / 3.6.
+- Date: RMC (``ddmmyy``; years 80-99 read as 19xx), ZDA or PTNL,GGK, per epoch; epochs
   between dated ones take the previous date plus midnight rollovers (time of
   day decreasing by more than 12 h is the next day; an increase, however
   large, is a gap within the day).  The ``date`` argument is
-  only used when the log has no RMC/ZDA date at all: a date in the log always
+  only used when the log has no RMC/ZDA/GGK date at all: a date in the log always
   wins.  Dates before 1980 (GPS time began 1980-01-06) are malformed; before 2000
   or in the future (GPS week-rollover bugs) are kept
   as given, counted in ``meta['warning_counts']`` and explained in
@@ -85,8 +108,9 @@ decoded; Latin-1 bytes need no decoding (NMEA is ASCII); both are named in
 Everything that is skipped is counted by reason in the :class:`SkipReport`
 with the first ``name:line`` where it occurred; ``strict=True`` raises
 :class:`ParseError` (or :class:`ChecksumError`) for the first such line
-instead.  Unknown but well-formed sentences (GSV, proprietary ``$P...``, AIS
-``!AIVDM``, numeric talkers, six-letter addresses) are counted and never fatal.
+instead.  Unknown but well-formed sentences (GSV, proprietary ``$P...`` other than the
+two above, AIS ``!AIVDM``, numeric talkers, six-letter addresses) are counted and never
+fatal.
 """
 
 from __future__ import annotations
@@ -110,16 +134,24 @@ _US_PER_DAY = 86_400_000_000
 _HALF_DAY_US = _US_PER_DAY // 2
 
 # kind codes of the sentences this reader uses
-_GGA, _RMC, _GSA, _VTG, _GST, _ZDA, _GNS, _GLL = range(8)
+_GGA, _RMC, _GSA, _VTG, _GST, _ZDA, _GNS, _GLL, _GGK, _PUBX = range(10)
 _KNOWN = {b"GGA": _GGA, b"RMC": _RMC, b"GSA": _GSA, b"VTG": _VTG, b"GST": _GST, b"ZDA": _ZDA,
           b"GNS": _GNS, b"GLL": _GLL}
-_TYPE_NAME = {v: k.decode() for k, v in _KNOWN.items()}
-_TIMED = (_GGA, _RMC, _GST, _ZDA, _GNS, _GLL)
-_TIME_FIELD = {_GLL: 5}  # field number of the time of day; 1 for the other timed sentences
+#: Proprietary sentences read: (address, message id in field 1) -> kind.
+_PROPRIETARY = {(b"PTNL", b"GGK"): _GGK, (b"PUBX", b"00"): _PUBX}
+_TYPE_NAME = {v: k.decode() for k, v in _KNOWN.items()} | {
+    v: f"{a.decode()},{m.decode()}" for (a, m), v in _PROPRIETARY.items()}
+#: Bytes of a sentence's start that tell its kind: '$' + address + ','; for the
+#: proprietary addresses read, the message id and its comma too.
+_HEAD = 7
+_HEAD_PROPRIETARY = {b"$PTNL,": 10, b"$PUBX,": 9}
+_TIMED = (_GGA, _RMC, _GST, _ZDA, _GNS, _GLL, _GGK, _PUBX)
+#: field number of the time of day; 1 for the other timed sentences
+_TIME_FIELD = {_GLL: 5, _GGK: 2, _PUBX: 2}
 #: Position sentences, most informative first: the epoch's position comes from the first
-#: of these it has (GGA and GNS carry quality, satellites, HDOP and altitude; RMC a mode;
-#: GLL only a status).
-_POSITION_RANK = (_GGA, _GNS, _RMC, _GLL)
+#: of these it has (GGA and GNS carry quality, satellites, HDOP and altitude; PTNL,GGK and
+#: PUBX,00 quality and ellipsoidal height; RMC a mode; GLL only a status).
+_POSITION_RANK = (_GGA, _GNS, _GGK, _PUBX, _RMC, _GLL)
 #: Sentences of one epoch whose positions differ by more than this (deg; 1.1 cm in
 #: latitude) disagree, unless one of them is printed more coarsely.
 _DISAGREE_DEG = 1e-7
@@ -142,6 +174,16 @@ _MODE_QUALITY = {b"": 1, b"A": 1, b"D": 2, b"P": 3, b"R": 4, b"F": 5, b"E": 6,
 #: GNS mode letters from best to worst: the epoch's quality is the best any constellation
 #: reports (a fix exists if one system has one).
 _GNS_RANK = b"RFDPAE"
+#: Trimble PTNL,GGK quality (index 0-15) -> GGA-style quality, as Trimble's GGA reports
+#: the same solution: RTK fixed (3, 7, 9) and xFill (15) 4; RTK float (2, 6, 8), Location
+#: RTK (12), OmniSTAR HP/XP (10) and CenterPoint RTX (14) 5; DGPS, SBAS, OmniSTAR VBS and
+#: beacon (4, 5, 11, 13) 2; autonomous 1; 0 no fix.
+_GGK_QUALITY = np.array([0, 1, 5, 4, 2, 2, 5, 4, 5, 4, 5, 2, 5, 2, 5, 4])
+#: u-blox PUBX,00 navStat -> GGA-style quality: DR (the receiver's dead reckoning alone) is
+#: 6 like GGA's "estimated"; RK (GNSS combined with dead reckoning) is a fix.
+_NAVSTAT_QUALITY = {b"NF": 0, b"TT": 0, b"DR": 6, b"G2": 1, b"G3": 1, b"RK": 1, b"D2": 2,
+                    b"D3": 2}
+KMH_MPS = 1.0 / 3.6  # 1 km/h in m/s
 
 _CHUNK_BYTES = 1 << 22  # 4 MiB of whole lines scanned at a time
 _DOP_NONE = 99.99  # receivers' placeholder for "no DOP" (u-blox, Quectel, ...): read as NaN
@@ -267,7 +309,8 @@ def _num(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     empty = a == b""
     try:
-        v = np.where(empty, b"nan", a).astype(np.float64)
+        with np.errstate(over="ignore"):  # "1E999" casts to inf: bad below, no warning
+            v = np.where(empty, b"nan", a).astype(np.float64)
     except ValueError:
         v = np.full(len(a), np.nan)
         for i, s in enumerate(a.tolist()):
@@ -337,16 +380,18 @@ def _ymd_days(y: np.ndarray, m: np.ndarray, d: np.ndarray, ok: np.ndarray
     return days, ok & ~valid
 
 
-def _rmc_date(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``ddmmyy`` -> (days since epoch, NaN where missing/bad; bad mask)."""
+def _rmc_date(a: np.ndarray, month_first: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """``ddmmyy`` (``mmddyy`` if ``month_first``, PTNL,GGK) -> (days since epoch, NaN where
+    missing/bad; bad mask)."""
     v, bad = _num(a)
     empty = a == b""
     digits = (np.strings.str_len(a) == 6) & np.strings.isdigit(a)
     ok = digits & np.isfinite(v)
     vi = np.where(ok, v, 0).astype(np.int64)
     yy = vi % 100
-    days, invalid = _ymd_days(np.where(yy < 80, 2000 + yy, 1900 + yy), (vi // 100) % 100,
-                              vi // 10000, ok)
+    hi, mid = vi // 10000, (vi // 100) % 100
+    days, invalid = _ymd_days(np.where(yy < 80, 2000 + yy, 1900 + yy),
+                              hi if month_first else mid, mid if month_first else hi, ok)
     return days, bad | (~empty & ~ok) | invalid
 
 
@@ -372,10 +417,11 @@ def _resolution_deg(val: np.ndarray) -> np.ndarray:
     return 10.0 ** -np.clip(decimals, 0, 12) / 60.0
 
 
-def _mode_quality(mode: np.ndarray) -> np.ndarray:
-    """RMC/GLL mode letters -> GGA-style quality (-1 where not a mode letter)."""
+def _mode_quality(mode: np.ndarray, table: dict[bytes, int] = _MODE_QUALITY) -> np.ndarray:
+    """RMC/GLL mode letters (PUBX,00 navStat with ``table``) -> GGA-style quality (-1 where
+    not in ``table``), looked up once per distinct value."""
     uniq, inv = np.unique(mode, return_inverse=True)
-    q = np.array([_MODE_QUALITY.get(m, -1) for m in uniq.tolist()], np.int64)
+    q = np.array([table.get(m, -1) for m in uniq.tolist()], np.int64)
     return q[inv.ravel()] if len(uniq) else np.zeros(0, np.int64)
 
 
@@ -412,7 +458,10 @@ def _position(s: _Sentences, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
 # ------------------------------------------------------------------ the parser
 def _classify(head: bytes, bang: bool) -> int | str:
     """Kind code of a sentence from the first bytes of its body, or the skip reason."""
-    addr = head.split(b",", 1)[0]
+    parts = head.split(b",", 2)
+    addr = parts[0]
+    if len(parts) == 3 and (addr, parts[1]) in _PROPRIETARY and not bang:
+        return _PROPRIETARY[(addr, parts[1])]  # a whole message id: a comma follows it
     if bang:
         return "unknown sentence (encapsulated !" + addr[:5].decode("ascii", "replace") + ", e.g. AIS)"
     if len(addr) == 5 and addr.isalpha() and addr.isupper():
@@ -618,13 +667,19 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         probs.add("not a sentence (no $ on the line)", text_lines + base)
 
 
-    # ---- 3. classify by the first 7 bytes ('$'/'!' + address + ','), once per distinct head
+    # ---- 3. classify by the first 7 bytes ('$'/'!' + address + ','), once per distinct head;
+    # $PTNL/$PUBX by their message id too ('$PTNL,GGK,', '$PUBX,00,')
     # window view over the chunk padded with NULs: row i = the _MAX_FIELD bytes from i
     win = np.lib.stride_tricks.sliding_window_view(
         np.concatenate([arr, np.zeros(_MAX_FIELD, np.uint8)]), _MAX_FIELD)
-    heads = win[:, :7][ok_start]
-    heads *= np.arange(7)[None, :] < (ok_st_a - ok_start)[:, None]  # past the body: NUL
-    heads = heads.view("S7").ravel()
+    wide = max(_HEAD_PROPRIETARY.values())
+    heads = win[:, :wide][ok_start]
+    keep_len = np.full(len(ok_start), _HEAD)
+    for prefix, width in _HEAD_PROPRIETARY.items():
+        keep_len[(heads[:, :len(prefix)] == np.frombuffer(prefix, np.uint8)).all(axis=1)] = width
+    keep_len = np.minimum(keep_len, ok_st_a - ok_start)
+    heads *= np.arange(wide)[None, :] < keep_len[:, None]  # past the head or the body: NUL
+    heads = heads.view(f"S{wide}").ravel()
     uniq, first_i, inverse, counts = np.unique(heads, return_index=True, return_inverse=True,
                                                return_counts=True)
     kind_of_uniq = np.empty(len(uniq), np.int64)
@@ -632,14 +687,15 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         k = _classify(head[1:], head[:1] == b"!")
         if isinstance(k, int):
             kind_of_uniq[u] = k
-            stats["talkers"][head[1:3].decode("ascii", "replace")] += int(counts[u])
+            talker = head[1:5] if k in (_GGK, _PUBX) else head[1:3]  # proprietary: PTNL, PUBX
+            stats["talkers"][talker.decode("ascii", "replace")] += int(counts[u])
         else:
             kind_of_uniq[u] = -1
             probs.add(k, int(ok_start[first_i[u]]) + base, fatal=False, n=int(counts[u]))
     kind_arr = kind_of_uniq[inverse.ravel()] if len(uniq) else np.zeros(0, np.int64)
 
     sent: dict[int, _Sentences] = {}
-    for kind in range(len(_KNOWN)):
+    for kind in _TYPE_NAME:
         sel = np.flatnonzero(kind_arr == kind)
         if len(sel) == 0:
             continue
@@ -704,6 +760,60 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                      q=np.where(fix, qi, 0).astype(np.float64),
                      nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
                      hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan))
+        elif kind == _GGK:
+            lat, lon, res, badpos = _position(s, 4)
+            q, bq = _num(s.f(8))
+            bq |= np.isfinite(q) & ((q != np.floor(q)) | (q < 0) | (q >= len(_GGK_QUALITY)))
+            probs.add(f"malformed position in {tname}", s.pos[badpos & keep])
+            probs.add(f"malformed fix quality in {tname}", s.pos[bq & keep & ~badpos])
+            keep &= ~badpos & ~bq
+            qi = _GGK_QUALITY[np.where(np.isfinite(q) & ~bq, q, 0).astype(np.int64)]
+            fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+            days, bd = _rmc_date(s.f(3), month_first=True)
+            probs.add(f"malformed date in {tname} (field ignored)", s.pos[bd & keep])
+            nsat, bs = _num(s.f(9))
+            pdop, bp = _num(s.f(10))
+            # the height is ellipsoidal and says so: "EHT-5.923"; a bare number is not read
+            ht = s.f(11)
+            eht = np.strings.startswith(ht, b"EHT")
+            alt, ba = _num(np.where(eht, np.strings.replace(ht, b"EHT", b"", 1), b""))
+            ba |= (ht != b"") & ~eht
+            for bad, fld in ((bs, "satellites"), (bp, "DOP"), (ba, "height")):
+                probs.add(f"malformed {fld} in {tname} (field ignored)", s.pos[bad & keep])
+            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
+                     alt=np.where(fix, alt, np.nan), q=np.where(fix, qi, 0).astype(np.float64),
+                     nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
+                     pdop=np.where((pdop > 0) & (pdop < _DOP_NONE), pdop, np.nan), days=days)
+        elif kind == _PUBX:
+            lat, lon, res, badpos = _position(s, 3)
+            qi = _mode_quality(s.f(8), _NAVSTAT_QUALITY)
+            bq = qi < 0
+            badpos &= ~bq & (qi > 0)  # "NF" prints zeros or blanks: no position to check
+            probs.add(f"malformed position in {tname}", s.pos[badpos & keep])
+            probs.add(f"malformed navigation status in {tname}", s.pos[bq & keep & ~badpos])
+            keep &= ~badpos & ~bq
+            fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+            alt, ba = _num(s.f(7))
+            hacc, bha = _num(s.f(9))
+            spd, bsp = _num(s.f(11))
+            crs, bc = _num(s.f(12))
+            hdop, bh = _num(s.f(15))
+            vdop, bv = _num(s.f(16))
+            nsat, bs = _num(s.f(18))
+            for bad, fld in ((ba, "altitude"), (bha, "horizontal accuracy"), (bsp, "speed"),
+                             (bc, "course"), (bh, "HDOP"), (bv, "VDOP"), (bs, "satellites")):
+                probs.add(f"malformed {fld} in {tname} (field ignored)", s.pos[bad & keep])
+            # hAcc is one radial 1-sigma: hAcc**2 = sigma_n**2 + sigma_e**2, as io/ubx.py
+            # reads NAV-PVT's hAcc, so both u-blox outputs give the same sigmas
+            sig = np.where(fix & (hacc > 0), hacc / np.sqrt(2.0), np.nan)
+            p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
+                     alt=np.where(fix, alt, np.nan), q=np.where(fix, qi, 0).astype(np.float64),
+                     sig_n=sig, sig_e=sig,
+                     speed=np.where(fix & (spd >= 0), spd * KMH_MPS, np.nan),
+                     course=np.where(fix & (crs >= 0) & (crs <= 360), crs % 360.0, np.nan),
+                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan),
+                     vdop=np.where((vdop > 0) & (vdop < _DOP_NONE), vdop, np.nan),
+                     nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan))
         elif kind == _GLL:
             status = s.f(6)
             lat, lon, res, badpos = _position(s, 1)
@@ -790,10 +900,11 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
 def _assign_epochs(parsed: dict[int, dict[str, np.ndarray]]) -> np.ndarray | None:
     """Give every sentence its epoch (``parsed[kind]['ep']``); return each epoch's time of day.
 
-    A timed sentence (GGA, RMC, GST, ZDA) opens a new epoch when its time of day differs
-    from the previous timed sentence's, or when its date differs from the last date seen
-    (a multi-day log sampled at the same time of day).  Untimed sentences (GSA, VTG) join
-    the epoch of the timed sentence before them; before the first one, the first epoch.
+    A timed sentence (GGA, GNS, RMC, GLL, GST, ZDA, PTNL,GGK, PUBX,00) opens a new epoch
+    when its time of day differs from the previous timed sentence's, or when its date
+    differs from the last date seen (a multi-day log sampled at the same time of day).
+    Untimed sentences (GSA, VTG) join the epoch of the timed sentence before them; before
+    the first one, the first epoch.
     Returns the epochs' times of day (us), or None when no sentence has a time.
     """
     kinds = list(parsed)
@@ -833,7 +944,7 @@ def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int,
                   position_from: str = "rank") -> dict[str, np.ndarray]:
     """One value per epoch and field: the last non-empty in file order, by the module's rules.
 
-    ``row``: the epoch has a position sentence (GGA, GNS, RMC, GLL: the epochs that become
+    ``row``: the epoch has a position sentence (:data:`_POSITION_RANK`: the epochs that become
     fixes).  ``disagree``: its position sentences disagree (:func:`_disagreements`).
     ``position_from``: ``"rank"`` (the position of the most informative kind) or ``"last"``
     (of the last position sentence with a fix, in file order: what gpsd reports).
@@ -873,16 +984,18 @@ def _merge_epochs(parsed: dict[int, dict[str, np.ndarray]], n_ep: int,
     elif position_from != "rank":
         raise ValueError(f"position_from must be 'rank' or 'last', not {position_from!r}")
     e["disagree"] = _disagreements(parsed, e, n_ep)
-    e["nsat"] = field([(_GNS, "nsat")])
+    # later kinds win: of two position sentences, the one ranked higher in _POSITION_RANK
+    e["nsat"] = field([(_PUBX, "nsat"), (_GGK, "nsat"), (_GNS, "nsat")])
     if _GGA in parsed:
         _gga_satellites(e["nsat"], parsed[_GGA])  # GGA wins
-    e["hdop"] = field([(_GSA, "hdop"), (_GNS, "hdop"), (_GGA, "hdop")])  # GGA's HDOP wins
-    e["pdop"] = field([(_GSA, "pdop")])
-    e["vdop"] = field([(_GSA, "vdop")])
-    e["sig_n"] = field([(_GST, "sig_n")])
-    e["sig_e"] = field([(_GST, "sig_e")])
-    e["speed"] = field([(_VTG, "speed"), (_RMC, "speed")])  # RMC wins
-    e["course"] = field([(_VTG, "course"), (_RMC, "course")])
+    e["hdop"] = field([(_PUBX, "hdop"), (_GSA, "hdop"), (_GNS, "hdop"),
+                       (_GGA, "hdop")])  # GGA's HDOP wins
+    e["pdop"] = field([(_GGK, "pdop"), (_GSA, "pdop")])
+    e["vdop"] = field([(_PUBX, "vdop"), (_GSA, "vdop")])
+    e["sig_n"] = field([(_PUBX, "sig_n"), (_GST, "sig_n")])  # GST's per-axis sigmas win
+    e["sig_e"] = field([(_PUBX, "sig_e"), (_GST, "sig_e")])
+    e["speed"] = field([(_PUBX, "speed"), (_VTG, "speed"), (_RMC, "speed")])  # RMC wins
+    e["course"] = field([(_PUBX, "course"), (_VTG, "course"), (_RMC, "course")])
     e["row"] = row
     return e
 
@@ -957,14 +1070,15 @@ def _epoch_days(parsed: dict[int, dict[str, np.ndarray]], epoch_sod: np.ndarray,
                 date: datetime.date | None) -> tuple[np.ndarray | None, str]:
     """Day (since 1970-01-01) of every epoch and where it came from; None if no date source.
 
-    RMC/ZDA dates (ZDA wins within an epoch) are carried to the epochs around them
-    with midnight rollovers counted in between: time of day decreasing by more than
-    12 h is the next day; an increase, however large, is a gap within the same day.
-    Only without any RMC/ZDA date is ``date`` (the first epoch's day) used.
+    PTNL,GGK, RMC and ZDA dates (ZDA wins within an epoch, then RMC) are carried to the
+    epochs around them with midnight rollovers counted in between: time of day decreasing
+    by more than 12 h is the next day; an increase, however large, is a gap within the
+    same day.
+    Only without any such date is ``date`` (the first epoch's day) used.
     """
     n_ep = len(epoch_sod)
     day_of_epoch = np.full(n_ep, np.nan)
-    for kind in (_RMC, _ZDA):
+    for kind in (_GGK, _RMC, _ZDA):
         if kind in parsed:
             g = parsed[kind]
             k_days = np.full(n_ep, np.nan)
@@ -977,7 +1091,7 @@ def _epoch_days(parsed: dict[int, dict[str, np.ndarray]], epoch_sod: np.ndarray,
         offset = np.where(dated, day_of_epoch - roll, 0).astype(np.int64)
         src = np.maximum.accumulate(np.where(dated, np.arange(n_ep), -1))
         src[src < 0] = int(np.flatnonzero(dated)[0])  # before the first date: back-fill
-        return offset[src] + roll, "log (RMC/ZDA)"
+        return offset[src] + roll, "log (RMC/ZDA/GGK)"
     if date is not None:
         return (date - datetime.date(1970, 1, 1)).days + roll, "argument"
     return None, "none"
@@ -990,10 +1104,11 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     Returns fixes (one row per receiver epoch, in file order), the skipped-line
     report (reasons counted, first ``name:line`` of each) and a meta dict
     (``sentences``, ``talkers``, ``lines``, ``epochs``, ``dates``, ``date_source``,
-    ``warnings``, ...).  ``date`` is used only when the log holds no RMC/ZDA date.
+    ``warnings``, ...).  ``date`` is used only when the log holds no RMC/ZDA/PTNL,GGK date.
     ``strict`` raises :class:`ParseError` at the first bad line instead of skipping it.
     ``position_from``: which position an epoch whose sentences disagree takes:
-    ``"rank"``, the default (GGA, then GNS, RMC, GLL: the sentence that also carries the
+    ``"rank"``, the default (GGA, then GNS, PTNL,GGK, PUBX,00, RMC, GLL: the sentence that
+    also carries the
     quality, satellites, HDOP and height), or ``"last"`` (the last in file order, as
     gpsd does; docs/decisions/0005-nmea-epoch-position-and-text-readers.md has a log
     where the two differ by 1.7e-6 deg).  Either way the disagreeing epochs are counted
@@ -1045,8 +1160,9 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     report = _report(probs, name, lines, strict, buf)
     epoch_sod = _assign_epochs(parsed)
     if epoch_sod is None:
-        what = ("GGA/GNS/RMC/GLL/GSA/VTG/GST/ZDA sentence with a valid checksum" if not parsed
-                else "GGA, GNS, RMC or GLL sentence with a time of day")
+        what = ("GGA/GNS/RMC/GLL/GSA/VTG/GST/ZDA/PTNL,GGK/PUBX,00 sentence with a valid checksum"
+                if not parsed else "GGA, GNS, RMC or GLL sentence with a time of day (nor "
+                "PTNL,GGK or PUBX,00)")
         raise NoDataError(name, f"no {what} ({_summary(report)})")
     e = _merge_epochs(parsed, len(epoch_sod), position_from)
     row = e.pop("row")
@@ -1054,12 +1170,14 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     day, meta["date_source"] = _epoch_days(parsed, epoch_sod, date)
     if day is None:
         if (e["q"][row] > 0).any():
-            raise MissingDateError(name, "no date in the log (no RMC or ZDA sentence with a date); "
+            raise MissingDateError(name, "no date in the log (no RMC, ZDA or PTNL,GGK sentence with "
+                                    "a date); "
                                     "pass --date YYYY-MM-DD (the UTC date of the first fix)")
         raise NoDataError(name, "no fix and no date in the log (only no-fix epochs without "
-                                "RMC/ZDA dates)")
+                                "RMC/ZDA/PTNL,GGK dates)")
     if not row.any():
-        raise NoDataError(name, f"no GGA, GNS, RMC or GLL sentence with a time of day ({_summary(report)})")
+        raise NoDataError(name, "no GGA, GNS, RMC or GLL sentence with a time of day (nor "
+                                f"PTNL,GGK or PUBX,00) ({_summary(report)})")
     r = {f: v[row] for f, v in e.items()}
     t_us = day[row].astype(np.int64) * _US_PER_DAY + epoch_sod[row]
     fixes = GnssFixes(
@@ -1101,7 +1219,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         notes.append(
             f"{meta['position_disagreements']} epochs whose sentences disagree on the position "
             f"(> {_DISAGREE_DEG:g} deg): took "
-            + ("GGA, then GNS, then RMC, then GLL" if position_from == "rank"
+            + ("GGA, then GNS, PTNL,GGK, PUBX,00, RMC, GLL" if position_from == "rank"
                else "the last sentence of each epoch"))
     if notes:
         meta["notes"] = notes
@@ -1148,6 +1266,10 @@ _EXPECTED = (
     ("malformed time", "expected hhmmss[.sss]"),
     ("malformed date in RMC", "expected ddmmyy"),
     ("malformed date in ZDA", "expected dd,mm,yyyy"),
+    ("malformed date in PTNL,GGK", "expected mmddyy"),
+    ("malformed fix quality in PTNL,GGK", "expected 0 to 15"),
+    ("malformed height in PTNL,GGK", "expected EHT and a number of metres"),
+    ("malformed navigation status", "expected one of NF DR G2 G3 D2 D3 RK TT"),
     ("malformed position", "expected ddmm.mmmm,N|S,dddmm.mmmm,E|W"),
     ("malformed mode", "expected one of A D P R F E N M S"),
     ("GSA with too few fields", "expected mode,fix type,satellites...,PDOP,HDOP,VDOP"),
