@@ -37,7 +37,7 @@ Miss 2, the same drives: "fafkf error variance (mean squared error) >= 50 % belo
 (e) mean squared error (m^2) of fkf and fafkf, shipped and plain, forward and RTS, with the
     oracle of each.
 
-Miss 3, comma2k19 (real, ``../shared/data/comma2k19``, 60 s, open-sky highway; the
+Miss 3, comma2k19 (real, ``sample_logs/comma2k19``, 60 s, open-sky highway; the
 reference is comma's own post-processed fusion): "fused below GNSS-only with the GNSS
 latency estimated or applied".
 
@@ -91,8 +91,7 @@ from gpsdr_cli.evaluation import gnss_only_errors, reference_en, summarise, trac
 from gpsdr_cli.pipeline import FuseResult, fuse
 from gpsdr_cli.simulate import SimDrive, oracle_drive, oracle_params, simulate_drive
 
-COMMA = ROOT.parent / "shared" / "data" / "comma2k19"
-COMMA_FALLBACK = ROOT / "sample_logs" / "comma2k19"
+COMMA = ROOT / "sample_logs" / "comma2k19"
 OUT_PNG = ROOT / "docs" / "accuracy_diagnostics.png"
 
 #: method label -> (registered filter, config overrides, run the oracle too)
@@ -289,7 +288,7 @@ def load_comma(folder: Path | None = None):
     from gpsdr_cli.io.nmea import read_nmea
     from gpsdr_cli.io.reference import read_reference
 
-    folder = folder or (COMMA if COMMA.exists() else COMMA_FALLBACK)
+    folder = folder or COMMA
     p0 = config.defaults()
     drive = read_nmea(folder / "gps.nmea")
     drive.merge(read_gyro_csv(folder / "gyro.csv", p0["gyro"]))

@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/real_degraded.py [--cases a,b,...] [--filters ekf,aekf,...]
                                                  [--no-smooth] [--jobs 2] [--keep DIR] [--list]
 
-Our only real drive with a reference (``../shared/data/comma2k19``: 60 s of open-sky
+Our only real drive with a reference (``sample_logs/comma2k19``: 60 s of open-sky
 highway, u-blox NMEA at 10 Hz, phone gyro, CAN speed, comma's post-processed pose) is
 easy.  Acceptance runs unseen real drives in the same layout that may not be.  This
 script writes degraded copies of the drive as real NMEA/CSV files in a temporary
@@ -69,7 +69,7 @@ import pyarrow.parquet as pq
 from pyproj import CRS, Transformer
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "comma2k19"
+DATA = REPO / "sample_logs" / "comma2k19"
 #: the console script of the Python that runs this script (its venv), else the one on PATH
 _BESIDE = Path(sys.executable).with_name("gpsdr")
 GPSDR = _BESIDE if _BESIDE.exists() else Path(shutil.which("gpsdr") or "gpsdr")

@@ -18,7 +18,7 @@ from gpsdr_cli import clock_check, config
 from gpsdr_cli.pipeline import fuse
 from gpsdr_cli.simulate import simulate_drive
 
-COMMA = Path(__file__).resolve().parents[2] / "shared" / "data" / "comma2k19"
+COMMA = Path(__file__).resolve().parents[1] / "sample_logs" / "comma2k19"
 
 
 def _shifted(drive, shift_s: float):
@@ -80,7 +80,6 @@ def test_a_user_offset_is_left_alone() -> None:
     assert notes == [] and p["time"]["gyro_offset_s"] == 0.0
 
 
-@pytest.mark.skipif(not COMMA.exists(), reason="../shared/data/comma2k19 not present")
 def test_the_real_drive_is_not_moved() -> None:
     """comma2k19: u-blox fixes, CAN speed, a phone gyro, one clock (about 0.1 s of latency)."""
     from gpsdr_cli.io.readers import read_drive

@@ -13,7 +13,7 @@ from gpsdr_cli import config
 from gpsdr_cli.errors import ConfigError, InputError, NoDataError, UsageError
 from gpsdr_cli.io.csv import read_gyro_csv, read_odo_csv
 
-DRIVE = Path(__file__).resolve().parents[3] / "shared" / "data" / "comma2k19"
+DRIVE = Path(__file__).resolve().parents[2] / "sample_logs" / "comma2k19"
 P = config.defaults()
 
 
