@@ -465,7 +465,15 @@ def _main_pass(epochs: Epochs, fparams: Params, params: Params,
         _warn(work, f"reflected signals (NLOS): {n_screened} of {int(epochs.has_gnss.sum())} "
                     "fixes disagree with the whole drive's dead reckoning and were not used "
                     "([gnss] nlos_screen)")
-    if result.info.get("nlos_screen_skipped"):
+    skipped = result.info.get("nlos_screen_skipped")
+    if skipped in ("no odometer", "no gyro"):
+        # simulated city drives without an odometer, seeds 1-7: aekf forward 0.66-2.0 x the
+        # fixes, the graph smoother 0.17-0.80 x (docs/benchmarks.md)
+        _warn(work, f"reflected signals (NLOS) suspected, and with {skipped} nothing outvotes "
+                    "them: the filter's track can be further off than the fixes"
+                    + ("" if smoother == "graph" else
+                       "; --smooth graph weighs every fix against the whole drive"))
+    elif skipped:
         _warn(work, "reflected signals (NLOS) suspected, but the gyro or odometer is unhealthy "
                     "or silent for long: the track follows the fixes rather than a dead "
                     "reckoning that cannot judge them")

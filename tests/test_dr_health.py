@@ -155,3 +155,30 @@ def test_aekf_follows_the_fixes_when_the_gyro_clips(city) -> None:
     assert r.result.info.get("pdop_r_factors", "").startswith("off")
     out = ~r.epochs.gnss_outage
     assert np.sqrt(np.mean(r.err_m[out] ** 2)) < 0.75 * r.gnss_rmse_m
+
+
+def test_reflected_signals_without_an_odometer_are_said_and_graph_suggested() -> None:
+    """A city drive with reflected signals, gyro but no odometer: nothing can screen the
+    fixes, and the default aekf ended 41.7 m off against the fixes' 20.7 m without a word.
+    The summary now says so and names --smooth graph (16.6 m there); with the odometer the
+    screen runs and the warning is the screen's own."""
+    from gpsdr_cli.io.reference import Reference
+    from gpsdr_cli.pipeline import fuse
+
+    sim = simulate_drive("urban_nlos", 5, 300.0)
+    t = sim.truth
+    ref = Reference(t["t_ns"].to_numpy(), t["lat"].to_numpy(), t["lon"].to_numpy(),
+                    np.full(len(t), np.nan), "truth")
+    no_odo = F.drop_streams(sim.drive, "odo")
+    res = fuse(copy.deepcopy(no_odo), config.defaults(), ref)
+    said = [w for w in res.drive_warnings if "nothing outvotes" in w]
+    assert len(said) == 1 and "no odometer" in said[0] and "--smooth graph" in said[0]
+    fixes = res.gnss_only_summary()["rmse_m"]
+    assert res.summary()["rmse_m"] > fixes  # the case the warning is for
+    p = config.defaults()
+    p["filter"]["smoother"] = "graph"
+    graph = fuse(copy.deepcopy(no_odo), p, ref)
+    assert graph.summary()["rmse_m"] < 0.9 * fixes
+    assert not any("--smooth graph" in w for w in graph.drive_warnings)
+    with_odo = fuse(copy.deepcopy(sim.drive), config.defaults(), ref)
+    assert not any("nothing outvotes" in w for w in with_odo.drive_warnings)
