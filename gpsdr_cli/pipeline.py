@@ -467,8 +467,8 @@ def _main_pass(epochs: Epochs, fparams: Params, params: Params,
                     "([gnss] nlos_screen)")
     skipped = result.info.get("nlos_screen_skipped")
     if skipped in ("no odometer", "no gyro"):
-        # simulated city drives without an odometer, seeds 1-7: aekf forward 0.66-2.0 x the
-        # fixes, the graph smoother 0.17-0.80 x (docs/benchmarks.md)
+        # simulated city drives without an odometer, seeds 1-7: aekf forward 0.49-1.3 x the
+        # fixes, fafkf up to 1.9 x, the graph smoother 0.17-0.80 x (docs/benchmarks.md)
         _warn(work, f"reflected signals (NLOS) suspected, and with {skipped} nothing outvotes "
                     "them: the filter's track can be further off than the fixes"
                     + ("" if smoother == "graph" else

@@ -159,9 +159,10 @@ def test_aekf_follows_the_fixes_when_the_gyro_clips(city) -> None:
 
 def test_reflected_signals_without_an_odometer_are_said_and_graph_suggested() -> None:
     """A city drive with reflected signals, gyro but no odometer: nothing can screen the
-    fixes, and the default aekf ended 41.7 m off against the fixes' 20.7 m without a word.
-    The summary now says so and names --smooth graph (16.6 m there); with the odometer the
-    screen runs and the warning is the screen's own."""
+    fixes, and the default aekf ended 41.7 m off against the fixes' 20.7 m without a word
+    (26.6 m with the Doppler sigma of [gnss] nlos_velocity_sd_mps).  The summary now says so
+    and names --smooth graph (16.6 m there); with the odometer the screen runs and the
+    warning is the screen's own."""
     from gpsdr_cli.io.reference import Reference
     from gpsdr_cli.pipeline import fuse
 
@@ -174,7 +175,7 @@ def test_reflected_signals_without_an_odometer_are_said_and_graph_suggested() ->
     said = [w for w in res.drive_warnings if "nothing outvotes" in w]
     assert len(said) == 1 and "no odometer" in said[0] and "--smooth graph" in said[0]
     fixes = res.gnss_only_summary()["rmse_m"]
-    assert res.summary()["rmse_m"] > fixes  # the case the warning is for
+    assert fixes < res.summary()["rmse_m"] < 1.4 * fixes  # the case the warning is for
     p = config.defaults()
     p["filter"]["smoother"] = "graph"
     graph = fuse(copy.deepcopy(no_odo), p, ref)

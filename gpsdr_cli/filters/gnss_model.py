@@ -20,6 +20,9 @@ receiver's own figures cannot say:
   becomes ``nlos_err_sd_m``, so they let the dead reckoning carry the shape and average
   the fixes over the bias's correlation time instead of following each step (fkf/fafkf
   keep their two-regime bias model: a larger sigma there was worse on the NLOS scenario).
+  Without an odometer the receiver's Doppler velocity carries ekf/aekf's speed, and
+  reflected signals bias it by metres per second: its sigma becomes at least
+  ``nlos_velocity_sd_mps`` (fkf/fafkf keep theirs: 2 m/s put them at the fixes' error).
 
 Applied by the filter registry (:func:`gpsdr_cli.filters.register`) to every run, so
 no caller can skip it.  Units: metres, seconds.
@@ -128,6 +131,12 @@ def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     if nlos:
         params = copy.deepcopy(params)
         params["aekf"]["gnss_err_sd_m"] = float(g["nlos_err_sd_m"])
+        if not epochs.has_odo.any():
+            # reflected signals put the Doppler speed metres per second off too; with no
+            # odometer to carry the speed, a 0.2-m/s sigma drove aekf up to 2x the fixes
+            a = params["aekf"]
+            a["gnss_velocity_sd_mps"] = max(float(a["gnss_velocity_sd_mps"]),
+                                            float(g["nlos_velocity_sd_mps"]))
     return epochs, params
 
 
