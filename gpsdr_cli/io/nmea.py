@@ -455,6 +455,21 @@ def _position(s: _Sentences, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return lat, lon, np.maximum(_resolution_deg(la), _resolution_deg(lo)), b1 | b2
 
 
+def _has_fix(q: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """A fix: a quality above 0 and a position, not the ``0,0`` some receivers print."""
+    return (q > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+
+
+def _dop(v: np.ndarray) -> np.ndarray:
+    """A DOP field, NaN where absent, not positive or the receivers' 99.99 placeholder."""
+    return np.where((v > 0) & (v < _DOP_NONE), v, np.nan)
+
+
+def _satellites(n: np.ndarray) -> np.ndarray:
+    """A satellite count, NaN where absent or out of range."""
+    return np.where((n >= 0) & (n < 32767), np.floor(n), np.nan)
+
+
 # ------------------------------------------------------------------ the parser
 def _classify(head: bytes, bang: bool) -> int | str:
     """Kind code of a sentence from the first bytes of its body, or the skip reason."""
@@ -722,7 +737,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             probs.add("malformed fix quality in GGA", s.pos[bq & keep & ~badpos])
             keep &= ~badpos & ~bq
             qi = np.where(np.isfinite(q) & ~bq, q, 0).astype(np.int64)
-            fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+            fix = _has_fix(qi, lat, lon)
             nsat, bs = _num(s.f(7))
             hdop, bh = _num(s.f(8))
             alt, ba = _num(s.f(9))
@@ -736,9 +751,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
                      alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
                      q=np.where(fix, qi, 0).astype(np.float64),
-                     nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
-                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan),
-                     talker=_talker_code(s.f(0)))
+                     nsat=_satellites(nsat), hdop=_dop(hdop), talker=_talker_code(s.f(0)))
         elif kind == _GNS:
             lat, lon, res, badpos = _position(s, 2)
             probs.add("malformed position in GNS", s.pos[badpos & keep])
@@ -746,7 +759,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             qi, bm = _gns_quality(s.f(6))
             probs.add("malformed mode in GNS", s.pos[bm & keep & ~badpos])
             keep &= ~bm
-            fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+            fix = _has_fix(qi, lat, lon)
             nsat, bs = _num(s.f(7))
             hdop, bh = _num(s.f(8))
             alt, ba = _num(s.f(9))
@@ -758,8 +771,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
                      alt=np.where(fix, alt + np.nan_to_num(sep), np.nan),
                      q=np.where(fix, qi, 0).astype(np.float64),
-                     nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
-                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan))
+                     nsat=_satellites(nsat), hdop=_dop(hdop))
         elif kind == _GGK:
             lat, lon, res, badpos = _position(s, 4)
             q, bq = _num(s.f(8))
@@ -768,7 +780,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             probs.add(f"malformed fix quality in {tname}", s.pos[bq & keep & ~badpos])
             keep &= ~badpos & ~bq
             qi = _GGK_QUALITY[np.where(np.isfinite(q) & ~bq, q, 0).astype(np.int64)]
-            fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+            fix = _has_fix(qi, lat, lon)
             days, bd = _rmc_date(s.f(3), month_first=True)
             probs.add(f"malformed date in {tname} (field ignored)", s.pos[bd & keep])
             nsat, bs = _num(s.f(9))
@@ -782,8 +794,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                 probs.add(f"malformed {fld} in {tname} (field ignored)", s.pos[bad & keep])
             p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
                      alt=np.where(fix, alt, np.nan), q=np.where(fix, qi, 0).astype(np.float64),
-                     nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan),
-                     pdop=np.where((pdop > 0) & (pdop < _DOP_NONE), pdop, np.nan), days=days)
+                     nsat=_satellites(nsat), pdop=_dop(pdop), days=days)
         elif kind == _PUBX:
             lat, lon, res, badpos = _position(s, 3)
             qi = _mode_quality(s.f(8), _NAVSTAT_QUALITY)
@@ -792,7 +803,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             probs.add(f"malformed position in {tname}", s.pos[badpos & keep])
             probs.add(f"malformed navigation status in {tname}", s.pos[bq & keep & ~badpos])
             keep &= ~badpos & ~bq
-            fix = (qi > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+            fix = _has_fix(qi, lat, lon)
             alt, ba = _num(s.f(7))
             hacc, bha = _num(s.f(9))
             spd, bsp = _num(s.f(11))
@@ -811,9 +822,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                      sig_n=sig, sig_e=sig,
                      speed=np.where(fix & (spd >= 0), spd * KMH_MPS, np.nan),
                      course=np.where(fix & (crs >= 0) & (crs <= 360), crs % 360.0, np.nan),
-                     hdop=np.where((hdop > 0) & (hdop < _DOP_NONE), hdop, np.nan),
-                     vdop=np.where((vdop > 0) & (vdop < _DOP_NONE), vdop, np.nan),
-                     nsat=np.where((nsat >= 0) & (nsat < 32767), np.floor(nsat), np.nan))
+                     hdop=_dop(hdop), vdop=_dop(vdop), nsat=_satellites(nsat))
         elif kind == _GLL:
             status = s.f(6)
             lat, lon, res, badpos = _position(s, 1)
@@ -823,8 +832,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             mq = _mode_quality(s.f(7))
             probs.add("malformed mode in GLL (field ignored)", s.pos[(mq < 0) & keep])
             mq[mq < 0] = 1
-            fix = ((status == b"A") & (mq > 0) & np.isfinite(lat) & np.isfinite(lon)
-                   & ~((lat == 0) & (lon == 0)))
+            fix = (status == b"A") & _has_fix(mq, lat, lon)
             p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
                      q=np.where(fix, mq, 0).astype(np.float64))
         elif kind == _RMC:
@@ -838,8 +846,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             probs.add("malformed mode in RMC (field ignored)", s.pos[(mq < 0) & keep])
             mq[mq < 0] = 1
             valid = status == b"A"
-            fix = valid & (mq > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0)
-                                                                              & (lon == 0))
+            fix = valid & _has_fix(mq, lat, lon)
             spd, bsp = _num(s.f(7))
             crs, bc = _num(s.f(8))
             probs.add("malformed speed in RMC (field ignored)", s.pos[bsp & keep])
@@ -865,7 +872,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
                 kk = k0 + j
                 v, b = _num(s.f(kk))
                 probs.add("malformed DOP in GSA (field ignored)", s.pos[b & keep])
-                dops.append(np.where((v > 0) & (v < _DOP_NONE), v, np.nan))
+                dops.append(_dop(v))
             nofix = s.f(2) == b"1"
             p.update(pdop=np.where(nofix, np.nan, dops[0]), hdop=np.where(nofix, np.nan, dops[1]),
                      vdop=np.where(nofix, np.nan, dops[2]))
