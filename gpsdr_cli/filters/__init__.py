@@ -49,8 +49,6 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             screened, info = screen(epochs, params, nlos, fn)
             if model_epochs.nlos_drive and epochs.dr_unhealthy:
                 info["nlos_screen_skipped"] = "the dead reckoning is unhealthy"
-            elif model_epochs.nlos_drive and not (epochs.has_odo.any() and epochs.has_gyro.any()):
-                info["nlos_screen_skipped"] = "no odometer" if epochs.has_gyro.any() else "no gyro"
             if info.get("nlos_screened"):  # the fixes left are judged afresh
                 model_epochs, model_params = gnss_error_model(
                     dataclasses.replace(epochs, has_gnss=screened.has_gnss), params)

@@ -46,10 +46,15 @@ def _key(epochs: Epochs, params: Params) -> tuple:
 def screen(epochs: Epochs, params: Params, nlos_drive: bool,
            run: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
     """``(epochs, info)``: the epochs with the outvoted fixes' ``has_gnss`` cleared, and
-    what was done (``info["nlos_screened"]``: fixes left out; absent when not applied)."""
-    g = params["gnss"]
-    if (not nlos_drive or not g["nlos_screen"] or not epochs.has_gyro.any()
-            or not epochs.has_odo.any()):
+    what was done (``info["nlos_screened"]``: fixes left out; absent when not applied;
+    ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
+    lacks one)."""
+    if not nlos_drive:
+        return epochs, {}
+    if not (epochs.has_gyro.any() and epochs.has_odo.any()):
+        return epochs, {"nlos_screen_skipped": "no odometer" if epochs.has_gyro.any()
+                        else "no gyro"}
+    if not params["gnss"]["nlos_screen"]:
         return epochs, {}
     key = _key(epochs, params)
     if _LAST and _LAST[0][0] == key and np.array_equal(_LAST[0][1], epochs.gnss_e, equal_nan=True):
