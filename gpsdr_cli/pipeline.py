@@ -661,10 +661,12 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
         params["time"]["gnss_offset_s"] = offset_auto
     epochs, result, track, work = _run_once(drive, params, frame, progress, ready, with_qc=True)
     skipped = work.skipped
-    if not auto_gnss_offset and (drive.gyro is not None or drive.odo is not None):
+    # the fixes stamped off the dead reckoning's clock; not on a drive with reflected signals,
+    # whose errors of tens of metres read as offsets of 0.7 s there
+    if (not auto_gnss_offset and (drive.gyro is not None or drive.odo is not None)
+            and not result.info.get("nlos_drive")):
         from .latency import offset_hint
 
-        # the fixes stamped off the dead reckoning's clock
         hint = offset_hint(track, odometer=drive.odo is not None)
         if hint:
             _warn(work, hint)

@@ -57,6 +57,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"
             result = fn(model_epochs, model_params)
             result.info.update(info)
+            result.info["nlos_drive"] = bool(model_epochs.nlos_drive)
             return result
 
         _REGISTRY[name] = run
