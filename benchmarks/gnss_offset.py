@@ -34,8 +34,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gpsdr_cli import config  # noqa: E402
 from gpsdr_cli.io.readers import read_drive  # noqa: E402
-from gpsdr_cli.io.reference import Reference, read_reference  # noqa: E402
-from gpsdr_cli.latency import _fix_mask, _t_ns, estimate_gnss_offset, huber_fit  # noqa: E402
+from gpsdr_cli.io.reference import read_reference  # noqa: E402
+from gpsdr_cli.latency import _fix_mask, estimate_gnss_offset, huber_fit  # noqa: E402
 from gpsdr_cli.pipeline import fuse  # noqa: E402
 from gpsdr_cli.simulate import simulate_drive  # noqa: E402
 from gpsdr_cli.testing import faults as F  # noqa: E402
@@ -45,28 +45,6 @@ CASES = ("clean", "late", "early", "can5hz")
 STAMP = {"late": -0.12, "early": +0.12}
 WINDOW_S = 3.0
 SMOOTH_S = 15.0
-
-
-def _reference(sim) -> Reference:
-    t = sim.truth
-    return Reference(t.t_ns.to_numpy(), t.lat.to_numpy(), t.lon.to_numpy(),
-                     np.full(len(t), np.nan), "truth")
-
-
-def _rmse(res) -> float:
-    s = res.stats
-    return float(s[s.segment == "all"].iloc[0]["rmse_m"])
-
-
-def _fixes_rmse(res) -> float:
-    tr, ref = res.track, res.reference_en
-    t = _t_ns(tr)
-    ok = np.isfinite(tr.gnss_e.to_numpy(float))
-    te = np.interp(t[ok], ref.t_ns.to_numpy(), ref.e.to_numpy())
-    tn = np.interp(t[ok], ref.t_ns.to_numpy(), ref.n.to_numpy())
-    de = tr.gnss_e.to_numpy(float)[ok] - te
-    dn = tr.gnss_n.to_numpy(float)[ok] - tn
-    return float(np.sqrt(np.mean(de * de + dn * dn)))
 
 
 def _interp(x: np.ndarray, has: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -149,7 +127,7 @@ def main() -> int:
         for case in CASES:
             for seed in seeds:
                 sim, drive = _drive(sc, seed, case, args.duration)
-                ref = _reference(sim)
+                ref = sim.reference()
                 for name in args.filters.split(","):
                     for smooth in (False, True):
                         p = _params(name, smooth)
@@ -157,9 +135,11 @@ def main() -> int:
                         hint = estimate_gnss_offset(r0.track)
                         r1 = fuse(copy.deepcopy(drive), p, ref, auto_gnss_offset=True)
                         label = name + (" + RTS" if smooth else "")
-                        print(f"| {sc} s{seed} | {case} | {label} | {_fixes_rmse(r0):.2f} | "
-                              f"{_rmse(r0):.2f} | {hint.offset_s:+.3f} +-{hint.stderr_s:.3f} | "
-                              f"{_rmse(r1):.2f} | {r1.gnss_offset_s:+.3f} |", flush=True)
+                        fixes = r0.gnss_only_summary()["rmse_m"]
+                        print(f"| {sc} s{seed} | {case} | {label} | {fixes:.2f} | "
+                              f"{r0.summary()['rmse_m']:.2f} | "
+                              f"{hint.offset_s:+.3f} +-{hint.stderr_s:.3f} | "
+                              f"{r1.summary()['rmse_m']:.2f} | {r1.gnss_offset_s:+.3f} |", flush=True)
     print()
     print("| drive | case | along: fixes vs odometer, s | across: fixes vs gyro, s |")
     print("|---|---|---|---|")

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import dataclasses
 import sys
 import time
 import warnings
@@ -28,7 +27,7 @@ from dr_rate import graph_rmse  # noqa: E402
 
 from gpsdr_cli import config  # noqa: E402
 from gpsdr_cli.simulate import simulate_drive  # noqa: E402
-from gpsdr_cli.testing.faults import drop_streams  # noqa: E402
+from gpsdr_cli.testing.faults import drop_streams, with_drive  # noqa: E402
 from gpsdr_cli.testing.sim import run_filter  # noqa: E402
 
 FILTERS = ("ekf", "aekf", "fkf", "fafkf")
@@ -54,7 +53,7 @@ def main() -> int:
         sim = simulate_drive("urban_nlos", seed, args.duration, gyro_rate_hz=args.rate,
                              odo_rate_hz=args.rate)
         if args.no_odometer:
-            sim = dataclasses.replace(sim, drive=drop_streams(sim.drive, "odo"))
+            sim = with_drive(sim, drop_streams(sim.drive, "odo"))
         cells, worst, fixes, screened = [], 0.0, float("nan"), 0
         for name in FILTERS:
             pair = []

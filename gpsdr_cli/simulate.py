@@ -63,6 +63,7 @@ from .conventions import FIX_GPS, FIX_NONE, NS_PER_S
 from .errors import UsageError
 from .geodesy import LocalFrame
 from .io.drive import Drive, ForwardAccel, GnssFixes, Odometry, Source, YawRates
+from .io.reference import Reference
 
 SCENARIOS: tuple[str, ...] = ("open_sky", "urban_canyon", "tunnels", "stop_and_go", "one_hour",
                               "urban_nlos", "rtk", "no_odometer")
@@ -139,6 +140,13 @@ class SimDrive:
     scenario: str
     seed: int
     gnss_errors: pd.DataFrame = field(default_factory=pd.DataFrame)
+
+    def reference(self) -> Reference:
+        """The truth as a reference trajectory (``gpsdr fuse --reference``), no altitude."""
+        t = self.truth
+        return Reference(t_ns=t["t_ns"].to_numpy(np.int64), lat_deg=t["lat"].to_numpy(float),
+                         lon_deg=t["lon"].to_numpy(float), alt_m=np.full(len(t), np.nan),
+                         source=f"simulated {self.scenario} seed {self.seed}")
 
 
 # --------------------------------------------------------------------------- route

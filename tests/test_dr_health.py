@@ -163,13 +163,10 @@ def test_reflected_signals_without_an_odometer_are_said_and_graph_suggested() ->
     (26.6 m with the Doppler sigma of [gnss] nlos_velocity_sd_mps).  The summary now says so
     and names --smooth graph (16.6 m there); with the odometer the screen runs and the
     warning is the screen's own."""
-    from gpsdr_cli.io.reference import Reference
     from gpsdr_cli.pipeline import fuse
 
     sim = simulate_drive("urban_nlos", 5, 300.0)
-    t = sim.truth
-    ref = Reference(t["t_ns"].to_numpy(), t["lat"].to_numpy(), t["lon"].to_numpy(),
-                    np.full(len(t), np.nan), "truth")
+    ref = sim.reference()
     no_odo = F.drop_streams(sim.drive, "odo")
     res = fuse(copy.deepcopy(no_odo), config.defaults(), ref)
     said = [w for w in res.drive_warnings if "nothing outvotes" in w]

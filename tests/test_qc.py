@@ -221,13 +221,7 @@ def test_fused_separation_is_that_of_independent_passes(open_sky: simulate.SimDr
 
 
 def test_release_arrays_keeps_the_summaries(open_sky: simulate.SimDrive) -> None:
-    from gpsdr_cli.io.reference import Reference
-
-    truth = open_sky.truth
-    ref = Reference(t_ns=truth["t_ns"].to_numpy(np.int64), lat_deg=truth["lat"].to_numpy(float),
-                    lon_deg=truth["lon"].to_numpy(float), alt_m=np.full(len(truth), np.nan),
-                    source="truth")
-    res = pipeline.fuse(open_sky.drive, config.defaults(), ref)
+    res = pipeline.fuse(open_sky.drive, config.defaults(), open_sky.reference())
     fixes, track = res.gnss_only_summary(), res.summary()
     assert 0.5 < fixes["rmse_m"] < 5.0 and track["rmse_m"] < fixes["rmse_m"]
     res.release_arrays()
