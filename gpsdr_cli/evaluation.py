@@ -209,7 +209,7 @@ def gnss_only_errors(epochs_or_track: Any, reference_en: pd.DataFrame) -> np.nda
 
 
 def outage_runs(flag: np.ndarray) -> list[tuple[int, int]]:
-    """(first, last) index of every run of True in ``flag`` (:func:`gpsdr_cli.align.true_runs`)."""
+    """(first, last) index of every run of True in ``flag`` (:func:`gpsdr_cli.epochs.true_runs`)."""
     starts, ends = true_runs(flag)
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
