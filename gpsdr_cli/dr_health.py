@@ -82,6 +82,13 @@ def _persistent(t_ns: np.ndarray, bad: np.ndarray, min_run_s: float, pad_s: floa
     return out
 
 
+def _longest_run_s(t_ns: np.ndarray, flag: np.ndarray) -> float:
+    """The longest stretch of ``flag`` (s, first to last flagged stamp of a run)."""
+    starts, ends = _runs(flag)
+    return max(((t_ns[b - 1] - t_ns[a]) / NS_PER_S for a, b in zip(starts, ends, strict=True)),
+               default=0.0)
+
+
 def clipped_gyro(rate_radps: np.ndarray, min_rate_radps: float, min_samples: int,
                  pile_up: float) -> tuple[np.ndarray, list[float]]:
     """Samples at a clipping limit, and the limits found (rad/s, signed).
@@ -189,21 +196,21 @@ def odometer_mismatch(odo_t: np.ndarray, odo_v: np.ndarray, fix_t: np.ndarray,
         if turning.any() and not why:
             why = "it reads 0 m/s while the gyro turns"
         bad |= turning
+    caught = _persistent(odo_t, bad, p["min_run_s"], 0.0)
     bad = _persistent(odo_t, bad, p["min_run_s"], 0.5)
     # an odometer caught reading 0 while the car moved is not believed for the rest of that
     # run of zeros (through GNSS gaps, where nothing can check it) unless the GNSS says stopped.
     # A run that began with a drop no brake gives is a dropout; one that began as a stop is
-    # blamed only on ZERO_EVIDENCE_S of motion: reflected signals fake a few m/s at a stop
-    # (Doppler and positions alike), and a real stop left out leaves the heading to them
+    # blamed only on ZERO_EVIDENCE_S of motion without a break: a car that drove off keeps
+    # moving, while reflected signals fake bursts of a few m/s at a stop (Doppler and
+    # positions alike), and a real stop left out leaves the heading to them
     starts, ends = _runs(np.abs(odo_v) < STOPPED_MPS)
     for a, b in zip(starts, ends, strict=True):
         if not bad[a:b].any():
             continue
         before = np.interp(odo_t[a] - DROP_LOOKBACK_S * NS_PER_S, odo_t[:a + 1], odo_v[:a + 1])
         abrupt = a > 0 and before > MAX_DECEL_MPS2 * DROP_LOOKBACK_S
-        dt_s = np.diff(odo_t[a:min(b + 1, n)]) / NS_PER_S  # each sample to the next
-        caught_s = float(np.sum(dt_s[bad[a:a + len(dt_s)]]))
-        bad[a:b] = abrupt or caught_s >= ZERO_EVIDENCE_S
+        bad[a:b] = abrupt or _longest_run_s(odo_t[a:b], caught[a:b]) >= ZERO_EVIDENCE_S
         if confirmed_stop is not None:
             bad[a:b] &= ~confirmed_stop[a:b]
     return bad, why
