@@ -51,7 +51,8 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 info["nlos_screen_skipped"] = "the dead reckoning is unhealthy"
             if info.get("nlos_screened"):  # the fixes left are judged afresh
                 model_epochs, model_params = gnss_error_model(
-                    dataclasses.replace(epochs, has_gnss=screened.has_gnss), params)
+                    dataclasses.replace(epochs, has_gnss=screened.has_gnss), params,
+                    vector=False)
             if epochs.dr_unhealthy:
                 model_params = follow_the_fixes(model_params)
                 info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"

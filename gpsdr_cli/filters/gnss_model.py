@@ -20,6 +20,15 @@ receiver's own figures cannot say:
   becomes ``nlos_err_sd_m``, so they let the dead reckoning carry the shape and average
   the fixes over the bias's correlation time instead of following each step (fkf/fafkf
   keep their two-regime bias model: a larger sigma there was worse on the NLOS scenario).
+  The distance alone misses a step across the street at speed (a 20-m chord with a 20-m
+  sideways ramp is only 8 m longer), and 70 % of reflected-signal offsets on a street lie
+  across it; with a gyro and an odometer the chord is also compared as a vector with the
+  dead reckoning's own displacement, turned onto east/north by the local median of all
+  chords' rotation (most chords lie inside one offset's plateau and are right even where
+  most fixes are reflected).  A drive where at least ``nlos_vector_share`` of the fixes
+  sit in runs of ``nlos_vector_run_s`` or more of vector mismatch beyond ``nlos_mismatch_m``
+  is an NLOS drive too, when the dead reckoning is healthy (the per-fix sigmas still come
+  from the distance check).
   Without an odometer the receiver's Doppler velocity carries ekf/aekf's speed, and
   reflected signals bias it by metres per second: its sigma becomes at least
   ``nlos_velocity_sd_mps`` (fkf/fafkf keep theirs: 2 m/s put them at the fixes' error).
@@ -93,10 +102,74 @@ def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
     return out
 
 
-def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
+#: window (s) of the local median that turns the dead reckoning's chords onto east/north:
+#: a MEMS gyro's bias of 0.3 deg/s turns them by 0.08 rad across it
+VECTOR_WINDOW_S = 30.0
+#: a chord shorter than this (m), GNSS or dead reckoning, has no direction to vote with
+VECTOR_MIN_CHORD_M = 3.0
+
+
+def _held(has: np.ndarray, values: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each epoch's latest reading (0 before the first), and a counter that steps at every
+    epoch whose reading is older than ``SPEED_MAX_AGE_S`` (a held reading is no measurement)."""
+    idx = np.maximum.accumulate(np.where(has & np.isfinite(values), np.arange(len(has)), -1))
+    age = np.where(idx >= 0, (t_ns - t_ns[np.maximum(idx, 0)]) / NS_PER_S, np.inf)
+    return (np.where(idx >= 0, values[np.maximum(idx, 0)], 0.0),
+            np.concatenate(([0], np.cumsum(age > SPEED_MAX_AGE_S))))
+
+
+def chord_vector_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
+    """Per usable fix, | (p_i - p_j) - R (d_i - d_j) | (m): the chord to the fix nearest
+    ``lag_s`` before, against the dead reckoning's displacement (odometer speed along the
+    gyro's integrated heading, in its own frame) turned by R, the local median over
+    ``VECTOR_WINDOW_S`` of every chord's rotation.  NaN where not judged, and everywhere on
+    a drive without both a gyro and an odometer."""
+    f = np.flatnonzero(epochs.has_gnss)
+    out = np.full(len(f), np.nan)
+    if len(f) < 3 or not (epochs.has_gyro.any() and epochs.has_odo.any()):
+        return out
+    import pandas as pd
+
+    dt = epochs.dt_s[1:]
+    rate, stale_gyro = _held(epochs.has_gyro, epochs.yaw_rate_radps, epochs.t_ns)
+    speed, stale_odo = _held(epochs.has_odo, epochs.odo_speed_mps, epochs.t_ns)
+    psi = np.concatenate(([0.0], np.cumsum(rate[:-1] * dt)))
+    speed = np.abs(speed[:-1]) * dt
+    dr = np.concatenate(([0.0], np.cumsum(speed * np.exp(1j * psi[:-1]))))  # east + i north
+    t = epochs.t_ns[f] / NS_PER_S
+    j = np.clip(np.searchsorted(t, t - lag_s), 0, len(f) - 1)
+    ok = (t - t[j] >= 0.5 * lag_s) & (t - t[j] <= 1.5 * lag_s)
+    ok &= (stale_odo[f + 1] == stale_odo[f[j]]) & (stale_gyro[f + 1] == stale_gyro[f[j]])
+    c = (epochs.gnss_e[f] - epochs.gnss_e[f[j]]) + 1j * (epochs.gnss_n[f] - epochs.gnss_n[f[j]])
+    d = dr[f] - dr[f[j]]
+    vote = ok & (np.abs(c) > VECTOR_MIN_CHORD_M) & (np.abs(d) > VECTOR_MIN_CHORD_M)
+    if not vote.any():
+        return out
+    z = np.full(len(f), np.nan + 0j)
+    z[vote] = c[vote] / d[vote]
+    z[vote] /= np.abs(z[vote])
+    win = max(int(round(VECTOR_WINDOW_S / max(float(np.median(np.diff(t))), 1e-3))), 5)
+    rot = (pd.Series(z.real).rolling(win, center=True, min_periods=5).median().to_numpy()
+           + 1j * pd.Series(z.imag).rolling(win, center=True, min_periods=5).median().to_numpy())
+    judged = ok & np.isfinite(rot) & (np.abs(rot) > 0)
+    out[judged] = np.abs(c[judged] - rot[judged] / np.abs(rot[judged]) * d[judged])
+    return out
+
+
+def _run_share(t_s: np.ndarray, flagged: np.ndarray, known: np.ndarray, run_s: float) -> float:
+    """Share of the known fixes inside runs of ``flagged`` fixes lasting ``run_s`` or more."""
+    starts, last = true_runs(flagged)
+    long_run = (t_s[last] - t_s[starts]) >= run_s
+    return float(np.sum((last - starts + 1)[long_run])) / max(int(known.sum()), 1)
+
+
+def gnss_error_model(epochs: Epochs, params: Params, *,
+                     vector: bool = True) -> tuple[Epochs, Params]:
     """``(epochs, params)`` with each fix's sigma and the GNSS error states' sigmas for
     this drive's fix quality and its agreement with the dead reckoning, the same for every
-    filter; ``epochs.nlos_drive`` says whether the drive has reflected signals (NLOS)."""
+    filter; ``epochs.nlos_drive`` says whether the drive has reflected signals (NLOS).
+    ``vector``: the vector chord may call the drive NLOS (not when the fixes the NLOS screen
+    kept are judged again: those agree with the dead reckoning by construction)."""
     g = params["gnss"]
     if epochs.rtk_fixed_share >= float(g["rtk_share"]):
         return rtk_error_model(epochs, params)
@@ -105,20 +178,28 @@ def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
         return epochs, params
     mis = chord_mismatch_m(epochs, float(g["nlos_lag_s"]))
     known = np.isfinite(mis)
-    if not known.any():
-        return epochs, params
-    # a step of NLOS error disagrees over every chord that spans its ramp: a run of
-    # disagreeing fixes; a lone outlier (one fix, left to the gate) gives no run
-    starts, last = true_runs(known & (mis > thr))
     t_fix = epochs.t_ns[epochs.has_gnss] / NS_PER_S
-    long_run = (t_fix[last] - t_fix[starts]) >= float(g["nlos_run_s"])
-    if not long_run.any():
-        return epochs, params
     bad = np.zeros(len(mis), bool)
-    mark = np.zeros(len(mis) + 1, np.int64)
-    np.add.at(mark, starts[long_run], 1)
-    np.add.at(mark, last[long_run] + 1, -1)
-    bad = np.cumsum(mark[:-1]) > 0
+    if known.any():
+        # a step of NLOS error disagrees over every chord that spans its ramp: a run of
+        # disagreeing fixes; a lone outlier (one fix, left to the gate) gives no run
+        starts, last = true_runs(known & (mis > thr))
+        long_run = (t_fix[last] - t_fix[starts]) >= float(g["nlos_run_s"])
+        mark = np.zeros(len(mis) + 1, np.int64)
+        np.add.at(mark, starts[long_run], 1)
+        np.add.at(mark, last[long_run] + 1, -1)
+        bad = np.cumsum(mark[:-1]) > 0
+    nlos = bool(known.any() and bad.sum() >= float(g["nlos_drive_share"]) * known.sum())
+    # the vector chord takes the dead reckoning's shape as the truth: not with a clipping
+    # gyro or a gappy odometer
+    if vector and not nlos and not epochs.dr_unhealthy and float(g["nlos_vector_share"]) > 0.0:
+        vec = chord_vector_mismatch_m(epochs, float(g["nlos_lag_s"]))
+        vknown = np.isfinite(vec)
+        nlos = bool(vknown.any()) and _run_share(
+            t_fix, vknown & (vec > thr), vknown,
+            float(g["nlos_vector_run_s"])) >= float(g["nlos_vector_share"])
+    if not (bad.any() or nlos):
+        return epochs, params
     f = np.flatnonzero(epochs.has_gnss)
     scale = np.ones(len(f))
     scale[bad] = mis[bad] / thr
@@ -126,7 +207,6 @@ def gnss_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     sd_n = epochs.gnss_sd_n.copy()
     sd_e[f] *= scale
     sd_n[f] *= scale
-    nlos = bool(bad.sum() >= float(g["nlos_drive_share"]) * known.sum())
     epochs = dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n, nlos_drive=nlos)
     if nlos:
         params = copy.deepcopy(params)

@@ -252,8 +252,9 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # An NLOS drive (by the quality model) keeps white fixes under the tight kernel: with
     # error states the NLOS steps trade between the error state and the track, and the
     # solve crawls (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#graph-smoother).
-    # (a share of NLOS-marked fixes: a lower bar than the filters' NLOS drive)
-    nlos_drive = nlos_share >= float(gp["nlos_share"])
+    # (a share of NLOS-marked fixes: a lower bar than the filters' NLOS drive, or the
+    # filters' NLOS drive itself, which the vector chord may call with few fixes marked)
+    nlos_drive = nlos_share >= float(gp["nlos_share"]) or epochs.nlos_drive
     # An RTK drive too: centimetre fixes against a 0.3-m error state did not converge.
     rtk_drive = epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])
     err_on = bool(gp["gnss_err_states"]) and not nlos_drive and not rtk_drive
