@@ -23,11 +23,12 @@ receiver's own figures cannot say:
   The distance alone misses a step across the street at speed (a 20-m chord with a 20-m
   sideways ramp is only 8 m longer), and 70 % of reflected-signal offsets on a street lie
   across it; with a gyro and an odometer the chord is also compared as a vector with the
-  dead reckoning's own displacement, turned onto east/north by the local median of all
-  chords' rotation (most chords lie inside one offset's plateau and are right even where
-  most fixes are reflected).  A drive where at least ``nlos_vector_share`` of the fixes
-  sit in runs of ``nlos_vector_run_s`` or more of vector mismatch beyond ``nlos_mismatch_m``
-  is an NLOS drive too, when the dead reckoning is healthy (the per-fix sigmas still come
+  dead reckoning's own displacement over ``nlos_vector_lag_s``, turned onto east/north by
+  the local median of all chords' rotation (most chords lie inside one offset's plateau
+  and are right even where most fixes are reflected).  A drive where at least
+  ``nlos_vector_share`` of the fixes sit in runs of ``nlos_vector_run_s`` or more of vector
+  mismatch beyond ``nlos_vector_mismatch_m`` is an NLOS drive too (a step holds its
+  offset for the whole lag; a canyon's burst of outliers, shorter than the run, does not), when the dead reckoning is healthy (the per-fix sigmas still come
   from the distance check).
   Without an odometer the receiver's Doppler velocity carries ekf/aekf's speed, and
   reflected signals bias it by metres per second: its sigma becomes at least
@@ -193,10 +194,10 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     # the vector chord takes the dead reckoning's shape as the truth: not with a clipping
     # gyro or a gappy odometer
     if vector and not nlos and not epochs.dr_unhealthy and float(g["nlos_vector_share"]) > 0.0:
-        vec = chord_vector_mismatch_m(epochs, float(g["nlos_lag_s"]))
+        vec = chord_vector_mismatch_m(epochs, float(g["nlos_vector_lag_s"]))
         vknown = np.isfinite(vec)
         nlos = bool(vknown.any()) and _run_share(
-            t_fix, vknown & (vec > thr), vknown,
+            t_fix, vknown & (vec > float(g["nlos_vector_mismatch_m"])), vknown,
             float(g["nlos_vector_run_s"])) >= float(g["nlos_vector_share"])
     if not (bad.any() or nlos):
         return epochs, params
