@@ -69,6 +69,33 @@ def chi2_1(prob: float) -> float:
     return NormalDist().inv_cdf(0.5 * (1.0 + prob)) ** 2
 
 
+def wheels_moving(epochs: Epochs, t_s: np.ndarray, o: np.ndarray, speed: np.ndarray,
+                  v_min: float) -> np.ndarray:
+    """Per epoch: False where a fresh odometer record (at most ``STALE_ODO_S`` old, ``speed``
+    at the epochs ``o``) reads below ``v_min`` m/s, else True (no odometer there: no say).
+
+    With an odometer the wheels, not the receiver's Doppler nor the filter's predicted
+    velocity, say whether the car moves.  Where they say it is slower than ``[fkf]
+    course_min_speed_mps`` the receiver's speed and course are not a course or a speed for
+    :func:`course_correction` and :func:`odometer_scale`: a reflected (NLOS) signal's
+    Doppler is biased by metres per second, and the NLOS screen judges a fix by its
+    position only (``simulate_drive("urban_nlos", 33, 283.0, gyro_rate_hz=5.0,
+    odo_rate_hz=5.0)``: a 13-s stop's kept fixes read 3.0-3.8 m/s at 76-98 deg off the
+    road while the odometer read 0; the course correction took them for the heading and
+    interpolated it through the 76 s of screened fixes after them, fkf 194 m off, and the
+    odometer scale read 1.106 for 1.020).  Where they say it is slower than ``[standstill]
+    omega_min_speed_mps`` there is no heading row (:func:`prepare`)."""
+    n = len(t_s)
+    if not len(o):
+        return np.ones(n, bool)
+    last = np.maximum.accumulate(np.where(epochs.has_odo, np.arange(n), -1))
+    lastc = np.maximum(last, 0)
+    fresh = (last >= 0) & (t_s - t_s[lastc] <= STALE_ODO_S)
+    held = np.zeros(n)
+    held[o] = speed
+    return ~fresh | (held[lastc] >= v_min)
+
+
 def heading_alignment(epochs: Epochs, t_s: np.ndarray, params: Params) -> tuple[float, float, str]:
     """(t_a s, heading at t_a rad, source) for aligning the integrated gyro heading."""
     v_min = params["standstill"]["omega_min_speed_mps"]
@@ -177,7 +204,7 @@ def outage_headings(epochs: Epochs, t_s: np.ndarray, o: np.ndarray, params: Para
 
 
 def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np.ndarray,
-                      params: Params) -> np.ndarray:
+                      params: Params, moving: np.ndarray | None = None) -> np.ndarray:
     """Slow correction (rad) of the integrated gyro heading towards the GNSS course, at ``tg``.
 
     ``d_k = wrap(course_k - psi_g(t_k))`` at fixes with a course and speed >=
@@ -191,13 +218,16 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     Each window's mean belongs to the mean time of the fixes in it, not to the
     fix it is centred on: next to a GNSS outage the window is one-sided, and a
     gyro bias makes ``d`` a ramp, so the mean placed at the fix lagged it and the
-    track left an outage far off.
+    track left an outage far off.  ``moving`` (per epoch, :func:`wheels_moving`): only
+    the fixes it marks give a course.
     Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     fp = params["fkf"]
     window = fp["heading_course_window_s"]
     ok = (epochs.has_gnss & np.isfinite(epochs.gnss_course_rad)
           & (epochs.gnss_speed_mps >= fp["course_min_speed_mps"]))
+    if moving is not None:
+        ok &= moving
     k = np.flatnonzero(ok)
     if window <= 0 or len(k) < 2:
         return np.zeros(len(tg))
@@ -422,7 +452,7 @@ def windowed_ratio(tk: np.ndarray, num: np.ndarray, den: np.ndarray, window_s: f
 
 
 def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np.ndarray,
-                   params: Params) -> tuple[np.ndarray, float]:
+                   params: Params, moving: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Scale factor (per odometer record at ``t_odo``) taking the odometer speed to the GNSS's.
 
     ``k = sum(gnss speed) / sum(odometer speed)`` over the fixes with a speed >=
@@ -431,8 +461,8 @@ def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np
     interpolated to the fix times; interpolated linearly to the odometer
     records; clamped to [0.8, 1.25] (a ratio outside is a unit error, not a
     wheel).  A post-processor sees the whole drive, so an outage is bridged
-    from both ends.  Needs ``MIN_SCALE_FIXES`` such fixes, else 1.  Returns
-    (k per record, median k).
+    from both ends.  Needs ``MIN_SCALE_FIXES`` such fixes, else 1; with ``moving``
+    (:func:`wheels_moving`) only the fixes it marks.  Returns (k per record, median k).
     """
     fp = params["fkf"]
     window = fp["odo_scale_window_s"]
@@ -442,6 +472,8 @@ def odometer_scale(epochs: Epochs, t_s: np.ndarray, t_odo: np.ndarray, speed: np
     ok = (epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps)
           & (epochs.gnss_speed_mps >= fp["course_min_speed_mps"])
           & (t_s >= t_odo[0]) & (t_s <= t_odo[-1]))
+    if moving is not None:
+        ok &= moving
     if len(t_odo) > 1:  # not fitted across an odometer dropout (its speed there is unknown)
         gap = dropouts(np.diff(t_odo))
         j = np.searchsorted(t_odo, t_s, side="right") - 1     # the record at or before each epoch
@@ -607,6 +639,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     if len(o):
         speed, odo_spikes = despike(np.abs(epochs.odo_speed_mps[o]), fp["odo_spike_mps"])
     eps_w = multipath_regime(epochs, params)
+    # the receiver's course and speed only where the wheels do not say the car is slower
+    moving = wheels_moving(epochs, t_s, o, speed if len(o) else np.zeros(0),
+                           fp["course_min_speed_mps"])
     # positions only (GGA without RMC/VTG, a ROS NavSatFix): course and odometer scale
     # from chords between fixes instead of the receiver's course and speed
     v_share = epochs.velocity_share
@@ -628,13 +663,23 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
             if len(o):      # the chords again, dead-reckoned with the corrected heading
                 chords = fix_chords(epochs, t_s, tg, psi_g, t_s[o], speed, eps_w, params)
         else:
-            psi_g = psi_g + course_correction(epochs, t_s, tg, psi_g, params)
+            psi_g = psi_g + course_correction(epochs, t_s, tg, psi_g, params, moving)
         slot = np.floor(tg / max(fp["heading_interval_s"], 1e-9))
         if np.all(slot[1:] >= slot[:-1]):               # epochs are in time order: O(n)
             first = np.flatnonzero(np.concatenate(([True], slot[1:] != slot[:-1])))
         else:
             _, first = np.unique(slot, return_index=True)
         use = g[first]
+        # no heading row where the wheels say the car is slower than omega_min: the kernel
+        # skips the row below that *predicted* speed, but at a stop the constant-acceleration
+        # model carries the velocity through zero to a direction that is noise, and a heading
+        # row linearised there (d atan2 / dv ~ 1/v) threw it to metres per second, which the
+        # zero-velocity rows then read, through the row's covariance, as heading error q_w
+        # (urban_nlos seed 19 fafkf: q_w 2.5 -> 58 deg at a stop, the track 143 m off after it)
+        slow = ~wheels_moving(epochs, t_s, o, speed if len(o) else np.zeros(0),
+                              sp["omega_min_speed_mps"])
+        first = first[~slow[use]]
+        use = use[~slow[use]]
         theta[use] = np.angle(np.exp(1j * psi_g[first]))     # wrapped to (-pi, pi]
         if from_fixes:      # the heading at the start: the corrected gyro heading
             psi0 = float(np.interp(0.0, tg, psi_g))
@@ -660,7 +705,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         if chords is not None:
             scale, odo_scale = chord_odometer_scale(chords, t_s[o], params)
         else:
-            scale, odo_scale = odometer_scale(epochs, t_s, t_s[o], speed, params)
+            scale, odo_scale = odometer_scale(epochs, t_s, t_s[o], speed, params, moving)
         speed = speed * scale
         rows, d_rows, tm_rows = distance_rows(t_s, o, speed, fp["distance_interval_s"],
                                               np.isfinite(theta))
