@@ -27,9 +27,10 @@ receiver's own figures cannot say:
   the local median of all chords' rotation (most chords lie inside one offset's plateau
   and are right even where most fixes are reflected).  A drive where at least
   ``nlos_vector_share`` of the fixes sit in runs of ``nlos_vector_run_s`` or more of vector
-  mismatch beyond ``nlos_vector_mismatch_m`` is an NLOS drive too (a step holds its
-  offset for the whole lag; a canyon's burst of outliers, shorter than the run, does not), when the dead reckoning is healthy (the per-fix sigmas still come
-  from the distance check).
+  mismatch beyond ``nlos_vector_mismatch_m`` is an NLOS drive too, when the dead
+  reckoning is healthy (a step holds its offset for the whole lag; a canyon's burst of
+  outliers, shorter than the run, does not).  The per-fix sigmas still come from the
+  distance check.
   Without an odometer the receiver's Doppler velocity carries ekf/aekf's speed, and
   reflected signals bias it by metres per second: its sigma becomes at least
   ``nlos_velocity_sd_mps`` (fkf/fafkf keep theirs: 2 m/s put them at the fixes' error).
