@@ -150,9 +150,13 @@ def chord_vector_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
     z = np.full(len(f), np.nan + 0j)
     z[vote] = c[vote] / d[vote]
     z[vote] /= np.abs(z[vote])
-    win = max(int(round(VECTOR_WINDOW_S / max(float(np.median(np.diff(t))), 1e-3))), 5)
-    rot = (pd.Series(z.real).rolling(win, center=True, min_periods=5).median().to_numpy()
-           + 1j * pd.Series(z.imag).rolling(win, center=True, min_periods=5).median().to_numpy())
+    # a window in time, not in fixes: across a GNSS outage the votes come from another
+    # stretch of the gyro's drift (a tunnel drive run backwards read 25 deg against 3 deg)
+    at = pd.to_timedelta(t - t[0], unit="s")
+    window = pd.Timedelta(seconds=VECTOR_WINDOW_S)
+    rot = (pd.Series(z.real, index=at).rolling(window, center=True, min_periods=5).median().to_numpy()
+           + 1j * pd.Series(z.imag, index=at).rolling(window, center=True,
+                                                      min_periods=5).median().to_numpy())
     judged = ok & np.isfinite(rot) & (np.abs(rot) > 0)
     out[judged] = np.abs(c[judged] - rot[judged] / np.abs(rot[judged]) * d[judged])
     return out
