@@ -69,10 +69,22 @@ def chi2_1(prob: float) -> float:
     return NormalDist().inv_cdf(0.5 * (1.0 + prob)) ** 2
 
 
-def wheels_moving(epochs: Epochs, t_s: np.ndarray, o: np.ndarray, speed: np.ndarray,
-                  v_min: float) -> np.ndarray:
-    """Per epoch: False where a fresh odometer record (at most ``STALE_ODO_S`` old, ``speed``
-    at the epochs ``o``) reads below ``v_min`` m/s, else True (no odometer there: no say).
+def odometer_held(epochs: Epochs, t_s: np.ndarray, o: np.ndarray,
+                  speed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per epoch: whether an odometer record at most ``STALE_ODO_S`` old exists, and that
+    record's speed from ``speed`` (m/s, one per epoch of ``o``; 0 before the first)."""
+    n = len(t_s)
+    last = np.maximum.accumulate(np.where(epochs.has_odo, np.arange(n), -1))
+    lastc = np.maximum(last, 0)
+    fresh = (last >= 0) & (t_s - t_s[lastc] <= STALE_ODO_S)
+    held = np.zeros(n)
+    held[o] = speed
+    return fresh, held[lastc]
+
+
+def wheels_moving(fresh: np.ndarray, held: np.ndarray, v_min: float) -> np.ndarray:
+    """Per epoch: False where a fresh odometer record (:func:`odometer_held`) reads below
+    ``v_min`` m/s, else True (no odometer there: no say).
 
     With an odometer the wheels, not the receiver's Doppler nor the filter's predicted
     velocity, say whether the car moves.  Where they say it is slower than ``[fkf]
@@ -85,15 +97,7 @@ def wheels_moving(epochs: Epochs, t_s: np.ndarray, o: np.ndarray, speed: np.ndar
     interpolated it through the 76 s of screened fixes after them, fkf 194 m off, and the
     odometer scale read 1.106 for 1.020).  Where they say it is slower than ``[standstill]
     omega_min_speed_mps`` there is no heading row (:func:`prepare`)."""
-    n = len(t_s)
-    if not len(o):
-        return np.ones(n, bool)
-    last = np.maximum.accumulate(np.where(epochs.has_odo, np.arange(n), -1))
-    lastc = np.maximum(last, 0)
-    fresh = (last >= 0) & (t_s - t_s[lastc] <= STALE_ODO_S)
-    held = np.zeros(n)
-    held[o] = speed
-    return ~fresh | (held[lastc] >= v_min)
+    return ~fresh | (held >= v_min)
 
 
 def heading_alignment(epochs: Epochs, t_s: np.ndarray, params: Params) -> tuple[float, float, str]:
@@ -640,8 +644,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         speed, odo_spikes = despike(np.abs(epochs.odo_speed_mps[o]), fp["odo_spike_mps"])
     eps_w = multipath_regime(epochs, params)
     # the receiver's course and speed only where the wheels do not say the car is slower
-    moving = wheels_moving(epochs, t_s, o, speed if len(o) else np.zeros(0),
-                           fp["course_min_speed_mps"])
+    wheels = (odometer_held(epochs, t_s, o, speed) if len(o)
+              else (np.zeros(n, bool), np.zeros(n)))
+    moving = wheels_moving(*wheels, fp["course_min_speed_mps"])
     # positions only (GGA without RMC/VTG, a ROS NavSatFix): course and odometer scale
     # from chords between fixes instead of the receiver's course and speed
     v_share = epochs.velocity_share
@@ -676,8 +681,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         # row linearised there (d atan2 / dv ~ 1/v) threw it to metres per second, which the
         # zero-velocity rows then read, through the row's covariance, as heading error q_w
         # (urban_nlos seed 19 fafkf: q_w 2.5 -> 58 deg at a stop, the track 143 m off after it)
-        slow = ~wheels_moving(epochs, t_s, o, speed if len(o) else np.zeros(0),
-                              sp["omega_min_speed_mps"])
+        slow = ~wheels_moving(*wheels, sp["omega_min_speed_mps"])
         first = first[~slow[use]]
         use = use[~slow[use]]
         theta[use] = np.angle(np.exp(1j * psi_g[first]))     # wrapped to (-pi, pi]
@@ -713,13 +717,8 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
         dist[rows] = d_rows
         speed0 = float(speed[0])
         if sp["enabled"]:
-            last = np.maximum.accumulate(np.where(epochs.has_odo, np.arange(n), -1))
-            have = last >= 0
-            lastc = np.maximum(last, 0)
-            fresh = have & (t_s - t_s[lastc] <= STALE_ODO_S)
-            held = np.zeros(n)
-            held[o] = speed
-            static = fresh & (held[lastc] < sp["speed_mps"])
+            fresh, held = odometer_held(epochs, t_s, o, speed)   # the scaled speed
+            static = fresh & (held < sp["speed_mps"])
             if gnss_on and not fresh.all():  # a silent odometer: the receiver's speed says when
                 gnss_static = standstill_from_gnss(epochs, t_s, params,
                                                    (t_s[g], psi_g) if len(g) else None)

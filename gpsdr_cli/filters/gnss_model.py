@@ -73,6 +73,15 @@ def pdop_factors(pdop: np.ndarray, g: dict) -> tuple[np.ndarray, np.ndarray]:
     raise ConfigError(f"gnss.pdop_mode = {mode!r}: expected \"regimes\" or \"continuous\"")
 
 
+def _held(has: np.ndarray, values: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each epoch's latest reading (0 before the first), and a counter that steps at every
+    epoch whose reading is older than ``SPEED_MAX_AGE_S`` (a held reading is no measurement)."""
+    idx = np.maximum.accumulate(np.where(has & np.isfinite(values), np.arange(len(has)), -1))
+    age = np.where(idx >= 0, (t_ns - t_ns[np.maximum(idx, 0)]) / NS_PER_S, np.inf)
+    return (np.where(idx >= 0, values[np.maximum(idx, 0)], 0.0),
+            np.concatenate(([0], np.cumsum(age > SPEED_MAX_AGE_S))))
+
+
 def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
     """Per usable fix, | |p_i - p_j| - DR distance(t_j, t_i) | (m) with j the fix nearest
     ``lag_s`` before i; NaN where no earlier fix is within 1.5 lag or the drive has no
@@ -87,12 +96,10 @@ def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
         has, values = epochs.has_gnss, epochs.gnss_speed_mps
     else:
         return out
-    # each epoch's latest speed reading (0 before the first); a chord is judged only where
-    # that reading is fresh at every epoch it spans: a held reading is no measurement
-    idx = np.maximum.accumulate(np.where(has & np.isfinite(values), np.arange(len(has)), -1))
-    speed = np.where(idx >= 0, np.abs(values[np.maximum(idx, 0)]), 0.0)
-    age = np.where(idx >= 0, (epochs.t_ns - epochs.t_ns[np.maximum(idx, 0)]) / NS_PER_S, np.inf)
-    stale = np.concatenate(([0], np.cumsum(age > SPEED_MAX_AGE_S)))
+    # each epoch's latest speed reading; a chord is judged only where that reading is
+    # fresh at every epoch it spans
+    speed, stale = _held(has, values, epochs.t_ns)
+    speed = np.abs(speed)
     dist = np.concatenate(([0.0], np.cumsum(speed[:-1] * epochs.dt_s[1:])))
     t = epochs.t_ns[f] / NS_PER_S
     j = np.clip(np.searchsorted(t, t - lag_s), 0, len(f) - 1)
@@ -109,15 +116,6 @@ def chord_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
 VECTOR_WINDOW_S = 30.0
 #: a chord shorter than this (m), GNSS or dead reckoning, has no direction to vote with
 VECTOR_MIN_CHORD_M = 3.0
-
-
-def _held(has: np.ndarray, values: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each epoch's latest reading (0 before the first), and a counter that steps at every
-    epoch whose reading is older than ``SPEED_MAX_AGE_S`` (a held reading is no measurement)."""
-    idx = np.maximum.accumulate(np.where(has & np.isfinite(values), np.arange(len(has)), -1))
-    age = np.where(idx >= 0, (t_ns - t_ns[np.maximum(idx, 0)]) / NS_PER_S, np.inf)
-    return (np.where(idx >= 0, values[np.maximum(idx, 0)], 0.0),
-            np.concatenate(([0], np.cumsum(age > SPEED_MAX_AGE_S))))
 
 
 def chord_vector_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
