@@ -371,9 +371,15 @@ def _drop_far_no_fix(drive: Drive) -> None:
         g, **{f.name: getattr(g, f.name)[keep] for f in dataclasses.fields(g)})
 
 
+def _own_warnings(meta: dict) -> dict:
+    """``meta`` with a warnings list of its own: a run's warnings stay with that run."""
+    return {**meta, "warnings": list(meta.get("warnings", []))}
+
+
 def drop_stray_records(drive: Drive) -> Drive:
     """A copy of ``drive`` without stray-stamped records, counted in its SkipReport."""
-    out = dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped))
+    out = dataclasses.replace(drive, skipped=copy.deepcopy(drive.skipped),
+                              meta=_own_warnings(drive.meta))
     _drop_far_no_fix(out)
     streams = [(name, getattr(out, name)) for name in ("gnss", "gyro", "odo")]
     streams = [(name, s) for name, s in streams if s is not None and len(s)]
@@ -620,6 +626,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
         where = drive.sources[0].path if drive.sources else None
         raise NoDataError(where, "no GNSS, gyro or odometer stream found")
     params = copy.deepcopy(params)
+    drive = dataclasses.replace(drive, meta=_own_warnings(drive.meta))  # the caller's stays
     frame = choose_frame(drive, params)
     from . import clock_check
 

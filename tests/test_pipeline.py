@@ -105,8 +105,13 @@ def test_metadata_names_filter_parameters_frame_and_inputs(result, sample_dir: P
 
 def test_fuse_does_not_change_its_input(drive: Drive, reference) -> None:
     before = copy.deepcopy(drive.skipped.counts)
-    fuse(drive, config.defaults(), reference)
+    meta = copy.deepcopy(drive.meta)
+    first = fuse(drive, config.defaults(), reference)
     assert drive.skipped.counts == before
+    assert drive.meta == meta  # the run's warnings are the run's
+    # a second run says what the first said, once
+    assert fuse(drive, config.defaults(), reference).drive_warnings == first.drive_warnings
+    assert first.drive_warnings
 
 
 def test_reference_is_projected_in_the_same_frame(result, reference) -> None:
