@@ -607,6 +607,85 @@ OFFSET_ITERATIONS = 4
 OFFSET_TOL_S = 0.003
 
 
+def _probe_offset(drive: Drive, params: Params, frame: LocalFrame, progress: Progress | None,
+                  ready: Callable[[], object] | None, key: str, sign: float, start: float,
+                  bounds: tuple[float, float]) -> tuple[float, str]:
+    """The ``[time]`` offset ``key`` (s) at which the fixes and the dead reckoning agree along
+    the track, searched from ``start``, within ``bounds``, and how it was found.  ``sign``:
+    +1 for the GNSS stamps (the estimate is added), -1 for a dead-reckoning stream's.
+
+    From the track's own kinematics, never from the reference: the error statistics against
+    the reference must stay an independent check.  The probe pass is smoothed: a forward
+    track lags the truth by the filter's own delay, which the regression would otherwise read
+    as GNSS latency (ekf +0.19 s vs +0.12 s smoothed on comma2k19).  The fixes' own speed
+    and course pull the probe's velocity toward the GNSS clock, so one estimate falls short
+    of the offset by a share of it; probing again at the estimate until the residual is below
+    OFFSET_TOL_S reaches the fixed point, where the GNSS and the dead reckoning agree."""
+    from .latency import estimate_gnss_offset
+
+    probe = copy.deepcopy(params)
+    probe["filter"]["smooth"] = True
+    probe["filter"]["smoother"] = "rts"
+    lo, hi = bounds
+    value = min(max(start, lo), hi)
+    note = ""
+    for i in range(OFFSET_ITERATIONS):
+        probe["time"][key] = value
+        _, _, probe_track, _ = _run_once(drive, probe, frame, progress, ready)
+        est = estimate_gnss_offset(probe_track)
+        if not (est.identified and math.isfinite(est.offset_s)):
+            if i == 0:
+                note = f"not estimated ({est.reason}); kept {value:+.3f} s"
+            break
+        step = sign * float(est.offset_s)
+        value = min(max(value + step, lo), hi)
+        note = (f"{est.method}, +-{est.stderr_s:.3f} s from {est.n_used} fixes"
+                if math.isfinite(est.stderr_s) else est.method)
+        if abs(est.offset_s) < OFFSET_TOL_S or value in (lo, hi):
+            break
+    return value, note
+
+
+#: the filters whose odometer is read earlier.  fkf and fafkf take the fixes' speed and
+#: course into their heading and odometer scale, which hides the lag on their track and
+#: absorbs it: moved by the lag an ekf pass finds, fkf got worse on every simulated drive
+#: whose odometer or fixes were off (open_sky, 5-Hz CAN: 0.30 -> 0.61 m; decisions/0024)
+LAG_FILTERS = ("ekf", "aekf")
+#: a forward track shows about half of an odometer's lag (0.10-0.12 s of 0.25 s, at 9-13
+#: standard errors on 150-300 s of simulated open sky): this many standard errors call for
+#: the smoothed probes, which decide (a lag of at least HINT_OFFSET_S at their fixed point)
+LAG_MIN_T = 5.0
+
+
+def _odometer_lag(drive: Drive, params: Params, track: pd.DataFrame, result: FilterResult,
+                  auto_gnss_offset: bool) -> float | None:
+    """The odometer's lag (s, > 0) when ekf's or aekf's ``track`` shows the fixes clearly
+    ahead of the dead reckoning along the track (:func:`gpsdr_cli.latency.significant_offset`),
+    else None.
+
+    Fixes ahead of the dead reckoning are either stamped early or met by an odometer that is
+    late.  A receiver stamps a position with the satellites' time, the best clock on the
+    vehicle, while a wheel speed always describes the past (ticks counted over a window, a
+    CAN signal filtered or averaged over its period), so the odometer is read earlier.  On
+    a drive whose fixes really are early (comma2k19 against its reference) the track then
+    keeps the fixes' timing error, as the fixes alone do, instead of lagging behind its
+    changes (decisions/0024).  Only with every offset at 0 and an odometer, never on an
+    NLOS drive (its reflections read as offsets of tenths of a second) or with
+    ``--gnss-offset auto`` (which moves the fixes instead)."""
+    tp = params["time"]
+    if (auto_gnss_offset or drive.odo is None or not bool(tp["odo_lag_auto"])
+            or any(float(tp[k]) != 0.0 for k in ("gnss_offset_s", "odo_offset_s",
+                                                  "gyro_offset_s"))
+            or result.info.get("nlos_drive") or str(params["filter"]["name"]) not in LAG_FILTERS):
+        return None
+    from .latency import significant_offset
+
+    est = significant_offset(track, LAG_MIN_T)
+    if est is None or est.offset_s <= 0.0:
+        return None
+    return float(est.offset_s)
+
+
 def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
          auto_gnss_offset: bool = False, progress: Progress | None = None,
          ready: Callable[[], object] | None = None) -> FuseResult:
@@ -636,37 +715,28 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     offset_auto: float | None = None
     offset_note = ""
     if auto_gnss_offset:
-        from .latency import estimate_gnss_offset
-
         if progress:
             progress("estimating the GNSS time offset")
-        # From the track's own kinematics, never from the reference: the error statistics
-        # against the reference must stay an independent check.  The probe pass is smoothed:
-        # a forward track lags the truth by the filter's own delay, which the regression
-        # would otherwise read as GNSS latency (ekf +0.19 s vs +0.12 s smoothed on comma2k19).
-        probe = copy.deepcopy(params)
-        probe["filter"]["smooth"] = True
-        probe["filter"]["smoother"] = "rts"
-        offset_auto = float(params["time"]["gnss_offset_s"])
-        # The fixes' own speed and course pull the probe's velocity toward the GNSS clock, so
-        # one estimate falls short of the offset by a share of it; probing again at the
-        # estimate until the residual is below OFFSET_TOL_S reaches the fixed point, where
-        # the GNSS and the dead reckoning agree.
-        for i in range(OFFSET_ITERATIONS):
-            probe["time"]["gnss_offset_s"] = offset_auto
-            _, _, probe_track, _ = _run_once(drive, probe, frame, progress, ready)
-            est = estimate_gnss_offset(probe_track)
-            if not (est.identified and math.isfinite(est.offset_s)):
-                if i == 0:
-                    offset_note = f"not estimated ({est.reason}); kept {offset_auto:+.3f} s"
-                break
-            offset_auto += float(est.offset_s)
-            offset_note = (f"{est.method}, +-{est.stderr_s:.3f} s from {est.n_used} fixes"
-                           if math.isfinite(est.stderr_s) else est.method)
-            if abs(est.offset_s) < OFFSET_TOL_S:
-                break
+        offset_auto, offset_note = _probe_offset(
+            drive, params, frame, progress, ready, "gnss_offset_s", +1.0,
+            float(params["time"]["gnss_offset_s"]), (-math.inf, math.inf))
         params["time"]["gnss_offset_s"] = offset_auto
     epochs, result, track, work = _run_once(drive, params, frame, progress, ready, with_qc=True)
+    odo_lag = _odometer_lag(drive, params, track, result, auto_gnss_offset)
+    if odo_lag is not None:
+        from .latency import HINT_OFFSET_S
+
+        if progress:
+            progress("timing the odometer against the fixes")
+        offset, how = _probe_offset(drive, params, frame, progress, ready, "odo_offset_s", -1.0,
+                                    -odo_lag, (-float(params["time"]["dr_clock_min_s"]), 0.0))
+        if offset <= -HINT_OFFSET_S:
+            params["time"]["odo_offset_s"] = offset
+            epochs, result, track, work = _run_once(drive, params, frame, progress, ready,
+                                                    with_qc=True)
+            _warn(work, f"the odometer's speed reads {-offset:.2f} s late against the GNSS fixes "
+                        f"({how}): read that much earlier ([time] odo_offset_s; "
+                        "odo_lag_auto = false keeps it as logged)")
     skipped = work.skipped
     # the fixes stamped off the dead reckoning's clock; not on a drive with reflected signals,
     # whose errors of tens of metres read as offsets of 0.7 s there
