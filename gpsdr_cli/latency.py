@@ -137,11 +137,13 @@ def estimate_gnss_offset(track: pd.DataFrame, reference_en: pd.DataFrame | None 
     return _differenced(track, fixes, window_s, min_fixes)
 
 
-def significant_offset(track: pd.DataFrame, min_t: float = HINT_MIN_T) -> OffsetEstimate | None:
+def significant_offset(track: pd.DataFrame, min_t: float = HINT_MIN_T,
+                       est: OffsetEstimate | None = None) -> OffsetEstimate | None:
     """The offset of ``track``'s fixes against its dead reckoning when it is clear: at least
     :data:`HINT_OFFSET_S` and ``min_t`` standard errors.  None otherwise.  About 0.05 s on
-    a one-hour track."""
-    est = estimate_gnss_offset(track)
+    a one-hour track; ``est``: :func:`estimate_gnss_offset` of ``track``, if already made."""
+    if est is None:
+        est = estimate_gnss_offset(track)
     if not (est.identified and math.isfinite(est.offset_s) and math.isfinite(est.stderr_s)):
         return None
     if abs(est.offset_s) < HINT_OFFSET_S or abs(est.offset_s) < min_t * est.stderr_s:
@@ -149,12 +151,13 @@ def significant_offset(track: pd.DataFrame, min_t: float = HINT_MIN_T) -> Offset
     return est
 
 
-def offset_hint(track: pd.DataFrame, *, odometer: bool = True) -> str | None:
+def offset_hint(track: pd.DataFrame, *, odometer: bool = True,
+                est: OffsetEstimate | None = None) -> str | None:
     """A warning line when ``track`` (fused with the offsets the user gave) shows the fixes
-    stamped off the dead reckoning's clock (:func:`significant_offset`).  None otherwise.
-    ``odometer``: the drive has one, whose own lag reads the same way as fixes stamped
-    early (decisions/0022)."""
-    est = significant_offset(track)
+    stamped off the dead reckoning's clock (:func:`significant_offset`; ``est`` as there).
+    None otherwise.  ``odometer``: the drive has one, whose own lag reads the same way as
+    fixes stamped early (decisions/0022)."""
+    est = significant_offset(track, est=est)
     if est is None:
         return None
     way = "ahead of" if est.offset_s > 0 else "behind"

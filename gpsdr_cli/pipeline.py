@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from .filters.base import FilterResult
     from .io.drive import Drive
     from .io.reference import Reference
+    from .latency import OffsetEstimate
 
 #: Track columns that may hold nulls (everything else must be finite).
 NULLABLE_TRACK_COLUMNS = frozenset({"pdop", "gnss_e", "gnss_n", "nis", "separation_m",
@@ -658,10 +659,10 @@ LAG_MIN_T = 5.0
 
 
 def _odometer_lag(drive: Drive, params: Params, track: pd.DataFrame, result: FilterResult,
-                  auto_gnss_offset: bool) -> float | None:
+                  auto_gnss_offset: bool) -> tuple[float | None, OffsetEstimate | None]:
     """The odometer's lag (s, > 0) when ekf's or aekf's ``track`` shows the fixes clearly
     ahead of the dead reckoning along the track (:func:`gpsdr_cli.latency.significant_offset`),
-    else None.
+    else None; and the offset estimate of ``track`` when one was made.
 
     Fixes ahead of the dead reckoning are either stamped early or met by an odometer that is
     late.  A receiver stamps a position with the satellites' time, the best clock on the
@@ -677,13 +678,14 @@ def _odometer_lag(drive: Drive, params: Params, track: pd.DataFrame, result: Fil
             or any(float(tp[k]) != 0.0 for k in ("gnss_offset_s", "odo_offset_s",
                                                   "gyro_offset_s"))
             or result.info.get("nlos_drive") or str(params["filter"]["name"]) not in LAG_FILTERS):
-        return None
-    from .latency import significant_offset
+        return None, None
+    from .latency import estimate_gnss_offset, significant_offset
 
-    est = significant_offset(track, LAG_MIN_T)
-    if est is None or est.offset_s <= 0.0:
-        return None
-    return float(est.offset_s)
+    est = estimate_gnss_offset(track)
+    clear = significant_offset(track, LAG_MIN_T, est)
+    if clear is None or clear.offset_s <= 0.0:
+        return None, est
+    return float(clear.offset_s), est
 
 
 def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
@@ -722,7 +724,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             float(params["time"]["gnss_offset_s"]), (-math.inf, math.inf))
         params["time"]["gnss_offset_s"] = offset_auto
     epochs, result, track, work = _run_once(drive, params, frame, progress, ready, with_qc=True)
-    odo_lag = _odometer_lag(drive, params, track, result, auto_gnss_offset)
+    odo_lag, track_offset = _odometer_lag(drive, params, track, result, auto_gnss_offset)
     if odo_lag is not None:
         from .latency import HINT_OFFSET_S
 
@@ -734,6 +736,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             params["time"]["odo_offset_s"] = offset
             epochs, result, track, work = _run_once(drive, params, frame, progress, ready,
                                                     with_qc=True)
+            track_offset = None     # a new track
             _warn(work, f"the odometer's speed reads {-offset:.2f} s late against the GNSS fixes "
                         f"({how}): read that much earlier ([time] odo_offset_s; "
                         "odo_lag_auto = false keeps it as logged)")
@@ -744,7 +747,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             and not result.info.get("nlos_drive")):
         from .latency import offset_hint
 
-        hint = offset_hint(track, odometer=drive.odo is not None)
+        hint = offset_hint(track, odometer=drive.odo is not None, est=track_offset)
         if hint:
             _warn(work, hint)
 
