@@ -123,8 +123,13 @@ def _fix_mask(track: pd.DataFrame) -> np.ndarray:
 
 
 def estimate_gnss_offset(track: pd.DataFrame, reference_en: pd.DataFrame | None = None, *,
-                         window_s: float = WINDOW_S, min_fixes: int = 30) -> OffsetEstimate:
-    """Estimate the GNSS time offset of a track (see the module docstring)."""
+                         window_s: float = WINDOW_S, min_fixes: int = 30,
+                         along: bool = False) -> OffsetEstimate:
+    """Estimate the GNSS time offset of a track (see the module docstring).  ``along``: from
+    the along-track components alone (speed changes: the fixes against the odometer), not
+    the vectors, whose turns read an antenna ahead of the reference point, ``L`` metres, as
+    an offset of ``L / speed`` (an along-track unit vector ``u`` of the window's chord sees
+    neither that nor a turn's velocity change, both perpendicular to it)."""
     for col in ("gnss_e", "gnss_n", "e", "n", "v_e", "v_n"):
         if col not in track:
             return OffsetEstimate(0.0, np.nan, 0, "none", f"the track has no {col} column")
@@ -134,16 +139,15 @@ def estimate_gnss_offset(track: pd.DataFrame, reference_en: pd.DataFrame | None 
                               f"too few GNSS fixes ({int(fixes.sum())} < {min_fixes})")
     if reference_en is not None:
         return _by_reference(track, reference_en, fixes, window_s, min_fixes)
-    return _differenced(track, fixes, window_s, min_fixes)
+    return _differenced(track, fixes, window_s, min_fixes, along=along)
 
 
-def significant_offset(track: pd.DataFrame, min_t: float = HINT_MIN_T,
-                       est: OffsetEstimate | None = None) -> OffsetEstimate | None:
+def significant_offset(track: pd.DataFrame, min_t: float = HINT_MIN_T, *,
+                       along: bool = False) -> OffsetEstimate | None:
     """The offset of ``track``'s fixes against its dead reckoning when it is clear: at least
     :data:`HINT_OFFSET_S` and ``min_t`` standard errors.  None otherwise.  About 0.05 s on
-    a one-hour track; ``est``: :func:`estimate_gnss_offset` of ``track``, if already made."""
-    if est is None:
-        est = estimate_gnss_offset(track)
+    a one-hour track; ``along`` as in :func:`estimate_gnss_offset`."""
+    est = estimate_gnss_offset(track, along=along)
     if not (est.identified and math.isfinite(est.offset_s) and math.isfinite(est.stderr_s)):
         return None
     if abs(est.offset_s) < HINT_OFFSET_S or abs(est.offset_s) < min_t * est.stderr_s:
@@ -151,13 +155,12 @@ def significant_offset(track: pd.DataFrame, min_t: float = HINT_MIN_T,
     return est
 
 
-def offset_hint(track: pd.DataFrame, *, odometer: bool = True,
-                est: OffsetEstimate | None = None) -> str | None:
+def offset_hint(track: pd.DataFrame, *, odometer: bool = True) -> str | None:
     """A warning line when ``track`` (fused with the offsets the user gave) shows the fixes
-    stamped off the dead reckoning's clock (:func:`significant_offset`; ``est`` as there).
-    None otherwise.  ``odometer``: the drive has one, whose own lag reads the same way as
-    fixes stamped early (decisions/0022)."""
-    est = significant_offset(track, est=est)
+    stamped off the dead reckoning's clock (:func:`significant_offset`).  None otherwise.
+    ``odometer``: the drive has one, whose own lag reads the same way as fixes stamped
+    early (decisions/0022)."""
+    est = significant_offset(track)
     if est is None:
         return None
     way = "ahead of" if est.offset_s > 0 else "behind"
@@ -218,8 +221,12 @@ def _by_reference(track: pd.DataFrame, ref: pd.DataFrame, fixes: np.ndarray, win
     return est
 
 
+#: m: ``along``: windows whose chord is shorter than this give no along-track direction
+ALONG_MIN_CHORD_M = 1.0
+
+
 def _differenced(track: pd.DataFrame, fixes: np.ndarray, window_s: float,
-                 min_fixes: int, positions: bool = False) -> OffsetEstimate:
+                 min_fixes: int, positions: bool = False, along: bool = False) -> OffsetEstimate:
     """Differenced regression; ``positions``: take displacements from e/n (a reference)
     instead of integrating v_e/v_n (a fused track, whose positions follow the GNSS).
     Every per-epoch series is reduced to the fix epochs as soon as it is made: on an
@@ -261,13 +268,27 @@ def _differenced(track: pd.DataFrame, fixes: np.ndarray, window_s: float,
     ge = track["gnss_e"].to_numpy(float)[idx]
     gn = track["gnss_n"].to_numpy(float)[idx]
     (ve, vn), (pe, pn) = vel, disp
-    r = np.concatenate([(ge[b] - ge[a]) - (pe[b] - pe[a]), (gn[b] - gn[a]) - (pn[b] - pn[a])])
-    dv = np.concatenate([ve[b] - ve[a], vn[b] - vn[a]])
-    d = np.concatenate([pe[b] - pe[a], pn[b] - pn[a]])
+    if along:
+        de, dn = pe[b] - pe[a], pn[b] - pn[a]
+        chord = np.hypot(de, dn)
+        keep = (chord >= ALONG_MIN_CHORD_M) & np.isfinite(ge[a] + ge[b] + gn[a] + gn[b])
+        if keep.sum() < min_fixes:
+            return OffsetEstimate(0.0, np.nan, int(keep.sum()), "none",
+                                  f"too few moving fix pairs ({int(keep.sum())} < {min_fixes})")
+        a, b, de, dn, chord = a[keep], b[keep], de[keep], dn[keep], chord[keep]
+        ue, un = de / chord, dn / chord
+        r = ((ge[b] - ge[a]) - de) * ue + ((gn[b] - gn[a]) - dn) * un
+        dv = (ve[b] - ve[a]) * ue + (vn[b] - vn[a]) * un
+        d = chord
+    else:
+        r = np.concatenate([(ge[b] - ge[a]) - (pe[b] - pe[a]), (gn[b] - gn[a]) - (pn[b] - pn[a])])
+        dv = np.concatenate([ve[b] - ve[a], vn[b] - vn[a]])
+        d = np.concatenate([pe[b] - pe[a], pn[b] - pn[a]])
     X = np.column_stack([dv, d])
     beta, cov = huber_fit(X, r)
     signal = float(np.sqrt(np.sum(dv * dv)))
-    return _finish(beta[0], cov[0, 0], n, "differenced", signal, 30.0,
+    return _finish(beta[0], cov[0, 0], len(r) if along else n,
+                   "differenced along track" if along else "differenced", signal, 30.0,
                    "velocity change (m/s, root-sum-square over pairs)")
 
 

@@ -43,7 +43,6 @@ if TYPE_CHECKING:
     from .filters.base import FilterResult
     from .io.drive import Drive
     from .io.reference import Reference
-    from .latency import OffsetEstimate
 
 #: Track columns that may hold nulls (everything else must be finite).
 NULLABLE_TRACK_COLUMNS = frozenset({"pdop", "gnss_e", "gnss_n", "nis", "separation_m",
@@ -652,17 +651,29 @@ def _probe_offset(drive: Drive, params: Params, frame: LocalFrame, progress: Pro
 #: absorbs it: moved by the lag an ekf pass finds, fkf got worse on every simulated drive
 #: whose odometer or fixes were off (open_sky, 5-Hz CAN: 0.30 -> 0.61 m; decisions/0024)
 LAG_FILTERS = ("ekf", "aekf")
-#: a forward track shows about half of an odometer's lag (0.10-0.12 s of 0.25 s, at 9-13
-#: standard errors on 150-300 s of simulated open sky): this many standard errors call for
-#: the smoothed probes, which decide (a lag of at least HINT_OFFSET_S at their fixed point)
+#: standard errors of the along-track reading that move the odometer (the regression's own,
+#: from windows that overlap: the scatter between seeds is 2-4 times larger)
 LAG_MIN_T = 5.0
+#: a forward track reads a large lag short (an odometer 0.23 s late: 0.17 s forward, 0.215 s
+#: smoothed; one_hour's 0.05 s: +0.078 forward, +0.074 smoothed): the reading on the track
+#: with the odometer moved is added while it is at least LAG_REST_S, in at most LAG_STEPS passes
+LAG_REST_S = 0.02
+LAG_STEPS = 2
 
 
 def _odometer_lag(drive: Drive, params: Params, track: pd.DataFrame, result: FilterResult,
-                  auto_gnss_offset: bool) -> tuple[float | None, OffsetEstimate | None]:
-    """The odometer's lag (s, > 0) when ekf's or aekf's ``track`` shows the fixes clearly
-    ahead of the dead reckoning along the track (:func:`gpsdr_cli.latency.significant_offset`),
-    else None; and the offset estimate of ``track`` when one was made.
+                  auto_gnss_offset: bool) -> tuple[float, str] | None:
+    """The odometer's lag (s, at least ``HINT_OFFSET_S``, to 0.01 s) and how it was found,
+    when ekf's or aekf's ``track`` shows the fixes clearly ahead of the dead reckoning along
+    the track; else None.
+
+    Read from speed changes alone (:func:`gpsdr_cli.latency.significant_offset`, ``along``:
+    in turns an antenna ahead of the reference point reads as an offset too).  That reading
+    is close to the lag itself, forward or smoothed (one_hour seed 3: +0.078 / +0.074 s,
+    then +0.030 / +0.025 s with the odometer moved by 0.05 s), so the track is made again
+    with the odometer moved by it (:data:`LAG_STEPS`), not probed.  Rounded to 0.01 s: a
+    100-Hz drive's odometer stays on its gyro's stamps (moved off that grid, one drive's
+    epochs went from 30001 to 59968).
 
     Fixes ahead of the dead reckoning are either stamped early or met by an odometer that is
     late.  A receiver stamps a position with the satellites' time, the best clock on the
@@ -675,17 +686,20 @@ def _odometer_lag(drive: Drive, params: Params, track: pd.DataFrame, result: Fil
     ``--gnss-offset auto`` (which moves the fixes instead)."""
     tp = params["time"]
     if (auto_gnss_offset or drive.odo is None or not bool(tp["odo_lag_auto"])
+            or str(params["filter"]["name"]) not in LAG_FILTERS
             or any(float(tp[k]) != 0.0 for k in ("gnss_offset_s", "odo_offset_s",
                                                   "gyro_offset_s"))
-            or result.info.get("nlos_drive") or str(params["filter"]["name"]) not in LAG_FILTERS):
-        return None, None
-    from .latency import estimate_gnss_offset, significant_offset
+            or result.info.get("nlos_drive")):
+        return None
+    from .latency import HINT_OFFSET_S, significant_offset
 
-    est = estimate_gnss_offset(track)
-    clear = significant_offset(track, LAG_MIN_T, est)
-    if clear is None or clear.offset_s <= 0.0:
-        return None, est
-    return float(clear.offset_s), est
+    est = significant_offset(track, LAG_MIN_T, along=True)
+    if est is None or est.offset_s <= 0.0:
+        return None
+    lag = min(round(float(est.offset_s), 2), float(tp["dr_clock_min_s"]))
+    if lag < HINT_OFFSET_S:
+        return None
+    return lag, f"{est.method}, +-{est.stderr_s:.3f} s from {est.n_used} fixes"
 
 
 def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
@@ -724,22 +738,27 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             float(params["time"]["gnss_offset_s"]), (-math.inf, math.inf))
         params["time"]["gnss_offset_s"] = offset_auto
     epochs, result, track, work = _run_once(drive, params, frame, progress, ready, with_qc=True)
-    odo_lag, track_offset = _odometer_lag(drive, params, track, result, auto_gnss_offset)
+    odo_lag = _odometer_lag(drive, params, track, result, auto_gnss_offset)
     if odo_lag is not None:
-        from .latency import HINT_OFFSET_S
+        from .latency import estimate_gnss_offset
 
-        if progress:
-            progress("timing the odometer against the fixes")
-        offset, how = _probe_offset(drive, params, frame, progress, ready, "odo_offset_s", -1.0,
-                                    -odo_lag, (-float(params["time"]["dr_clock_min_s"]), 0.0))
-        if offset <= -HINT_OFFSET_S:
-            params["time"]["odo_offset_s"] = offset
+        lag = odo_lag[0]
+        for step in range(LAG_STEPS):
+            if progress:
+                progress("the odometer read earlier")
+            params["time"]["odo_offset_s"] = -lag
+            del epochs, result, track, work      # not alive beside the next pass's: peak memory
             epochs, result, track, work = _run_once(drive, params, frame, progress, ready,
                                                     with_qc=True)
-            track_offset = None     # a new track
-            _warn(work, f"the odometer's speed reads {-offset:.2f} s late against the GNSS fixes "
-                        f"({how}): read that much earlier ([time] odo_offset_s; "
-                        "odo_lag_auto = false keeps it as logged)")
+            rest = estimate_gnss_offset(track, along=True).offset_s
+            more = min(round(lag + rest, 2), float(params["time"]["dr_clock_min_s"]))
+            if step + 1 == LAG_STEPS or not rest >= LAG_REST_S or more <= lag:
+                break
+            lag = more
+        odo_lag = (lag, odo_lag[1])
+        _warn(work, f"the odometer's speed reads {odo_lag[0]:.2f} s late against the GNSS fixes "
+                    f"({odo_lag[1]}): read that much earlier ([time] odo_offset_s; "
+                    "odo_lag_auto = false keeps it as logged)")
     skipped = work.skipped
     # the fixes stamped off the dead reckoning's clock; not on a drive with reflected signals,
     # whose errors of tens of metres read as offsets of 0.7 s there
@@ -747,7 +766,7 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             and not result.info.get("nlos_drive")):
         from .latency import offset_hint
 
-        hint = offset_hint(track, odometer=drive.odo is not None, est=track_offset)
+        hint = offset_hint(track, odometer=drive.odo is not None)
         if hint:
             _warn(work, hint)
 

@@ -41,6 +41,17 @@ def test_recovers_injected_offset_without_reference(drive_offset):
     assert est.stderr_s < 0.02
 
 
+def test_along_the_track_alone_recovers_it_too(drive_offset):
+    """From speed changes alone (the fixes against the odometer), the same 0.1 s; a drive
+    standing still has no along-track direction to read it on."""
+    est = estimate_gnss_offset(truth_track(drive_offset, vel_noise_mps=0.05), along=True)
+    assert est.method == "differenced along track"
+    assert est.offset_s == pytest.approx(0.1, abs=0.02)  # s
+    standing = truth_track(drive_offset)
+    standing[["v_e", "v_n"]] = 0.0
+    assert not estimate_gnss_offset(standing, along=True).identified
+
+
 def test_recovers_injected_offset_against_reference(drive_offset):
     ref = drive_offset.truth[["t_ns", "e", "n"]]
     est = estimate_gnss_offset(truth_track(drive_offset), ref)

@@ -124,3 +124,19 @@ def test_cli_lever_arm(gpsdr, tmp_path, antenna_drive) -> None:
     assert meta["param.gnss.lever_arm_m"] == "[1.5, 0.0, 0.0]"
     bad = gpsdr(["fuse", "--gps", str(files[".nmea"]), "--lever-arm", "1.5", "-o", str(out)])
     assert bad.exit_code == 2 and "FWD,LEFT" in bad.output
+
+
+def test_an_antenna_ahead_is_not_a_late_odometer(antenna_drive) -> None:
+    """In turns, fixes from an antenna 1.5 m ahead read like fixes early by 1.5 m / speed;
+    the odometer's lag is read from speed changes alone, which see the simulator's own
+    0.05 s, so the odometer stays as logged (decisions/0024)."""
+    from gpsdr_cli.latency import estimate_gnss_offset
+
+    _, antenna = antenna_drive
+    res = pipeline.fuse(antenna, config.defaults())
+    assert res.params["time"]["odo_offset_s"] == 0.0
+    assert not any("odometer's speed reads" in w for w in res.drive_warnings)
+    vector = estimate_gnss_offset(res.track)
+    along = estimate_gnss_offset(res.track, along=True)
+    assert vector.offset_s > 0.06                        # 0.071 s: the arm, seen in turns
+    assert along.offset_s == pytest.approx(0.05, abs=0.015)  # 0.046 s: the odometer's lag
