@@ -651,9 +651,6 @@ def _probe_offset(drive: Drive, params: Params, frame: LocalFrame, progress: Pro
 #: absorbs it: moved by the lag an ekf pass finds, fkf got worse on every simulated drive
 #: whose odometer or fixes were off (open_sky, 5-Hz CAN: 0.30 -> 0.61 m; decisions/0024)
 LAG_FILTERS = ("ekf", "aekf")
-#: standard errors of the along-track reading that move the odometer (the regression's own,
-#: from windows that overlap: the scatter between seeds is 2-4 times larger)
-LAG_MIN_T = 5.0
 #: a forward track reads a large lag short (an odometer 0.23 s late: 0.17 s forward, 0.215 s
 #: smoothed; one_hour's 0.05 s: +0.078 forward, +0.074 smoothed): the reading on the track
 #: with the odometer moved is added while it is at least LAG_REST_S, in at most LAG_STEPS passes
@@ -693,7 +690,10 @@ def _odometer_lag(drive: Drive, params: Params, track: pd.DataFrame, result: Fil
         return None
     from .latency import HINT_OFFSET_S, significant_offset
 
-    est = significant_offset(track, LAG_MIN_T, along=True)
+    # the warning's bar, 10 standard errors: the regression's own are 2-4 times too small, and
+    # at 5 the bundled urban sample's multipath read 0.28 +- 0.048 s and took aekf + RTS from
+    # 1.18 to 1.92 m
+    est = significant_offset(track, along=True)
     if est is None or est.offset_s <= 0.0:
         return None
     lag = min(round(float(est.offset_s), 2), float(tp["dr_clock_min_s"]))
