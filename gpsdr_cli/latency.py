@@ -70,6 +70,12 @@ class OffsetEstimate:
     def identified(self) -> bool:
         return self.method != "none"
 
+    def describe(self) -> str:
+        """How it was found, for a summary line."""
+        if not math.isfinite(self.stderr_s):
+            return self.method
+        return f"{self.method}, +-{self.stderr_s:.3f} s from {self.n_used} fixes"
+
 
 def huber_fit(X: np.ndarray, y: np.ndarray, k: float = HUBER_K, iters: int = 50
               ) -> tuple[np.ndarray, np.ndarray]:
@@ -142,15 +148,14 @@ def estimate_gnss_offset(track: pd.DataFrame, reference_en: pd.DataFrame | None 
     return _differenced(track, fixes, window_s, min_fixes, along=along)
 
 
-def significant_offset(track: pd.DataFrame, min_t: float = HINT_MIN_T, *,
-                       along: bool = False) -> OffsetEstimate | None:
+def significant_offset(track: pd.DataFrame, *, along: bool = False) -> OffsetEstimate | None:
     """The offset of ``track``'s fixes against its dead reckoning when it is clear: at least
-    :data:`HINT_OFFSET_S` and ``min_t`` standard errors.  None otherwise.  About 0.05 s on
-    a one-hour track; ``along`` as in :func:`estimate_gnss_offset`."""
+    :data:`HINT_OFFSET_S` and :data:`HINT_MIN_T` standard errors.  None otherwise.  About
+    0.05 s on a one-hour track; ``along`` as in :func:`estimate_gnss_offset`."""
     est = estimate_gnss_offset(track, along=along)
     if not (est.identified and math.isfinite(est.offset_s) and math.isfinite(est.stderr_s)):
         return None
-    if abs(est.offset_s) < HINT_OFFSET_S or abs(est.offset_s) < min_t * est.stderr_s:
+    if abs(est.offset_s) < HINT_OFFSET_S or abs(est.offset_s) < HINT_MIN_T * est.stderr_s:
         return None
     return est
 
@@ -271,7 +276,7 @@ def _differenced(track: pd.DataFrame, fixes: np.ndarray, window_s: float,
     if along:
         de, dn = pe[b] - pe[a], pn[b] - pn[a]
         chord = np.hypot(de, dn)
-        keep = (chord >= ALONG_MIN_CHORD_M) & np.isfinite(ge[a] + ge[b] + gn[a] + gn[b])
+        keep = chord >= ALONG_MIN_CHORD_M
         if keep.sum() < min_fixes:
             return OffsetEstimate(0.0, np.nan, int(keep.sum()), "none",
                                   f"too few moving fix pairs ({int(keep.sum())} < {min_fixes})")

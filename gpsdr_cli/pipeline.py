@@ -607,45 +607,6 @@ OFFSET_ITERATIONS = 4
 OFFSET_TOL_S = 0.003
 
 
-def _probe_offset(drive: Drive, params: Params, frame: LocalFrame, progress: Progress | None,
-                  ready: Callable[[], object] | None, key: str, sign: float, start: float,
-                  bounds: tuple[float, float]) -> tuple[float, str]:
-    """The ``[time]`` offset ``key`` (s) at which the fixes and the dead reckoning agree along
-    the track, searched from ``start``, within ``bounds``, and how it was found.  ``sign``:
-    +1 for the GNSS stamps (the estimate is added), -1 for a dead-reckoning stream's.
-
-    From the track's own kinematics, never from the reference: the error statistics against
-    the reference must stay an independent check.  The probe pass is smoothed: a forward
-    track lags the truth by the filter's own delay, which the regression would otherwise read
-    as GNSS latency (ekf +0.19 s vs +0.12 s smoothed on comma2k19).  The fixes' own speed
-    and course pull the probe's velocity toward the GNSS clock, so one estimate falls short
-    of the offset by a share of it; probing again at the estimate until the residual is below
-    OFFSET_TOL_S reaches the fixed point, where the GNSS and the dead reckoning agree."""
-    from .latency import estimate_gnss_offset
-
-    probe = copy.deepcopy(params)
-    probe["filter"]["smooth"] = True
-    probe["filter"]["smoother"] = "rts"
-    lo, hi = bounds
-    value = min(max(start, lo), hi)
-    note = ""
-    for i in range(OFFSET_ITERATIONS):
-        probe["time"][key] = value
-        _, _, probe_track, _ = _run_once(drive, probe, frame, progress, ready)
-        est = estimate_gnss_offset(probe_track)
-        if not (est.identified and math.isfinite(est.offset_s)):
-            if i == 0:
-                note = f"not estimated ({est.reason}); kept {value:+.3f} s"
-            break
-        step = sign * float(est.offset_s)
-        value = min(max(value + step, lo), hi)
-        note = (f"{est.method}, +-{est.stderr_s:.3f} s from {est.n_used} fixes"
-                if math.isfinite(est.stderr_s) else est.method)
-        if abs(est.offset_s) < OFFSET_TOL_S or value in (lo, hi):
-            break
-    return value, note
-
-
 #: the filters whose odometer is read earlier.  fkf and fafkf take the fixes' speed and
 #: course into their heading and odometer scale, which hides the lag on their track and
 #: absorbs it: moved by the lag an ekf pass finds, fkf got worse on every simulated drive
@@ -697,9 +658,7 @@ def _odometer_lag(drive: Drive, params: Params, track: pd.DataFrame, result: Fil
     if est is None or est.offset_s <= 0.0:
         return None
     lag = min(round(float(est.offset_s), 2), float(tp["dr_clock_min_s"]))
-    if lag < HINT_OFFSET_S:
-        return None
-    return lag, f"{est.method}, +-{est.stderr_s:.3f} s from {est.n_used} fixes"
+    return (lag, est.describe()) if lag >= HINT_OFFSET_S else None
 
 
 def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
@@ -731,18 +690,41 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     offset_auto: float | None = None
     offset_note = ""
     if auto_gnss_offset:
+        from .latency import estimate_gnss_offset
+
         if progress:
             progress("estimating the GNSS time offset")
-        offset_auto, offset_note = _probe_offset(
-            drive, params, frame, progress, ready, "gnss_offset_s", +1.0,
-            float(params["time"]["gnss_offset_s"]), (-math.inf, math.inf))
+        # From the track's own kinematics, never from the reference: the error statistics
+        # against the reference must stay an independent check.  The probe pass is smoothed:
+        # a forward track lags the truth by the filter's own delay, which the regression
+        # would otherwise read as GNSS latency (ekf +0.19 s vs +0.12 s smoothed on comma2k19).
+        probe = copy.deepcopy(params)
+        probe["filter"]["smooth"] = True
+        probe["filter"]["smoother"] = "rts"
+        offset_auto = float(params["time"]["gnss_offset_s"])
+        # The fixes' own speed and course pull the probe's velocity toward the GNSS clock, so
+        # one estimate falls short of the offset by a share of it; probing again at the
+        # estimate until the residual is below OFFSET_TOL_S reaches the fixed point, where
+        # the GNSS and the dead reckoning agree.
+        for i in range(OFFSET_ITERATIONS):
+            probe["time"]["gnss_offset_s"] = offset_auto
+            _, _, probe_track, _ = _run_once(drive, probe, frame, progress, ready)
+            est = estimate_gnss_offset(probe_track)
+            if not (est.identified and math.isfinite(est.offset_s)):
+                if i == 0:
+                    offset_note = f"not estimated ({est.reason}); kept {offset_auto:+.3f} s"
+                break
+            offset_auto += float(est.offset_s)
+            offset_note = est.describe()
+            if abs(est.offset_s) < OFFSET_TOL_S:
+                break
         params["time"]["gnss_offset_s"] = offset_auto
     epochs, result, track, work = _run_once(drive, params, frame, progress, ready, with_qc=True)
     odo_lag = _odometer_lag(drive, params, track, result, auto_gnss_offset)
     if odo_lag is not None:
         from .latency import estimate_gnss_offset
 
-        lag = odo_lag[0]
+        lag, how = odo_lag
         for step in range(LAG_STEPS):
             if progress:
                 progress("the odometer read earlier")
@@ -750,14 +732,15 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
             del epochs, result, track, work      # not alive beside the next pass's: peak memory
             epochs, result, track, work = _run_once(drive, params, frame, progress, ready,
                                                     with_qc=True)
+            if step + 1 == LAG_STEPS:
+                break
             rest = estimate_gnss_offset(track, along=True).offset_s
             more = min(round(lag + rest, 2), float(params["time"]["dr_clock_min_s"]))
-            if step + 1 == LAG_STEPS or not rest >= LAG_REST_S or more <= lag:
+            if not (rest >= LAG_REST_S and more > lag):
                 break
             lag = more
-        odo_lag = (lag, odo_lag[1])
-        _warn(work, f"the odometer's speed reads {odo_lag[0]:.2f} s late against the GNSS fixes "
-                    f"({odo_lag[1]}): read that much earlier ([time] odo_offset_s; "
+        _warn(work, f"the odometer's speed reads {lag:.2f} s late against the GNSS fixes "
+                    f"({how}): read that much earlier ([time] odo_offset_s; "
                     "odo_lag_auto = false keeps it as logged)")
     skipped = work.skipped
     # the fixes stamped off the dead reckoning's clock; not on a drive with reflected signals,
