@@ -16,6 +16,13 @@ odo        ``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``),
            (``twist.linear.x``), forward speed in m/s
 =========  ====================================================================
 
+Fix quality: NavSatStatus FIX is autonomous (1), SBAS and GBAS are DGPS (2), and any fix
+whose known covariance is at most ``RTK_FIXED_SD_M`` per axis is RTK fixed (4): the status
+has no code for RTK (the u-blox and NMEA drivers send it as GBAS, foxglove.LocationFix has
+no status), and only a carrier-phase fixed solution is stated to centimetres.  Read as
+DGPS, an RTK drive got metres of GNSS error states and its track wandered 1-3 m from
+centimetre fixes (docs/decisions/0025-rtk-from-a-navsatfix-covariance.md).
+
 Encodings: ROS 2 CDR (a vectorised fixed-layout fast path,
 :mod:`gpsdr_cli.io.ros2_fast`, with ``mcap_ros2``'s generic decoder as the fallback
 for any message the fast path declines), ROS 1 (the same fast path; no generic
@@ -64,7 +71,7 @@ from typing import Any
 
 import numpy as np
 
-from ..conventions import FIX_DGPS, FIX_GPS, FIX_NONE, NS_PER_S
+from ..conventions import FIX_DGPS, FIX_GPS, FIX_NONE, FIX_RTK, NS_PER_S
 from ..errors import InputError, NoDataError, UsageError
 from . import protobuf, ros2_fast
 from .drive import Drive, ForwardAccel, GnssFixes, Odometry, SkipReport, Source, YawRates
@@ -416,6 +423,11 @@ def _times(chan: Channel, use_log_time: bool) -> tuple[np.ndarray, int]:
     return np.where(zero, log, stamp), int(zero.sum())
 
 
+#: a fix whose known covariance is at most this per axis (m) is taken as RTK fixed
+#: (the ``[gnss] rtk_cm_sd_m`` default: the centimetres no other solution reaches)
+RTK_FIXED_SD_M = 0.05
+
+
 def _gnss_from_fixes(chan: Channel, t_ns: np.ndarray, skipped: SkipReport, where: str) -> GnssFixes:
     lat = _cat(chan, "lat", np.float64)
     lon = _cat(chan, "lon", np.float64)
@@ -437,6 +449,8 @@ def _gnss_from_fixes(chan: Channel, t_ns: np.ndarray, skipped: SkipReport, where
         var = _cat(chan, name, np.float64)
         good = fix & (cov_type > 0) & np.isfinite(var) & (var > 0)
         setattr(g, out, np.where(good, np.sqrt(np.where(good, var, 1.0)), np.nan))
+    rtk = fix & (np.maximum(g.sigma_e_m, g.sigma_n_m) <= RTK_FIXED_SD_M)  # NaN: unknown
+    g.fix_quality[rtk] = FIX_RTK
     return g
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gpsdr_cli.conventions import FIX_DGPS, FIX_GPS, FIX_NONE
+from gpsdr_cli.conventions import FIX_DGPS, FIX_GPS, FIX_NONE, FIX_RTK
 from gpsdr_cli.errors import InputError, NoDataError, UsageError
 from gpsdr_cli.io import ros2_fast
 from gpsdr_cli.io.mcap import read_mcap
@@ -109,7 +109,13 @@ def test_real_ublox_recording_counts_and_ranges():
     assert g.lat_deg[0] == 54.3709248 and g.lon_deg[0] == 18.6138034
     assert g.sigma_e_m[0] == pytest.approx(0.111, abs=1e-12)
     assert g.t_ns[0] == 1616425418_800331612  # the header stamp, not the log time
-    assert set(np.unique(g.fix_quality)) <= {FIX_GPS, FIX_DGPS}
+    # An F9P with RTK corrections: NavSatStatus says GBAS (no code says RTK), hAcc 1.4-2.6 cm.
+    # Those fixes are RTK fixed; the first 15.6 s (0.10-0.11 m) are not.
+    assert g.fix_quality[0] == FIX_GPS
+    rtk = g.fix_quality == FIX_RTK
+    assert np.count_nonzero(rtk) == 3207 and np.count_nonzero(g.fix_quality == FIX_GPS) == 157
+    assert np.fmax(g.sigma_e_m, g.sigma_n_m)[rtk].max() <= 0.05
+    assert np.fmax(g.sigma_e_m, g.sigma_n_m)[~rtk].min() > 0.05
     # 339 s of 10 Hz stamps, strictly increasing
     assert np.all(np.diff(g.t_ns) > 0)
     assert (g.t_ns[-1] - g.t_ns[0]) / 1e9 == pytest.approx(339.3, abs=0.5)
@@ -277,6 +283,24 @@ def test_no_fix_status_nan_and_covariance_type(tmp_path):
     np.testing.assert_array_equal(g.sigma_e_m[[0, 4]], [2.0, 2.0])
     np.testing.assert_array_equal(g.sigma_n_m[[0, 4]], [3.0, 3.0])
     assert np.isnan(g.sigma_e_m[3])  # covariance type 0: unknown
+
+
+def test_a_centimetre_covariance_is_an_rtk_fixed_fix(tmp_path):
+    """NavSatStatus has no RTK code: a known covariance of <= 5 cm per axis makes the fix
+    RTK fixed (quality 4) whatever the status; an unknown one (type 0) or 6 cm does not."""
+    cases = [(2, 0.02, 0.03, 2), (0, 0.02, 0.02, 1), (2, 0.06, 0.02, 2), (1, 0.5, 0.5, 2),
+             (2, 0.01, 0.01, 0), (-1, 0.01, 0.01, 2)]
+    msgs = []
+    for i, (status, sd_e, sd_n, cov_type) in enumerate(cases):
+        t = T0 + i * 10**8
+        msgs.append((t, t, ros2_fast.encode("navsatfix", t, "gps", lat=54.0, lon=18.0,
+                                            status=status, cov_type=cov_type,
+                                            cov=(sd_e**2, 0, 0, 0, sd_n**2, 0, 0, 0, 1.0))))
+    path = tmp_path / "rtk.mcap"
+    write_mcap(path, [("/fix", "navsatfix", msgs)])
+    g = read_mcap(path).gnss
+    np.testing.assert_array_equal(g.fix_quality,
+                                  [FIX_RTK, FIX_RTK, FIX_DGPS, FIX_DGPS, FIX_DGPS, FIX_NONE])
 
 
 def test_most_messages_wins_and_topic_override(tmp_path):
