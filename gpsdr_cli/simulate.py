@@ -1315,7 +1315,8 @@ def _stamp(t_ns: int, frame_id: str) -> dict:
 def write_mcap(drive: Drive, path: str | Path) -> Path:
     """ROS 2 CDR MCAP (zstd chunks): /gnss/fix NavSatFix, /gnss/fix_velocity
     TwistWithCovarianceStamped (the receiver's Doppler velocity in ENU, x east, y north, as
-    the u-blox driver publishes it; only where the fix has a speed and course), /imu Imu
+    the u-blox driver publishes it, with every fix that has a speed: zero where it is too
+    slow for a course), /imu Imu
     (linear_acceleration.x: the forward accelerometer when sampled with the gyro, else 0
     with covariance[0] = -1, "not given"), /vehicle/twist TwistStamped (the wheel speed,
     body frame; none without an odometer)."""
@@ -1354,7 +1355,9 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
                        "position_covariance_type": 2 if ok else 0}
                 w.write_message("/gnss/fix", s_fix, msg, log_time=t, publish_time=t)
                 spd, crs = float(g.speed_mps[i]), math.radians(float(g.course_deg[i]))
-                if ok and math.isfinite(spd) and math.isfinite(crs):
+                if ok and math.isfinite(spd) and not math.isfinite(crs):
+                    spd, crs = 0.0, 0.0  # too slow for a course: the driver still sends ~0
+                if ok and math.isfinite(spd):
                     cov = [0.0] * 36
                     cov[0] = cov[7] = cov[14] = vel_var
                     vel = {"header": _stamp(t, "gnss"),
