@@ -303,6 +303,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                                 q)
         rtk_share = float(np.count_nonzero(usable & (q == FIX_RTK))) / max(int(usable.sum()), 1)
         g_rec = {"usable": usable, "e": e, "n": n, "sd_e": sd_e, "sd_n": sd_n, "pdop": g.pdop[keep],
+                 "quality": q,
                      "speed": g.speed_mps[keep], "course": np.deg2rad(g.course_deg[keep])}
         parts.append(gnss_t)
 
@@ -348,6 +349,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
     has_gnss = np.zeros(n_ep, bool)
     nan = np.full(n_ep, np.nan)
     gnss_e = gnss_n = sd_e = sd_n = pdop = gspeed = gcourse = nan
+    quality = np.zeros(n_ep, np.int8)
     if len(gnss_t):
         u = g_rec["usable"]
         has_gnss = scatter(gnss_t[u], np.ones(u.sum(), bool), False).astype(bool)
@@ -356,6 +358,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
         sd_e = scatter(gnss_t[u], g_rec["sd_e"][u])
         sd_n = scatter(gnss_t[u], g_rec["sd_n"][u])
         gspeed = scatter(gnss_t[u], g_rec["speed"][u])
+        quality = scatter(gnss_t[u], g_rec["quality"][u], 0).astype(np.int8)
         gcourse = scatter(gnss_t[u], g_rec["course"][u])
         pdop = scatter(gnss_t, g_rec["pdop"])
     has_gyro = scatter(gyro_t, np.ones(len(gyro_t), bool), False).astype(bool)
@@ -378,7 +381,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                     gnss_sd_e=sd_e, gnss_sd_n=sd_n, pdop=pdop, gnss_speed_mps=gspeed,
                     gnss_course_rad=gcourse, has_gyro=has_gyro, yaw_rate_radps=yaw,
                     has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s,
-                    has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share,
+                    has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share, gnss_quality=quality,
                     dr_unhealthy=(health.gyro_ok is not None
                                   or health.odo_bad_s >= float(params["health"]["odo_silent_s"])
                                   or _silent(odo_t, float(params["health"]["odo_silent_s"]),

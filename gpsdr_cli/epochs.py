@@ -53,6 +53,8 @@ class Epochs:
     accel_mps2: np.ndarray | None = None
     #: share of the usable fixes that are RTK fixed (GGA quality 4)
     rtk_fixed_share: float = 0.0
+    #: the fix quality (NMEA GGA code: 4 RTK fixed, 5 float, ...) at the usable fixes, 0 elsewhere
+    gnss_quality: np.ndarray | None = None
     #: the GNSS model's verdict (filters.gnss_model): the fixes disagree with the dead
     #: reckoning often enough for a drive with reflected signals (NLOS)
     nlos_drive: bool = False
@@ -66,6 +68,8 @@ class Epochs:
             self.has_accel = np.zeros(n, bool)
         if self.accel_mps2 is None:
             self.accel_mps2 = np.full(n, np.nan)
+        if self.gnss_quality is None:
+            self.gnss_quality = np.zeros(n, np.int8)
 
     def __len__(self) -> int:
         return len(self.t_ns)

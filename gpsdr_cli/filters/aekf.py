@@ -61,6 +61,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..config import Params
+from ..conventions import FIX_FLOAT_RTK
 from ..epochs import Epochs
 from ..errors import ConfigError
 from ..models.cs_model import N_STATES
@@ -498,6 +499,34 @@ def drive_off_var(params: Params) -> tuple[float, float]:
             max(float(a["drive_off_acc_sd_mps2"]), 0.0) ** 2)
 
 
+def bias_variance(epochs: Epochs, params: Params) -> np.ndarray:
+    """Per epoch, the stationary variance (m^2) of the GNSS error states b: the regime of the
+    fix at or last before the epoch (the first fix's before it).
+
+    ``aekf.gnss_err_sd_m`` squared everywhere, except on a drive whose fixes are mostly RTK
+    fixed (``[gnss] rtk_share``; the GNSS model has then set that sigma to
+    ``rtk_err_sd_m``): there an RTK float fix (quality 5) has a bias of ``[gnss]
+    rtk_float_err_sd_m`` and any other fix that is not a centimetre fix (autonomous,
+    DGPS, a false RTK fix: :func:`~gpsdr_cli.rtk_false_fix.centimetre_fixes`) one of
+    ``rtk_free_err_sd_m``.  The kernel starts a new, independent b where the regime changes
+    (the two kinds of fix err independently): so float or autonomous fixes before a first
+    RTK fix, averaged while parked, no longer pin the position their bias holds, and the
+    first centimetre fix moves the position, not b, back through the stop in the smoother.
+    """
+    var = float(params["aekf"]["gnss_err_sd_m"]) ** 2
+    out = np.full(len(epochs), var)
+    g = params["gnss"]
+    if epochs.rtk_fixed_share < float(g["rtk_share"]) or not epochs.has_gnss.any():
+        return out
+    f = np.flatnonzero(epochs.has_gnss)
+    fix_var = np.where(centimetre_fixes(epochs, params)[f], var,
+                       np.where(epochs.gnss_quality[f] == FIX_FLOAT_RTK,
+                                float(g["rtk_float_err_sd_m"]) ** 2,
+                                float(g["rtk_free_err_sd_m"]) ** 2))
+    last = np.searchsorted(f, np.arange(len(epochs)), side="right") - 1
+    return fix_var[np.maximum(last, 0)]
+
+
 def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> FilterResult:
     """Forward pass (and RTS when ``params["filter"]["smooth"]``) of the CS-model filter."""
     n = len(epochs)
@@ -524,6 +553,9 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     st[kn.ST_WH_T] = -math.inf  # no previous innovation yet
     st[kn.ST_WH_T2] = -math.inf
     st[kn.ST_B_SINCE] = -1.0  # the bias gate's timer: not running
+    ge_var = (bias_variance(epochs, params) if params["aekf"]["gnss_err_states"]
+              else np.zeros(0))
+    st[kn.ST_GE_VAR] = ge_var[0] if len(ge_var) else prm[kn.PAR_GE_VAR]
     f64 = np.float64
     x_out = np.empty((N_STATES, n))  # rows: contiguous track columns, no copies
     pcov = np.empty((3, n))
@@ -546,13 +578,15 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         c64(epochs.dt_s, f64), c64(epochs.has_gnss, bool), c64(epochs.gnss_e, f64),
         c64(epochs.gnss_n, f64), c64(r_e, f64), c64(r_n, f64), c64(ka, f64),
         c64(use_gyro, bool), c64(epochs.yaw_rate_radps, f64), c64(use_odo, bool),
-        c64(odo_speed, f64), c64(epochs.gnss_outage, bool), gv_e, gv_n)
+        c64(odo_speed, f64), c64(epochs.gnss_outage, bool), gv_e, gv_n, ge_var)
     del r_e, r_n, ka
 
     opts = kn.kernel_options(flg)
     wk = np.zeros((5, N_STATES))
     b_out = np.zeros((2, n))  # GNSS error states (aekf.gnss_err_states), zero when off
     ge = initial_gnss_err(params)
+    if len(ge):
+        ge[kn.GE_PEE] = ge[kn.GE_PNN] = st[kn.ST_GE_VAR]
     gw = np.zeros((kn.GW_ROWS, N_STATES))  # its work rows
     outputs = kn.CsOutputs(x_out, pcov, gnss_used, gnss_rej, nis, static, hold, sd, b_out)
 

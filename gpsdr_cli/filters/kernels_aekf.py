@@ -113,7 +113,8 @@ ST_WH_C2, ST_WH_UE2, ST_WH_UN2, ST_WH_T2, ST_B_SINCE = range(19, 24)
 ST_ODO_T = 24  # time of the latest odometer record (s since the start)
 ST_JUMP_E, ST_JUMP_N = 25, 26  # this epoch's bias-gate move of b into the position (m; 0: none)
 ST_FIX_T = 27  # time of the latest used GNSS fix (s since the start)
-N_ST = 28
+ST_GE_VAR = 28  # the stationary variance of b's current regime (m^2; inp.ge_var)
+N_ST = 29
 #: a standstill the odometer said is forgotten after this long without an odometer record (s),
 #: as fkf's STALE_ODO_S: an odometer that drops out at a stop must not hold the car for minutes
 STALE_ODO_S = 1.0
@@ -123,7 +124,8 @@ VPSI_MAX = math.pi ** 2 / 3.0
 PRI_QA_E, PRI_QA_N, PRI_LAM, PRI_GAIN, PRI_ADD_E, PRI_ADD_N, PRI_W = range(7)
 PRI_FL_EE, PRI_FL_NN, PRI_FL_EN, PRI_FB = 7, 8, 9, 10
 PRI_JUMP_E, PRI_JUMP_N = 11, 12  # the bias gate's mean move of b into the position (m)
-N_PRIOR = 13
+PRI_VB = 13  # b's stationary variance at this epoch (m^2; its regime's)
+N_PRIOR = 14
 # counters (``info`` vector)
 INF_SPD_FAIL, INF_MIN_DIAG, INF_SKIPPED, INF_GATE_RESETS, INF_NONFINITE, INF_INFLATED = range(6)
 N_INFO = 6
@@ -131,9 +133,10 @@ N_INFO = 6
 # the kernel's arguments as records (numba takes namedtuples of arrays as they are)
 #: per-epoch inputs, arrays of n: dt (s), the GNSS fix z_e, z_n (m) and its variances
 #: r_e, r_n (m^2), K_a, the gyro yaw rate (rad/s, CCW+), the odometer speed (m/s), the
-#: outage flag and the receiver velocity gv_e, gv_n (m/s, NaN when none)
+#: outage flag, the receiver velocity gv_e, gv_n (m/s, NaN when none) and the GNSS error
+#: states' stationary variance ge_var (m^2; empty when they are off)
 CsInputs = namedtuple("CsInputs", "dt has_gnss z_e z_n r_e r_n ka has_gyro yaw has_odo odo "
-                                  "outage gv_e gv_n")
+                                  "outage gv_e gv_n ge_var")
 #: the filter state a segment starts from, updated in place: x (8), P (8, 8), the ST_* memory
 #: and the GNSS error block (GE_*)
 CsState = namedtuple("CsState", "x P st ge")
@@ -669,7 +672,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     yn = z_n - x[IN]
     if ge_on is not None:  # z = position + b + v: the predicted fix includes the bias
         if ge_pred:
-            ge_epoch(ge, gw, no_cons, ge_pred, alpha, prm[PAR_GE_VAR])  # no rows yet
+            ge_epoch(ge, gw, no_cons, ge_pred, alpha, st[ST_GE_VAR])  # no rows yet
             ge_pred = False
         if gate and n_fix >= prm[PAR_GATE_WARMUP]:
             # bias gate (our choice): multipath decorrelates as the car moves; an
@@ -680,7 +683,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # half in b; evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-aekf)
             if not is_static:
                 b2 = ge[GE_BE] * ge[GE_BE] + ge[GE_BN] * ge[GE_BN]
-                verdict, b_since = chi2_gate(b2, prm[PAR_GATE_THR] * prm[PAR_GE_VAR], t, b_since,
+                verdict, b_since = chi2_gate(b2, prm[PAR_GATE_THR] * st[ST_GE_VAR], t, b_since,
                                              prm[PAR_GATE_RESET], RESET_AFTER_FIRST_REJECT, False)
                 if verdict == GATE_RESET:
                     x[IE] += ge[GE_BE]
@@ -886,7 +889,7 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
     inference, so a default run compiles none of their code and helpers (cold
     start); :func:`kernel_options` builds them from ``flg``.
     """
-    dt, has_gnss, z_e, z_n, r_e, r_n, ka, has_gyro, yaw, has_odo, odo, outage, gv_e, gv_n = inp
+    dt, has_gnss, z_e, z_n, r_e, r_n, ka, has_gyro, yaw, has_odo, odo, outage, gv_e, gv_n, ge_var = inp
     x, P, st, ge = state
     x_out, pcov_out, gnss_used, gnss_rej, nis_out, static_out, hold_out, sd_out, b_out = out
     P_store, prior_store = store
@@ -974,6 +977,11 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                 # decorrelates with the antenna's displacement; parked, only with time)
                 sp_b = 0.0 if hold else math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
                 f_b = math.exp(-T * (prm[PAR_GE_RATE] + sp_b * prm[PAR_GE_DIST_RATE]))
+                if ge_var[k] != st[ST_GE_VAR]:
+                    # the fixes' error changed kind (an RTK drive's centimetre fixes and its
+                    # float / autonomous ones): b is a new variable, independent of the old
+                    f_b = 0.0
+                    st[ST_GE_VAR] = ge_var[k]
                 gw[GW_PRED, 0] = T
                 gw[GW_PRED, 1] = f_eps
                 gw[GW_PRED, 2] = lam
@@ -1164,7 +1172,7 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                     n_rows = ge_push(gw, n_rows, GW_OMEGA, H, PHt, prm[PAR_R_OMEGA], z - h)
         if ge_on is not None:  # noqa: SIM102 (the block: prediction and DR rows; numba prunes a plain test)
             if ge_pred or n_rows > 0:
-                ge_epoch(ge, gw, n_rows, ge_pred, alpha, prm[PAR_GE_VAR])
+                ge_epoch(ge, gw, n_rows, ge_pred, alpha, st[ST_GE_VAR])
         sp = math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN])
         if floor_off is None and gnss_used[k] and sp >= heading_min:  # the heading floor restarts from P
             ce = x[IVN] / sp
@@ -1205,6 +1213,7 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                 for i in range(N_GE_PACKED):
                     P_store[k - p_off, N_PACKED + i] = ge[i]
             prior_store[k, PRI_FB] = f_b
+            prior_store[k, PRI_VB] = st[ST_GE_VAR]
             prior_store[k, PRI_QA_E] = qa_e
             prior_store[k, PRI_QA_N] = qa_n
             prior_store[k, PRI_LAM] = lam

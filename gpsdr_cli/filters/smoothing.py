@@ -54,7 +54,6 @@ from .kernels_aekf import (
     N_PACKED,
     PAR_ALPHA,
     PAR_EPS_MEAN_DECAY,
-    PAR_GE_VAR,
     PAR_Q_EPS,
     PAR_Q_KS,
     PAR_R_OMEGA,
@@ -65,6 +64,7 @@ from .kernels_aekf import (
     PRI_JUMP_E,
     PRI_JUMP_N,
     PRI_LAM,
+    PRI_VB,
     PRI_W,
     ge_epoch,
     ge_turn,
@@ -184,7 +184,7 @@ def rts_segment(dt: np.ndarray, hold: np.ndarray, prm: np.ndarray, x_io: np.ndar
             rebuild_prior(P8, x8, T, alpha, tau_eps, prm[PAR_Q_EPS], prm[PAR_Q_KS],
                           prm[PAR_R_OMEGA], pr, hold[k + 1], qbuf, prm[PAR_SCALE_VAR])
             if ge_on:
-                ge_prior(G, gw, x8, T, alpha, tau_eps, pr, hold[k + 1], prm[PAR_GE_VAR])
+                ge_prior(G, gw, x8, T, alpha, tau_eps, pr, hold[k + 1], pr[PRI_VB])
             for i in range(n8):
                 x_prior[i] = x8[i]
                 for j in range(n8):

@@ -56,6 +56,33 @@ def test_rtk_drive_follows_centimetre_fixes(name, smooth):
     assert run.rmse_m < 0.6 * run.gnss_rmse_m
 
 
+def test_rtk_drive_bias_regime_per_fix_kind():
+    """aekf.bias_variance on the rtk scenario: 2 cm at the centimetre fixes, 0.2 m at the
+    float ones (quality 5), 2 m at the false ones; between fixes the last fix's; one
+    regime (aekf.gnss_err_sd_m) on a drive that is not RTK."""
+    from gpsdr_cli.filters.aekf import bias_variance
+    from gpsdr_cli.filters.gnss_model import gnss_error_model as apply
+    from gpsdr_cli.rtk_false_fix import centimetre_fixes
+
+    sim = simulate.simulate_drive("rtk", seed=1, duration_s=300)
+    p = config.defaults()
+    ep, pp = apply(build_epochs(sim.drive, sim.frame, p), p)
+    var = bias_variance(ep, pp)
+    f = ep.has_gnss
+    cm = centimetre_fixes(ep, pp)
+    g = pp["gnss"]
+    assert np.all(var[cm] == g["rtk_err_sd_m"] ** 2)
+    assert np.all(var[f & ~cm & (ep.gnss_quality == 5)] == g["rtk_float_err_sd_m"] ** 2)
+    assert np.all(var[f & ~cm & (ep.gnss_quality != 5)] == g["rtk_free_err_sd_m"] ** 2)
+    assert (f & ~cm & (ep.gnss_quality == 5)).any() and (f & ~cm & (ep.gnss_quality == 4)).any()
+    k = np.flatnonzero(f)
+    between = np.arange(k[0] + 1, k[1])
+    assert np.all(var[between] == var[k[0]])
+    city = simulate.simulate_drive("urban_canyon", seed=1, duration_s=60)
+    ep2, pp2 = apply(build_epochs(city.drive, city.frame, p), p)
+    assert np.all(bias_variance(ep2, pp2) == pp2["aekf"]["gnss_err_sd_m"] ** 2)
+
+
 def test_nlos_steps_are_down_weighted_for_ekf():
     """urban_nlos (steps of 10-80 m for 5-60 s under a good HDOP): the chords betray the
     steps, and ekf ends well below the fixes' error; without the check it is at or above
