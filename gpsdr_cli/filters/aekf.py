@@ -61,7 +61,6 @@ from collections.abc import Callable
 import numpy as np
 
 from ..config import Params
-from ..conventions import FIX_FLOAT_RTK
 from ..epochs import Epochs
 from ..errors import ConfigError
 from ..models.cs_model import N_STATES
@@ -70,7 +69,7 @@ from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
 from .base import FilterResult
-from .gnss_model import pdop_factors
+from .gnss_model import pdop_factors, rtk_bias_sd
 from .smoothing import rts_checkpointed
 
 #: Speed sigma (m/s) assigned to a velocity taken from the receiver's speed and course.
@@ -500,31 +499,13 @@ def drive_off_var(params: Params) -> tuple[float, float]:
 
 
 def bias_variance(epochs: Epochs, params: Params) -> np.ndarray:
-    """Per epoch, the stationary variance (m^2) of the GNSS error states b: the regime of the
-    fix at or last before the epoch (the first fix's before it).
-
-    ``aekf.gnss_err_sd_m`` squared everywhere, except on a drive whose fixes are mostly RTK
-    fixed (``[gnss] rtk_share``; the GNSS model has then set that sigma to
-    ``rtk_err_sd_m``): there an RTK float fix (quality 5) has a bias of ``[gnss]
-    rtk_float_err_sd_m`` and any other fix that is not a centimetre fix (autonomous,
-    DGPS, a false RTK fix: :func:`~gpsdr_cli.rtk_false_fix.centimetre_fixes`) one of
-    ``rtk_free_err_sd_m``.  The kernel starts a new, independent b where the regime changes
-    (the two kinds of fix err independently): so float or autonomous fixes before a first
-    RTK fix, averaged while parked, no longer pin the position their bias holds, and the
-    first centimetre fix moves the position, not b, back through the stop in the smoother.
-    """
-    var = float(params["aekf"]["gnss_err_sd_m"]) ** 2
-    out = np.full(len(epochs), var)
-    g = params["gnss"]
-    if epochs.rtk_fixed_share < float(g["rtk_share"]) or not epochs.has_gnss.any():
-        return out
-    f = np.flatnonzero(epochs.has_gnss)
-    fix_var = np.where(centimetre_fixes(epochs, params)[f], var,
-                       np.where(epochs.gnss_quality[f] == FIX_FLOAT_RTK,
-                                float(g["rtk_float_err_sd_m"]) ** 2,
-                                float(g["rtk_free_err_sd_m"]) ** 2))
-    last = np.searchsorted(f, np.arange(len(epochs)), side="right") - 1
-    return fix_var[np.maximum(last, 0)]
+    """Per epoch, the stationary variance (m^2) of the GNSS error states b: on an RTK drive
+    its fix kind's regime (:func:`~gpsdr_cli.filters.gnss_model.rtk_bias_sd`; the kernel
+    starts a new, independent b where it changes), else ``aekf.gnss_err_sd_m`` squared."""
+    sd = rtk_bias_sd(epochs, params)
+    if sd is None:
+        return np.full(len(epochs), float(params["aekf"]["gnss_err_sd_m"]) ** 2)
+    return sd ** 2
 
 
 def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> FilterResult:

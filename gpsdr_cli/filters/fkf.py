@@ -186,7 +186,8 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
                   gnss_course_rad=np.angle(np.exp(1j * course)), has_gyro=epochs.has_gyro[rev],
                   yaw_rate_radps=-epochs.yaw_rate_radps[rev], has_odo=epochs.has_odo[rev],
                   odo_speed_mps=epochs.odo_speed_mps[rev], gnss_outage=epochs.gnss_outage[rev],
-                  gap_s=epochs.gap_s)
+                  gap_s=epochs.gap_s, rtk_fixed_share=epochs.rtk_fixed_share,
+                  gnss_quality=epochs.gnss_quality[rev])
 
 
 #: epochs per block of :func:`combine_two_filter` (bounds its ~20 temporaries to ~10 MB)

@@ -23,6 +23,7 @@ from ..epochs import Epochs, true_runs
 from ..errors import ConfigError, NoDataError
 from . import kernels_fkf as kf
 from .adaptive import gate_threshold
+from .gnss_model import rtk_bias_sd
 from .standstill import standstill_from_gnss
 
 #: seconds: an odometer reading older than this does not decide standstill
@@ -316,7 +317,7 @@ def fix_chords(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray | None, psi_g: np
     tf = t_s[f]
     pf = epochs.gnss_e[f] + 1j * epochs.gnss_n[f]
     var_fix = 0.5 * (epochs.gnss_sd_e[f] ** 2 + epochs.gnss_sd_n[f] ** 2)
-    w = eps_w[f]
+    w = np.mod(eps_w[f], kf.EPS_RESET)  # the regime share, without a reset mark
     var_eps = (1.0 - w) * fp["gnss_err_sd_m"] ** 2 + w * fp["gnss_err_obstructed_sd_m"] ** 2
     d_min = np.sqrt(2.0 * (var_fix + var_eps)) / fp["fix_chord_course_sd_rad"]
     with_odo = t_odo is not None and len(t_odo) > 1
@@ -524,6 +525,13 @@ def multipath_regime(epochs: Epochs, params: Params) -> np.ndarray:
     Evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#fkf-inputs.
     """
     n = len(epochs)
+    rtk_sd = rtk_bias_sd(epochs, params)
+    if rtk_sd is not None:  # an RTK drive: the regime is the fix kind (0 centimetres, 1 other)
+        c2 = float(params["fkf"]["gnss_err_sd_m"]) ** 2
+        o2 = float(params["fkf"]["gnss_err_obstructed_sd_m"]) ** 2
+        w = np.clip((rtk_sd ** 2 - c2) / (o2 - c2), 0.0, 1.0) if o2 > c2 else np.zeros(n)
+        switch = np.concatenate(([False], np.diff(rtk_sd) != 0.0))
+        return np.where(switch, w + kf.EPS_RESET, w)
     thr = params["fkf"]["gnss_err_pdop"]
     f = np.flatnonzero(epochs.has_gnss)
     if not len(f) or thr == math.inf:

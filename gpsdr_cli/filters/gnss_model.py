@@ -47,7 +47,7 @@ import dataclasses
 import numpy as np
 
 from ..config import Params
-from ..conventions import NS_PER_S
+from ..conventions import FIX_FLOAT_RTK, NS_PER_S
 from ..epochs import Epochs, true_runs
 from ..errors import ConfigError
 from ..rtk_false_fix import centimetre_fixes
@@ -224,9 +224,30 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     return epochs, params
 
 
+def rtk_bias_sd(epochs: Epochs, params: Params) -> np.ndarray | None:
+    """Per epoch on an RTK drive (``[gnss] rtk_share``), the sigma (m) of the GNSS error
+    states' regime, the fix kind's at or last before the epoch (the first fix's before it):
+    ``rtk_err_sd_m`` at a centimetre fix (:func:`~gpsdr_cli.rtk_false_fix.centimetre_fixes`),
+    ``rtk_float_err_sd_m`` at an RTK float fix (quality 5), ``rtk_free_err_sd_m`` at any
+    other (autonomous, DGPS, a false RTK fix).  None on other drives (one regime).  The
+    filters start a new, independent bias where it changes: the kinds of fix err apart, and
+    float or autonomous fixes averaged at a stop must not pin the position their own bias
+    holds (decision 0026)."""
+    g = params["gnss"]
+    if epochs.rtk_fixed_share < float(g["rtk_share"]) or not epochs.has_gnss.any():
+        return None
+    f = np.flatnonzero(epochs.has_gnss)
+    sd = np.where(centimetre_fixes(epochs, params)[f], float(g["rtk_err_sd_m"]),
+                  np.where(epochs.gnss_quality[f] == FIX_FLOAT_RTK, float(g["rtk_float_err_sd_m"]),
+                           float(g["rtk_free_err_sd_m"])))
+    last = np.searchsorted(f, np.arange(len(epochs)), side="right") - 1
+    return sd[np.maximum(last, 0)]
+
+
 def rtk_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     """A drive whose fixes are mostly RTK fixed: the centimetre fixes are taken at their
-    word -- the GNSS error states pinned at ``[gnss] rtk_err_sd_m``, the standstill from
+    word -- the GNSS error states pinned at ``[gnss] rtk_err_sd_m`` there (a regime per fix
+    kind, :func:`rtk_bias_sd`), the standstill from
     the receiver's speed below ``rtk_standstill_speed_mps`` -- and every other fix (float, autonomous, or a
     centimetre fix judged false by
     :func:`gpsdr_cli.rtk_false_fix.mark_false_fixes`) gets its sigma x
@@ -247,7 +268,10 @@ def rtk_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
     out = copy.deepcopy(params)
     sd = float(g["rtk_err_sd_m"])
     out["aekf"]["gnss_err_sd_m"] = sd
-    out["fkf"]["gnss_err_sd_m"] = out["fkf"]["gnss_err_obstructed_sd_m"] = sd
+    # fkf's two eps regimes become the fix kinds' (fkf_inputs.multipath_regime): centimetre
+    # fixes clear, the others obstructed
+    out["fkf"]["gnss_err_sd_m"] = sd
+    out["fkf"]["gnss_err_obstructed_sd_m"] = float(g["rtk_free_err_sd_m"])
     # an RTK receiver's Doppler speed is good to centimetres per second: the standstill from
     # it may end sooner, before the pinned states would have to carry the first metre
     out["fkf"]["gnss_standstill_speed_mps"] = min(float(out["fkf"]["gnss_standstill_speed_mps"]),

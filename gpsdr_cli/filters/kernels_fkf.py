@@ -185,7 +185,11 @@ PAR_TAU_EPS_O = 26   # s, obstructed sky (PDOP >= gnss_err_pdop): multipath
 PAR_EPS_SD_O = 27    # m
 PAR_EPS_DIST_O = 28  # m; <= 0: time only
 PAR_COAST_Q = 29     # m^2/s^3: zero-acceleration rows r = this / T while nothing measures the speed; 0: off
-N_PAR = 30
+PAR_EPS_RESET = 30   # 1: the step into this epoch starts a new, independent eps (select_eps)
+N_PAR = 31
+#: added to a regime share w in ``eps_w``: the step into that epoch starts a new eps
+#: (an RTK drive's fix kind changed: fkf_inputs.multipath_regime)
+EPS_RESET = 10.0
 
 #: heading row only while v^2 >= this x var(speed), var(speed) = u^T P_vv u, u = v/|v|:
 #: a speed of 3 sigmas or more
@@ -430,6 +434,8 @@ def eps_decay(x: np.ndarray, T: float, par: np.ndarray) -> float:
     ``|v|`` the speed of the state being predicted, ``D = [fkf]
     gnss_err_dist_m`` (<= 0: time only, Tang et al.).
     """
+    if par[PAR_EPS_RESET] != 0.0:
+        return 0.0
     rate = 1.0 / par[PAR_TAU_EPS]
     if par[PAR_EPS_DIST] > 0.0:
         rate += math.sqrt(x[IVE] * x[IVE] + x[IVN] * x[IVN]) / par[PAR_EPS_DIST]
@@ -445,7 +451,12 @@ def select_eps(par: np.ndarray, w: float) -> None:
     linear in w).  Copied, so a regime's floats are the parameter's own.  The
     variance of eps relaxes to a new regime's at the process's own rate (Q =
     ``sd^2 (1 - f^2)``); the regime itself changes gradually (a share over a window).
+    ``w >= EPS_RESET``: regime ``w - EPS_RESET``, and the step starts a new, independent
+    eps (:func:`eps_decay` 0: Q is then the regime's whole variance).
     """
+    par[PAR_EPS_RESET] = 1.0 if w >= EPS_RESET else 0.0
+    if w >= EPS_RESET:
+        w -= EPS_RESET
     if w <= 0.0:
         par[PAR_TAU_EPS] = par[PAR_TAU_EPS_C]
         par[PAR_EPS_SD] = par[PAR_EPS_SD_C]

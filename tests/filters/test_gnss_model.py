@@ -78,6 +78,19 @@ def test_rtk_drive_bias_regime_per_fix_kind():
     k = np.flatnonzero(f)
     between = np.arange(k[0] + 1, k[1])
     assert np.all(var[between] == var[k[0]])
+    # fkf: the same kinds as its two eps regimes (0 clear = centimetres, 1 the others,
+    # float in between at its sigma), a new eps where the kind changes
+    from gpsdr_cli.filters import kernels_fkf as kf
+    from gpsdr_cli.filters.fkf_inputs import multipath_regime
+
+    w = multipath_regime(ep, pp)
+    reset = w >= kf.EPS_RESET
+    w = np.mod(w, kf.EPS_RESET)
+    assert np.all(w[cm] == 0.0) and np.all(w[f & ~cm & (ep.gnss_quality != 5)] == 1.0)
+    sd2 = (1 - w) * g["rtk_err_sd_m"] ** 2 + w * g["rtk_free_err_sd_m"] ** 2
+    np.testing.assert_allclose(sd2, var, rtol=1e-12)
+    np.testing.assert_array_equal(reset[1:], np.diff(var) != 0.0)
+    assert 4 <= reset.sum() < f.sum() // 20
     city = simulate.simulate_drive("urban_canyon", seed=1, duration_s=60)
     ep2, pp2 = apply(build_epochs(city.drive, city.frame, p), p)
     assert np.all(bias_variance(ep2, pp2) == pp2["aekf"]["gnss_err_sd_m"] ** 2)
