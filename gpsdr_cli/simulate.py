@@ -1313,7 +1313,8 @@ def _stamp(t_ns: int, frame_id: str) -> dict:
 
 
 def write_mcap(drive: Drive, path: str | Path) -> Path:
-    """ROS 2 CDR MCAP (zstd chunks): /gnss/fix NavSatFix, /gnss/fix_velocity
+    """ROS 2 CDR MCAP (zstd chunks): /gnss/fix NavSatFix (status GBAS for a differential
+    fix, as the u-blox driver sends it, else FIX), /gnss/fix_velocity
     TwistWithCovarianceStamped (the receiver's Doppler velocity in ENU, x east, y north, as
     the u-blox driver publishes it, with every fix that has a speed: zero where it is too
     slow for a course), /imu Imu
@@ -1348,7 +1349,10 @@ def write_mcap(drive: Drive, path: str | Path) -> Path:
                 var_n = float(g.sigma_n_m[i]) ** 2 if ok else 0.0
                 var_u = (1.6 * float(g.sigma_n_m[i])) ** 2 if ok else 0.0
                 msg = {"header": _stamp(t, "gnss"),
-                       "status": {"status": 0 if ok else -1, "service": 1},
+                       # the u-blox driver's mapping: a differential fix (DGPS, RTK fixed
+                       # or float) is GBAS, any other fix FIX
+                       "status": {"status": (2 if g.fix_quality[i] in (2, 4, 5) else 0) if ok
+                                  else -1, "service": 1},
                        "latitude": float(g.lat_deg[i]), "longitude": float(g.lon_deg[i]),
                        "altitude": float(g.alt_m[i]),
                        "position_covariance": [var_e, 0.0, 0.0, 0.0, var_n, 0.0, 0.0, 0.0, var_u],

@@ -16,12 +16,15 @@ odo        ``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``),
            (``twist.linear.x``), forward speed in m/s
 =========  ====================================================================
 
-Fix quality: NavSatStatus FIX is autonomous (1), SBAS and GBAS are DGPS (2), and any fix
-whose known covariance is at most ``RTK_FIXED_SD_M`` per axis is RTK fixed (4): the status
-has no code for RTK (the u-blox and NMEA drivers send it as GBAS, foxglove.LocationFix has
-no status), and only a carrier-phase fixed solution is stated to centimetres.  Read as
-DGPS, an RTK drive got metres of GNSS error states and its track wandered 1-3 m from
-centimetre fixes (docs/decisions/0025-rtk-from-a-navsatfix-covariance.md).
+Fix quality: NavSatStatus FIX is autonomous (1), SBAS and GBAS are DGPS (2), and an
+augmented fix (SBAS or GBAS) whose known covariance is at most ``RTK_FIXED_SD_M`` per axis
+is RTK fixed (4): the status has no code for RTK (the u-blox and NMEA drivers send it as
+GBAS), and only a carrier-phase fixed solution is stated to centimetres.  Read as DGPS, an
+RTK drive got metres of GNSS error states and its track wandered 1-3 m from centimetre
+fixes.  An unaugmented fix (FIX, or foxglove.LocationFix, which has no status) stays
+autonomous whatever its covariance: RTK needs corrections, and a publisher that fills in a
+centimetre covariance for metres of error would otherwise pin the track to its noise
+(docs/decisions/0025-rtk-from-a-navsatfix-covariance.md).
 
 Encodings: ROS 2 CDR (a vectorised fixed-layout fast path,
 :mod:`gpsdr_cli.io.ros2_fast`, with ``mcap_ros2``'s generic decoder as the fallback
@@ -449,7 +452,7 @@ def _gnss_from_fixes(chan: Channel, t_ns: np.ndarray, skipped: SkipReport, where
         var = _cat(chan, name, np.float64)
         good = fix & (cov_type > 0) & np.isfinite(var) & (var > 0)
         setattr(g, out, np.where(good, np.sqrt(np.where(good, var, 1.0)), np.nan))
-    rtk = fix & (np.maximum(g.sigma_e_m, g.sigma_n_m) <= RTK_FIXED_SD_M)  # NaN: unknown
+    rtk = fix & (status > 0) & (np.maximum(g.sigma_e_m, g.sigma_n_m) <= RTK_FIXED_SD_M)
     g.fix_quality[rtk] = FIX_RTK
     return g
 

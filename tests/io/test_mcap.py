@@ -110,12 +110,13 @@ def test_real_ublox_recording_counts_and_ranges():
     assert g.sigma_e_m[0] == pytest.approx(0.111, abs=1e-12)
     assert g.t_ns[0] == 1616425418_800331612  # the header stamp, not the log time
     # An F9P with RTK corrections: NavSatStatus says GBAS (no code says RTK), hAcc 1.4-2.6 cm.
-    # Those fixes are RTK fixed; the first 15.6 s (0.10-0.11 m) are not.
+    # Those fixes are RTK fixed; the first 15.6 s (FIX, 0.10-0.11 m) and 41 FIX ones stated
+    # to 1.7-2.3 cm later (no corrections: not RTK) are not.
     assert g.fix_quality[0] == FIX_GPS
     rtk = g.fix_quality == FIX_RTK
-    assert np.count_nonzero(rtk) == 3207 and np.count_nonzero(g.fix_quality == FIX_GPS) == 157
+    assert np.count_nonzero(rtk) == 3166 and np.count_nonzero(g.fix_quality == FIX_GPS) == 198
     assert np.fmax(g.sigma_e_m, g.sigma_n_m)[rtk].max() <= 0.05
-    assert np.fmax(g.sigma_e_m, g.sigma_n_m)[~rtk].min() > 0.05
+    assert np.fmax(g.sigma_e_m, g.sigma_n_m)[g.fix_quality == FIX_GPS].max() > 0.05
     # 339 s of 10 Hz stamps, strictly increasing
     assert np.all(np.diff(g.t_ns) > 0)
     assert (g.t_ns[-1] - g.t_ns[0]) / 1e9 == pytest.approx(339.3, abs=0.5)
@@ -286,8 +287,9 @@ def test_no_fix_status_nan_and_covariance_type(tmp_path):
 
 
 def test_a_centimetre_covariance_is_an_rtk_fixed_fix(tmp_path):
-    """NavSatStatus has no RTK code: a known covariance of <= 5 cm per axis makes the fix
-    RTK fixed (quality 4) whatever the status; an unknown one (type 0) or 6 cm does not."""
+    """NavSatStatus has no RTK code: a known covariance of <= 5 cm per axis makes an
+    augmented fix (SBAS, GBAS) RTK fixed (quality 4); an unaugmented one, an unknown
+    covariance (type 0) or 6 cm does not."""
     cases = [(2, 0.02, 0.03, 2), (0, 0.02, 0.02, 1), (2, 0.06, 0.02, 2), (1, 0.5, 0.5, 2),
              (2, 0.01, 0.01, 0), (-1, 0.01, 0.01, 2)]
     msgs = []
@@ -300,7 +302,7 @@ def test_a_centimetre_covariance_is_an_rtk_fixed_fix(tmp_path):
     write_mcap(path, [("/fix", "navsatfix", msgs)])
     g = read_mcap(path).gnss
     np.testing.assert_array_equal(g.fix_quality,
-                                  [FIX_RTK, FIX_RTK, FIX_DGPS, FIX_DGPS, FIX_DGPS, FIX_NONE])
+                                  [FIX_RTK, FIX_GPS, FIX_DGPS, FIX_DGPS, FIX_DGPS, FIX_NONE])
 
 
 def test_most_messages_wins_and_topic_override(tmp_path):
