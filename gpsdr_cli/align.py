@@ -303,8 +303,7 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                                 q)
         rtk_share = float(np.count_nonzero(usable & (q == FIX_RTK))) / max(int(usable.sum()), 1)
         g_rec = {"usable": usable, "e": e, "n": n, "sd_e": sd_e, "sd_n": sd_n, "pdop": g.pdop[keep],
-                 "quality": q,
-                     "speed": g.speed_mps[keep], "course": np.deg2rad(g.course_deg[keep])}
+                 "quality": q, "speed": g.speed_mps[keep], "course": np.deg2rad(g.course_deg[keep])}
         parts.append(gnss_t)
 
     gyro_t = np.zeros(0, np.int64)
@@ -381,7 +380,8 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                     gnss_sd_e=sd_e, gnss_sd_n=sd_n, pdop=pdop, gnss_speed_mps=gspeed,
                     gnss_course_rad=gcourse, has_gyro=has_gyro, yaw_rate_radps=yaw,
                     has_odo=has_odo, odo_speed_mps=odo, gnss_outage=outage, gap_s=gap_s,
-                    has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share, gnss_quality=quality,
+                    has_accel=has_accel, accel_mps2=accel, rtk_fixed_share=rtk_share,
+                    gnss_quality=quality,
                     dr_unhealthy=(health.gyro_ok is not None
                                   or health.odo_bad_s >= float(params["health"]["odo_silent_s"])
                                   or _silent(odo_t, float(params["health"]["odo_silent_s"]),

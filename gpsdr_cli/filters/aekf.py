@@ -565,9 +565,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     opts = kn.kernel_options(flg)
     wk = np.zeros((5, N_STATES))
     b_out = np.zeros((2, n))  # GNSS error states (aekf.gnss_err_states), zero when off
-    ge = initial_gnss_err(params)
-    if len(ge):
-        ge[kn.GE_PEE] = ge[kn.GE_PNN] = st[kn.ST_GE_VAR]
+    ge = initial_gnss_err(params, st[kn.ST_GE_VAR])
     gw = np.zeros((kn.GW_ROWS, N_STATES))  # its work rows
     outputs = kn.CsOutputs(x_out, pcov, gnss_used, gnss_rej, nis, static, hold, sd, b_out)
 
@@ -686,8 +684,9 @@ def compile_parts(params: Params, adaptive: bool) -> tuple[Callable[[], None], .
     return shared, fix_helpers, fix, block, dr_helpers
 
 
-def initial_gnss_err(params: Params) -> np.ndarray:
-    """The GNSS error block at epoch 0 (kernels_aekf GE_*): b = 0 with its stationary variance.
+def initial_gnss_err(params: Params, var: float | None = None) -> np.ndarray:
+    """The GNSS error block at epoch 0 (kernels_aekf GE_*): b = 0 with its stationary variance,
+    ``var`` (m^2; the first epoch's regime, :func:`bias_variance`), else ``gnss_err_sd_m``'s.
 
     ``aekf.gnss_err_states`` off: an empty array (the kernel does not touch it).
     """
@@ -695,7 +694,7 @@ def initial_gnss_err(params: Params) -> np.ndarray:
     if not a["gnss_err_states"]:
         return np.zeros(0)
     ge = np.zeros(kn.N_GE)
-    ge[kn.GE_PEE] = ge[kn.GE_PNN] = a["gnss_err_sd_m"] ** 2
+    ge[kn.GE_PEE] = ge[kn.GE_PNN] = a["gnss_err_sd_m"] ** 2 if var is None else var
     return ge
 
 

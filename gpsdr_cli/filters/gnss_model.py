@@ -175,7 +175,7 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     ``vector``: the vector chord may call the drive NLOS (not when the fixes the NLOS screen
     kept are judged again: those agree with the dead reckoning by construction)."""
     g = params["gnss"]
-    if epochs.rtk_fixed_share >= float(g["rtk_share"]):
+    if rtk_drive(epochs, params):
         return rtk_error_model(epochs, params)
     thr = float(g["nlos_mismatch_m"])
     if not thr > 0.0:
@@ -224,6 +224,11 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     return epochs, params
 
 
+def rtk_drive(epochs: Epochs, params: Params) -> bool:
+    """At least ``[gnss] rtk_share`` of the drive's usable fixes are RTK fixed."""
+    return epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])
+
+
 def rtk_bias_sd(epochs: Epochs, params: Params) -> np.ndarray | None:
     """Per epoch on an RTK drive (``[gnss] rtk_share``), the sigma (m) of the GNSS error
     states' regime, the fix kind's at or last before the epoch (the first fix's before it):
@@ -233,9 +238,9 @@ def rtk_bias_sd(epochs: Epochs, params: Params) -> np.ndarray | None:
     filters start a new, independent bias where it changes: the kinds of fix err apart, and
     float or autonomous fixes averaged at a stop must not pin the position their own bias
     holds (decision 0026)."""
-    g = params["gnss"]
-    if epochs.rtk_fixed_share < float(g["rtk_share"]) or not epochs.has_gnss.any():
+    if not rtk_drive(epochs, params) or not epochs.has_gnss.any():
         return None
+    g = params["gnss"]
     f = np.flatnonzero(epochs.has_gnss)
     sd = np.where(centimetre_fixes(epochs, params)[f], float(g["rtk_err_sd_m"]),
                   np.where(epochs.gnss_quality[f] == FIX_FLOAT_RTK, float(g["rtk_float_err_sd_m"]),

@@ -71,6 +71,7 @@ from ..config import Params
 from ..conventions import NS_PER_S
 from ..epochs import Epochs
 from .base import FilterResult
+from .gnss_model import rtk_drive
 
 KERNELS = {"gauss": 0, "huber": 1, "cauchy": 2}
 
@@ -256,8 +257,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # filters' NLOS drive itself, which the vector chord may call with few fixes marked)
     nlos_drive = nlos_share >= float(gp["nlos_share"]) or epochs.nlos_drive
     # An RTK drive too: centimetre fixes against a 0.3-m error state did not converge.
-    rtk_drive = epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])
-    err_on = bool(gp["gnss_err_states"]) and not nlos_drive and not rtk_drive
+    err_on = bool(gp["gnss_err_states"]) and not nlos_drive and not rtk_drive(epochs, params)
 
     # ---- fixes per keyframe
     sd_min = float(params["gnss"]["sigma_min_m"])
