@@ -687,6 +687,11 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     params, clock_notes = clock_check.check(drive, params)
     for note in clock_notes:
         _warn(drive, note)
+    from . import rtk_odo_lag
+
+    params, lag_note = rtk_odo_lag.apply(drive, params, frame, auto_gnss_offset)
+    if lag_note:
+        _warn(drive, lag_note)
     offset_auto: float | None = None
     offset_note = ""
     if auto_gnss_offset:
