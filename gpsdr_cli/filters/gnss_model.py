@@ -250,15 +250,16 @@ def rtk_bias_sd(epochs: Epochs, params: Params) -> np.ndarray | None:
 
 
 def rtk_error_model(epochs: Epochs, params: Params) -> tuple[Epochs, Params]:
-    """A drive whose fixes are mostly RTK fixed: the centimetre fixes are taken at their
-    word -- the GNSS error states pinned at ``[gnss] rtk_err_sd_m`` there (a regime per fix
-    kind, :func:`rtk_bias_sd`), the standstill from
-    the receiver's speed below ``rtk_standstill_speed_mps`` -- and every other fix (float, autonomous, or a
-    centimetre fix judged false by
-    :func:`gpsdr_cli.rtk_false_fix.mark_false_fixes`) gets its sigma x
-    ``rtk_free_sd_factor``: its error, decimetres to metres, holds for seconds, which a
-    white sigma at each fix would count as independent.  (ekf, with one sigma per fix class
-    rather than per fix, takes the centimetre fixes' and the others' medians apart:
+    """A drive with at least ``[gnss] rtk_share`` of its fixes RTK fixed (a fifth: long
+    float or autonomous stretches under trees do not undo the centimetres where it is
+    fixed, decision 0027): the centimetre fixes are taken at their word -- the GNSS error
+    states pinned at ``[gnss] rtk_err_sd_m`` there (a regime per fix kind,
+    :func:`rtk_bias_sd`), the standstill from the receiver's speed below
+    ``rtk_standstill_speed_mps`` -- and every other fix (float, autonomous, or a
+    centimetre fix judged false by :func:`gpsdr_cli.rtk_false_fix.mark_false_fixes`) gets
+    its sigma x ``rtk_free_sd_factor``: its error, decimetres to metres, holds for seconds,
+    which a white sigma at each fix would count as independent.  (ekf, with one sigma per
+    fix class rather than per fix, takes the centimetre fixes' and the others' medians apart:
     :func:`gpsdr_cli.filters.aekf.gnss_noise`.)"""
     g = params["gnss"]
     cm = centimetre_fixes(epochs, params)
