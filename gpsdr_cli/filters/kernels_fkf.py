@@ -152,6 +152,9 @@ IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS = range(NX)
 #: read through a position-velocity covariance built over the seconds without fixes it moved
 #: a city track 75 m at a stop (decisions/0015, fkf)
 ZUPT_CONSIDER = (1 << IE) | (1 << IN) | (1 << IEPS_E) | (1 << IEPS_N)
+#: a stop says nothing about the gyro heading's alignment error: read through the velocity's
+#: covariance, the braking transient moved it 1.3 -> 10.7 deg at one city stop (decisions/0023)
+ZUPT_KEEP_HEADING = 1 << IQW
 
 # ---- float parameter vector (built by fkf.kernel_parameters) ---------------------------
 PAR_TAU_EPS = 0      # s, correlation time of eps_e, eps_n
@@ -1296,11 +1299,12 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                     predict(x1, P1, T, st, par, d1)
                 if dr_on:
                     predict(x2, P2, T, st, par, d2)
-            zupt_consider = 0
+            zupt_consider = ZUPT_KEEP_HEADING
             if st:
                 p_counters[C_ZUPT] += 1
                 if t_now - t_last_acc > par[PAR_GNSS_STALE_S]:
-                    zupt_consider = ZUPT_CONSIDER
+                    zupt_consider = ZUPT_CONSIDER | ZUPT_KEEP_HEADING
+                central = False                         # consider rows are no Kalman rows: fuse
 
             # ---- GNSS local filter -------------------------------------------------------
             if gnss_on:

@@ -230,8 +230,9 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         T = prep.dt[k] if k > 0 else 0.0
         t += T
         st = bool(prep.static[k])
-        # without a fresh fix a stop corrects the velocity only (kernels_fkf.ZUPT_CONSIDER)
-        zc = (0, 3, 6, 7) if t - t_acc > par[kf.PAR_GNSS_STALE_S] else ()
+        # without a fresh fix a stop corrects the velocity only (kernels_fkf.ZUPT_CONSIDER),
+        # and never the heading's alignment error q_w (kernels_fkf.ZUPT_KEEP_HEADING)
+        zc = (0, 3, 6, 7, 8) if t - t_acc > par[kf.PAR_GNSS_STALE_S] else (8,)
         if T > 0:
             pk = regime_par(par, prep.eps_w[k])           # the eps model of this step
             Phi1, Q1 = Phi_of(T, st, pk, x1), Q_of(T, st, pk, x1)
@@ -405,7 +406,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
         xs, Ps = out_x, out_P
     return {"e": xs[:, 0], "n": xs[:, 3], "v_e": xs[:, 1], "v_n": xs[:, 4],
             "var_e": Ps[:, 0, 0], "var_n": Ps[:, 3, 3], "cov_en": Ps[:, 0, 3],
-            "beta": beta_out, "gnss_used": used}
+            "beta": beta_out, "gnss_used": used, "q_w": xs[:, 8]}
 
 
 def two_filter(fwd: dict[str, np.ndarray], bwd: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

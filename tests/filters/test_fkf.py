@@ -150,6 +150,24 @@ def test_stop_without_fixes_corrects_the_velocity_only(mode: str) -> None:
     assert np.ptp(result.e[stopped]) < 1e-6 and np.ptp(result.n[stopped]) < 1e-6
 
 
+@pytest.mark.parametrize("mode", ["nr", "fr"])
+def test_a_stop_leaves_the_heading_alignment_alone(mode: str) -> None:
+    """Braking into a stop on a bend: the zero-velocity rows say nothing about the gyro
+    heading's alignment error q_w, so it holds through the stop (read through the velocity's
+    covariance, one simulated city stop moved it 1.3 -> 10.7 deg, decisions/0023)."""
+    drive, frame, _ = tiny_drive(60.0, turn_radps=0.05, stop=(25, 35), gnss_gap=(20, 40))
+    params = _params(fkf={"mode": mode})
+    epochs = build_epochs(drive, frame, params)
+    prep = fkf.prepare(epochs, params)
+    t_s = (epochs.t_ns - epochs.t_ns[0]) / 1e9
+    ref = run_reference(prep, "fkf")
+    assert_matches_reference(get("fkf")(epochs, params), ref)
+    stopped = np.flatnonzero(prep.static & (t_s > 21) & (t_s < 39))
+    assert len(stopped) > 100
+    q_w = ref["q_w"][stopped[0] - 1:stopped[-1] + 1]
+    assert np.ptp(q_w) < 1e-12, np.ptp(q_w)
+
+
 def _with_pdop(epochs, t_s: np.ndarray):
     """PDOP 1.5 (clear sky) except 4.0 (obstructed) from 15 to 35 s and NaN from 50 s."""
     pdop = np.where((t_s >= 15.0) & (t_s < 35.0), 4.0, 1.5)
