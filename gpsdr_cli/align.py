@@ -38,7 +38,7 @@ from .conventions import FIX_DR, FIX_FLOAT_RTK, FIX_RTK, NS_PER_S
 from .epochs import Epochs, true_runs
 from .geodesy import LocalFrame
 from .io.drive import Drive, SkipReport
-from .rtk_false_fix import mark_false_fixes
+from .rtk_false_fix import centimetres_held, mark_false_fixes
 
 #: A stream losing more than this share of its records in cleaning gets a warning.
 LOSS_WARN_SHARE = 0.01
@@ -386,6 +386,11 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                                   or health.odo_bad_s >= float(params["health"]["odo_silent_s"])
                                   or _silent(odo_t, float(params["health"]["odo_silent_s"]),
                                              t[has_gnss], gspeed[has_gnss])))
+    epochs, claim = centimetres_held(epochs, params)
+    if claim:
+        warnings = drive.meta.setdefault("warnings", [])
+        if claim not in warnings:
+            warnings.append(claim)
     return mark_false_fixes(epochs, params)
 
 
