@@ -16,10 +16,11 @@ odo        ``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``),
            (``twist.linear.x``), forward speed in m/s
 =========  ====================================================================
 
-Fix quality: NavSatStatus FIX is autonomous (1), SBAS and GBAS are DGPS (2), and an
-augmented fix (SBAS or GBAS) whose known covariance is at most ``RTK_FIXED_SD_M`` per axis
-is RTK fixed (4): the status has no code for RTK (the u-blox and NMEA drivers send it as
-GBAS), and only a carrier-phase fixed solution is stated to centimetres.  Read as DGPS, an
+Fix quality: NavSatStatus FIX is autonomous (1), SBAS and GBAS are DGPS (2), and a GBAS
+fix whose known covariance is at most ``RTK_FIXED_SD_M`` per axis is RTK fixed (4): the
+status has no code for RTK (the u-blox and NMEA drivers send it as GBAS), and only a
+carrier-phase fixed solution is stated to centimetres.  Not an SBAS one: the ROS 2 NMEA
+driver sends DGPS as SBAS with a sigma of HDOP x 0.1 m, 5 cm at an HDOP of 0.5.  Read as DGPS, an
 RTK drive got metres of GNSS error states and its track wandered 1-3 m from centimetre
 fixes.  An unaugmented fix (FIX, or foxglove.LocationFix, which has no status) stays
 autonomous whatever its covariance: RTK needs corrections, and a publisher that fills in a
@@ -429,6 +430,8 @@ def _times(chan: Channel, use_log_time: bool) -> tuple[np.ndarray, int]:
 #: a fix whose known covariance is at most this per axis (m) is taken as RTK fixed
 #: (the ``[gnss] rtk_cm_sd_m`` default: the centimetres no other solution reaches)
 RTK_FIXED_SD_M = 0.05
+#: NavSatStatus.STATUS_GBAS_FIX (ground-based augmentation: the drivers' RTK)
+GBAS_FIX = 2
 
 
 def _gnss_from_fixes(chan: Channel, t_ns: np.ndarray, skipped: SkipReport, where: str) -> GnssFixes:
@@ -452,7 +455,7 @@ def _gnss_from_fixes(chan: Channel, t_ns: np.ndarray, skipped: SkipReport, where
         var = _cat(chan, name, np.float64)
         good = fix & (cov_type > 0) & np.isfinite(var) & (var > 0)
         setattr(g, out, np.where(good, np.sqrt(np.where(good, var, 1.0)), np.nan))
-    rtk = fix & (status > 0) & (np.maximum(g.sigma_e_m, g.sigma_n_m) <= RTK_FIXED_SD_M)
+    rtk = fix & (status == GBAS_FIX) & (np.maximum(g.sigma_e_m, g.sigma_n_m) <= RTK_FIXED_SD_M)
     g.fix_quality[rtk] = FIX_RTK
     return g
 

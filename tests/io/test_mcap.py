@@ -287,11 +287,11 @@ def test_no_fix_status_nan_and_covariance_type(tmp_path):
 
 
 def test_a_centimetre_covariance_is_an_rtk_fixed_fix(tmp_path):
-    """NavSatStatus has no RTK code: a known covariance of <= 5 cm per axis makes an
-    augmented fix (SBAS, GBAS) RTK fixed (quality 4); an unaugmented one, an unknown
-    covariance (type 0) or 6 cm does not."""
+    """NavSatStatus has no RTK code: a known covariance of <= 5 cm per axis makes a GBAS fix
+    RTK fixed (quality 4); an unaugmented one, an SBAS one (the ROS 2 NMEA driver's DGPS at
+    HDOP x 0.1 m), an unknown covariance (type 0) or 6 cm does not."""
     cases = [(2, 0.02, 0.03, 2), (0, 0.02, 0.02, 1), (2, 0.06, 0.02, 2), (1, 0.5, 0.5, 2),
-             (2, 0.01, 0.01, 0), (-1, 0.01, 0.01, 2)]
+             (2, 0.01, 0.01, 0), (-1, 0.01, 0.01, 2), (1, 0.05, 0.05, 2)]
     msgs = []
     for i, (status, sd_e, sd_n, cov_type) in enumerate(cases):
         t = T0 + i * 10**8
@@ -302,7 +302,8 @@ def test_a_centimetre_covariance_is_an_rtk_fixed_fix(tmp_path):
     write_mcap(path, [("/fix", "navsatfix", msgs)])
     g = read_mcap(path).gnss
     np.testing.assert_array_equal(g.fix_quality,
-                                  [FIX_RTK, FIX_GPS, FIX_DGPS, FIX_DGPS, FIX_DGPS, FIX_NONE])
+                                  [FIX_RTK, FIX_GPS, FIX_DGPS, FIX_DGPS, FIX_DGPS, FIX_NONE,
+                                   FIX_DGPS])
 
 
 def test_most_messages_wins_and_topic_override(tmp_path):
