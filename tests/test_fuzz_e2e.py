@@ -179,3 +179,18 @@ def test_fuzz_case_19115_far_future_rmc_date(seeds: dict[str, bytes], work: Path
     assert (target, filter_name) == ("e2e_files", "ekf")
     key, _ = F.fuzz_case(target, seeds, rng, work, filter_name=filter_name)
     assert not F.is_bug(key), key
+
+
+def test_fuzz_case_37973_an_odometer_speed_of_1e308(seeds: dict[str, bytes], work: Path) -> None:
+    """Replays ``benchmarks/fuzz.py --one 37973 --seed 20261205`` (target e2e_files, filter
+    aekf): mutated odometer rows read 1e308 and 253409 m/s, and the dead reckoning before the
+    first fix went to infinity.  The readers now leave out readings beyond a vehicle's
+    physics (:data:`gpsdr_cli.io.readers.DR_LIMITS`), counted."""
+    rng = np.random.default_rng(20261205 * 1_000_000_007 + 37973)
+    weights = np.array([0.3, 0.15, 0.15, 0.2, 0.12, 0.08])  # fuzz.WEIGHTS, same order
+    target = ["nmea", "gyro_csv", "odo_csv", "mcap", "e2e_files", "e2e_mcap"][
+        int(rng.choice(6, p=weights / weights.sum()))]
+    filter_name = NAMES[int(rng.integers(len(NAMES)))]
+    assert (target, filter_name) == ("e2e_files", "aekf")
+    key, _ = F.fuzz_case(target, seeds, rng, work, filter_name=filter_name)
+    assert not F.is_bug(key), key

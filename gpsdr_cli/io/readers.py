@@ -15,6 +15,8 @@ import hashlib
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from ..config import Params
 from ..conventions import NS_PER_S
 from ..errors import InputError, MissingDateError, NoDataError, UsageError
@@ -288,6 +290,44 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
     if drive.gnss is None and drive.gyro is None and drive.odo is None:
         names = ", ".join(str(p) for p in (log, gps, gyro, odo) if p is not None)
         raise NoDataError(names, "no GNSS, gyro or odometer data")
+    _drop_impossible(drive, warnings)
     if warnings:
         drive.meta["warnings"] = warnings
     return drive
+
+
+#: dead-reckoning readings beyond these are corrupt records, not motion: no road vehicle's
+#: wheels turn at 150 m/s, MEMS gyros end at +-2000 deg/s (35 rad/s) and accelerometers at
+#: +-16 g.  Read as motion, one odometer speed of 1e308 m/s made every later position
+#: infinite.  (stream, its array, limit, unit)
+DR_LIMITS = (("gyro", "yaw_rate_radps", 50.0, "rad/s"), ("odo", "speed_mps", 150.0, "m/s"),
+             ("accel", "accel_mps2", 160.0, "m/s^2"))
+
+
+def _drop_impossible(drive: Drive, warnings: list[str]) -> None:
+    """Leave out the dead-reckoning records beyond :data:`DR_LIMITS`, counted in
+    ``drive.skipped`` (the first with its file and record number); a warning line when a
+    stream loses more than 1 % of its records, and the stream dropped when none is left."""
+    for name, field, limit, unit in DR_LIMITS:
+        stream = getattr(drive, name)
+        if stream is None or not len(stream):
+            continue
+        v = np.asarray(getattr(stream, field), float)
+        bad = np.abs(v) > limit              # NaN stays: the aligner counts non-finite values
+        if not bad.any():
+            continue
+        source = next((src.path for src in drive.sources if name in src.streams), "")
+        first = int(np.flatnonzero(bad)[0])
+        what = f"{name}: reading beyond {limit:g} {unit}"
+        drive.skipped.add(what, f"{source}: {name} record {first + 1}" if source else
+                          f"{name} record {first + 1}", int(bad.sum()))
+        if bad.mean() > 0.01:
+            warnings.append(f"{source or name}: {int(bad.sum())} of {len(v)} {name} readings "
+                            f"beyond {limit:g} {unit} left out (corrupt, or in other units?)")
+        keep = ~bad
+        if not keep.any():
+            setattr(drive, name, None)
+            continue
+        setattr(drive, name, dataclasses.replace(
+            stream, **{f.name: np.asarray(getattr(stream, f.name))[keep]
+                       for f in dataclasses.fields(stream)}))

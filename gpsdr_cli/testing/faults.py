@@ -1173,6 +1173,10 @@ CATALOGUE: tuple[FaultCase, ...] = (
               _drive_case(lambda d: nan_values(d, "odo", 0.01, seed=4, value=1000.0))),
     FaultCase("gyro_spikes", "1 % of gyro readings 100 rad/s (glitches)", "track",
               _drive_case(lambda d: nan_values(d, "gyro", 0.01, seed=4, value=100.0))),
+    FaultCase("odo_huge", "odometer readings of 1e308 m/s (corrupt numbers), the first before "
+              "the first fix", "track",
+              _drive_case(lambda d: gnss_outage(nan_values(d, "odo", 0.005, seed=5, value=1e308),
+                                                0.0, 5.0), (0.0, 5.0))),
     FaultCase("no_odo", "GNSS and gyro, no odometer", "track", _subset_case(("gnss", "gyro"))),
     FaultCase("no_gyro", "GNSS and odometer, no gyro", "track", _subset_case(("gnss", "odo"))),
     FaultCase("no_gnss", "no GNSS and no origin configured", "error", _subset_case(("gyro", "odo"))),

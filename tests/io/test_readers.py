@@ -136,3 +136,23 @@ def test_sniffing_text_logs_does_not_load_numba(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={**os.environ, "PYTHONPATH": str(root)}).stdout
     assert out.strip() == "['csv', 'nmea'] False"
+
+
+def test_impossible_dead_reckoning_readings_are_skipped_and_counted(tmp_path):
+    """A corrupt number is no motion: an odometer speed of 1e308 m/s once made every later
+    position infinite (found by the fuzzer).  Readings beyond the physical limits are left
+    out and counted, with the file and record."""
+    odo = tmp_path / "odo.csv"
+    odo.write_text("t,speed\n" + "".join(
+        f"{1715673600 + 0.1 * i:.1f},{v}\n"
+        for i, v in enumerate([0.0, 1.0, 1e308, 2.0, -253409.0, 3.0, float("nan"), 4.0])))
+    gyro = tmp_path / "gyro.csv"
+    gyro.write_text("t,yaw_rate\n" + "".join(
+        f"{1715673600 + 0.1 * i:.1f},{v}\n" for i, v in enumerate([0.01, 60.0, -0.02, 0.03])))
+    d = read_drive(gyro=gyro, odo=odo, params=config.defaults())
+    assert d.odo.speed_mps.tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]   # the NaN row: the CSV reader's
+    assert np.array_equal(d.gyro.yaw_rate_radps, [0.01, -0.02, 0.03])
+    assert d.skipped.counts["odo: reading beyond 150 m/s"] == 2
+    assert d.skipped.first["odo: reading beyond 150 m/s"].endswith("odo record 3")
+    assert d.skipped.counts["gyro: reading beyond 50 rad/s"] == 1
+    assert any("2 of 7 odo readings beyond 150 m/s" in w for w in d.meta["warnings"])
