@@ -167,18 +167,25 @@ def test_csv_time_with_a_huge_negative_exponent_does_not_crash(tmp_path: Path, c
     assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr[-300:]}"
 
 
-def test_fuzz_case_19115_far_future_rmc_date(seeds: dict[str, bytes], work: Path) -> None:
-    """Replays ``benchmarks/fuzz.py --one 19115 --seed 1`` (target e2e_files, filter ekf): a fix
-    dated 2046 (mutated RMC year) as the last epoch made ekf predict over 22 years; the
-    pipeline now drops stamps far from the rest of the drive, judged over all streams."""
-    rng = np.random.default_rng(1 * 1_000_000_007 + 19115)
+def _replay(seed: int, index: int, expect: tuple[str, str], seeds: dict[str, bytes],
+            work: Path) -> None:
+    """``benchmarks/fuzz.py --one INDEX --seed SEED``: its case drawn the same way, which must
+    be ``expect`` (target, filter), and no bug."""
+    rng = np.random.default_rng(seed * 1_000_000_007 + index)
     weights = np.array([0.3, 0.15, 0.15, 0.2, 0.12, 0.08])  # fuzz.WEIGHTS, same order
     target = ["nmea", "gyro_csv", "odo_csv", "mcap", "e2e_files", "e2e_mcap"][
         int(rng.choice(6, p=weights / weights.sum()))]
     filter_name = NAMES[int(rng.integers(len(NAMES)))]
-    assert (target, filter_name) == ("e2e_files", "ekf")
+    assert (target, filter_name) == expect
     key, _ = F.fuzz_case(target, seeds, rng, work, filter_name=filter_name)
     assert not F.is_bug(key), key
+
+
+def test_fuzz_case_19115_far_future_rmc_date(seeds: dict[str, bytes], work: Path) -> None:
+    """Replays ``benchmarks/fuzz.py --one 19115 --seed 1`` (target e2e_files, filter ekf): a fix
+    dated 2046 (mutated RMC year) as the last epoch made ekf predict over 22 years; the
+    pipeline now drops stamps far from the rest of the drive, judged over all streams."""
+    _replay(1, 19115, ("e2e_files", "ekf"), seeds, work)
 
 
 def test_fuzz_case_37973_an_odometer_speed_of_1e308(seeds: dict[str, bytes], work: Path) -> None:
@@ -186,11 +193,4 @@ def test_fuzz_case_37973_an_odometer_speed_of_1e308(seeds: dict[str, bytes], wor
     aekf): mutated odometer rows read 1e308 and 253409 m/s, and the dead reckoning before the
     first fix went to infinity.  The readers now leave out readings beyond a vehicle's
     physics (:data:`gpsdr_cli.io.readers.DR_LIMITS`), counted."""
-    rng = np.random.default_rng(20261205 * 1_000_000_007 + 37973)
-    weights = np.array([0.3, 0.15, 0.15, 0.2, 0.12, 0.08])  # fuzz.WEIGHTS, same order
-    target = ["nmea", "gyro_csv", "odo_csv", "mcap", "e2e_files", "e2e_mcap"][
-        int(rng.choice(6, p=weights / weights.sum()))]
-    filter_name = NAMES[int(rng.integers(len(NAMES)))]
-    assert (target, filter_name) == ("e2e_files", "aekf")
-    key, _ = F.fuzz_case(target, seeds, rng, work, filter_name=filter_name)
-    assert not F.is_bug(key), key
+    _replay(20261205, 37973, ("e2e_files", "aekf"), seeds, work)
