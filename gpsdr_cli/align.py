@@ -37,8 +37,8 @@ from .config import Params
 from .conventions import FIX_DR, FIX_FLOAT_RTK, FIX_RTK, NS_PER_S
 from .epochs import Epochs, true_runs
 from .geodesy import LocalFrame
-from .io.drive import Drive, SkipReport
-from .rtk_false_fix import centimetres_held, mark_false_fixes
+from .io.drive import Drive, SkipReport, stream_source
+from .rtk_false_fix import mark_false_fixes
 
 #: A stream losing more than this share of its records in cleaning gets a warning.
 LOSS_WARN_SHARE = 0.01
@@ -191,15 +191,6 @@ def clean_times(t_ns: np.ndarray, finite: np.ndarray, name: str,
                    f"{(int(t[k]) - int(t[k - 1])) / NS_PER_S:+.3f} s after the record before it)",
                    int(step.sum()))
     return idx[keep]
-
-
-def stream_source(drive: Drive, name: str) -> str:
-    """The file that supplied stream ``name`` (its Source path), or ``""`` when unknown."""
-    named = [s.path for s in drive.sources if name in s.streams]
-    if named:
-        return named[0]
-    unnamed = [s.path for s in drive.sources if not s.streams]
-    return unnamed[0] if len(unnamed) == 1 else ""
 
 
 def _clean_stream(drive: Drive, name: str, t_ns: np.ndarray, finite: np.ndarray) -> np.ndarray:
@@ -386,12 +377,12 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                                   or health.odo_bad_s >= float(params["health"]["odo_silent_s"])
                                   or _silent(odo_t, float(params["health"]["odo_silent_s"]),
                                              t[has_gnss], gspeed[has_gnss])))
-    epochs, claim = centimetres_held(epochs, params)
+    epochs, claim = mark_false_fixes(epochs, params)
     if claim:
         warnings = drive.meta.setdefault("warnings", [])
         if claim not in warnings:
             warnings.append(claim)
-    return mark_false_fixes(epochs, params)
+    return epochs
 
 
 def _silent(t_ns: np.ndarray, gap_s: float, fix_t: np.ndarray, fix_speed: np.ndarray) -> bool:

@@ -105,7 +105,8 @@ def _steps(epochs: Epochs, params: Params, f: np.ndarray
     return t, se, sn, ss
 
 
-def centimetres_held(epochs: Epochs, params: Params) -> tuple[Epochs, str | None]:
+def centimetres_held(epochs: Epochs, params: Params, cm: np.ndarray | None = None,
+                     steps: tuple[np.ndarray, ...] | None = None) -> tuple[Epochs, str | None]:
     """``epochs`` as given when its centimetre fixes scatter as little as the receiver says
     (or too few can be judged); else with their sigmas scaled up to the scatter their
     position steps show, no fix RTK (``rtk_fixed_share`` 0), and a warning line.
@@ -115,13 +116,14 @@ def centimetres_held(epochs: Epochs, params: Params) -> tuple[Epochs, str | None
     track followed metre noise (simulated open sky: aekf 1.56 m against the fixes' 1.41 m).
     Each step estimate (:func:`step_estimates`) over its stated sigma has a median of 0.83
     when the fixes err as stated; the drive's median above ``[gnss] rtk_claim_max_z`` says
-    they do not, and by how much: their sigmas are scaled by median / 0.83."""
-    cm = centimetre_fixes(epochs, params)
+    they do not, and by how much: their sigmas are scaled by median / 0.83.  ``cm``,
+    ``steps``: :func:`centimetre_fixes` and :func:`_steps` at them, when already made."""
+    cm = centimetre_fixes(epochs, params) if cm is None else cm
     f = np.flatnonzero(cm)
     half = int(params["gnss"]["rtk_step_half_fixes"])
     if len(f) < max(2 * half + 1, CLAIM_MIN_FIXES):
         return epochs, None
-    _, se, sn, ss = _steps(epochs, params, f)
+    _, se, sn, ss = _steps(epochs, params, f) if steps is None else steps
     z = np.hypot(se, sn) / (ss * math.sqrt(2.0))
     z = z[np.isfinite(z)]
     if len(z) < CLAIM_MIN_FIXES:
@@ -142,7 +144,8 @@ def centimetres_held(epochs: Epochs, params: Params) -> tuple[Epochs, str | None
             "rtk_claim_max_z)")
 
 
-def false_fixes(epochs: Epochs, params: Params, cm: np.ndarray) -> np.ndarray:
+def false_fixes(epochs: Epochs, params: Params, cm: np.ndarray,
+                steps: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
     """Per epoch, the centimetre fixes judged wrong by an RTK false fix (a wrong integer
     ambiguity): the position jumps by decimetres while the receiver still reports
     centimetres, holds that offset for seconds, and jumps back when it fixes right.
@@ -152,7 +155,8 @@ def false_fixes(epochs: Epochs, params: Params, cm: np.ndarray) -> np.ndarray:
     the largest within its window) and at every other fix or gap in between.  A run of
     segments joined by steps knows each segment's offset from the first; the offset held by
     the most fixes is the right one (a false fix lasts seconds, the right fix the rest), and
-    the segments more than ``rtk_step_m`` off it are false."""
+    the segments more than ``rtk_step_m`` off it are false.  ``steps``: :func:`_steps` at
+    the centimetre fixes, when already made."""
     g = params["gnss"]
     f = np.flatnonzero(cm)
     out = np.zeros(len(epochs), bool)
@@ -160,7 +164,7 @@ def false_fixes(epochs: Epochs, params: Params, cm: np.ndarray) -> np.ndarray:
     if len(f) < 2 * half + 1:
         return out
     max_dt = float(g["rtk_step_max_dt_s"])
-    t, se, sn, ss = _steps(epochs, params, f)
+    t, se, sn, ss = _steps(epochs, params, f) if steps is None else steps
     size = np.hypot(se, sn)
     thr = float(g["rtk_step_m"])
     cand = np.isfinite(size) & (size > thr) & (size > float(g["rtk_step_k"]) * ss * np.sqrt(2.0))
@@ -196,19 +200,29 @@ def false_fixes(epochs: Epochs, params: Params, cm: np.ndarray) -> np.ndarray:
     return out
 
 
-def mark_false_fixes(epochs: Epochs, params: Params) -> Epochs:
-    """``epochs`` with the sigma of every centimetre fix judged false (:func:`false_fixes`)
-    raised to at least ``[gnss] rtk_false_sd_m``: it is no centimetre measurement, and every
-    consumer of the fixes' sigmas (the filters, the graph smoother) must know it."""
+def mark_false_fixes(epochs: Epochs, params: Params) -> tuple[Epochs, str | None]:
+    """``epochs`` with the centimetre fixes' word checked, and a warning line when it fails:
+    fixes that step far more than they state are no centimetre fixes
+    (:func:`centimetres_held`); of those left, every one judged false (:func:`false_fixes`)
+    gets a sigma of at least ``[gnss] rtk_false_sd_m``: it is no centimetre measurement,
+    and every consumer of the fixes' sigmas (the filters, the graph smoother) must know it.
+    The position steps are estimated once for both."""
     cm = centimetre_fixes(epochs, params)
     if not cm.any():
-        return epochs
-    wrong = false_fixes(epochs, params, cm)
+        return epochs, None
+    steps = _steps(epochs, params, np.flatnonzero(cm))
+    epochs, note = centimetres_held(epochs, params, cm, steps)
+    if note:  # the sigmas grew: what is still stated to centimetres is judged afresh
+        cm = centimetre_fixes(epochs, params)
+        if not cm.any():
+            return epochs, note
+        steps = None
+    wrong = false_fixes(epochs, params, cm, steps)
     if not wrong.any():
-        return epochs
+        return epochs, note
     floor = float(params["gnss"]["rtk_false_sd_m"])
     sd_e = epochs.gnss_sd_e.copy()
     sd_n = epochs.gnss_sd_n.copy()
     sd_e[wrong] = np.fmax(sd_e[wrong], floor)
     sd_n[wrong] = np.fmax(sd_n[wrong], floor)
-    return dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n)
+    return dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n), note

@@ -27,9 +27,11 @@ import math
 
 import numpy as np
 
+from .align import base_sigma, clean_times
 from .config import Params
 from .conventions import NS_PER_S
 from .geodesy import LocalFrame
+from .io.drive import SkipReport
 
 #: s: the window between the two fixes of a pair (the first fix at least this far on)
 WINDOW_S = 1.0
@@ -47,36 +49,32 @@ MIN_LAG_S = 0.01
 MIN_T = 5.0
 
 
-def centimetre_fix_mask(gnss, params: Params) -> np.ndarray:
-    """Per fix, an RTK-fixed fix stated to centimetres: GGA 4 with a sigma per axis at most
-    ``[gnss] rtk_cm_sd_m`` (HDOP x ``uere_rtk_fixed_m`` when the receiver gives none)."""
-    g = params["gnss"]
-    sd = np.fmax(np.asarray(gnss.sigma_e_m, float), np.asarray(gnss.sigma_n_m, float))
-    sd = np.where(np.isfinite(sd), sd, np.asarray(gnss.hdop, float) * float(g["uere_rtk_fixed_m"]))
-    return gnss.valid & (gnss.fix_quality == 4) & (sd <= float(g["rtk_cm_sd_m"]))
-
-
 def estimate(drive, params: Params, frame: LocalFrame) -> tuple[float, float, int] | None:
     """(lag s, its standard error s, pairs used) of the odometer against the drive's
     RTK-fixed fixes, or None when they do not measure it (too few moving pairs, too little
-    speed change)."""
+    speed change).  A fix is RTK fixed as the filters judge it: its base sigma per axis
+    (:func:`gpsdr_cli.align.base_sigma`) at most ``[gnss] rtk_cm_sd_m``; both streams in
+    the order :func:`gpsdr_cli.align.clean_times` keeps (the drive is not aligned yet)."""
     g, odo = drive.gnss, drive.odo
     if g is None or odo is None or len(odo) < 2 or not len(g):
         return None
-    cm = centimetre_fix_mask(g, params)
+    keep = clean_times(g.t_ns, g.valid, "gnss", SkipReport())
+    sd_e, sd_n = base_sigma(g.sigma_e_m[keep], g.sigma_n_m[keep], g.hdop[keep], params,
+                            g.fix_quality[keep])
+    cm = np.fmax(sd_e, sd_n) <= float(params["gnss"]["rtk_cm_sd_m"])
     if cm.sum() < MIN_PAIRS:
         return None
-    t0 = int(g.t_ns[0])
-    tf = (g.t_ns[cm] - t0) / NS_PER_S + float(params["time"]["gnss_offset_s"])
-    e, n = frame.forward(g.lat_deg[cm], g.lon_deg[cm])
-    # fix i's index among all fixes: a pair must not skip a fix that is not RTK fixed
+    # each fix's place among the kept ones: a pair must not skip a fix that is not RTK fixed
     pos = np.flatnonzero(cm)
-    to = (odo.t_ns - t0) / NS_PER_S
-    vo = np.asarray(odo.speed_mps, float)
-    ok_o = np.isfinite(vo) & np.isfinite(to)
-    to, vo = to[ok_o], vo[ok_o]
-    if len(to) < 2:
+    idx = keep[pos]
+    t0 = int(g.t_ns[idx[0]])
+    tf = (g.t_ns[idx] - t0) / NS_PER_S + float(params["time"]["gnss_offset_s"])
+    e, n = frame.forward(g.lat_deg[idx], g.lon_deg[idx])
+    ko = clean_times(odo.t_ns, np.isfinite(odo.speed_mps), "odo", SkipReport())
+    if len(ko) < 2:
         return None
+    to = (odo.t_ns[ko] - t0) / NS_PER_S
+    vo = np.asarray(odo.speed_mps, float)[ko]
     dist = np.concatenate(([0.0], np.cumsum(0.5 * (vo[1:] + vo[:-1]) * np.diff(to))))
     step = np.hypot(np.diff(e), np.diff(n))
     path = np.concatenate(([0.0], np.cumsum(step)))
@@ -128,4 +126,4 @@ def apply(drive, params: Params, frame: LocalFrame, auto_gnss_offset: bool
                  "([time] odo_offset_s; odo_lag_auto = false keeps it as logged)")
 
 
-__all__ = ["apply", "centimetre_fix_mask", "estimate"]
+__all__ = ["apply", "estimate"]

@@ -505,12 +505,12 @@ def read_odo_csv(path: str | Path, opts: dict) -> Drive:
 
 #: No vehicle odometer reads faster (m/s): a "distance" column whose rows divided by
 #: their interval exceed it is the odometer's running total.
-_MAX_SPEED_MPS = 150.0
+MAX_SPEED_MPS = 150.0
 
 
 def _cumulative_distance(v: np.ndarray, dt_s: np.ndarray) -> float:
     """The median speed (m/s) a ``distance`` column gives read as metres per row, when
-    that is impossible (over :data:`_MAX_SPEED_MPS`) while its steps give a possible one
+    that is impossible (over :data:`MAX_SPEED_MPS`) while its steps give a possible one
     and it never decreases (at most 1 % of the rows: a reversing vehicle): then it is a
     running total.  0.0 otherwise."""
     good = dt_s > 0
@@ -518,7 +518,7 @@ def _cumulative_distance(v: np.ndarray, dt_s: np.ndarray) -> float:
         return 0.0
     per_row = float(np.median(np.abs(v[1:][good]) / dt_s[good]))
     per_step = float(np.median(np.abs(np.diff(v)[good]) / dt_s[good]))
-    return per_row if per_row > _MAX_SPEED_MPS >= per_step else 0.0
+    return per_row if per_row > MAX_SPEED_MPS >= per_step else 0.0
 
 
 def _require_rows(path: str | Path, t_ns: np.ndarray, what: str, info: dict,

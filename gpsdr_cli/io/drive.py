@@ -157,3 +157,12 @@ class Drive:
         self.sources.extend(other.sources)
         for k, v in other.meta.items():
             self.meta.setdefault(k, v)
+
+
+def stream_source(drive: Drive, name: str) -> str:
+    """The file that supplied stream ``name`` (its Source path), or ``""`` when unknown."""
+    named = [s.path for s in drive.sources if name in s.streams]
+    if named:
+        return named[0]
+    unnamed = [s.path for s in drive.sources if not s.streams]
+    return unnamed[0] if len(unnamed) == 1 else ""

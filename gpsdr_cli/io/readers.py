@@ -20,8 +20,15 @@ import numpy as np
 from ..config import Params
 from ..conventions import NS_PER_S
 from ..errors import InputError, MissingDateError, NoDataError, UsageError
-from .csv import _parse_header, read_accel_csv, read_gyro_csv, read_odo_csv, text_problem
-from .drive import Drive
+from .csv import (
+    MAX_SPEED_MPS,
+    _parse_header,
+    read_accel_csv,
+    read_gyro_csv,
+    read_odo_csv,
+    text_problem,
+)
+from .drive import Drive, stream_source
 from .formats import (  # magics only: a reader is imported per format
     MCAP_MAGIC,
     PARQUET_MAGIC,
@@ -300,7 +307,8 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
 #: wheels turn at 150 m/s, MEMS gyros end at +-2000 deg/s (35 rad/s) and accelerometers at
 #: +-16 g.  Read as motion, one odometer speed of 1e308 m/s made every later position
 #: infinite.  (stream, its array, limit, unit)
-DR_LIMITS = (("gyro", "yaw_rate_radps", 50.0, "rad/s"), ("odo", "speed_mps", 150.0, "m/s"),
+DR_LIMITS = (("gyro", "yaw_rate_radps", 50.0, "rad/s"),
+             ("odo", "speed_mps", MAX_SPEED_MPS, "m/s"),
              ("accel", "accel_mps2", 160.0, "m/s^2"))
 
 
@@ -316,7 +324,7 @@ def _drop_impossible(drive: Drive, warnings: list[str]) -> None:
         bad = np.abs(v) > limit              # NaN stays: the aligner counts non-finite values
         if not bad.any():
             continue
-        source = next((src.path for src in drive.sources if name in src.streams), "")
+        source = stream_source(drive, name)
         first = int(np.flatnonzero(bad)[0])
         what = f"{name}: reading beyond {limit:g} {unit}"
         drive.skipped.add(what, f"{source}: {name} record {first + 1}" if source else
