@@ -35,7 +35,7 @@ NAMES: tuple[str, ...] = tuple(MODULES)
 
 def register(name: str) -> Callable[[RunFn], RunFn]:
     def deco(fn: RunFn) -> RunFn:
-        from .gnss_model import gnss_error_model
+        from .gnss_model import gnss_error_model, reflected_doppler
 
         @functools.wraps(fn)
         def run(epochs, params):  # every filter sees the same GNSS error model
@@ -53,6 +53,8 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 model_epochs, model_params = gnss_error_model(
                     dataclasses.replace(epochs, has_gnss=screened.has_gnss), params,
                     vector=False)
+                # ... but their receiver velocity is still an NLOS drive's
+                model_params = reflected_doppler(model_params, bool(epochs.has_odo.any()))
             if epochs.dr_unhealthy:
                 model_params = follow_the_fixes(model_params)
                 info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"

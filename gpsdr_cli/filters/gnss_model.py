@@ -33,7 +33,11 @@ receiver's own figures cannot say:
   distance check.
   Without an odometer the receiver's Doppler velocity carries ekf/aekf's speed, and
   reflected signals bias it by metres per second: its sigma becomes at least
-  ``nlos_velocity_sd_mps`` (fkf/fafkf keep theirs: 2 m/s put them at the fixes' error).
+  ``nlos_velocity_sd_mps``.  fkf/fafkf's GNSS local filter takes that velocity as a
+  measurement of its own: on an NLOS drive its sigma becomes at least
+  ``nlos_fkf_velocity_sd_mps`` (0.5 m/s: a reflected Doppler's bias held over a step
+  otherwise pulled their speed 8-15 % high for a minute; 2 m/s put them at the fixes'
+  error without an odometer; decisions/0029).
 
 Applied by the filter registry (:func:`gpsdr_cli.filters.register`) to every run, so
 no caller can skip it.  Units: metres, seconds.
@@ -215,13 +219,27 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     if nlos:
         params = copy.deepcopy(params)
         params["aekf"]["gnss_err_sd_m"] = float(g["nlos_err_sd_m"])
-        if not epochs.has_odo.any():
-            # reflected signals put the Doppler speed metres per second off too; with no
-            # odometer to carry the speed, a 0.2-m/s sigma drove aekf up to 2x the fixes
-            a = params["aekf"]
-            a["gnss_velocity_sd_mps"] = max(float(a["gnss_velocity_sd_mps"]),
-                                            float(g["nlos_velocity_sd_mps"]))
+        params = reflected_doppler(params, bool(epochs.has_odo.any()), copy_params=False)
     return epochs, params
+
+
+def reflected_doppler(params: Params, has_odo: bool, *, copy_params: bool = True) -> Params:
+    """``params`` with the receiver's velocity sigmas of an NLOS drive: reflected signals
+    put the Doppler velocity metres per second off too.  fkf/fafkf: at least ``[gnss]
+    nlos_fkf_velocity_sd_mps``; ekf/aekf without an odometer (the Doppler speed then carries
+    their speed; 0.2 m/s drove aekf up to 2x the fixes): at least ``nlos_velocity_sd_mps``.
+    Applied on the whole NLOS drive, also to the fixes the NLOS screen keeps (some of them
+    are reflected as well)."""
+    out = copy.deepcopy(params) if copy_params else params
+    g = out["gnss"]
+    k = out["fkf"]
+    k["gnss_velocity_sd_mps"] = max(float(k["gnss_velocity_sd_mps"]),
+                                    float(g["nlos_fkf_velocity_sd_mps"]))
+    if not has_odo:
+        a = out["aekf"]
+        a["gnss_velocity_sd_mps"] = max(float(a["gnss_velocity_sd_mps"]),
+                                        float(g["nlos_velocity_sd_mps"]))
+    return out
 
 
 def rtk_drive(epochs: Epochs, params: Params) -> bool:

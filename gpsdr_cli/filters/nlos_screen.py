@@ -68,9 +68,11 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
 def _screen(epochs: Epochs, params: Params,
             run: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
     g = params["gnss"]
+    from .gnss_model import reflected_doppler
     from .graph import smooth_graph
 
-    probe = copy.deepcopy(params)
+    # the start: the filter smoothed, with an NLOS drive's receiver velocity sigmas
+    probe = reflected_doppler(params, bool(epochs.has_odo.any()))
     probe["filter"]["smooth"] = True
     init = run(epochs, probe)
     # each fix weighed by its own sigma: the chord check's scaled sigmas would shrink the
