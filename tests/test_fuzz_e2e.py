@@ -194,3 +194,11 @@ def test_fuzz_case_37973_an_odometer_speed_of_1e308(seeds: dict[str, bytes], wor
     first fix went to infinity.  The readers now leave out readings beyond a vehicle's
     physics (:data:`gpsdr_cli.io.readers.DR_LIMITS`), counted."""
     _replay(20261205, 37973, ("e2e_files", "aekf"), seeds, work)
+
+
+def test_fuzz_case_28269_a_receiver_speed_of_1e7(seeds: dict[str, bytes], work: Path) -> None:
+    """Replays ``benchmarks/fuzz.py --one 28269 --seed 20261206`` (target e2e_files, filter
+    fkf): a mutated RMC speed field read 16 014 615 m/s, and fkf's receiver-velocity row sent
+    the track to infinity.  The readers now leave such a speed out with its course, counted
+    (the fix's position stays)."""
+    _replay(20261206, 28269, ("e2e_files", "fkf"), seeds, work)

@@ -339,3 +339,29 @@ def _drop_impossible(drive: Drive, warnings: list[str]) -> None:
         setattr(drive, name, dataclasses.replace(
             stream, **{f.name: np.asarray(getattr(stream, f.name))[keep]
                        for f in dataclasses.fields(stream)}))
+    _drop_impossible_gnss_speed(drive, warnings)
+
+
+def _drop_impossible_gnss_speed(drive: Drive, warnings: list[str]) -> None:
+    """The receiver's speed and course left out (NaN) where the speed is beyond a
+    vehicle's, :data:`MAX_SPEED_MPS` (a corrupt RMC/VTG field read 1.6e7 m/s and fkf's
+    velocity row, ungated, sent the track to infinity); the fix's position stays.  Counted
+    like :func:`_drop_impossible`."""
+    g = drive.gnss
+    if g is None or not len(g):
+        return
+    bad = np.abs(np.asarray(g.speed_mps, float)) > MAX_SPEED_MPS
+    if not bad.any():
+        return
+    source = stream_source(drive, "gnss")
+    first = int(np.flatnonzero(bad)[0])
+    drive.skipped.add(f"gnss: receiver speed beyond {MAX_SPEED_MPS:g} m/s (speed and course "
+                      "left out)", f"{source}: fix {first + 1}" if source else
+                      f"gnss fix {first + 1}", int(bad.sum()))
+    if bad.mean() > 0.01:
+        warnings.append(f"{source or 'gnss'}: {int(bad.sum())} of {len(g)} receiver speeds "
+                        f"beyond {MAX_SPEED_MPS:g} m/s left out with their course (corrupt, "
+                        "or in other units?)")
+    speed = np.where(bad, np.nan, g.speed_mps)
+    course = np.where(bad, np.nan, g.course_deg)
+    drive.gnss = dataclasses.replace(g, speed_mps=speed, course_deg=course)

@@ -240,6 +240,18 @@ def nan_values(drive: Drive, stream: str, fraction: float, *, seed: int = 0,
     return out
 
 
+def gnss_speed_values(drive: Drive, fraction: float, *, seed: int = 0,
+                      value: float = np.nan) -> Drive:
+    """A random ``fraction`` of the receiver's speeds (RMC/VTG) replaced by ``value``; the
+    fixes' positions stay."""
+    out = copy_drive(drive)
+    if out.gnss is None:
+        return out
+    m = np.random.default_rng(seed).random(len(out.gnss)) < fraction
+    out.gnss.speed_mps[m] = value
+    return out
+
+
 def drop_streams(drive: Drive, *names: str) -> Drive:
     """The drive without the named streams (``"gnss"``: no GNSS at all; ``"gyro", "odo"``: no DR)."""
     out = copy_drive(drive)
@@ -1177,6 +1189,8 @@ CATALOGUE: tuple[FaultCase, ...] = (
               "the first fix", "track",
               _drive_case(lambda d: gnss_outage(nan_values(d, "odo", 0.005, seed=5, value=1e308),
                                                 0.0, 5.0), (0.0, 5.0))),
+    FaultCase("gnss_speed_huge", "receiver speeds of 1.6e7 m/s (a corrupt RMC field)", "track",
+              _drive_case(lambda d: gnss_speed_values(d, 0.005, seed=6, value=1.6e7))),
     FaultCase("no_odo", "GNSS and gyro, no odometer", "track", _subset_case(("gnss", "gyro"))),
     FaultCase("no_gyro", "GNSS and odometer, no gyro", "track", _subset_case(("gnss", "odo"))),
     FaultCase("no_gnss", "no GNSS and no origin configured", "error", _subset_case(("gyro", "odo"))),
