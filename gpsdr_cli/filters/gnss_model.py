@@ -217,20 +217,19 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     sd_n[f] *= scale
     epochs = dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n, nlos_drive=nlos)
     if nlos:
-        params = copy.deepcopy(params)
+        params = reflected_doppler(params, bool(epochs.has_odo.any()))  # a copy
         params["aekf"]["gnss_err_sd_m"] = float(g["nlos_err_sd_m"])
-        params = reflected_doppler(params, bool(epochs.has_odo.any()), copy_params=False)
     return epochs, params
 
 
-def reflected_doppler(params: Params, has_odo: bool, *, copy_params: bool = True) -> Params:
+def reflected_doppler(params: Params, has_odo: bool) -> Params:
     """``params`` with the receiver's velocity sigmas of an NLOS drive: reflected signals
     put the Doppler velocity metres per second off too.  fkf/fafkf: at least ``[gnss]
     nlos_fkf_velocity_sd_mps``; ekf/aekf without an odometer (the Doppler speed then carries
     their speed; 0.2 m/s drove aekf up to 2x the fixes): at least ``nlos_velocity_sd_mps``.
     Applied on the whole NLOS drive, also to the fixes the NLOS screen keeps (some of them
     are reflected as well)."""
-    out = copy.deepcopy(params) if copy_params else params
+    out = copy.deepcopy(params)
     g = out["gnss"]
     k = out["fkf"]
     k["gnss_velocity_sd_mps"] = max(float(k["gnss_velocity_sd_mps"]),

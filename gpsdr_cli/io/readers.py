@@ -312,6 +312,19 @@ DR_LIMITS = (("gyro", "yaw_rate_radps", 50.0, "rad/s"),
              ("accel", "accel_mps2", 160.0, "m/s^2"))
 
 
+def _report_beyond(drive: Drive, warnings: list[str], name: str, bad: np.ndarray, what: str,
+                   record: str, left_out: str) -> None:
+    """Count the records ``bad`` of stream ``name`` in ``drive.skipped`` as ``what`` (the
+    first with its file and ``record`` number: "gyro record 7"), and a warning line when
+    they are more than 1 % of the stream (``left_out``: what the line says of them)."""
+    source = stream_source(drive, name)
+    where = f"{record} {int(np.flatnonzero(bad)[0]) + 1}"
+    drive.skipped.add(what, f"{source}: {where}" if source else where, int(bad.sum()))
+    if bad.mean() > 0.01:
+        warnings.append(f"{source or name}: {int(bad.sum())} of {len(bad)} {left_out} "
+                        "(corrupt, or in other units?)")
+
+
 def _drop_impossible(drive: Drive, warnings: list[str]) -> None:
     """Leave out the dead-reckoning records beyond :data:`DR_LIMITS`, counted in
     ``drive.skipped`` (the first with its file and record number); a warning line when a
@@ -324,14 +337,8 @@ def _drop_impossible(drive: Drive, warnings: list[str]) -> None:
         bad = np.abs(v) > limit              # NaN stays: the aligner counts non-finite values
         if not bad.any():
             continue
-        source = stream_source(drive, name)
-        first = int(np.flatnonzero(bad)[0])
-        what = f"{name}: reading beyond {limit:g} {unit}"
-        drive.skipped.add(what, f"{source}: {name} record {first + 1}" if source else
-                          f"{name} record {first + 1}", int(bad.sum()))
-        if bad.mean() > 0.01:
-            warnings.append(f"{source or name}: {int(bad.sum())} of {len(v)} {name} readings "
-                            f"beyond {limit:g} {unit} left out (corrupt, or in other units?)")
+        _report_beyond(drive, warnings, name, bad, f"{name}: reading beyond {limit:g} {unit}",
+                       f"{name} record", f"{name} readings beyond {limit:g} {unit} left out")
         keep = ~bad
         if not keep.any():
             setattr(drive, name, None)
@@ -353,15 +360,9 @@ def _drop_impossible_gnss_speed(drive: Drive, warnings: list[str]) -> None:
     bad = np.abs(np.asarray(g.speed_mps, float)) > MAX_SPEED_MPS
     if not bad.any():
         return
-    source = stream_source(drive, "gnss")
-    first = int(np.flatnonzero(bad)[0])
-    drive.skipped.add(f"gnss: receiver speed beyond {MAX_SPEED_MPS:g} m/s (speed and course "
-                      "left out)", f"{source}: fix {first + 1}" if source else
-                      f"gnss fix {first + 1}", int(bad.sum()))
-    if bad.mean() > 0.01:
-        warnings.append(f"{source or 'gnss'}: {int(bad.sum())} of {len(g)} receiver speeds "
-                        f"beyond {MAX_SPEED_MPS:g} m/s left out with their course (corrupt, "
-                        "or in other units?)")
-    speed = np.where(bad, np.nan, g.speed_mps)
-    course = np.where(bad, np.nan, g.course_deg)
-    drive.gnss = dataclasses.replace(g, speed_mps=speed, course_deg=course)
+    _report_beyond(drive, warnings, "gnss", bad,
+                   f"gnss: receiver speed beyond {MAX_SPEED_MPS:g} m/s (speed and course left out)",
+                   "gnss fix", f"receiver speeds beyond {MAX_SPEED_MPS:g} m/s left out with their "
+                   "course")
+    drive.gnss = dataclasses.replace(g, speed_mps=np.where(bad, np.nan, g.speed_mps),
+                                     course_deg=np.where(bad, np.nan, g.course_deg))

@@ -226,29 +226,19 @@ def duplicate_records(drive: Drive, stream: str, every: int = 10, *,
 
 
 def nan_values(drive: Drive, stream: str, fraction: float, *, seed: int = 0,
-               value: float = np.nan) -> Drive:
-    """A random ``fraction`` of a stream's values replaced by ``value`` (NaN, inf, a spike)."""
+               value: float = np.nan, field: str | None = None) -> Drive:
+    """A random ``fraction`` of a stream's values replaced by ``value`` (NaN, inf, a spike):
+    its main values (GNSS: latitude and longitude), or only the array ``field`` (e.g. the
+    receiver's ``speed_mps``)."""
     out = copy_drive(drive)
     s = getattr(out, stream)
     if s is None:
         return out
     rng = np.random.default_rng(seed)
     m = rng.random(len(s)) < fraction
-    getattr(s, _value_field(stream))[m] = value
-    if stream == "gnss":
+    getattr(s, field or _value_field(stream))[m] = value
+    if stream == "gnss" and field is None:
         s.lon_deg[m] = value
-    return out
-
-
-def gnss_speed_values(drive: Drive, fraction: float, *, seed: int = 0,
-                      value: float = np.nan) -> Drive:
-    """A random ``fraction`` of the receiver's speeds (RMC/VTG) replaced by ``value``; the
-    fixes' positions stay."""
-    out = copy_drive(drive)
-    if out.gnss is None:
-        return out
-    m = np.random.default_rng(seed).random(len(out.gnss)) < fraction
-    out.gnss.speed_mps[m] = value
     return out
 
 
@@ -1190,7 +1180,8 @@ CATALOGUE: tuple[FaultCase, ...] = (
               _drive_case(lambda d: gnss_outage(nan_values(d, "odo", 0.005, seed=5, value=1e308),
                                                 0.0, 5.0), (0.0, 5.0))),
     FaultCase("gnss_speed_huge", "receiver speeds of 1.6e7 m/s (a corrupt RMC field)", "track",
-              _drive_case(lambda d: gnss_speed_values(d, 0.005, seed=6, value=1.6e7))),
+              _drive_case(lambda d: nan_values(d, "gnss", 0.005, seed=6, value=1.6e7,
+                                              field="speed_mps"))),
     FaultCase("no_odo", "GNSS and gyro, no odometer", "track", _subset_case(("gnss", "gyro"))),
     FaultCase("no_gyro", "GNSS and odometer, no gyro", "track", _subset_case(("gnss", "odo"))),
     FaultCase("no_gnss", "no GNSS and no origin configured", "error", _subset_case(("gyro", "odo"))),
