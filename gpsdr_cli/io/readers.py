@@ -352,17 +352,80 @@ def _drop_impossible(drive: Drive, warnings: list[str]) -> None:
 def _drop_impossible_gnss_speed(drive: Drive, warnings: list[str]) -> None:
     """The receiver's speed and course left out (NaN) where the speed is beyond a
     vehicle's, :data:`MAX_SPEED_MPS` (a corrupt RMC/VTG field read 1.6e7 m/s and fkf's
-    velocity row, ungated, sent the track to infinity); the fix's position stays.  Counted
-    like :func:`_drop_impossible`."""
+    velocity row, ungated, sent the track to infinity), and where the velocity jumps off
+    its neighbours' (:func:`receiver_velocity_spikes`: one fix in twenty with a random speed
+    and course took every filter from 0.5 m to 8-180 m); the fix's position stays.
+    Counted like :func:`_drop_impossible`."""
     g = drive.gnss
     if g is None or not len(g):
         return
     bad = np.abs(np.asarray(g.speed_mps, float)) > MAX_SPEED_MPS
-    if not bad.any():
-        return
-    _report_beyond(drive, warnings, "gnss", bad,
-                   f"gnss: receiver speed beyond {MAX_SPEED_MPS:g} m/s (speed and course left out)",
-                   "gnss fix", f"receiver speeds beyond {MAX_SPEED_MPS:g} m/s left out with their "
-                   "course")
-    drive.gnss = dataclasses.replace(g, speed_mps=np.where(bad, np.nan, g.speed_mps),
-                                     course_deg=np.where(bad, np.nan, g.course_deg))
+    if bad.any():
+        _report_beyond(drive, warnings, "gnss", bad,
+                       f"gnss: receiver speed beyond {MAX_SPEED_MPS:g} m/s (speed and course left "
+                       "out)", "gnss fix", f"receiver speeds beyond {MAX_SPEED_MPS:g} m/s left out "
+                       "with their course")
+    speed = np.where(bad, np.nan, g.speed_mps)
+    spikes = receiver_velocity_spikes(g.t_ns, speed, g.course_deg)
+    if spikes.any():
+        _report_beyond(drive, warnings, "gnss", spikes,
+                       "gnss: receiver velocity off its neighbours beyond 1 g (speed and course "
+                       "left out)", "gnss fix", "receiver velocities off their neighbours "
+                       "beyond 1 g left out")
+        bad |= spikes
+    if bad.any():
+        drive.gnss = dataclasses.replace(g, speed_mps=np.where(bad, np.nan, g.speed_mps),
+                                         course_deg=np.where(bad, np.nan, g.course_deg))
+
+
+#: m/s^2: no road vehicle's velocity vector changes faster (braking, cornering: about 1 g)
+MAX_ACCEL_MPS2 = 10.0
+#: m/s: what a receiver's velocity may differ from its neighbours' beyond that acceleration
+#: (Doppler noise, a reflected signal's bias of about 1 m/s)
+VELOCITY_SPIKE_TOL_MPS = 2.0
+#: s: a velocity is judged only against neighbours this close (a 1-Hz receiver: two each side)
+VELOCITY_SPIKE_SPAN_S = 2.5
+
+
+def receiver_velocity_spikes(t_ns: np.ndarray, speed_mps: np.ndarray,
+                             course_deg: np.ndarray) -> np.ndarray:
+    """The receiver velocities (speed along a course clockwise from north) that no vehicle
+    could reach from those around them: further from the median of itself and up to two
+    velocities on each side (at most :data:`VELOCITY_SPIKE_SPAN_S` away) than
+    :data:`MAX_ACCEL_MPS2` over that time plus :data:`VELOCITY_SPIKE_TOL_MPS`.  The median of
+    five outvotes two wrong ones, so a lone spike or a pair is found and its neighbours are
+    not; a longer run of wrong velocities is the filters' innovation gate's.  A velocity
+    with fewer than two neighbours is kept.  Medians per axis (east, north)."""
+    n = len(t_ns)
+    bad = np.zeros(n, bool)
+    c = np.deg2rad(np.asarray(course_deg, float))
+    s = np.asarray(speed_mps, float)
+    ok = np.isfinite(s) & np.isfinite(c)
+    idx = np.flatnonzero(ok)
+    if len(idx) < 3:
+        return bad
+    order = idx[np.argsort(t_ns[idx], kind="stable")]
+    t = (t_ns[order] - t_ns[order[0]]) / NS_PER_S
+    ve = s[order] * np.sin(c[order])
+    vn = s[order] * np.cos(c[order])
+    m = len(order)
+    # neighbours -2, -1, +1, +2 of every velocity as columns (NaN beyond the ends)
+    cols = []
+    for shift in (-2, -1, 1, 2):
+        k = np.arange(m) + shift
+        inside = (k >= 0) & (k < m)
+        kk = np.clip(k, 0, m - 1)
+        near = inside & (np.abs(t[kk] - t) <= VELOCITY_SPIKE_SPAN_S)
+        cols.append((np.where(near, ve[kk], np.nan), np.where(near, vn[kk], np.nan),
+                     np.where(near, np.abs(t[kk] - t), np.nan)))
+    ne = np.column_stack([c_[0] for c_ in cols])
+    nn = np.column_stack([c_[1] for c_ in cols])
+    span = np.column_stack([c_[2] for c_ in cols])
+    have = np.isfinite(ne).sum(axis=1) >= 2
+    with np.errstate(all="ignore"):      # the median of five, the velocity itself among them
+        me = np.nanmedian(np.where(have[:, None], np.column_stack([ne, ve]), 0.0), axis=1)
+        mn = np.nanmedian(np.where(have[:, None], np.column_stack([nn, vn]), 0.0), axis=1)
+        allowed = MAX_ACCEL_MPS2 * np.nanmax(np.where(have[:, None], span, 0.0), axis=1)
+    spike = have & (np.hypot(ve - me, vn - mn) > allowed + VELOCITY_SPIKE_TOL_MPS)
+    bad[order[spike]] = True
+    return bad

@@ -1,0 +1,49 @@
+"""Receiver velocities that jump off their neighbours beyond a vehicle's acceleration."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gpsdr_cli.conventions import NS_PER_S
+from gpsdr_cli.io.readers import receiver_velocity_spikes
+
+
+def _drive_velocities(rate_hz: float = 5.0, seconds: float = 60.0) -> tuple[np.ndarray, ...]:
+    """A hard drive: 9 m/s^2 braking to a stop, a 0.9-g turn at 15 m/s, Doppler noise 0.3 m/s."""
+    t = np.arange(0.0, seconds, 1.0 / rate_hz)
+    speed = np.where(t < 25, np.clip(25.0 - np.clip(t - 17.0, 0, None) * 9.0, 0, None),
+                     np.clip((t - 25.0) * 3.0, 0, 15.0))     # stopped from 19.8 to 25 s
+    course = np.where(t < 30, 0.0, (t - 30.0) * np.rad2deg(0.9 * 9.81 / 15.0)) % 360.0
+    rng = np.random.default_rng(1)
+    ve = speed * np.sin(np.deg2rad(course)) + rng.normal(0, 0.3, len(t))
+    vn = speed * np.cos(np.deg2rad(course)) + rng.normal(0, 0.3, len(t))
+    t_ns = (t * NS_PER_S).astype(np.int64)
+    return t_ns, np.hypot(ve, vn), np.rad2deg(np.arctan2(ve, vn)) % 360.0
+
+
+def test_hard_braking_and_cornering_are_not_spikes() -> None:
+    for rate in (1.0, 5.0, 10.0):
+        t_ns, speed, course = _drive_velocities(rate)
+        assert not receiver_velocity_spikes(t_ns, speed, course).any(), rate
+
+
+def test_lone_and_paired_spikes_are_found_and_nothing_else() -> None:
+    t_ns, speed, course = _drive_velocities()
+    bad = np.zeros(len(t_ns), bool)
+    bad[[40, 41, 120, 200, 260]] = True           # a pair, and lone ones (at rest: index 110-124)
+    speed[bad] = [3.0, 3.0, 8.0, 30.0, 15.0]
+    course[bad] = [180.0, 180.0, 90.0, 200.0, 90.0]
+    course[40] = 180.0
+    found = receiver_velocity_spikes(t_ns, speed, course)
+    np.testing.assert_array_equal(np.flatnonzero(found), np.flatnonzero(bad))
+
+
+def test_unsorted_and_missing_velocities() -> None:
+    """Judged in time order whatever the record order; NaN neither judged nor a neighbour."""
+    t_ns, speed, course = _drive_velocities()
+    speed[[10, 11, 13]] = np.nan                  # 12 keeps two neighbours on one side only
+    speed[12] = 40.0
+    order = np.random.default_rng(2).permutation(len(t_ns))
+    found = receiver_velocity_spikes(t_ns[order], speed[order], course[order])
+    assert set(order[found]) == {12}
+    assert not receiver_velocity_spikes(t_ns[:2], speed[:2], course[:2]).any()
