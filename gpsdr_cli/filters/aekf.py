@@ -381,6 +381,7 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.PAR_WH_NIS] = gate_threshold(a["whitening_nis_prob"])
     prm[kn.PAR_SCALE_VAR] = gy["scale_sd"] ** 2
     prm[kn.PAR_GVEL_VAR] = a["gnss_velocity_sd_mps"] ** 2 if a["gnss_velocity"] else 0.0
+    prm[kn.PAR_VGATE_VAR] = g["velocity_gate_floor_mps"] ** 2
     prm[kn.PAR_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
     prm[kn.PAR_GE_VAR] = a["gnss_err_sd_m"] ** 2
     prm[kn.PAR_GE_RATE] = 1.0 / a["gnss_err_tau_s"]
@@ -524,6 +525,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     st = np.zeros(kn.N_ST)
     st[kn.ST_PSI] = psi0
     st[kn.ST_REJ_SINCE] = -1.0
+    st[kn.ST_VREJ_SINCE] = -1.0
     st[kn.ST_SH_R] = 1.0
     st[kn.ST_HEADING_KNOWN] = float(heading_known)
     st[kn.ST_W] = 0.0
@@ -590,6 +592,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         "gnss_used": int(gnss_used.sum()),
         "gate_resets": int(info_v[kn.INF_GATE_RESETS]),
         "gnss_inflated": int(info_v[kn.INF_INFLATED]),
+        "gnss_velocity_gated": int(info_v[kn.INF_VEL_GATED]),
         "gyro_implausible": int(np.count_nonzero(epochs.has_gyro & ~use_gyro)),  # incl. clipped
         "odo_implausible": int(np.count_nonzero(epochs.has_odo & ~use_odo)),
         "updates_skipped": int(info_v[kn.INF_SKIPPED]),

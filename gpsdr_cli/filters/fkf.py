@@ -300,6 +300,7 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
         "heading_skipped_slow": int(counters[kf.C_HEADING_SLOW]),
         "distance_updates": int(counters[kf.C_DIST]),
         "gnss_velocity_updates": int(counters[kf.C_GVEL]),
+        "gnss_velocity_gated": int(counters[kf.C_GVEL_REJECTED]),
         "coast_updates": int(counters[kf.C_COAST]),
         "zupt_epochs": int(counters[kf.C_ZUPT]),
         "r_adaptations": int(counters[kf.C_R_ADAPT]),

@@ -93,7 +93,8 @@ PAR_MAX_GAP, PAR_GAP_SPEED, PAR_WH_B, PAR_WH_MAX, PAR_WH_GAP, PAR_GVEL_VAR = ran
 PAR_WH_NIS, PAR_SCALE_VAR = 31, 32
 PAR_GE_VAR, PAR_GE_RATE, PAR_GE_DIST_RATE, PAR_COAST_Q, PAR_OFF_VVAR, PAR_OFF_AVAR = range(33, 39)
 PAR_UNKNOWN_W_VAR = 39
-N_PRM = 40
+PAR_VGATE_VAR = 40  # (m/s)^2, the receiver velocity gate's least variance per axis
+N_PRM = 41
 # indices into the integer flag vector ``flg``
 FLG_ADAPT_Q, FLG_STANDSTILL, FLG_GATE, FLG_INNOV, FLG_FADING, FLG_SAGE_HUSA = range(6)
 FLG_CHECK_SPD, FLG_STORE = 6, 7
@@ -114,7 +115,8 @@ ST_ODO_T = 24  # time of the latest odometer record (s since the start)
 ST_JUMP_E, ST_JUMP_N = 25, 26  # this epoch's bias-gate move of b into the position (m; 0: none)
 ST_FIX_T = 27  # time of the latest used GNSS fix (s since the start)
 ST_GE_VAR = 28  # the stationary variance of b's current regime (m^2; inp.ge_var)
-N_ST = 29
+ST_VREJ_SINCE = 29  # first rejection of the current run of gated receiver velocities (s; < 0: none)
+N_ST = 30
 #: a standstill the odometer said is forgotten after this long without an odometer record (s),
 #: as fkf's STALE_ODO_S: an odometer that drops out at a stop must not hold the car for minutes
 STALE_ODO_S = 1.0
@@ -128,7 +130,8 @@ PRI_VB = 13  # b's stationary variance at this epoch (m^2; its regime's)
 N_PRIOR = 14
 # counters (``info`` vector)
 INF_SPD_FAIL, INF_MIN_DIAG, INF_SKIPPED, INF_GATE_RESETS, INF_NONFINITE, INF_INFLATED = range(6)
-N_INFO = 6
+INF_VEL_GATED = 6  # receiver velocities the gate left out (their fix was used)
+N_INFO = 7
 
 # the kernel's arguments as records (numba takes namedtuples of arrays as they are)
 #: per-epoch inputs, arrays of n: dt (s), the GNSS fix z_e, z_n (m) and its variances
@@ -732,6 +735,22 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         s11 += 2.0 * ge[7] + ge[GE_PNN]
         s01 += ge[1] + ge[6] + ge[GE_PEN]
     nis = nis_2d(ye, yn, s00, s01, s11)
+    # the receiver (Doppler) velocity has its own gate against the predicted velocity (our
+    # choice): a wrong but plausible speed or course taken at its 0.2-5 m/s sigma carried
+    # the track tens of metres (docs/decisions/0031).  Judged with at least [gnss]
+    # velocity_gate_floor_mps (a drive-off the state has not seen is not an outlier), the
+    # fixes' threshold and no lock-out: a reset keeps its run open until a velocity is used
+    has_v = math.isfinite(gv_e) and math.isfinite(gv_n) and prm[PAR_GVEL_VAR] > 0.0
+    vel = has_v
+    if has_v and gate and n_fix >= prm[PAR_GATE_WARMUP]:
+        rv = max(prm[PAR_GVEL_VAR], prm[PAR_VGATE_VAR])
+        nis_v = nis_2d(gv_e - x[IVE], gv_n - x[IVN], P[IVE, IVE] + rv, P[IVE, IVN],
+                       P[IVN, IVN] + rv)
+        verdict_v, since_v = chi2_gate(nis_v, prm[PAR_GATE_THR], t, st[ST_VREJ_SINCE],
+                                       prm[PAR_GATE_RESET], RESET_AFTER_FIRST_REJECT, False)
+        vel = verdict_v != GATE_FAIL
+        if verdict_v != GATE_RESET:
+            st[ST_VREJ_SINCE] = since_v
     accept = True
     reset = False
     r_fac = 1.0
@@ -744,6 +763,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # inflate mode: fixes that have disagreed for gate_reset_s are a new
             # truth (a datum change), not an error to down-weight forever
             reset = True
+            vel = has_v  # the state, not this fix's velocity, is the outlier
             info[INF_GATE_RESETS] += 1.0
         elif verdict == GATE_FAIL:
             if (inflate_on is not None and nis <= thr * prm[PAR_GATE_INFLATE_MAX]
@@ -810,8 +830,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # slow drift of the fixes cannot be told from a DR heading error, and the
             # states absorbed a drive-off's wrong heading; then b is a consider
             # state (it widens S only)
-            est_b = is_static or (math.isfinite(gv_e) and math.isfinite(gv_n)
-                                  and prm[PAR_GVEL_VAR] > 0.0)
+            est_b = is_static or vel
             ok1 = ge_fix_update(x, P, ge, z_e, z_n, re, rn, K, est_b)
             ok2 = ok1
         else:
@@ -820,14 +839,17 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         if ok1 and ok2:
             used = True
             n_fix += 1.0
-            if math.isfinite(gv_e) and math.isfinite(gv_n) and prm[PAR_GVEL_VAR] > 0.0:
+            if vel:
                 # receiver (Doppler) velocity, aekf.gnss_velocity_sd_mps
-                for idx in (1, 4):
-                    y = (gv_e if idx == 1 else gv_n) - x[idx]
+                st[ST_VREJ_SINCE] = -1.0
+                for idx in (IVE, IVN):
+                    y = (gv_e if idx == IVE else gv_n) - x[idx]
                     ok_v = unit_update(x, P, idx, y, prm[PAR_GVEL_VAR], 1.0, K, PHt, no_cons)
                     if ge_on is not None:  # noqa: SIM102 (a plain test: numba prunes it when off)
                         if ok_v:
                             n_rows = ge_push(gw, n_rows, float(idx), H, PHt, prm[PAR_GVEL_VAR], y)
+            elif has_v:
+                info[INF_VEL_GATED] += 1.0
         else:
             info[INF_SKIPPED] += 1.0
     st[ST_REJ_SINCE] = rej_since

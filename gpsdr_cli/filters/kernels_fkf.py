@@ -189,7 +189,8 @@ PAR_EPS_SD_O = 27    # m
 PAR_EPS_DIST_O = 28  # m; <= 0: time only
 PAR_COAST_Q = 29     # m^2/s^3: zero-acceleration rows r = this / T while nothing measures the speed; 0: off
 PAR_EPS_RESET = 30   # 1: the step into this epoch starts a new, independent eps (select_eps)
-N_PAR = 31
+PAR_VGATE_VAR = 31   # (m/s)^2, the receiver velocity gate's least variance per axis
+N_PAR = 32
 #: added to a regime share w in ``eps_w``: the step into that epoch starts a new eps
 #: (an RTK drive's fix kind changed: fkf_inputs.multipath_regime)
 EPS_RESET = 10.0
@@ -238,7 +239,8 @@ C_STALE = 11
 C_DIST_REJECTED = 12
 C_GVEL = 13
 C_COAST = 14
-N_COUNTERS = 15
+C_GVEL_REJECTED = 15
+N_COUNTERS = 16
 
 # Output columns of the fused track.
 O_E, O_N, O_VE, O_VN, O_VAR_E, O_VAR_N, O_COV_EN = range(7)
@@ -268,7 +270,8 @@ ST_PSI_HINT = 5     # rad, latest heading measurement minus q_w (distance-row li
 ST_N_ACC = 6        # GNSS fixes accepted so far
 ST_REJ_SHARE = 7    # recent share of gated fixes (EWMA)
 ST_T_LAST_FIX = 8   # s, last fix seen
-N_SCALARS = 9
+ST_T_LAST_VACC = 9  # s, last accepted receiver velocity
+N_SCALARS = 10
 
 #: Ceiling on each state's sigma after a prediction (m, m/s, m/s^2, m, m/s, m/s^2, m, m,
 #: rad, m): a logger pause of 50 min grows the white-jerk position variance to ~1e16 m^2,
@@ -1259,6 +1262,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
         n_acc = np.int64(sc[ST_N_ACC])                   # GNSS fixes accepted so far
         rej_share = sc[ST_REJ_SHARE]                     # recent share of gated fixes (EWMA)
         t_last_fix = sc[ST_T_LAST_FIX]
+        t_last_vacc = sc[ST_T_LAST_VACC]
         zupt_sd = par[PAR_ZUPT_SD]
         omin2 = par[PAR_OMEGA_MIN] ** 2
         chi2 = par[PAR_GATE_CHI2]
@@ -1327,6 +1331,20 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                     rn = rfac[1] * gnss_var_n[kx]
                     nis = nis_2d(ye, yn, s00 + re, s01, s11 + rn)
                     p_nis[ko] = nis
+                    # the receiver (Doppler) velocity has its own gate against the predicted
+                    # velocity (our choice; docs/decisions/0031): a wrong but plausible speed
+                    # or course at 0.2 m/s carried the track away.  Judged with at least
+                    # [gnss] velocity_gate_floor_mps; no lock-out either
+                    has_v = par[PAR_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
+                                                            or math.isnan(gnss_vn[kx]))
+                    vel = has_v
+                    if has_v and chi2 > 0.0 and n_acc >= par[PAR_GATE_WARMUP]:
+                        rv = max(par[PAR_GVEL_VAR], par[PAR_VGATE_VAR])
+                        nis_v = nis_2d(gnss_ve[kx] - x1[IVE], gnss_vn[kx] - x1[IVN],
+                                       P1[IVE, IVE] + rv, P1[IVE, IVN], P1[IVN, IVN] + rv)
+                        verdict, _ = chi2_gate(nis_v, chi2, t_now, t_last_vacc,
+                                               par[PAR_GATE_RESET_S], RESET_AFTER_LAST_ACCEPT, False)
+                        vel = verdict != GATE_FAIL
                     accept = True
                     a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
                     t_last_fix = t_now
@@ -1338,6 +1356,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                                                a_rej * rej_share + (1.0 - a_rej) > 0.5)
                         if verdict == GATE_RESET:
                             p_counters[C_GATE_RESETS] += 1
+                            vel = has_v         # the state, not this fix's velocity, is the outlier
                         elif verdict == GATE_FAIL:
                             accept = False
                     rej_share = a_rej * rej_share + (0.0 if accept else 1.0 - a_rej)
@@ -1352,14 +1371,16 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                         h[IEPS_N] = 1.0
                         local_and_central_row(x1, P1, xg, Pg, central, h,
                                               gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk)
-                        if par[PAR_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
-                                                          or math.isnan(gnss_vn[kx])):
+                        if vel:
                             # receiver (Doppler) velocity with the accepted fix (our choice)
                             local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVE),
                                                    gnss_ve[kx] - x1[IVE], par[PAR_GVEL_VAR], s, kk)
                             local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVN),
                                                    gnss_vn[kx] - x1[IVN], par[PAR_GVEL_VAR], s, kk)
                             p_counters[C_GVEL] += 1
+                            t_last_vacc = t_now
+                        elif has_v:
+                            p_counters[C_GVEL_REJECTED] += 1
                         p_used[ko] = True
                         p_counters[C_GNSS_USED] += 1
                         n_acc += 1
@@ -1579,6 +1600,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
         sc[ST_N_ACC] = n_acc
         sc[ST_REJ_SHARE] = rej_share
         sc[ST_T_LAST_FIX] = t_last_fix
+        sc[ST_T_LAST_VACC] = t_last_vacc
         if job >= n_fwd:                            # RTS backward over the segment
             _smooth_segment(segment, xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, eps_w, par,
                             x_sn, P_sn, out, stats)

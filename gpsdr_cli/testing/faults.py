@@ -242,6 +242,22 @@ def nan_values(drive: Drive, stream: str, fraction: float, *, seed: int = 0,
     return out
 
 
+def wrong_velocities(drive: Drive, fraction: float = 0.05, *, seed: int = 8,
+                     max_speed_mps: float = 40.0) -> Drive:
+    """A random ``fraction`` of the receiver's velocities replaced by a plausible wrong one: a
+    speed uniform in [0, ``max_speed_mps``] along a uniform course (a receiver's bad epoch,
+    a mis-parsed but valid field)."""
+    out = copy_drive(drive)
+    g = out.gnss
+    if g is None:
+        return out
+    rng = np.random.default_rng(seed)
+    m = rng.random(len(g)) < fraction
+    g.speed_mps[m] = rng.uniform(0.0, max_speed_mps, int(m.sum()))
+    g.course_deg[m] = rng.uniform(0.0, 360.0, int(m.sum()))
+    return out
+
+
 def drop_streams(drive: Drive, *names: str) -> Drive:
     """The drive without the named streams (``"gnss"``: no GNSS at all; ``"gyro", "odo"``: no DR)."""
     out = copy_drive(drive)
@@ -1182,6 +1198,8 @@ CATALOGUE: tuple[FaultCase, ...] = (
     FaultCase("gnss_speed_huge", "receiver speeds of 1.6e7 m/s (a corrupt RMC field)", "track",
               _drive_case(lambda d: nan_values(d, "gnss", 0.005, seed=6, value=1.6e7,
                                               field="speed_mps"))),
+    FaultCase("gnss_velocity_wrong", "5 % of receiver velocities a random speed (0-40 m/s) and "
+              "course", "track", _drive_case(wrong_velocities)),
     FaultCase("no_odo", "GNSS and gyro, no odometer", "track", _subset_case(("gnss", "gyro"))),
     FaultCase("no_gyro", "GNSS and odometer, no gyro", "track", _subset_case(("gnss", "odo"))),
     FaultCase("no_gnss", "no GNSS and no origin configured", "error", _subset_case(("gyro", "odo"))),
@@ -1470,7 +1488,9 @@ def is_bug(outcome_key: str) -> bool:
 DEFAULT_RMSE_BOUND_M = 5.0
 RMSE_BOUND_M: dict[str, float] = {"gnss_clock_back": 40.0, "no_gnss_origin": 250.0,
                                   "outage_60s": math.inf, "outage_10min": math.inf,
-                                  "standstill_30min_nognss": 10.0}
+                                  "standstill_30min_nognss": 10.0,
+                                  # followed, they took 300-s drives to 8-180 m
+                                  "gnss_velocity_wrong": 1.5}
 #: 99.9 % radius of a chi-square(2) error, in sigmas: a consistent covariance stays inside it.
 CONSISTENT_SIGMAS = 3.7
 #: A standstill may drift this much (m) over the stop.
