@@ -238,6 +238,25 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
         return np.zeros(len(tg))
     tk = t_s[k]
     d = np.unwrap(np.angle(np.exp(1j * (epochs.gnss_course_rad[k] - np.interp(tk, tg, psi_g)))))
+    t_mean, d_mean = _window_means(tk, d, window)
+    # a course further than COURSE_OUTLIER_RAD from the corrected gyro heading is a wrong
+    # course, not noise (a receiver's bad epochs: four 3-s runs 45 deg off turned the
+    # windows' means by up to 13 deg and fkf's track without an odometer 12-19 m off,
+    # docs/decisions/0031): the means again without them
+    far = np.abs(d - np.interp(tk, t_mean, d_mean)) > COURSE_OUTLIER_RAD
+    if far.any() and (~far).sum() >= 2:
+        t_mean, d_mean = _window_means(tk[~far], d[~far], window)
+    return np.interp(tg, t_mean, d_mean)
+
+
+#: rad: a course this far from the course-corrected gyro heading is left out of the course
+#: correction's means (noise at [fkf] course_min_speed_mps: 0.2 m/s over 3 m/s, 4 deg)
+COURSE_OUTLIER_RAD = math.radians(20.0)
+
+
+def _window_means(tk: np.ndarray, d: np.ndarray, window: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centred window means of ``d`` (shrinking at the ends) and their fixes' mean times,
+    increasing (see :func:`course_correction`)."""
     c = np.concatenate(([0.0], np.cumsum(d)))
     half = np.minimum(0.5 * window, np.minimum(tk - tk[0], tk[-1] - tk))
     lo = np.searchsorted(tk, tk - half, side="left")
@@ -248,7 +267,7 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     # lo and hi never decrease with k, so neither does t_mean; equal times (a window
     # that did not move) keep their first mean
     keep = np.concatenate(([True], np.diff(t_mean) > 0.0))
-    return np.interp(tg, t_mean[keep], d_mean[keep])
+    return t_mean[keep], d_mean[keep]
 
 
 @dataclass
