@@ -382,6 +382,7 @@ def kernel_params(params: Params, adaptive: bool, store: bool) -> tuple[np.ndarr
     prm[kn.PAR_SCALE_VAR] = gy["scale_sd"] ** 2
     prm[kn.PAR_GVEL_VAR] = a["gnss_velocity_sd_mps"] ** 2 if a["gnss_velocity"] else 0.0
     prm[kn.PAR_VGATE_VAR] = g["velocity_gate_floor_mps"] ** 2
+    prm[kn.PAR_VGATE_RESET] = g["velocity_gate_reset_s"]
     prm[kn.PAR_HEADING_MIN] = max(st["heading_min_speed_mps"], st["omega_min_speed_mps"])
     prm[kn.PAR_GE_VAR] = a["gnss_err_sd_m"] ** 2
     prm[kn.PAR_GE_RATE] = 1.0 / a["gnss_err_tau_s"]

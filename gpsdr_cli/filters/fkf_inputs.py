@@ -782,6 +782,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.PAR_GATE_WARMUP] = g_p["gate_warmup_fixes"]
     par[kf.PAR_GVEL_VAR] = fp["gnss_velocity_sd_mps"] ** 2 if fp["gnss_velocity"] else 0.0
     par[kf.PAR_VGATE_VAR] = g_p["velocity_gate_floor_mps"] ** 2
+    # not no_odo_gate_reset_s (but on NLOS drives, gnss_model.reflected_doppler): at 3 s the
+    # gate took the last velocity of a 3-s run 45 deg off, and the track left (decisions/0031)
+    par[kf.PAR_VGATE_RESET_S] = g_p["velocity_gate_reset_s"]
     par[kf.PAR_TAU_EPS_C] = fp["gnss_err_tau_s"]
     par[kf.PAR_EPS_SD_C] = fp["gnss_err_sd_m"]
     par[kf.PAR_EPS_DIST_C] = fp["gnss_err_dist_m"]

@@ -227,6 +227,8 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     put the Doppler velocity metres per second off too.  fkf/fafkf: at least ``[gnss]
     nlos_fkf_velocity_sd_mps``; ekf/aekf without an odometer (the Doppler speed then carries
     their speed; 0.2 m/s drove aekf up to 2x the fixes): at least ``nlos_velocity_sd_mps``.
+    Without an odometer the receiver velocity's gate also resets after ``[fkf]
+    no_odo_gate_reset_s`` (as the fixes'), not ``[gnss] velocity_gate_reset_s``.
     Applied on the whole NLOS drive, also to the fixes the NLOS screen keeps (some of them
     are reflected as well)."""
     out = copy.deepcopy(params)
@@ -234,6 +236,11 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     k = out["fkf"]
     k["gnss_velocity_sd_mps"] = max(float(k["gnss_velocity_sd_mps"]),
                                     float(g["nlos_fkf_velocity_sd_mps"]))
+    if not has_odo and float(k["no_odo_gate_reset_s"]) > 0:
+        # the fixes, not the Doppler, are the suspects: fkf's state follows a reflected step
+        # and then gates the Doppler that disagrees (decisions/0031)
+        g["velocity_gate_reset_s"] = min(float(g["velocity_gate_reset_s"]),
+                                         float(k["no_odo_gate_reset_s"]))
     if not has_odo:
         a = out["aekf"]
         a["gnss_velocity_sd_mps"] = max(float(a["gnss_velocity_sd_mps"]),

@@ -94,7 +94,8 @@ PAR_WH_NIS, PAR_SCALE_VAR = 31, 32
 PAR_GE_VAR, PAR_GE_RATE, PAR_GE_DIST_RATE, PAR_COAST_Q, PAR_OFF_VVAR, PAR_OFF_AVAR = range(33, 39)
 PAR_UNKNOWN_W_VAR = 39
 PAR_VGATE_VAR = 40  # (m/s)^2, the receiver velocity gate's least variance per axis
-N_PRM = 41
+PAR_VGATE_RESET = 41  # s: receiver velocities gated this long are taken again (no lock-out)
+N_PRM = 42
 # indices into the integer flag vector ``flg``
 FLG_ADAPT_Q, FLG_STANDSTILL, FLG_GATE, FLG_INNOV, FLG_FADING, FLG_SAGE_HUSA = range(6)
 FLG_CHECK_SPD, FLG_STORE = 6, 7
@@ -747,7 +748,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         nis_v = nis_2d(gv_e - x[IVE], gv_n - x[IVN], P[IVE, IVE] + rv, P[IVE, IVN],
                        P[IVN, IVN] + rv)
         verdict_v, since_v = chi2_gate(nis_v, prm[PAR_GATE_THR], t, st[ST_VREJ_SINCE],
-                                       prm[PAR_GATE_RESET], RESET_AFTER_FIRST_REJECT, False)
+                                       prm[PAR_VGATE_RESET], RESET_AFTER_FIRST_REJECT, False)
         vel = verdict_v != GATE_FAIL
         if verdict_v != GATE_RESET:
             st[ST_VREJ_SINCE] = since_v

@@ -190,7 +190,8 @@ PAR_EPS_DIST_O = 28  # m; <= 0: time only
 PAR_COAST_Q = 29     # m^2/s^3: zero-acceleration rows r = this / T while nothing measures the speed; 0: off
 PAR_EPS_RESET = 30   # 1: the step into this epoch starts a new, independent eps (select_eps)
 PAR_VGATE_VAR = 31   # (m/s)^2, the receiver velocity gate's least variance per axis
-N_PAR = 32
+PAR_VGATE_RESET_S = 32  # s: receiver velocities gated this long are taken again (no lock-out)
+N_PAR = 33
 #: added to a regime share w in ``eps_w``: the step into that epoch starts a new eps
 #: (an RTK drive's fix kind changed: fkf_inputs.multipath_regime)
 EPS_RESET = 10.0
@@ -1343,7 +1344,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                         nis_v = nis_2d(gnss_ve[kx] - x1[IVE], gnss_vn[kx] - x1[IVN],
                                        P1[IVE, IVE] + rv, P1[IVE, IVN], P1[IVN, IVN] + rv)
                         verdict, _ = chi2_gate(nis_v, chi2, t_now, t_last_vacc,
-                                               par[PAR_GATE_RESET_S], RESET_AFTER_LAST_ACCEPT, False)
+                                               par[PAR_VGATE_RESET_S], RESET_AFTER_LAST_ACCEPT, False)
                         vel = verdict != GATE_FAIL
                     accept = True
                     a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
