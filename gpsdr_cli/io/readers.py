@@ -36,7 +36,7 @@ from .formats import (  # magics only: a reader is imported per format
     SQLITE_MAGIC,
     UBX_SYNC,
 )
-from .spikes import gyro_spikes, odometer_spikes, receiver_velocity_spikes
+from .spikes import accel_spikes, gyro_spikes, odometer_spikes, receiver_velocity_spikes
 
 _HEAD_BYTES = 65536
 
@@ -298,7 +298,7 @@ def read_drive(log: str | Path | None = None, *, gps: str | Path | None = None,
     if drive.gnss is None and drive.gyro is None and drive.odo is None:
         names = ", ".join(str(p) for p in (log, gps, gyro, odo) if p is not None)
         raise NoDataError(names, "no GNSS, gyro or odometer data")
-    _drop_impossible(drive, warnings)
+    drop_impossible(drive, warnings)
     if warnings:
         drive.meta["warnings"] = warnings
     return drive
@@ -313,7 +313,7 @@ DR_LIMITS = (("gyro", "yaw_rate_radps", 50.0, "rad/s"),
              ("accel", "accel_mps2", 160.0, "m/s^2"))
 #: ... and readings that jump off their neighbours further than a vehicle moves (one
 #: odometer reading in two hundred at a random 0-40 m/s took ekf/aekf 8-86 m off)
-DR_SPIKES = {"gyro": gyro_spikes, "odo": odometer_spikes}
+DR_SPIKES = {"gyro": gyro_spikes, "odo": odometer_spikes, "accel": accel_spikes}
 
 
 def _report_beyond(drive: Drive, warnings: list[str], name: str, bad: np.ndarray, what: str,
@@ -329,7 +329,7 @@ def _report_beyond(drive: Drive, warnings: list[str], name: str, bad: np.ndarray
                         "(corrupt, or in other units?)")
 
 
-def _drop_impossible(drive: Drive, warnings: list[str]) -> None:
+def drop_impossible(drive: Drive, warnings: list[str]) -> None:
     """Leave out the dead-reckoning records beyond :data:`DR_LIMITS` or off their neighbours
     (:data:`DR_SPIKES`, :mod:`.spikes`), counted in
     ``drive.skipped`` (the first with its file and record number); a warning line when a
@@ -370,7 +370,7 @@ def _drop_impossible_gnss_speed(drive: Drive, warnings: list[str]) -> None:
     velocity row, ungated, sent the track to infinity), and where the velocity jumps off
     its neighbours' (:func:`receiver_velocity_spikes`: one fix in twenty with a random speed
     and course took every filter from 0.5 m to 8-180 m); the fix's position stays.
-    Counted like :func:`_drop_impossible`."""
+    Counted like :func:`drop_impossible`."""
     g = drive.gnss
     if g is None or not len(g):
         return

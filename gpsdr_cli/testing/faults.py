@@ -108,7 +108,8 @@ def window(t_ns: np.ndarray, t0_ns: int, start_s: float, duration_s: float) -> n
 
 
 def _value_field(name: str) -> str:
-    return {"gyro": "yaw_rate_radps", "odo": "speed_mps", "gnss": "lat_deg"}[name]
+    return {"gyro": "yaw_rate_radps", "odo": "speed_mps", "accel": "accel_mps2",
+            "gnss": "lat_deg"}[name]
 
 
 # --------------------------------------------------------------------------------------------

@@ -6,6 +6,7 @@ import numpy as np
 
 from gpsdr_cli.conventions import NS_PER_S
 from gpsdr_cli.io.spikes import (
+    accel_spikes,
     gyro_spikes,
     odometer_spikes,
     receiver_velocity_spikes,
@@ -93,3 +94,14 @@ def test_gyro_glitches() -> None:
     assert not gyro_spikes(t_ns, w).any()
     w[[500, 1500, 1501]] = [5.0, -3.0, -3.0]
     assert np.flatnonzero(gyro_spikes(t_ns, w)).tolist() == [500, 1500, 1501]
+
+
+def test_accelerometer_glitches_and_road_vibration() -> None:
+    """Vibration of 1 m/s^2 and an emergency stop's onset are motion; +-40 m/s^2 is not."""
+    t = np.arange(0.0, 30.0, 0.01)
+    a = np.where((t > 10) & (t < 13), -8.0 * np.clip((t - 10) / 0.4, 0, 1), 0.5)
+    a = a + np.random.default_rng(4).normal(0, 1.0, len(t))
+    t_ns = (t * NS_PER_S).astype(np.int64)
+    assert not accel_spikes(t_ns, a).any()
+    a[[300, 1050, 2000]] = [40.0, 30.0, -35.0]
+    assert np.flatnonzero(accel_spikes(t_ns, a)).tolist() == [300, 1050, 2000]
