@@ -740,7 +740,9 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     # choice): a wrong but plausible speed or course taken at its 0.2-5 m/s sigma carried
     # the track tens of metres (docs/decisions/0031).  Judged with at least [gnss]
     # velocity_gate_floor_mps (a drive-off the state has not seen is not an outlier), the
-    # fixes' threshold and no lock-out: a reset keeps its run open until a velocity is used
+    # fixes' threshold and no lock-out: a reset keeps its run open until a velocity is used.
+    # A fix that fails its own gate too says the state, not the velocity, is off (a turn
+    # in an outage the gyro did not see): the velocity is taken then
     has_v = math.isfinite(gv_e) and math.isfinite(gv_n) and prm[PAR_GVEL_VAR] > 0.0
     vel = has_v
     if has_v and gate and n_fix >= prm[PAR_GATE_WARMUP]:
@@ -748,7 +750,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
         nis_v = nis_2d(gv_e - x[IVE], gv_n - x[IVN], P[IVE, IVE] + rv, P[IVE, IVN],
                        P[IVN, IVN] + rv)
         verdict_v, since_v = chi2_gate(nis_v, prm[PAR_GATE_THR], t, st[ST_VREJ_SINCE],
-                                       prm[PAR_VGATE_RESET], RESET_AFTER_FIRST_REJECT, False)
+                                       prm[PAR_VGATE_RESET], RESET_AFTER_FIRST_REJECT,
+                                       nis > prm[PAR_GATE_THR])
         vel = verdict_v != GATE_FAIL
         if verdict_v != GATE_RESET:
             st[ST_VREJ_SINCE] = since_v

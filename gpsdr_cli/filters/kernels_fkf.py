@@ -1335,7 +1335,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                     # the receiver (Doppler) velocity has its own gate against the predicted
                     # velocity (our choice; docs/decisions/0031): a wrong but plausible speed
                     # or course at 0.2 m/s carried the track away.  Judged with at least
-                    # [gnss] velocity_gate_floor_mps; no lock-out either
+                    # [gnss] velocity_gate_floor_mps; no lock-out either, and taken when the
+                    # fix fails its gate too (the state, not the velocity, is off)
                     has_v = par[PAR_GVEL_VAR] > 0.0 and not (math.isnan(gnss_ve[kx])
                                                             or math.isnan(gnss_vn[kx]))
                     vel = has_v
@@ -1344,7 +1345,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                         nis_v = nis_2d(gnss_ve[kx] - x1[IVE], gnss_vn[kx] - x1[IVN],
                                        P1[IVE, IVE] + rv, P1[IVE, IVN], P1[IVN, IVN] + rv)
                         verdict, _ = chi2_gate(nis_v, chi2, t_now, t_last_vacc,
-                                               par[PAR_VGATE_RESET_S], RESET_AFTER_LAST_ACCEPT, False)
+                                               par[PAR_VGATE_RESET_S], RESET_AFTER_LAST_ACCEPT,
+                                               nis > chi2)
                         vel = verdict != GATE_FAIL
                     accept = True
                     a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
