@@ -226,17 +226,25 @@ def duplicate_records(drive: Drive, stream: str, every: int = 10, *,
     return out
 
 
+def _some(drive: Drive, stream: str, fraction: float, seed: int
+          ) -> tuple[Drive, Any, np.ndarray, np.random.Generator]:
+    """A copy of ``drive``, its ``stream`` (None when absent), a random ``fraction`` of that
+    stream's records as a mask, and the generator that drew it (for the values)."""
+    out = copy_drive(drive)
+    s = getattr(out, stream)
+    rng = np.random.default_rng(seed)
+    m = rng.random(len(s)) < fraction if s is not None else np.zeros(0, bool)
+    return out, s, m, rng
+
+
 def nan_values(drive: Drive, stream: str, fraction: float, *, seed: int = 0,
                value: float = np.nan, field: str | None = None) -> Drive:
     """A random ``fraction`` of a stream's values replaced by ``value`` (NaN, inf, a spike):
     its main values (GNSS: latitude and longitude), or only the array ``field`` (e.g. the
     receiver's ``speed_mps``)."""
-    out = copy_drive(drive)
-    s = getattr(out, stream)
+    out, s, m, _ = _some(drive, stream, fraction, seed)
     if s is None:
         return out
-    rng = np.random.default_rng(seed)
-    m = rng.random(len(s)) < fraction
     getattr(s, field or _value_field(stream))[m] = value
     if stream == "gnss" and field is None:
         s.lon_deg[m] = value
@@ -247,13 +255,9 @@ def random_values(drive: Drive, stream: str, fraction: float, low: float, high: 
                   seed: int = 0) -> Drive:
     """A random ``fraction`` of a DR stream's values replaced by plausible wrong ones, uniform in
     [``low``, ``high``] (a CAN frame with flipped bits, still in range)."""
-    out = copy_drive(drive)
-    s = getattr(out, stream)
-    if s is None:
-        return out
-    rng = np.random.default_rng(seed)
-    m = rng.random(len(s)) < fraction
-    getattr(s, _value_field(stream))[m] = rng.uniform(low, high, int(m.sum()))
+    out, s, m, rng = _some(drive, stream, fraction, seed)
+    if s is not None:
+        getattr(s, _value_field(stream))[m] = rng.uniform(low, high, int(m.sum()))
     return out
 
 
@@ -262,14 +266,10 @@ def wrong_velocities(drive: Drive, fraction: float = 0.05, *, seed: int = 8,
     """A random ``fraction`` of the receiver's velocities replaced by a plausible wrong one: a
     speed uniform in [0, ``max_speed_mps``] along a uniform course (a receiver's bad epoch,
     a mis-parsed but valid field)."""
-    out = copy_drive(drive)
-    g = out.gnss
-    if g is None:
-        return out
-    rng = np.random.default_rng(seed)
-    m = rng.random(len(g)) < fraction
-    g.speed_mps[m] = rng.uniform(0.0, max_speed_mps, int(m.sum()))
-    g.course_deg[m] = rng.uniform(0.0, 360.0, int(m.sum()))
+    out, g, m, rng = _some(drive, "gnss", fraction, seed)
+    if g is not None:
+        g.speed_mps[m] = rng.uniform(0.0, max_speed_mps, int(m.sum()))
+        g.course_deg[m] = rng.uniform(0.0, 360.0, int(m.sum()))
     return out
 
 
