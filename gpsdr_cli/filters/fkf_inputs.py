@@ -35,6 +35,9 @@ ODO_DROPOUT_S = 5.0
 MIN_SCALE_FIXES = 20
 #: seconds: fixes this far apart give the fallback course for the heading alignment
 COURSE_BASE_S = 2.0
+#: rad: a course this far from the course-corrected gyro heading is left out of the course
+#: correction's means (noise at [fkf] course_min_speed_mps: 0.2 m/s over 3 m/s, 4 deg)
+COURSE_OUTLIER_RAD = math.radians(20.0)
 
 
 @dataclass
@@ -247,11 +250,6 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     if far.any() and (~far).sum() >= 2:
         t_mean, d_mean = _window_means(tk[~far], d[~far], window)
     return np.interp(tg, t_mean, d_mean)
-
-
-#: rad: a course this far from the course-corrected gyro heading is left out of the course
-#: correction's means (noise at [fkf] course_min_speed_mps: 0.2 m/s over 3 m/s, 4 deg)
-COURSE_OUTLIER_RAD = math.radians(20.0)
 
 
 def _window_means(tk: np.ndarray, d: np.ndarray, window: float) -> tuple[np.ndarray, np.ndarray]:

@@ -236,12 +236,12 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     k = out["fkf"]
     k["gnss_velocity_sd_mps"] = max(float(k["gnss_velocity_sd_mps"]),
                                     float(g["nlos_fkf_velocity_sd_mps"]))
-    if not has_odo and float(k["no_odo_gate_reset_s"]) > 0:
-        # the fixes, not the Doppler, are the suspects: fkf's state follows a reflected step
-        # and then gates the Doppler that disagrees (decisions/0031)
-        g["velocity_gate_reset_s"] = min(float(g["velocity_gate_reset_s"]),
-                                         float(k["no_odo_gate_reset_s"]))
     if not has_odo:
+        if float(k["no_odo_gate_reset_s"]) > 0:
+            # the fixes, not the Doppler, are the suspects: fkf's state follows a reflected
+            # step and then gates the Doppler that disagrees (decisions/0031)
+            g["velocity_gate_reset_s"] = min(float(g["velocity_gate_reset_s"]),
+                                             float(k["no_odo_gate_reset_s"]))
         a = out["aekf"]
         a["gnss_velocity_sd_mps"] = max(float(a["gnss_velocity_sd_mps"]),
                                         float(g["nlos_velocity_sd_mps"]))

@@ -741,8 +741,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     # the track tens of metres (docs/decisions/0031).  Judged with at least [gnss]
     # velocity_gate_floor_mps (a drive-off the state has not seen is not an outlier), the
     # fixes' threshold and no lock-out: a reset keeps its run open until a velocity is used.
-    # A fix that fails its own gate too says the state, not the velocity, is off (a turn
-    # in an outage the gyro did not see): the velocity is taken then
+    # A fix that fails its own gate too (also one the gate resets on) says the state, not
+    # the velocity, is off (a turn in an outage the gyro did not see): it is taken then
     has_v = math.isfinite(gv_e) and math.isfinite(gv_n) and prm[PAR_GVEL_VAR] > 0.0
     vel = has_v
     if has_v and gate and n_fix >= prm[PAR_GATE_WARMUP]:
@@ -767,7 +767,6 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             # inflate mode: fixes that have disagreed for gate_reset_s are a new
             # truth (a datum change), not an error to down-weight forever
             reset = True
-            vel = has_v  # the state, not this fix's velocity, is the outlier
             info[INF_GATE_RESETS] += 1.0
         elif verdict == GATE_FAIL:
             if (inflate_on is not None and nis <= thr * prm[PAR_GATE_INFLATE_MAX]

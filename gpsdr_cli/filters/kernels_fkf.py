@@ -1359,7 +1359,6 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                                                a_rej * rej_share + (1.0 - a_rej) > 0.5)
                         if verdict == GATE_RESET:
                             p_counters[C_GATE_RESETS] += 1
-                            vel = has_v         # the state, not this fix's velocity, is the outlier
                         elif verdict == GATE_FAIL:
                             accept = False
                     rej_share = a_rej * rej_share + (0.0 if accept else 1.0 - a_rej)

@@ -391,4 +391,3 @@ def _drop_impossible_gnss_speed(drive: Drive, warnings: list[str]) -> None:
     if bad.any():
         drive.gnss = dataclasses.replace(g, speed_mps=np.where(bad, np.nan, g.speed_mps),
                                          course_deg=np.where(bad, np.nan, g.course_deg))
-

@@ -16,6 +16,8 @@ from 0.6 to 4.5-4.9 m through 15-s outages bridged by the accelerometer.  Units:
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
@@ -46,19 +48,35 @@ DR_SPAN_S = 1.0
 STEP_SIGMAS = 8.0
 
 
+def _time_order(t_ns: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Indices of the ``ok`` readings in time order (stable; no sort when already in order)."""
+    idx = np.flatnonzero(ok)
+    ti = t_ns[idx]
+    return idx if np.all(ti[1:] >= ti[:-1]) else idx[np.argsort(ti, kind="stable")]
+
+
+def _step_size(v: np.ndarray) -> float:
+    """Robust size (median x 1.4826) of the non-zero steps of ``v`` (in time order)."""
+    d = np.abs(np.diff(v))
+    d = d[d > 1e-6]     # not the rounding of a speed computed from ticks over stamps
+    return 1.4826 * float(np.median(d)) if len(d) else 0.0
+
+
 def off_neighbours(t_ns: np.ndarray, values: np.ndarray, *, rate_limit: float, tol: float,
-                   span_s: float) -> np.ndarray:
+                   span_s: float, step_sigmas: float = 0.0) -> np.ndarray:
     """Per reading, whether it is a spike (see the module docstring).  ``values``: (n,) or
     (n, k) (a vector per reading, medians per column, distance Euclidean); NaN rows are
-    neither judged nor neighbours.  ``rate_limit`` per second, ``tol`` in the values' unit."""
+    neither judged nor neighbours.  ``rate_limit`` per second, ``tol`` in the values' unit,
+    raised to ``step_sigmas`` x the stream's step size (:func:`step_noise`; 1-D only)."""
     v = np.asarray(values, float)
     v = v[:, None] if v.ndim == 1 else v
     bad = np.zeros(len(v), bool)
-    idx = np.flatnonzero(np.isfinite(v).all(axis=1))
-    if len(idx) < 3:
+    ok = np.isfinite(v).all(axis=1)
+    if ok.sum() < 3:
         return bad
-    ti = t_ns[idx]
-    order = idx if np.all(ti[1:] >= ti[:-1]) else idx[np.argsort(ti, kind="stable")]
+    order = _time_order(t_ns, ok)
+    if step_sigmas > 0.0:
+        tol = max(tol, step_sigmas * _step_size(v[order, 0]))
     t = (t_ns[order] - t_ns[order[0]]) / NS_PER_S
     # windows of five as views: the neighbours -2, -1, the reading, +1, +2 (padding beyond
     # the ends); a neighbour counts when at most span_s away, and the farthest one's time
@@ -75,6 +93,8 @@ def off_neighbours(t_ns: np.ndarray, values: np.ndarray, *, rate_limit: float, t
     judged = n_near >= 2
     full = n_near == 4
     part = judged & ~full
+    if part.any():
+        near = np.abs(sliding_window_view(tp, 5)[part] - t[part, None]) <= span_s
     dist2 = np.zeros(len(order))
     for j in range(v.shape[1]):
         col = v[order, j]
@@ -82,7 +102,6 @@ def off_neighbours(t_ns: np.ndarray, values: np.ndarray, *, rate_limit: float, t
         # five readings everywhere but at ends and gaps: a median network, not a NaN median
         med = np.where(full, _median5(*(win[:, c] for c in range(5))), col)
         if part.any():
-            near = np.abs(sliding_window_view(tp, 5)[part] - t[part, None]) <= span_s
             med[part] = np.nanmedian(np.where(near, win[part], np.nan), axis=1)
         dist2 += (col - med) ** 2
     spike = judged & (np.sqrt(dist2) > rate_limit * far_s + tol)
@@ -117,34 +136,25 @@ def step_noise(t_ns: np.ndarray, values: np.ndarray) -> float:
     and its median non-zero step is the tick."""
     v = np.asarray(values, float)
     ok = np.isfinite(v)
-    if ok.sum() < 3:
-        return 0.0
-    order = np.flatnonzero(ok)[np.argsort(t_ns[ok], kind="stable")]
-    d = np.abs(np.diff(v[order]))
-    d = d[d > 1e-6]     # not the rounding of a speed computed from ticks over stamps
-    return 1.4826 * float(np.median(d)) if len(d) else 0.0
+    return _step_size(v[_time_order(t_ns, ok)]) if ok.sum() >= 3 else 0.0
 
 
-def odometer_spikes(t_ns: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
-    """Odometer speeds off their neighbours beyond 1 g (:data:`ODO_TOL_MPS`, or
-    :data:`STEP_SIGMAS` x the stream's step noise if larger)."""
-    tol = max(ODO_TOL_MPS, STEP_SIGMAS * step_noise(t_ns, speed_mps))
-    return off_neighbours(t_ns, speed_mps, rate_limit=MAX_ACCEL_MPS2, tol=tol, span_s=DR_SPAN_S)
+def _dr_spikes(rate_limit: float, tol: float) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """A dead-reckoning stream's check: off its neighbours beyond ``rate_limit`` over the
+    span plus ``tol``, or :data:`STEP_SIGMAS` x the stream's step size if larger."""
+    def spikes(t_ns: np.ndarray, values: np.ndarray) -> np.ndarray:
+        return off_neighbours(t_ns, values, rate_limit=rate_limit, tol=tol, span_s=DR_SPAN_S,
+                              step_sigmas=STEP_SIGMAS)
+    return spikes
 
 
-def gyro_spikes(t_ns: np.ndarray, rate_radps: np.ndarray) -> np.ndarray:
-    """Yaw rates off their neighbours beyond :data:`MAX_YAW_ACCEL_RADPS2`
-    (:data:`GYRO_TOL_RADPS`, or :data:`STEP_SIGMAS` x the stream's step noise if larger)."""
-    tol = max(GYRO_TOL_RADPS, STEP_SIGMAS * step_noise(t_ns, rate_radps))
-    return off_neighbours(t_ns, rate_radps, rate_limit=MAX_YAW_ACCEL_RADPS2, tol=tol,
-                          span_s=DR_SPAN_S)
+#: odometer speeds (m/s) off their neighbours beyond 1 g
+odometer_spikes = _dr_spikes(MAX_ACCEL_MPS2, ODO_TOL_MPS)
+#: yaw rates (rad/s) off their neighbours beyond a snap steer
+gyro_spikes = _dr_spikes(MAX_YAW_ACCEL_RADPS2, GYRO_TOL_RADPS)
+#: forward accelerations (m/s^2) off their neighbours beyond an emergency stop's onset
+accel_spikes = _dr_spikes(MAX_JERK_MPS3, ACCEL_TOL_MPS2)
 
 
-def accel_spikes(t_ns: np.ndarray, accel_mps2: np.ndarray) -> np.ndarray:
-    """Forward accelerations off their neighbours beyond :data:`MAX_JERK_MPS3`
-    (:data:`ACCEL_TOL_MPS2`, or :data:`STEP_SIGMAS` x the stream's step noise if larger)."""
-    tol = max(ACCEL_TOL_MPS2, STEP_SIGMAS * step_noise(t_ns, accel_mps2))
-    return off_neighbours(t_ns, accel_mps2, rate_limit=MAX_JERK_MPS3, tol=tol, span_s=DR_SPAN_S)
-
-
-__all__ = ["accel_spikes", "gyro_spikes", "odometer_spikes", "off_neighbours", "receiver_velocity_spikes"]
+__all__ = ["accel_spikes", "gyro_spikes", "odometer_spikes", "off_neighbours",
+           "receiver_velocity_spikes", "step_noise"]
