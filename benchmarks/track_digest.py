@@ -40,7 +40,8 @@ DURATION_S = {"tunnels": None}
 SHORT_S = 180.0
 AEKF_PLAIN = {"aekf": {"gnss_err_states": False, "gnss_velocity": False}}
 FKF_PLAIN = {"fkf": {"gnss_velocity": False, "gnss_err_pdop": float("inf"),
-                     "gnss_err_dist_m": 0.0, "gnss_err_sd_m": 1.0, "gnss_err_tau_s": 60.0}}
+                     "gnss_err_dist_m": 0.0, "gnss_err_sd_m": 1.0, "gnss_err_tau_s": 60.0},
+             "fafkf": {"remove_residual_mean": False}}
 #: (label, filter, overrides) run besides the defaults on urban_canyon
 VARIANTS = (("ekf_plain", "ekf", AEKF_PLAIN), ("aekf_plain", "aekf", AEKF_PLAIN),
             ("fkf_plain", "fkf", FKF_PLAIN), ("fafkf_plain", "fafkf", FKF_PLAIN))

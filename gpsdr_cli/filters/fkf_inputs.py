@@ -793,6 +793,7 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.PAR_R_MAX] = ap["r_max_factor"]
     par[kf.PAR_DELTA_MAX] = ap["delta_max"]
     par[kf.PAR_RES_CLIP] = ap["residual_clip"]
+    par[kf.PAR_RES_DEMEAN] = float(bool(ap["remove_residual_mean"]))
     par[kf.PAR_BETA_GNSS] = fp["beta_gnss"]
     par[kf.PAR_V_LIN] = max(fp["v_lin_mps"], 1e-3)
     par[kf.PAR_HEAD_CHI2] = chi2_1(g_p["gate_prob"]) if g_p["gate"] else 0.0

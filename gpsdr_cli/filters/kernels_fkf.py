@@ -191,7 +191,8 @@ PAR_COAST_Q = 29     # m^2/s^3: zero-acceleration rows r = this / T while nothin
 PAR_EPS_RESET = 30   # 1: the step into this epoch starts a new, independent eps (select_eps)
 PAR_VGATE_VAR = 31   # (m/s)^2, the receiver velocity gate's least variance per axis
 PAR_VGATE_RESET_S = 32  # s: receiver velocities gated this long are taken again (no lock-out)
-N_PAR = 33
+PAR_RES_DEMEAN = 33  # 1: covariance matching on the residuals' scatter about their window mean
+N_PAR = 34
 #: added to a regime share w in ``eps_w``: the step into that epoch starts a new eps
 #: (an RTK drive's fix kind changed: fkf_inputs.multipath_regime)
 EPS_RESET = 10.0
@@ -637,31 +638,36 @@ def distance_row(x: np.ndarray, h: np.ndarray, t_m: float, v_lin: float, psi_hin
 
 
 @njit(cache=True)
-def adapt_r(j: int, r2: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt: np.ndarray,
+def adapt_r(j: int, y: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt: np.ndarray,
             par: np.ndarray, r_table: np.ndarray, rfac: np.ndarray, u_last: np.ndarray,
             rsum: np.ndarray) -> bool:
     """Covariance matching for component j (Tang et al. eqs. (15)-(18)) + the fuzzy R controller.
 
-    Pushes the squared prior residual (clipped to ``res_clip x Te``) into the
-    window; once it holds M values: ``Ra = mean``, ``u = (Te - Ra)/Te``,
-    ``Delta = delta_max * table(u)``, ``f_j *= 1 + Delta`` clamped.  Returns
-    True when R was adapted.  ``rsum[j]`` keeps the window's sum (updated by the
-    value in and the value out, summed afresh once per M pushes against drift).
+    Pushes the prior residual ``y`` (clipped to +-sqrt(``res_clip x Te``)) into the
+    window; once it holds M values: ``Ra`` = the mean of ``y^2`` (Tang et al.), less the
+    square of the window's mean when ``PAR_RES_DEMEAN`` (our choice: a residual that stays
+    off for the whole window is the state's error, which the position and the GNSS error
+    states are there to take; read as fix noise it raised R to its clamp and locked good
+    fixes out of a track left tens of metres off, decisions/0033), ``u = (Te - Ra)/Te``,
+    ``Delta = delta_max * table(u)``, ``f_j *= 1 + Delta`` clamped.  Returns True when R
+    was adapted.  ``rsum[j]`` keeps the window's sum of squares (M is tens: summed afresh).
     """
     m = ring.shape[1]
-    v = min(r2, par[PAR_RES_CLIP] * te)
-    rsum[j] += v - ring[j, pos[j]]
-    ring[j, pos[j]] = v
+    lim = math.sqrt(par[PAR_RES_CLIP] * te)
+    ring[j, pos[j]] = min(max(y, -lim), lim)
     pos[j] = (pos[j] + 1) % m
-    if pos[j] == 0:
-        acc = 0.0
-        for i in range(m):
-            acc += ring[j, i]
-        rsum[j] = acc
     cnt[j] += 1
     if cnt[j] < m:
         return False
-    ra = rsum[j] / m                                # Tang et al. eq. (16)
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(m):
+        s1 += ring[j, i]
+        s2 += ring[j, i] * ring[j, i]
+    rsum[j] = s2
+    ra = s2 / m                                     # Tang et al. eq. (16)
+    if par[PAR_RES_DEMEAN] != 0.0:
+        ra -= (s1 / m) ** 2
     u = (te - ra) / te                              # Dis_jj / Te_jj, eqs. (17)-(18)
     u = min(max(u, -1.0), 1.0)
     u_last[j] = u
@@ -1322,10 +1328,10 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                     s11 = P1[IN, IN] + 2.0 * P1[IN, IEPS_N] + P1[IEPS_N, IEPS_N]
                     s01 = P1[IE, IN] + P1[IE, IEPS_N] + P1[IEPS_E, IN] + P1[IEPS_E, IEPS_N]
                     if adaptive:
-                        if adapt_r(np.int64(0), ye * ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
+                        if adapt_r(np.int64(0), ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
                                    par, r_table, rfac, u_last, rsum):
                             p_counters[C_R_ADAPT] += 1
-                        if adapt_r(np.int64(1), yn * yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
+                        if adapt_r(np.int64(1), yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
                                    par, r_table, rfac, u_last, rsum):
                             p_counters[C_R_ADAPT] += 1
                     re = rfac[0] * gnss_var_e[kx]
@@ -1431,7 +1437,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                         if do_head:
                             pred = heading_row(x2, h)
                             y = wrap_pi(theta[kx] - pred)
-                            if adapt_r(np.int64(2), y * y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
+                            if adapt_r(np.int64(2), y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
                                        par, r_table, rfac, u_last, rsum):
                                 p_counters[C_R_ADAPT] += 1
                         if do_dist:
@@ -1439,7 +1445,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                             y_dist = dist[kx] - pred
                             hph_dist = hph(P2, h)
                             y = y_dist
-                            if adapt_r(np.int64(3), y * y, hph_dist + rfac[3] * r_dist, ring, pos, cnt,
+                            if adapt_r(np.int64(3), y, hph_dist + rfac[3] * r_dist, ring, pos, cnt,
                                        par, r_table, rfac, u_last, rsum):
                                 p_counters[C_R_ADAPT] += 1
                     if do_head:

@@ -143,17 +143,17 @@ class Window:
         self.factor = 1.0
         self.u = 0.0
 
-    def push(self, r2: float, Te: float, par: np.ndarray) -> None:
+    def push(self, y: float, Te: float, par: np.ndarray) -> None:
         M = len(self.buf)
-        self.buf[self.pos] = min(r2, par[kf.PAR_RES_CLIP] * Te)
+        lim = math.sqrt(par[kf.PAR_RES_CLIP] * Te)
+        self.buf[self.pos] = min(max(y, -lim), lim)
         self.pos = (self.pos + 1) % M
         self.count += 1
         if self.count < M:
             return
-        Ra = 0.0
-        for v in self.buf:
-            Ra += v
-        Ra /= M
+        Ra = sum(v * v for v in self.buf) / M
+        if par[kf.PAR_RES_DEMEAN]:                  # the scatter about the window's mean
+            Ra -= (sum(self.buf) / M) ** 2
         u = min(max((Te - Ra) / Te, -1.0), 1.0)
         self.u = u
         delta = par[kf.PAR_DELTA_MAX] * np.interp(u, np.linspace(-1, 1, len(fuzzy.R_TABLE)),
@@ -251,7 +251,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 R0 = np.array([prep.gnss_var_e[k], prep.gnss_var_n[k]])
                 if adaptive:
                     for j in range(2):
-                        win[j].push(y[j] ** 2, HPH[j, j] + win[j].factor * R0[j], par)
+                        win[j].push(y[j], HPH[j, j] + win[j].factor * R0[j], par)
                 R = np.diag([win[0].factor * R0[0], win[1].factor * R0[1]])
                 S = HPH + R
                 nis = float(y @ np.linalg.solve(S, y))
@@ -306,10 +306,10 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                 if adaptive:
                     if do_head:
                         H, h = row("heading", x2)
-                        win[2].push(wrap(th - h) ** 2, H @ P2 @ H + win[2].factor * R_head, par)
+                        win[2].push(wrap(th - h), H @ P2 @ H + win[2].factor * R_head, par)
                     if do_dist:
                         H, h = row("dist", x2, t_m, par[kf.PAR_V_LIN], psi_hint)
-                        win[3].push((dist - h) ** 2, H @ P2 @ H + win[3].factor * R_dist, par)
+                        win[3].push(dist - h, H @ P2 @ H + win[3].factor * R_dist, par)
                 if do_head:
                     H, h = row("heading", x2)
                     y, R = wrap(th - h), win[2].factor * R_head

@@ -56,6 +56,17 @@ def test_fafkf_kernel_reproduces_the_reference(busy_drive, mode: str, weights: s
     _assert_sane(result, len(epochs))
 
 
+def test_fafkf_papers_covariance_matching_reproduces_the_reference(busy_drive) -> None:
+    """``[fafkf] remove_residual_mean = false``: Tang et al.'s mean of r r^T."""
+    drive, frame, _ = busy_drive
+    params = _params(fafkf={"remove_residual_mean": False})
+    epochs = build_epochs(drive, frame, params)
+    result = get("fafkf")(epochs, params)
+    ref = run_reference(fkf.prepare(epochs, params), "fafkf")
+    assert_matches_reference(result, ref)
+    assert result.info["r_adaptations"] > 0
+
+
 @pytest.mark.parametrize("mode", ["nr", "fr"])
 def test_fafkf_rts_smoothing_reproduces_the_reference(busy_drive, mode: str) -> None:
     """Weights "shares": the fusion is covariance-weighted, so the fused RTS of fkf applies."""
