@@ -1288,8 +1288,10 @@ def write_config(config: dict[str, dict[str, Any]], path: Any) -> list[str]:
 
 
 def run_case(case: FaultCase, filter_name: str, out_dir: Any, sim: Any | None = None,
-             *, subprocess_exe: str | None = None) -> tuple[CaseInputs, Outcome]:
-    """Make the case's inputs in ``out_dir`` and run gpsdr on them with ``filter_name``."""
+             *, subprocess_exe: str | None = None, smoother: str = ""
+             ) -> tuple[CaseInputs, Outcome]:
+    """Make the case's inputs in ``out_dir`` and run gpsdr on them with ``filter_name`` (and
+    ``smoother``: rts | graph | none; empty: the default)."""
     import pathlib
 
     from .. import config as cfg
@@ -1298,10 +1300,12 @@ def run_case(case: FaultCase, filter_name: str, out_dir: Any, sim: Any | None = 
     out.mkdir(parents=True, exist_ok=True)
     inputs = case.make(sim, out)
     inputs.out_dir = out
+    chosen = {"name": filter_name, **({"smoother": smoother} if smoother else {})}
     if inputs.drive is not None:
-        params = cfg.merge(cfg.defaults(), {"filter": {"name": filter_name}, **inputs.config})
+        params = cfg.merge(cfg.defaults(), {"filter": chosen, **inputs.config})
         return inputs, run_inmemory(inputs.drive, params)
-    args = [*inputs.args, *write_config(inputs.config, out / "params.toml")]
+    args = [*inputs.args, *write_config(inputs.config, out / "params.toml"),
+            *(["--smooth", smoother] if smoother else [])]
     return inputs, run_cli(args, out, filter_name=filter_name, subprocess_exe=subprocess_exe)
 
 
