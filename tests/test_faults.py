@@ -191,6 +191,30 @@ def test_fault_track_follows_the_truth(case: str, filter_name: str, runs) -> Non
     assert F.accuracy_problems(F.CASES[case], inputs, out) == []
 
 
+@pytest.fixture(scope="module")
+def graph_runs(tmp_path_factory: pytest.TempPathFactory) -> object:
+    """Each fault once through the default filter and the robust batch smoother."""
+    sim = F.base_sim()
+    root = tmp_path_factory.mktemp("faults_graph")
+
+    def get(case: str) -> tuple[F.CaseInputs, F.Outcome]:
+        return F.run_case(F.CASES[case], "aekf", root / case, sim, smoother="graph")
+
+    return get
+
+
+@pytest.mark.parametrize("case", [c.name for c in F.CATALOGUE])
+def test_fault_through_the_graph_gives_a_track_or_one_clear_error(case: str, graph_runs) -> None:
+    """Issue 15: the fault suite passes with ``--smooth graph`` as with RTS (a solve that does
+    not converge keeps the RTS track, with a warning)."""
+    _, out = graph_runs(case)
+    assert F.outcome_problems(out, F.CASES[case].expect) == []
+    if out.status == 0:
+        meta = out.meta or {}
+        ran = '"smoothing": "graph"' in str(meta.get("filter_info", ""))
+        assert ran or "graph smoother:" in str(meta.get("warnings", "")), sorted(meta)
+
+
 def test_failed_run_keeps_an_existing_output(runs, tmp_path: Path) -> None:
     """A failing run must not clobber (or half-write) the file -o names, nor leave temp files."""
     inputs = F.CASES["no_gnss"].make(runs.sim, tmp_path)
