@@ -157,13 +157,14 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> object:
     """Run each (fault, filter) once; the contract and the accuracy tests share the outcome."""
     sim = F.base_sim()
     root = tmp_path_factory.mktemp("faults")
-    cache: dict[tuple[str, str], tuple[F.CaseInputs, F.Outcome]] = {}
+    cache: dict[tuple[str, str, str], tuple[F.CaseInputs, F.Outcome]] = {}
 
-    def get(case: str, filter_name: str) -> tuple[F.CaseInputs, F.Outcome]:
-        if (case, filter_name) not in cache:
-            cache[case, filter_name] = F.run_case(F.CASES[case], filter_name,
-                                                  root / case / filter_name, sim)
-        return cache[case, filter_name]
+    def get(case: str, filter_name: str, smoother: str = "") -> tuple[F.CaseInputs, F.Outcome]:
+        key = (case, filter_name, smoother)
+        if key not in cache:
+            cache[key] = F.run_case(F.CASES[case], filter_name,
+                                    root / case / (filter_name + smoother), sim, smoother=smoother)
+        return cache[key]
 
     get.sim = sim  # type: ignore[attr-defined]
     return get
@@ -191,23 +192,11 @@ def test_fault_track_follows_the_truth(case: str, filter_name: str, runs) -> Non
     assert F.accuracy_problems(F.CASES[case], inputs, out) == []
 
 
-@pytest.fixture(scope="module")
-def graph_runs(tmp_path_factory: pytest.TempPathFactory) -> object:
-    """Each fault once through the default filter and the robust batch smoother."""
-    sim = F.base_sim()
-    root = tmp_path_factory.mktemp("faults_graph")
-
-    def get(case: str) -> tuple[F.CaseInputs, F.Outcome]:
-        return F.run_case(F.CASES[case], "aekf", root / case, sim, smoother="graph")
-
-    return get
-
-
 @pytest.mark.parametrize("case", [c.name for c in F.CATALOGUE])
-def test_fault_through_the_graph_gives_a_track_or_one_clear_error(case: str, graph_runs) -> None:
+def test_fault_through_the_graph_gives_a_track_or_one_clear_error(case: str, runs) -> None:
     """Issue 15: the fault suite passes with ``--smooth graph`` as with RTS (a solve that does
     not converge keeps the RTS track, with a warning)."""
-    _, out = graph_runs(case)
+    _, out = runs(case, "aekf", "graph")
     assert F.outcome_problems(out, F.CASES[case].expect) == []
     if out.status == 0:
         meta = out.meta or {}

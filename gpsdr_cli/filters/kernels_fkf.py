@@ -262,7 +262,7 @@ NPACK = NX * (NX + 1) // 2
 # ---- the filter state (init_state): rows of vec, mats, aux; scalars of sc --------------
 V_X1, V_X2, V_XG, V_D1, V_D2 = range(5)         # local states, fused state, reset scalings
 M_P1, M_P2, M_PG = range(3)                      # local and fused covariances
-A_RFAC, A_RSUM, A_ULAST = range(3)               # R factors, window sums, last u per component
+A_RFAC, A_ULAST = range(2)                       # R factors, last u per component
 ST_T_NOW = 0        # s since the first epoch (the sum of dt, as the pass accumulates it)
 ST_T_LAST_ACC = 1   # s, last accepted GNSS fix
 ST_T_LAST_DR = 2    # s, last DR update of any kind
@@ -639,8 +639,7 @@ def distance_row(x: np.ndarray, h: np.ndarray, t_m: float, v_lin: float, psi_hin
 
 @njit(cache=True)
 def adapt_r(j: int, y: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt: np.ndarray,
-            par: np.ndarray, r_table: np.ndarray, rfac: np.ndarray, u_last: np.ndarray,
-            rsum: np.ndarray) -> bool:
+            par: np.ndarray, r_table: np.ndarray, rfac: np.ndarray, u_last: np.ndarray) -> bool:
     """Covariance matching for component j (Tang et al. eqs. (15)-(18)) + the fuzzy R controller.
 
     Pushes the prior residual ``y`` (clipped to +-sqrt(``res_clip x Te``)) into the
@@ -650,7 +649,7 @@ def adapt_r(j: int, y: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt:
     states are there to take; read as fix noise it raised R to its clamp and locked good
     fixes out of a track left tens of metres off, decisions/0033), ``u = (Te - Ra)/Te``,
     ``Delta = delta_max * table(u)``, ``f_j *= 1 + Delta`` clamped.  Returns True when R
-    was adapted.  ``rsum[j]`` keeps the window's sum of squares (M is tens: summed afresh).
+    was adapted.  The window (M is tens) is summed afresh at each push.
     """
     m = ring.shape[1]
     lim = math.sqrt(par[PAR_RES_CLIP] * te)
@@ -664,7 +663,6 @@ def adapt_r(j: int, y: float, te: float, ring: np.ndarray, pos: np.ndarray, cnt:
     for i in range(m):
         s1 += ring[j, i]
         s2 += ring[j, i] * ring[j, i]
-    rsum[j] = s2
     ra = s2 / m                                     # Tang et al. eq. (16)
     if par[PAR_RES_DEMEAN] != 0.0:
         ra -= (s1 / m) ** 2
@@ -901,11 +899,10 @@ def init_state(x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray,
     """The filter state before the first epoch: ``(vec, mats, aux, ring, pc, sc)``.
 
     ``vec`` (5, 10): x1, x2, x_g, d1, d2; ``mats`` (3, 10, 10): P1, P2, P_g;
-    ``aux`` (3, 4): R factors, residual-window sums, last normalised
-    discrepancies; ``ring`` (4, M): the residual windows; ``pc`` (2, 4) int:
-    window positions and counts; ``sc``: the scalars ``ST_*``.  Everything that
-    carries from one epoch to the next lives here, so a run can stop after any
-    epoch and resume bit-identically (:func:`save_state`, :func:`load_state`).
+    ``aux`` (2, 4): R factors, last normalised discrepancies; ``ring`` (4, M): the
+    residual windows; ``pc`` (2, 4) int: window positions and counts; ``sc``: the scalars
+    ``ST_*``.  Everything that carries from one epoch to the next lives here, so a run can
+    stop after any epoch and resume bit-identically (:func:`save_state`, :func:`load_state`).
     """
     mode_fr = flags[FLG_MODE_FR] != 0
     fusion = flags[FLG_FUSION]
@@ -933,7 +930,7 @@ def init_state(x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray,
             mats[M_P1, i, j] = P0[i, j] * (vec[V_D1, i] * vec[V_D1, j])
             mats[M_P2, i, j] = P0[i, j] * (vec[V_D2, i] * vec[V_D2, j])
             mats[M_PG, i, j] = P0[i, j]
-    aux = np.zeros((3, 4))
+    aux = np.zeros((2, 4))
     aux[A_RFAC, :] = 1.0
     ring = np.zeros((4, m_window))
     pc = np.zeros((2, 4), np.int64)
@@ -945,7 +942,7 @@ def init_state(x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray,
 @njit(cache=True)
 def checkpoint_length(m_window: int) -> int:
     """Floats in one checkpoint row (:func:`save_state`) for a residual window of M."""
-    return 5 * NX + 3 * NX * NX + 12 + 8 + N_SCALARS + 4 * m_window
+    return 5 * NX + 3 * NX * NX + 8 + 8 + N_SCALARS + 4 * m_window
 
 
 def save_state(segment, row, vec, mats, aux, ring, pc, sc):  # hints: _save_checkpoint
@@ -1206,7 +1203,6 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
     P2 = mats[M_P2]
     Pg = mats[M_PG]
     rfac = aux[A_RFAC]
-    rsum = aux[A_RSUM]                              # window sums (adapt_r)
     u_last = aux[A_ULAST]
     pos = pc[0]
     cnt = pc[1]
@@ -1329,10 +1325,10 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                     s01 = P1[IE, IN] + P1[IE, IEPS_N] + P1[IEPS_E, IN] + P1[IEPS_E, IEPS_N]
                     if adaptive:
                         if adapt_r(np.int64(0), ye, s00 + rfac[0] * gnss_var_e[kx], ring, pos, cnt,
-                                   par, r_table, rfac, u_last, rsum):
+                                   par, r_table, rfac, u_last):
                             p_counters[C_R_ADAPT] += 1
                         if adapt_r(np.int64(1), yn, s11 + rfac[1] * gnss_var_n[kx], ring, pos, cnt,
-                                   par, r_table, rfac, u_last, rsum):
+                                   par, r_table, rfac, u_last):
                             p_counters[C_R_ADAPT] += 1
                     re = rfac[0] * gnss_var_e[kx]
                     rn = rfac[1] * gnss_var_n[kx]
@@ -1438,7 +1434,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                             pred = heading_row(x2, h)
                             y = wrap_pi(theta[kx] - pred)
                             if adapt_r(np.int64(2), y, hph(P2, h) + rfac[2] * r_head, ring, pos, cnt,
-                                       par, r_table, rfac, u_last, rsum):
+                                       par, r_table, rfac, u_last):
                                 p_counters[C_R_ADAPT] += 1
                         if do_dist:
                             pred = distance_row(x2, h, t_m[kx], par[PAR_V_LIN], psi_hint)
@@ -1446,7 +1442,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                             hph_dist = hph(P2, h)
                             y = y_dist
                             if adapt_r(np.int64(3), y, hph_dist + rfac[3] * r_dist, ring, pos, cnt,
-                                       par, r_table, rfac, u_last, rsum):
+                                       par, r_table, rfac, u_last):
                                 p_counters[C_R_ADAPT] += 1
                     if do_head:
                         pred = heading_row(x2, h)

@@ -36,10 +36,8 @@ def _factor_after(residuals: np.ndarray, demean: bool, te: float = 1.0) -> float
     cnt = np.zeros(4, np.int64)
     rfac = np.ones(4)
     u_last = np.zeros(4)
-    rsum = np.zeros(4)
     for y in residuals:
-        kf.adapt_r(np.int64(0), float(y), te, ring, pos, cnt, par, fuzzy.R_TABLE, rfac,
-                   u_last, rsum)
+        kf.adapt_r(np.int64(0), float(y), te, ring, pos, cnt, par, fuzzy.R_TABLE, rfac, u_last)
     return float(rfac[0])
 
 
