@@ -54,7 +54,10 @@ iterative LSQR, far slower than a direct banded solve on this structure).  The k
 graduated (graduated non-convexity, Yang et al. 2020): the Cauchy scale starts at
 ``gnc_start`` x ``kernel_scale`` and halves to ``kernel_scale``, so the start -- the forward
 filter's track, already pulled towards the biased fixes -- does not lock the solution into
-accepting them.  Kernel and scale by benchmark: docs/decisions/0002-graph-smoother.md.
+accepting them.  On an NLOS drive with a gyro and an odometer a last stage follows under
+the bounded Geman-McClure kernel (``[graph] nlos_last_kernel``), as GNC's own last stage
+would be: Cauchy's cost keeps growing with the residual, so a long reflected run still pulls.
+Kernel and scale by benchmark: docs/decisions/0002-graph-smoother.md and 0035.
 
 Marginal sigmas: the entries of H^-1 inside the band by the Takahashi recursion on the
 banded Cholesky factor (:func:`.graph_kernels.banded_inverse_band`), interpolated linearly
@@ -75,7 +78,7 @@ from ..epochs import Epochs
 from .base import FilterResult
 from .gnss_model import rtk_drive
 
-KERNELS = {"gauss": 0, "huber": 1, "cauchy": 2}
+KERNELS = {"gauss": 0, "huber": 1, "cauchy": 2, "geman": 3}
 #: an accepted step is doubled up to this factor while the cost keeps falling (8: the same
 #: minima as plain steps on 80 simulated city drives at half the iterations; 64 jumped one
 #: drive into another basin, decisions/0034)
@@ -96,6 +99,16 @@ class GraphOutcome:
     odo_scale_sd: float = math.nan
     gyro_bias_radps: float = math.nan
     gyro_bias_sd_radps: float = math.nan
+
+
+def kernel_id(params: Params, key: str) -> int:
+    """The kernel ``[graph] key`` names, or a usage error that lists the choices."""
+    from ..errors import UsageError
+
+    name = str(params["graph"][key])
+    if name not in KERNELS:
+        raise UsageError(f"[graph] {key} = {name!r}: expected one of {', '.join(KERNELS)}")
+    return KERNELS[name]
 
 
 def parse_prior(text: str, default_sd: float, what: str) -> tuple[float, float]:
@@ -467,10 +480,15 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
                          float(gp["init_heading_sd_rad"]), float(gp["init_speed_sd_mps"]),
                          b_sd, s_sd, err_sd[0], err_sd[0]])
 
-    kernel = KERNELS[str(gp["kernel"])]
+    kernel = kernel_id(params, "kernel")
     c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
     n_stages = max(int(gp["gnc_stages"]), 1) if kernel != KERNELS["gauss"] else 1
-    stages = [c_final * 2.0 ** (n_stages - 1 - k) for k in range(n_stages)]
+    stages = [(kernel, c_final * 2.0 ** (n_stages - 1 - k)) for k in range(n_stages)]
+    # An NLOS drive whose dead reckoning holds the shape on its own: a last stage under a
+    # bounded kernel, where a reflected fix costs at most c^2 however far off it is; under
+    # Cauchy a run of them 20-80 m off still pulled the track (decisions/0035)
+    if str(gp["nlos_last_kernel"]) and nlos_drive and not err_on and have_odo and have_gyro:
+        stages.append((kernel_id(params, "nlos_last_kernel"), c_final))
     ab = np.zeros((gk.BAND + 1, n_x), order="F")  # LAPACK's layout: factored in place
     g = np.zeros(n_x)
     q = np.zeros((max(n_key - 1, 1), gk.N_Q))
@@ -482,16 +500,16 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     args_fix = (fe, fn, sde, sdn, gspd, gcrs, err_phi, err_wsd, acc_dv, acc_t, v_sd, s_rw,
                 prior_mean, prior_sd)
 
-    def cost_at(xx: np.ndarray, c: float, want: bool) -> float:
+    def cost_at(xx: np.ndarray, kern: int, c: float, want: bool) -> float:
         return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
-                            *args_fix, kernel, c, ab, g, want)
+                            *args_fix, kern, c, ab, g, want)
 
     try:
-        for c in stages:
+        for kern, c in stages:
             gk.interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, v_psd, q)
             lam = 1e-6
             stage_done = False
-            cost = cost_at(x, c, True)
+            cost = cost_at(x, kern, c, True)
             while its < max_it:
                 its += 1
                 diag = ab[gk.BAND].copy()
@@ -505,7 +523,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
                         step = None
                     if step is not None and np.all(np.isfinite(step)):
                         x_new = x + step
-                        new_cost = cost_at(x_new, c, False)
+                        new_cost = cost_at(x_new, kern, c, False)
                         if math.isfinite(new_cost) and new_cost <= cost:
                             break
                     lam *= 10.0
@@ -521,7 +539,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
                 alpha = 1.0
                 while alpha < EXTRAPOLATE_MAX:
                     x_try = x + (2.0 * alpha) * step
-                    c_try = cost_at(x_try, c, False)
+                    c_try = cost_at(x_try, kern, c, False)
                     if not (math.isfinite(c_try) and c_try < new_cost):
                         break
                     alpha *= 2.0
@@ -530,7 +548,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
                 rel = (cost - new_cost) / max(cost, 1e-12)
                 x = x_new
                 lam = max(lam / 10.0, 1e-9)
-                cost = cost_at(x, c, True)
+                cost = cost_at(x, kern, c, True)
                 if rel < tol or float(np.max(np.abs(step))) < 1e-5:
                     stage_done = True
                     break
@@ -547,7 +565,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         return GraphOutcome(None, False, its, message or "not converged")
 
     # ---- marginal covariance inside the band (H at the solution, final weights)
-    cost_at(x, c_final, True)
+    final_cost = cost_at(x, stages[-1][0], c_final, True)
     var_e_k = var_n_k = cov_en_k = None
     g = q = None
     try:
@@ -581,7 +599,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     cov_en = np.interp(t_s, tk, cov_en_k)
     w_k = np.full(n_key, np.nan)
     r2_k = np.full(n_key, np.nan)
-    gk.fix_weights(x, fe, fn, sde, sdn, kernel, c_final, w_k, r2_k)
+    gk.fix_weights(x, fe, fn, sde, sdn, stages[-1][0], c_final, w_k, r2_k)
     weight = np.full(n_ep, np.nan)
     weight[key_ep] = w_k
     nis = np.full(n_ep, np.nan)
@@ -600,7 +618,9 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     n_down = int(np.count_nonzero(has_fix & (np.nan_to_num(weight, nan=1.0) < 0.5)))
     info = dict(init.info)
     info.update({"smoothing": "graph", "smoothed": True, "graph_iterations": its,
-                 "graph_keyframes": n_key, "graph_kernel": str(gp["kernel"]),
+                 "graph_cost": final_cost,
+                 "graph_keyframes": n_key, "graph_kernel": "+".join(dict.fromkeys(
+                     name for k, _ in stages for name, i in KERNELS.items() if i == k)),
                  "graph_odo_lag_s": lag, "graph_gnss_err_states": err_on,
                  "graph_accel": acc_on,
                  "graph_fixes_downweighted": n_down,

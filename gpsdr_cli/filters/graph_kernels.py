@@ -34,7 +34,7 @@ BAND = 2 * N_X - 1
 N_2 = 2 * N_X
 
 # kernel ids
-K_GAUSS, K_HUBER, K_CAUCHY = 0, 1, 2
+K_GAUSS, K_HUBER, K_CAUCHY, K_GEMAN = 0, 1, 2, 3
 
 # per-interval noise table columns (frozen between relinearisations of the noise)
 Q_AE, Q_AN, Q_NN, Q_PSI = 0, 1, 2, 3   # position covariance (ee, en, nn) and heading variance
@@ -61,6 +61,9 @@ def robust_weight(r2: float, kernel: int, c: float) -> float:
     if kernel == K_HUBER:
         r = math.sqrt(r2)
         return 1.0 if r <= c else c / r
+    if kernel == K_GEMAN:
+        d = 1.0 + r2 / (c * c)
+        return 1.0 / (d * d)
     return 1.0
 
 
@@ -72,6 +75,8 @@ def robust_cost(r2: float, kernel: int, c: float) -> float:
     if kernel == K_HUBER:
         r = math.sqrt(r2)
         return r2 if r <= c else 2.0 * c * r - c * c
+    if kernel == K_GEMAN:
+        return r2 / (1.0 + r2 / (c * c))
     return r2
 
 
