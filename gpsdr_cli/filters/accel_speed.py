@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..angles import unwrap_across_gaps
 from ..config import Params
 from ..conventions import NS_PER_S
 from ..epochs import Epochs
@@ -203,7 +204,7 @@ def course_gyro_bias(epochs: Epochs, k: int, psi_gyro: np.ndarray) -> float | No
                               & (epochs.gnss_speed_mps[lo:k + 1] >= COURSE_MIN_MPS))
     if len(sel) < COURSE_MIN_FIXES or np.ptp(t_s[sel]) < COURSE_MIN_SPAN_S:
         return None
-    r = np.unwrap(epochs.gnss_course_rad[sel] - psi_gyro[sel])
+    r = unwrap_across_gaps(t_s[sel], epochs.gnss_course_rad[sel] - psi_gyro[sel])
     return float(np.polyfit(t_s[sel], r, 1)[0])
 
 

@@ -17,6 +17,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from ..angles import unwrap_across_gaps
 from ..config import Params
 from ..conventions import NS_PER_S
 from ..epochs import Epochs, true_runs
@@ -240,7 +241,8 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     if window <= 0 or len(k) < 2:
         return np.zeros(len(tg))
     tk = t_s[k]
-    d = np.unwrap(np.angle(np.exp(1j * (epochs.gnss_course_rad[k] - np.interp(tk, tg, psi_g)))))
+    d = unwrap_across_gaps(tk, np.angle(np.exp(1j * (epochs.gnss_course_rad[k]
+                                                     - np.interp(tk, tg, psi_g)))))
     t_mean, d_mean = _window_means(tk, d, window)
     # a course further than COURSE_OUTLIER_RAD from the corrected gyro heading is a wrong
     # course, not noise (a receiver's bad epochs: four 3-s runs 45 deg off turned the
@@ -416,7 +418,7 @@ def chord_course_correction(chords: FixChords, tg: np.ndarray, params: Params) -
     if window <= 0 or len(chords.t_mid) < 2:
         return np.zeros(len(tg))
     tk = chords.t_mid
-    d = np.unwrap(np.angle(chords.dr * np.conj(chords.g)))
+    d = unwrap_across_gaps(tk, np.angle(chords.dr * np.conj(chords.g)))
     wk = np.abs(chords.dr) ** 2 / chords.var
     t0 = tk - tk[0]
 

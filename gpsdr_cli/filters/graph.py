@@ -72,6 +72,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..angles import unwrap_across_gaps
 from ..config import Params
 from ..conventions import NS_PER_S
 from ..epochs import Epochs
@@ -203,7 +204,7 @@ def _initial_heading(t_s: np.ndarray, yaw: np.ndarray, gyro_ok: np.ndarray,
     fast = np.hypot(ve, vn) >= 2.0
     if not fast.any():
         return psi_g
-    off = np.unwrap(course[fast] - psi_g[fast])
+    off = unwrap_across_gaps(t_s[fast], course[fast] - psi_g[fast])
     return psi_g + np.interp(t_s, t_s[fast], off)
 
 
