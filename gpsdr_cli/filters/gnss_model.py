@@ -226,7 +226,8 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     """``params`` with the receiver's velocity sigmas of an NLOS drive: reflected signals
     put the Doppler velocity metres per second off too.  fkf/fafkf: at least ``[gnss]
     nlos_fkf_velocity_sd_mps``; ekf/aekf without an odometer (the Doppler speed then carries
-    their speed; 0.2 m/s drove aekf up to 2x the fixes): at least ``nlos_velocity_sd_mps``.
+    their speed; 0.2 m/s drove aekf up to 2x the fixes): at least ``nlos_velocity_sd_mps``;
+    with one, the receiver's velocity only at ``nlos_velocity_min_mps`` or faster.
     Without an odometer the receiver velocity's gate also resets after ``[fkf]
     no_odo_gate_reset_s`` (as the fixes'), not ``[gnss] velocity_gate_reset_s``.
     Applied on the whole NLOS drive, also to the fixes the NLOS screen keeps (some of them
@@ -236,7 +237,13 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     k = out["fkf"]
     k["gnss_velocity_sd_mps"] = max(float(k["gnss_velocity_sd_mps"]),
                                     float(g["nlos_fkf_velocity_sd_mps"]))
-    if not has_odo:
+    if has_odo:
+        # the odometer measures the speed; at walking pace a reflected Doppler's course is off
+        # by tens of degrees and turned ekf's heading 9.5 deg just after a stop (decisions/0037)
+        a = out["aekf"]
+        a["gnss_velocity_min_mps"] = max(float(a["gnss_velocity_min_mps"]),
+                                         float(g["nlos_velocity_min_mps"]))
+    else:
         if float(k["no_odo_gate_reset_s"]) > 0:
             # the fixes, not the Doppler, are the suspects: fkf's state follows a reflected
             # step and then gates the Doppler that disagrees (decisions/0031)
