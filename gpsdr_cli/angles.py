@@ -6,9 +6,8 @@ courses (a tunnel, a run of reflected fixes left out) it moves by about 180 deg,
 ``numpy.unwrap``, which takes the shortest way round, can take the wrong way: the offset
 interpolated across the gap then turns the heading a whole turn the wrong way over the gap
 (2 deg/s across 175 s), and a simulated city drive's fkf track went 600 m off (urban_nlos
-seed 25; docs/decisions/0036).  Across a gap
-the branch is chosen by the drift rate the offsets show on either side of it.  Units:
-seconds, radians.
+seed 25; docs/decisions/0036).  Across a gap the branch is chosen by the drift rate the
+offsets show on either side of it.  Units: seconds, radians.
 """
 
 from __future__ import annotations

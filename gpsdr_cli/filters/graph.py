@@ -485,11 +485,13 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
     n_stages = max(int(gp["gnc_stages"]), 1) if kernel != KERNELS["gauss"] else 1
     stages = [(kernel, c_final * 2.0 ** (n_stages - 1 - k)) for k in range(n_stages)]
+    kernel_names = str(gp["kernel"])
     # An NLOS drive whose dead reckoning holds the shape on its own: a last stage under a
     # bounded kernel, where a reflected fix costs at most c^2 however far off it is; under
     # Cauchy a run of them 20-80 m off still pulled the track (decisions/0035)
     if str(gp["nlos_last_kernel"]) and nlos_drive and not err_on and have_odo and have_gyro:
         stages.append((kernel_id(params, "nlos_last_kernel"), c_final))
+        kernel_names += "+" + str(gp["nlos_last_kernel"])
     ab = np.zeros((gk.BAND + 1, n_x), order="F")  # LAPACK's layout: factored in place
     g = np.zeros(n_x)
     q = np.zeros((max(n_key - 1, 1), gk.N_Q))
@@ -566,7 +568,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         return GraphOutcome(None, False, its, message or "not converged")
 
     # ---- marginal covariance inside the band (H at the solution, final weights)
-    final_cost = cost_at(x, stages[-1][0], c_final, True)
+    cost_at(x, stages[-1][0], c_final, True)
     var_e_k = var_n_k = cov_en_k = None
     g = q = None
     try:
@@ -619,9 +621,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     n_down = int(np.count_nonzero(has_fix & (np.nan_to_num(weight, nan=1.0) < 0.5)))
     info = dict(init.info)
     info.update({"smoothing": "graph", "smoothed": True, "graph_iterations": its,
-                 "graph_cost": final_cost,
-                 "graph_keyframes": n_key, "graph_kernel": "+".join(dict.fromkeys(
-                     name for k, _ in stages for name, i in KERNELS.items() if i == k)),
+                 "graph_keyframes": n_key, "graph_kernel": kernel_names,
                  "graph_odo_lag_s": lag, "graph_gnss_err_states": err_on,
                  "graph_accel": acc_on,
                  "graph_fixes_downweighted": n_down,
