@@ -733,7 +733,10 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     if len(o):
         if from_fixes and chords is None:       # no gyro: straight chords for the scale
             chords = fix_chords(epochs, t_s, None, None, t_s[o], speed, eps_w, params)
-        if chords is not None:
+        if float(fp["known_odo_scale"]) > 0:
+            odo_scale = float(fp["known_odo_scale"])
+            scale = np.full(len(o), odo_scale)
+        elif chords is not None:
             scale, odo_scale = chord_odometer_scale(chords, t_s[o], params)
         else:
             scale, odo_scale = odometer_scale(epochs, t_s, t_s[o], speed, params, moving)

@@ -227,7 +227,9 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     put the Doppler velocity metres per second off too.  fkf/fafkf: at least ``[gnss]
     nlos_fkf_velocity_sd_mps``; ekf/aekf without an odometer (the Doppler speed then carries
     their speed; 0.2 m/s drove aekf up to 2x the fixes): at least ``nlos_velocity_sd_mps``;
-    with one, the receiver's velocity only at ``nlos_velocity_min_mps`` or faster.
+    with one, the receiver's velocity (ekf/aekf) and course (fkf/fafkf's steering) only at
+    ``nlos_velocity_min_mps`` or faster, and fkf's odometer scale over
+    ``nlos_odo_scale_window_s``.
     Without an odometer the receiver velocity's gate also resets after ``[fkf]
     no_odo_gate_reset_s`` (as the fixes'), not ``[gnss] velocity_gate_reset_s``.
     Applied on the whole NLOS drive, also to the fixes the NLOS screen keeps (some of them
@@ -243,6 +245,15 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
         a = out["aekf"]
         a["gnss_velocity_min_mps"] = max(float(a["gnss_velocity_min_mps"]),
                                          float(g["nlos_velocity_min_mps"]))
+        # ... and fkf's course steering: twelve courses 14 deg off at 3-5 m/s ended a 90-s
+        # gap and turned its gyro heading 15 deg across it (decisions/0038)
+        k["course_min_speed_mps"] = max(float(k["course_min_speed_mps"]),
+                                        float(g["nlos_velocity_min_mps"]))
+        # a wheel's scale holds over the drive; the kept fixes' Dopplers are partly reflected,
+        # and a window of them read 1.058 for 0.999 across a 100-s gap (decisions/0038)
+        if float(k["odo_scale_window_s"]) > 0:
+            k["odo_scale_window_s"] = max(float(k["odo_scale_window_s"]),
+                                          float(g["nlos_odo_scale_window_s"]))
     else:
         if float(k["no_odo_gate_reset_s"]) > 0:
             # the fixes, not the Doppler, are the suspects: fkf's state follows a reflected

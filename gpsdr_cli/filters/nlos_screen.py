@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -48,7 +49,7 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
     """``(epochs, info)``: the epochs with the outvoted fixes' ``has_gnss`` cleared, and
     what was done (``info["nlos_screened"]``: fixes left out; absent when not applied;
     ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
-    lacks one)."""
+    lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale)."""
     if not nlos_drive:
         return epochs, {}
     if not (epochs.has_gyro.any() and epochs.has_odo.any()):
@@ -94,7 +95,10 @@ def _screen(epochs: Epochs, params: Params,
         return epochs, {"nlos_screen": f"not applied: only {kept} of {int(fix.sum())} fixes agree"}
     if not out.any():
         return epochs, {"nlos_screened": 0}
-    return dataclasses.replace(epochs, has_gnss=fix & ~out), {"nlos_screened": int(out.sum())}
+    info = {"nlos_screened": int(out.sum())}
+    if math.isfinite(outcome.odo_scale):
+        info["nlos_screen_odo_scale"] = outcome.odo_scale
+    return dataclasses.replace(epochs, has_gnss=fix & ~out), info
 
 
 __all__ = ["screen"]
