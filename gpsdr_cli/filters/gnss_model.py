@@ -231,7 +231,9 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     ``nlos_velocity_min_mps`` or faster, and fkf's odometer scale over
     ``nlos_odo_scale_window_s``.
     Without an odometer the receiver velocity's gate also resets after ``[fkf]
-    no_odo_gate_reset_s`` (as the fixes'), not ``[gnss] velocity_gate_reset_s``.
+    no_odo_gate_reset_s`` (as the fixes'), not ``[gnss] velocity_gate_reset_s``, and
+    ekf/aekf's zero-velocity update never moves the position (``[gnss]
+    nlos_no_odo_zupt_keeps_position``).
     Applied on the whole NLOS drive, also to the fixes the NLOS screen keeps (some of them
     are reflected as well)."""
     out = copy.deepcopy(params)
@@ -263,6 +265,11 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
         a = out["aekf"]
         a["gnss_velocity_sd_mps"] = max(float(a["gnss_velocity_sd_mps"]),
                                         float(g["nlos_velocity_sd_mps"]))
+        # a stop says nothing about where the car is; without an odometer the velocity a
+        # ZUPT zeroes is the filter's own guess (the Doppler at 5 m/s), and its correlation
+        # with the position moved a track 24 m off good fixes at one stop (decisions/0039)
+        if g["nlos_no_odo_zupt_keeps_position"]:
+            out["standstill"]["zupt_keeps_position"] = "always"
     return out
 
 
