@@ -210,7 +210,9 @@ def test_reflected_signals_without_an_odometer_are_said_and_graph_suggested() ->
     # reflected signals read as a 0.7-s offset of the fixes' stamps: no such hint here
     assert not any("time stamps look" in w for w in res.drive_warnings)
     fixes = res.gnss_only_summary()["rmse_m"]
-    assert fixes < res.summary()["rmse_m"] < 1.4 * fixes  # the case the warning is for
+    # the case the warning is for: 41.7 m, then 20.9 m with the Doppler sigma; 19.3 m since a
+    # stop's ZUPT keeps the position (decisions/0039): at the fixes, not below them
+    assert 0.8 * fixes < res.summary()["rmse_m"] < 1.1 * fixes
     p = config.defaults()
     p["filter"]["smoother"] = "graph"
     graph = fuse(copy.deepcopy(no_odo), p, ref)
