@@ -22,10 +22,10 @@ receiver's own figures cannot say:
   keep their two-regime bias model: a larger sigma there was worse on the NLOS scenario).
   The distance alone misses a step across the street at speed (a 20-m chord with a 20-m
   sideways ramp is only 8 m longer), and 70 % of reflected-signal offsets on a street lie
-  across it; with a gyro and an odometer the chord is also compared as a vector with the
-  dead reckoning's own displacement over ``nlos_vector_lag_s``, turned onto east/north by
-  the local median of all chords' rotation (most chords lie inside one offset's plateau
-  and are right even where most fixes are reflected).  A drive where at least
+  across it; with a gyro the chord is also compared as a vector with the dead reckoning's
+  own displacement (odometer, else Doppler speed) over ``nlos_vector_lag_s``, turned onto
+  east/north by the local median of all chords' rotation (most chords lie inside one
+  offset's plateau and are right even where most fixes are reflected).  A drive where at least
   ``nlos_vector_share`` of the fixes sit in runs of ``nlos_vector_run_s`` or more of vector
   mismatch beyond ``nlos_vector_mismatch_m`` is an NLOS drive too, when the dead
   reckoning is healthy (a step holds its offset for the whole lag; a canyon's burst of
@@ -124,26 +124,35 @@ VECTOR_MIN_CHORD_M = 3.0
 
 def chord_vector_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
     """Per usable fix, | (p_i - p_j) - R (d_i - d_j) | (m): the chord to the fix nearest
-    ``lag_s`` before, against the dead reckoning's displacement (odometer speed along the
-    gyro's integrated heading, in its own frame) turned by R, the local median over
-    ``VECTOR_WINDOW_S`` of every chord's rotation.  NaN where not judged, and everywhere on
-    a drive without both a gyro and an odometer."""
+    ``lag_s`` before, against the dead reckoning's displacement (odometer speed, else the
+    receiver's Doppler speed, along the gyro's integrated heading, in its own frame) turned
+    by R, the local median over ``VECTOR_WINDOW_S`` of every chord's rotation.  NaN where
+    not judged, and everywhere on a drive without a gyro or without any speed.
+
+    Without an odometer the Doppler speed stands in: a reflected Doppler is about 1 m/s off,
+    5 m over a 5-s chord, while reflected fixes move tens of metres across the street, which
+    the chord's length barely shows (7 of 40 simulated city drives went uncalled;
+    decisions/0040)."""
     f = np.flatnonzero(epochs.has_gnss)
     out = np.full(len(f), np.nan)
-    if len(f) < 3 or not (epochs.has_gyro.any() and epochs.has_odo.any()):
+    if epochs.has_odo.any():
+        has_speed, speed_mps = epochs.has_odo, epochs.odo_speed_mps
+    else:
+        has_speed, speed_mps = epochs.has_gnss, epochs.gnss_speed_mps
+    if len(f) < 3 or not (epochs.has_gyro.any() and np.isfinite(speed_mps[has_speed]).any()):
         return out
     import pandas as pd
 
     dt = epochs.dt_s[1:]
     rate, stale_gyro = _held(epochs.has_gyro, epochs.yaw_rate_radps, epochs.t_ns)
-    speed, stale_odo = _held(epochs.has_odo, epochs.odo_speed_mps, epochs.t_ns)
+    speed, stale_speed = _held(has_speed, speed_mps, epochs.t_ns)
     psi = np.concatenate(([0.0], np.cumsum(rate[:-1] * dt)))
     speed = np.abs(speed[:-1]) * dt
     dr = np.concatenate(([0.0], np.cumsum(speed * np.exp(1j * psi[:-1]))))  # east + i north
     t = epochs.t_ns[f] / NS_PER_S
     j = np.clip(np.searchsorted(t, t - lag_s), 0, len(f) - 1)
     ok = (t - t[j] >= 0.5 * lag_s) & (t - t[j] <= 1.5 * lag_s)
-    ok &= (stale_odo[f + 1] == stale_odo[f[j]]) & (stale_gyro[f + 1] == stale_gyro[f[j]])
+    ok &= (stale_speed[f + 1] == stale_speed[f[j]]) & (stale_gyro[f + 1] == stale_gyro[f[j]])
     c = (epochs.gnss_e[f] - epochs.gnss_e[f[j]]) + 1j * (epochs.gnss_n[f] - epochs.gnss_n[f[j]])
     d = dr[f] - dr[f[j]]
     vote = ok & (np.abs(c) > VECTOR_MIN_CHORD_M) & (np.abs(d) > VECTOR_MIN_CHORD_M)
