@@ -54,7 +54,8 @@ iterative LSQR, far slower than a direct banded solve on this structure).  The k
 graduated (graduated non-convexity, Yang et al. 2020): the Cauchy scale starts at
 ``gnc_start`` x ``kernel_scale`` and halves to ``kernel_scale``, so the start -- the forward
 filter's track, already pulled towards the biased fixes -- does not lock the solution into
-accepting them.  On an NLOS drive with a gyro and an odometer a last stage follows under
+accepting them (on an NLOS drive without an odometer over ``nlos_no_odo_gnc_stages``
+only).  On an NLOS drive with a gyro and an odometer a last stage follows under
 the bounded Geman-McClure kernel (``[graph] nlos_last_kernel``), as GNC's own last stage
 would be: Cauchy's cost keeps growing with the residual, so a long reflected run still pulls.
 Kernel and scale by benchmark: docs/decisions/0002-graph-smoother.md and 0035.
@@ -483,7 +484,13 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
 
     kernel = kernel_id(params, "kernel")
     c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
-    n_stages = max(int(gp["gnc_stages"]), 1) if kernel != KERNELS["gauss"] else 1
+    n_stages = int(gp["gnc_stages"])
+    if nlos_drive and not have_odo:
+        # nothing holds the distance: a wide first stage let reflected steps bend the speed,
+        # heading and gyro bias, and the narrower stages then kept the bend and rejected
+        # the good fixes (a 600-s drive 63 m off against fixes at 35 m; decisions/0041)
+        n_stages = int(gp["nlos_no_odo_gnc_stages"])
+    n_stages = max(n_stages, 1) if kernel != KERNELS["gauss"] else 1
     stages = [(kernel, c_final * 2.0 ** (n_stages - 1 - k)) for k in range(n_stages)]
     kernel_names = str(gp["kernel"])
     # An NLOS drive whose dead reckoning holds the shape on its own: a last stage under a
