@@ -56,8 +56,11 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 # ... but their receiver velocity is still an NLOS drive's
                 model_params = reflected_doppler(model_params, bool(epochs.has_odo.any()))
                 # ... and the fit's odometer scale, not the kept fixes' Doppler speeds (some
-                # reflected: 1.026 for 0.999 on a 600-s drive, the fit 0.993; decisions/0038)
-                model_params["fkf"]["known_odo_scale"] = info.get("nlos_screen_odo_scale", 0.0)
+                # reflected: 1.026 for 0.999 on a 600-s drive, the fit 0.993; decisions/0038),
+                # unless the user gave one
+                fkf_p = model_params["fkf"]
+                if "nlos_screen_odo_scale" in info and not float(fkf_p["known_odo_scale"]) > 0:
+                    fkf_p["known_odo_scale"] = info["nlos_screen_odo_scale"]
             if epochs.dr_unhealthy:
                 model_params = follow_the_fixes(model_params)
                 info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"
