@@ -36,6 +36,21 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
+def _graph_from(sim, rts, graph: dict | None = None):
+    """The graph smoother from the RTS run ``rts`` (defaults, ``[graph]`` updated by
+    ``graph``), asserted converged: (outcome, RMSE against ``sim.truth`` in m)."""
+    p = config.defaults()
+    p["filter"]["smooth"] = True
+    p["graph"].update(graph or {})
+    out = smooth_graph(rts.epochs, rts.result, p)
+    assert out.converged, out.message
+    tr = sim.truth
+    t = rts.epochs.t_ns
+    err = np.hypot(out.result.e - np.interp(t, tr.t_ns, tr.e),
+                   out.result.n - np.interp(t, tr.t_ns, tr.n))
+    return out, _rms(err)
+
+
 @pytest.fixture(scope="module")
 def nlos_run():
     sim = simulate_drive("urban_canyon", seed=2, duration_s=DUR_S)
@@ -353,16 +368,9 @@ def test_converges_where_reweighting_lets_a_reflected_run_go_slowly() -> None:
     sim = simulate_drive("urban_nlos", 4, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
     sim = with_drive(sim, drop_streams(sim.drive, "odo"))
     rts = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
-    p = config.defaults()
-    p["filter"]["smooth"] = True
-    out = smooth_graph(rts.epochs, rts.result, p)
-    assert out.converged, out.message
-    assert out.iterations <= 0.6 * int(p["graph"]["max_iterations"])
-    tr = sim.truth
-    t = rts.epochs.t_ns
-    err = np.hypot(out.result.e - np.interp(t, tr.t_ns, tr.e),
-                   out.result.n - np.interp(t, tr.t_ns, tr.n))
-    assert _rms(err) < 0.8 * rts.gnss_rmse_m
+    out, rmse = _graph_from(sim, rts)
+    assert out.iterations <= 0.6 * int(config.defaults()["graph"]["max_iterations"])
+    assert rmse < 0.8 * rts.gnss_rmse_m
 
 
 def test_bounded_last_stage_lets_the_dead_reckoning_outvote_reflected_runs() -> None:
@@ -374,18 +382,7 @@ def test_bounded_last_stage_lets_the_dead_reckoning_outvote_reflected_runs() -> 
 
     sim = simulate_drive("urban_nlos", 19, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
     rts = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
-    tr = sim.truth
-    t = rts.epochs.t_ns
-    rmse = {}
-    for last in ("", "geman"):
-        p = config.defaults()
-        p["filter"]["smooth"] = True
-        p["graph"]["nlos_last_kernel"] = last
-        out = smooth_graph(rts.epochs, rts.result, p)
-        assert out.converged, out.message
-        err = np.hypot(out.result.e - np.interp(t, tr.t_ns, tr.e),
-                       out.result.n - np.interp(t, tr.t_ns, tr.n))
-        rmse[last] = _rms(err)
+    rmse = {last: _graph_from(sim, rts, {"nlos_last_kernel": last})[1] for last in ("", "geman")}
     assert rts.gnss_rmse_m > 20.0  # the reflected runs are there (m)
     assert rmse["geman"] < 0.5 * rmse[""]
     assert rmse["geman"] < 0.05 * rts.gnss_rmse_m
@@ -403,15 +400,8 @@ def test_without_an_odometer_a_short_graduation_keeps_the_good_fixes() -> None:
     sim = with_drive(sim, drop_streams(sim.drive, "odo"))
     rts = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
     assert rts.result.info["nlos_drive"]
-    p = config.defaults()
-    p["filter"]["smooth"] = True
-    out = smooth_graph(rts.epochs, rts.result, p)
-    assert out.converged, out.message
-    tr = sim.truth
-    t = rts.epochs.t_ns
-    err = np.hypot(out.result.e - np.interp(t, tr.t_ns, tr.e),
-                   out.result.n - np.interp(t, tr.t_ns, tr.n))
-    assert _rms(err) < 0.8 * rts.gnss_rmse_m  # was 1.81 x
+    out, rmse = _graph_from(sim, rts)
+    assert rmse < 0.8 * rts.gnss_rmse_m  # was 1.81 x
     assert abs(out.gyro_bias_radps - sim.noise["gyro_bias_initial_radps"]) < 0.002  # was 0.011
 
 

@@ -231,6 +231,11 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     return epochs, params
 
 
+def _at_least(section: dict, key: str, floor: float) -> None:
+    """``section[key]`` raised to ``floor`` where below it."""
+    section[key] = max(float(section[key]), float(floor))
+
+
 def reflected_doppler(params: Params, has_odo: bool) -> Params:
     """``params`` with the receiver's velocity sigmas of an NLOS drive: reflected signals
     put the Doppler velocity metres per second off too.  fkf/fafkf: at least ``[gnss]
@@ -248,32 +253,26 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     out = copy.deepcopy(params)
     g = out["gnss"]
     k = out["fkf"]
-    k["gnss_velocity_sd_mps"] = max(float(k["gnss_velocity_sd_mps"]),
-                                    float(g["nlos_fkf_velocity_sd_mps"]))
+    a = out["aekf"]
+    _at_least(k, "gnss_velocity_sd_mps", g["nlos_fkf_velocity_sd_mps"])
     if has_odo:
         # the odometer measures the speed; at walking pace a reflected Doppler's course is off
         # by tens of degrees and turned ekf's heading 9.5 deg just after a stop (decisions/0037)
-        a = out["aekf"]
-        a["gnss_velocity_min_mps"] = max(float(a["gnss_velocity_min_mps"]),
-                                         float(g["nlos_velocity_min_mps"]))
+        _at_least(a, "gnss_velocity_min_mps", g["nlos_velocity_min_mps"])
         # ... and fkf's course steering: twelve courses 14 deg off at 3-5 m/s ended a 90-s
         # gap and turned its gyro heading 15 deg across it (decisions/0038)
-        k["course_min_speed_mps"] = max(float(k["course_min_speed_mps"]),
-                                        float(g["nlos_velocity_min_mps"]))
+        _at_least(k, "course_min_speed_mps", g["nlos_velocity_min_mps"])
         # a wheel's scale holds over the drive; the kept fixes' Dopplers are partly reflected,
         # and a window of them read 1.058 for 0.999 across a 100-s gap (decisions/0038)
         if float(k["odo_scale_window_s"]) > 0:
-            k["odo_scale_window_s"] = max(float(k["odo_scale_window_s"]),
-                                          float(g["nlos_odo_scale_window_s"]))
+            _at_least(k, "odo_scale_window_s", g["nlos_odo_scale_window_s"])
     else:
         if float(k["no_odo_gate_reset_s"]) > 0:
             # the fixes, not the Doppler, are the suspects: fkf's state follows a reflected
             # step and then gates the Doppler that disagrees (decisions/0031)
             g["velocity_gate_reset_s"] = min(float(g["velocity_gate_reset_s"]),
                                              float(k["no_odo_gate_reset_s"]))
-        a = out["aekf"]
-        a["gnss_velocity_sd_mps"] = max(float(a["gnss_velocity_sd_mps"]),
-                                        float(g["nlos_velocity_sd_mps"]))
+        _at_least(a, "gnss_velocity_sd_mps", g["nlos_velocity_sd_mps"])
         # a stop says nothing about where the car is; without an odometer the velocity a
         # ZUPT zeroes is the filter's own guess (the Doppler at 5 m/s), and its correlation
         # with the position moved a track 24 m off good fixes at one stop (decisions/0039)
