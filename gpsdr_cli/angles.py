@@ -7,7 +7,11 @@ courses (a tunnel, a run of reflected fixes left out) it moves by about 180 deg,
 interpolated across the gap then turns the heading a whole turn the wrong way over the gap
 (2 deg/s across 175 s), and a simulated city drive's fkf track went 600 m off (urban_nlos
 seed 25; docs/decisions/0036).  Across a gap the branch is chosen by the drift rate the
-offsets show on either side of it.  Units: seconds, radians.
+offsets show on either side of it.  A rate seen on one side only must agree with the
+drift the whole drive shows (a gyro bias changes slowly), else the drive's is taken:
+thirty seconds of reflected courses after a 100-s gap read 1.8 deg/s against the drive's
+0.05 and turned an fkf heading a whole turn across the gap (decisions/0042).  Units:
+seconds, radians.
 """
 
 from __future__ import annotations
@@ -47,7 +51,9 @@ def unwrap_across_gaps(t_s: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
     out = np.unwrap(np.asarray(angle_rad, float))
     if len(out) < 2:
         return out
-    for g in np.flatnonzero(np.diff(t) > GAP_S):
+    gaps = np.flatnonzero(np.diff(t) > GAP_S)
+    drive = _drive_rate(t, out, gaps) if len(gaps) else math.nan
+    for g in gaps:
         lo = int(np.searchsorted(t, t[g] - RATE_SPAN_S, side="left"))
         hi = int(np.searchsorted(t, t[g + 1] + RATE_SPAN_S, side="right"))
         nxt = g + 1 + np.flatnonzero(np.diff(t[g + 1:hi]) > GAP_S)[:1]
@@ -59,6 +65,8 @@ def unwrap_across_gaps(t_s: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
         if not sides:
             continue
         gap = t[g + 1] - t[g]
+        if len(sides) == 1 and math.isfinite(drive) and abs(sides[0][0] - drive) * gap > 0.25 * math.pi:
+            sides = [(drive, 0.0)]
         w = [1.0 / max(se * se, 1e-18) for _, se in sides]
         rate = sum(wi * r for wi, (r, _) in zip(w, sides, strict=True)) / sum(w)
         se = 1.0 / math.sqrt(sum(w))
@@ -68,6 +76,18 @@ def unwrap_across_gaps(t_s: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
         pred = out[g] + rate * gap
         out[g + 1:] += 2.0 * math.pi * round((pred - out[g + 1]) / (2.0 * math.pi))
     return out
+
+
+def _drive_rate(t: np.ndarray, a: np.ndarray, gaps: np.ndarray) -> float:
+    """The drift rate of the whole drive (rad/s): the median of the slopes fitted over each
+    run of offsets between gaps, weighted by their inverse variances; NaN without one."""
+    bounds = np.concatenate(([0], gaps + 1, [len(t)]))
+    fits = [_rate(t[i:j], a[i:j]) for i, j in zip(bounds[:-1], bounds[1:], strict=True)]
+    fits = sorted((r, 1.0 / max(se * se, 1e-18)) for r, se in fits if math.isfinite(r))
+    if not fits:
+        return math.nan
+    w = np.cumsum([wi for _, wi in fits])
+    return fits[int(np.searchsorted(w, 0.5 * w[-1]))][0]
 
 
 __all__ = ["unwrap_across_gaps"]

@@ -46,3 +46,16 @@ def test_rates_that_disagree_across_the_gap_keep_numpys_choice() -> None:
     a = np.where(t < 40.0, 0.003 * t, 0.5 + 0.05 * (t - 55.0))
     wrapped = _wrapped(a - 2.6 * (t > 40.0))
     assert np.array_equal(unwrap_across_gaps(t, wrapped), np.unwrap(wrapped))
+
+
+def test_a_rate_seen_on_one_side_only_must_agree_with_the_drive() -> None:
+    """0.001 rad/s of drift over the drive; after a 100-s gap, 30 s of courses that ramp at
+    0.04 rad/s (reflected, at a crawl) and only 2 s of them before it: that side alone would
+    move the branch a whole turn (4 rad over the gap); the drive's rate keeps it."""
+    rate = 0.001
+    t = np.concatenate([np.arange(0.0, 150.0, 0.2), np.arange(190.0, 192.0, 0.5),
+                        np.arange(292.0, 322.0, 1.0)])
+    true = 0.4 + rate * t
+    true[t >= 292.0] += 0.04 * (t[t >= 292.0] - 292.0)
+    got = unwrap_across_gaps(t, _wrapped(true))
+    assert np.max(np.abs(got - true)) < 1e-9
