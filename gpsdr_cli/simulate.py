@@ -40,7 +40,10 @@ The gyro (consumer MEMS): ``(1 + scale_error) * yaw_rate + bias(t) + white`` wit
 white noise 0.1 deg/s per 100 Hz sample, scale error ~N(0, 0.5 %), and a bias
 that is a stationary first-order Gauss-Markov process (the filters' own drift
 model) of sigma 0.3 deg/s and correlation time 1 h: a turn-on bias that differs
-per drive and wanders slowly (rate random walk ~20 deg/h/sqrt(h)).
+per drive and wanders by about 0.05 deg/s a minute (a rate random walk of 1500
+deg/h/sqrt(h), tens of times a consumer MEMS gyro's in-run wander: a pessimistic
+gyro, whose wander also stands for the scale error and temperature drift the filters
+do not model; decisions/0043).
 The odometer: wheel ticks ``floor(40/m * (1 + scale_error) * distance)``
 (scale error ~N(0, 2 %)) turned into speed over a 0.1 s moving window (so it
 lags by 0.05 s and is quantised to 0.25 m/s steps), plus 0.02 m/s white noise.
@@ -1089,7 +1092,7 @@ def _gyro(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tupl
     dt = step * DT_S
     noise_sd = math.radians(0.1)       # white noise per sample, rad/s
     bias_sd = math.radians(0.3)        # stationary sigma of the Gauss-Markov bias
-    bias_tau = 3600.0  # in-run wander ~ 20 deg/h/sqrt(h) rate random walk; the spread is turn-on bias
+    bias_tau = 3600.0  # with bias_sd: a rate random walk of 1500 deg/h/sqrt(h) (module docstring)
     scale_sd = 0.005
     scale = float(rng.normal(0.0, scale_sd))
     bias = _gauss_markov(rng, m, dt, bias_tau, bias_sd)
