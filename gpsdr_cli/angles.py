@@ -80,10 +80,12 @@ def unwrap_across_gaps(t_s: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
 
 def _drive_rate(t: np.ndarray, a: np.ndarray, gaps: np.ndarray) -> float:
     """The drift rate of the whole drive (rad/s): the median of the slopes fitted over each
-    run of offsets between gaps, weighted by their inverse variances; NaN without one."""
+    run of offsets between gaps, weighted by the run's duration (not by its standard error:
+    a run of identical offsets would outvote the drive); NaN without one."""
     bounds = np.concatenate(([0], gaps + 1, [len(t)]))
-    fits = [_rate(t[i:j], a[i:j]) for i, j in zip(bounds[:-1], bounds[1:], strict=True)]
-    fits = sorted((r, 1.0 / max(se * se, 1e-18)) for r, se in fits if math.isfinite(r))
+    runs = [(_rate(t[i:j], a[i:j])[0], float(t[j - 1] - t[i]))
+            for i, j in zip(bounds[:-1], bounds[1:], strict=True)]
+    fits = sorted((r, w) for r, w in runs if math.isfinite(r))
     if not fits:
         return math.nan
     w = np.cumsum([wi for _, wi in fits])
