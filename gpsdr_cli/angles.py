@@ -66,7 +66,7 @@ def unwrap_across_gaps(t_s: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
             continue
         gap = t[g + 1] - t[g]
         if len(sides) == 1 and math.isfinite(drive) and abs(sides[0][0] - drive) * gap > 0.25 * math.pi:
-            sides = [(drive, 0.0)]
+            sides = [(drive, 0.0)]  # the drive's rate, taken as known (it is the fallback)
         w = [1.0 / max(se * se, 1e-18) for _, se in sides]
         rate = sum(wi * r for wi, (r, _) in zip(w, sides, strict=True)) / sum(w)
         se = 1.0 / math.sqrt(sum(w))

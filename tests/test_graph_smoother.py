@@ -13,7 +13,9 @@ from gpsdr_cli import config, filters
 from gpsdr_cli.align import build_epochs
 from gpsdr_cli.filters.graph import parse_prior, smooth_graph
 from gpsdr_cli.simulate import simulate_drive
+from gpsdr_cli.testing.faults import drop_streams, with_drive
 from gpsdr_cli.testing.nlos import add_nlos
+from gpsdr_cli.testing.sim import run_filter
 
 DUR_S = 300.0
 
@@ -362,9 +364,6 @@ def test_converges_where_reweighting_lets_a_reflected_run_go_slowly() -> None:
     slides in decimetre steps; plain Levenberg-Marquardt steps took 455 iterations, past
     the default 400, and the drive fell back to RTS.  Doubled steps take about 200 and
     reach the same minimum: 21.7 m against the fixes' 29.2 m."""
-    from gpsdr_cli.testing.faults import drop_streams, with_drive
-    from gpsdr_cli.testing.sim import run_filter
-
     sim = simulate_drive("urban_nlos", 4, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
     sim = with_drive(sim, drop_streams(sim.drive, "odo"))
     rts = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
@@ -378,8 +377,6 @@ def test_bounded_last_stage_lets_the_dead_reckoning_outvote_reflected_runs() -> 
     283 s, fixes 27 m RMS): under Cauchy alone the runs of fixes 20-80 m off still pulled
     the track to 2.9 m; the last Geman-McClure stage, whose cost per fix is bounded, takes
     it to 0.7 m."""
-    from gpsdr_cli.testing.sim import run_filter
-
     sim = simulate_drive("urban_nlos", 19, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
     rts = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
     rmse = {last: _graph_from(sim, rts, {"nlos_last_kernel": last})[1] for last in ("", "geman")}
@@ -393,9 +390,6 @@ def test_without_an_odometer_a_short_graduation_keeps_the_good_fixes() -> None:
     fixes 35 m RMS, gyro bias 0.0014 rad/s): from four graduated stages the graph's gyro bias
     walked to -0.03 rad/s, every fix of the first 40 s (1-12 m off) was rejected and the
     track ran 200 m off, 63.4 m RMS.  Two stages keep the bias and end at 26 m."""
-    from gpsdr_cli.testing.faults import drop_streams, with_drive
-    from gpsdr_cli.testing.sim import run_filter
-
     sim = simulate_drive("urban_nlos", 40)
     sim = with_drive(sim, drop_streams(sim.drive, "odo"))
     rts = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
