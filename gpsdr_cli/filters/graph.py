@@ -68,8 +68,9 @@ the caller keeps the RTS track with a warning.
 
 from __future__ import annotations
 
+import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -177,6 +178,71 @@ def odo_lag_s(t_s: np.ndarray, odo_good: np.ndarray, odo: np.ndarray, has_fix: n
     return best_lag
 
 
+#: sd of a GNSS error state where a segment of fixes starts (m): free
+SEGMENT_FREE_SD_M = 1e3
+
+
+def _segment_states(seg: np.ndarray, run: np.ndarray, fix: np.ndarray, tk_s: np.ndarray,
+                    gp: Params):
+    """Per keyframe: segment id (keyframes between two fixes of one segment belong to it,
+    others -1), the error states' chain (phi, sd of w per interval: held in a segment,
+    free at its start, pinned at zero outside), and each segment's zero prior (sd, vote)
+    at its middle fix: its run's vote shared among the run's segments by length."""
+    n = len(seg)
+    seg_k = np.where(fix, seg, -1)
+    fix_i = np.flatnonzero(fix & (seg >= 0))
+    if len(fix_i):
+        # each keyframe's last fix at or before it and first fix at or after it
+        pos = np.arange(n)
+        prev = np.maximum.accumulate(np.where(seg_k >= 0, pos, -1))
+        nxt = np.minimum.accumulate(np.where(seg_k >= 0, pos, n)[::-1])[::-1]
+        inside = (prev >= 0) & (nxt < n)
+        both = np.where(inside, seg_k[np.clip(prev, 0, n - 1)], -1)
+        seg_k = np.where(inside & (both == seg_k[np.clip(nxt, 0, n - 1)]), both, -1)
+    same = (seg_k[:-1] == seg_k[1:]) & (seg_k[1:] >= 0)
+    start = (seg_k[1:] >= 0) & ~same
+    dt = np.maximum(np.diff(tk_s), 0.0)
+    phi = np.where(same, 1.0, 0.0)
+    wsd = np.where(same, np.maximum(float(gp["nlos_segment_drift_sd"]) * np.sqrt(dt), 1e-4),
+                   np.where(start, SEGMENT_FREE_SD_M, 1e-5))
+    if n < 2:
+        phi, wsd = np.ones(1), np.ones(1)
+    seg_sd = np.full(n, np.nan)
+    vote = np.zeros(n)
+    if len(fix_i):
+        step = float(np.median(np.diff(tk_s[fix_i]))) if len(fix_i) > 1 else 0.0
+        vote_s = max(float(gp["nlos_segment_vote_s"]), 1e-3)
+        for run_i in np.split(fix_i, np.flatnonzero(np.diff(run[fix_i])) + 1):
+            run_dur = tk_s[run_i[-1]] - tk_s[run_i[0]] + step
+            for grp in np.split(run_i, np.flatnonzero(np.diff(seg_k[run_i])) + 1):
+                mid = grp[len(grp) // 2]
+                seg_sd[mid] = max(float(gp["nlos_segment_sd_m"]), 1e-3)
+                dur = tk_s[grp[-1]] - tk_s[grp[0]] + step
+                vote[mid] = math.sqrt(run_dur / vote_s) * dur / max(run_dur, 1e-9)
+    return seg_k, phi, wsd, seg_sd, vote
+
+
+def _segment_weights(x: np.ndarray, seg_k: np.ndarray, fe: np.ndarray, fn: np.ndarray,
+                     sd_m: float, kernel: int, c: float) -> np.ndarray:
+    """Each fix keyframe's weight: the robust weight of its segment's median offset from
+    the track (in ``sd_m``), NaN without a fix.  From the offsets, not the error states:
+    a short segment's error state sits near its zero prior whatever its fixes say."""
+    from . import graph_kernels as gk
+
+    out = np.full(len(seg_k), np.nan)
+    fix = np.flatnonzero(np.isfinite(fe) & (seg_k >= 0))
+    if not len(fix):
+        return out
+    de = fe[fix] - x[gk.N_X * fix + gk.E]
+    dn = fn[fix] - x[gk.N_X * fix + gk.N]
+    ids = seg_k[fix]
+    cut = np.flatnonzero(np.diff(ids)) + 1
+    for grp in np.split(np.arange(len(fix)), cut):
+        r2 = (float(np.median(de[grp])) ** 2 + float(np.median(dn[grp])) ** 2) / sd_m ** 2
+        out[fix[grp]] = gk.robust_weight(r2, kernel, c)
+    return out
+
+
 def keyframes(t_s: np.ndarray, has_fix: np.ndarray, step_s: float) -> np.ndarray:
     """Epoch indices of the keyframes: every fix, the first and the last epoch, and enough
     epochs between so that no two keyframes are more than ``step_s`` apart where epochs allow."""
@@ -209,9 +275,74 @@ def _initial_heading(t_s: np.ndarray, yaw: np.ndarray, gyro_ok: np.ndarray,
     return psi_g + np.interp(t_s, t_s[fast], off)
 
 
-def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOutcome:
+def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
+                 segments: np.ndarray | None = None) -> GraphOutcome:
     """Solve the drive as one robust least-squares problem, started from ``init`` (the
-    forward filter's RTS result on the same epochs)."""
+    forward filter's RTS result on the same epochs).
+
+    ``segments`` (rows: per epoch, the fix's segment id and run id from
+    :func:`.nlos_segments.fix_segments`, -1: none): each segment's fixes share one GNSS
+    error (a reflected-signal bias, constant but for ``[graph] nlos_segment_drift_sd``,
+    free at the segment's start), the fixes are Gaussian about it, and each run (its
+    segments sharing it by length) has one robust vote that its error is zero (sigma
+    ``nlos_segment_sd_m`` under the bounded ``nlos_segment_kernel`` at ``nlos_segment_c``
+    sigmas, so that many far segments cannot add up to a pull; the vote
+    sqrt(length / ``nlos_segment_vote_s``): a run's fixes are correlated, a longer run
+    is more, not proportionally more, evidence).  The fixes' weights returned are their
+    segment's.
+
+    Started from a filter whose NLOS screen applied (:mod:`.nlos_screen`) and without
+    ``segments``, the drive is solved as the screen judges it: segments cut where the
+    fixes jump off ``init``'s track and solved as above, each fix at its own sigma (the
+    segment's bias replaces the quality model's scaled sigmas); then the segments within
+    ``[graph] nlos_segment_keep_m`` of that solution are solved again fix by fix (white
+    fixes, robust kernel), the others left out.  A segment's single vote decides which
+    fixes are clean; the clean fixes then weigh one by one, as in the filters."""
+    if (segments is None and len(epochs) and "nlos_screened" in init.info
+            and bool(params["graph"]["nlos_segments"])):
+        return _by_segments(epochs, init, params)
+    return _solve(epochs, init, params, segments)
+
+
+def _by_segments(epochs: Epochs, init: FilterResult, params: Params) -> GraphOutcome:
+    """:func:`smooth_graph` of a screened NLOS drive: segment votes, then the kept fixes."""
+    from .nlos_segments import fix_segments, segments_near
+
+    gp = params["graph"]
+    own = copy.deepcopy(params)
+    own["gnss"]["nlos_mismatch_m"] = 0.0
+    own["graph"]["gnss_err_states"] = False
+    seg = fix_segments(epochs, init, gp)
+    by_seg = _solve(epochs, init, own, seg)
+    if by_seg.result is None:
+        return _solve(epochs, init, params, None)
+    fix = np.asarray(epochs.has_gnss, bool)
+    near = segments_near(epochs, by_seg.result, seg, float(gp["nlos_segment_keep_m"]))
+    kept = replace(epochs, has_gnss=fix & near)
+    out = _solve(kept, by_seg.result, own, None)
+    if out.result is None:
+        return by_seg
+    # the left-out fixes: their segment's weight, rejected
+    gone = fix & ~near
+    out.gnss_weight = np.where(gone, by_seg.gnss_weight, out.gnss_weight)
+    res = out.result
+    res.extras["gnss_weight"] = out.gnss_weight
+    res.gnss_rejected = res.gnss_rejected | gone
+    res.gnss_used = res.gnss_used & ~gone
+    res.nis = np.where(gone, by_seg.result.nis, res.nis)
+    res.info["gnss_rejected"] = int(res.gnss_rejected.sum())
+    res.info["graph_fixes_downweighted"] = int(np.count_nonzero(
+        fix & (np.nan_to_num(out.gnss_weight, nan=1.0) < 0.5)))
+    res.info["graph_nlos_segments"] = int(seg[0].max() + 1) if seg.size else 0
+    res.info["graph_nlos_left_out"] = int(gone.sum())
+    res.info["graph_iterations"] = int(res.info.get("graph_iterations", 0)) + by_seg.iterations
+    out.iterations += by_seg.iterations
+    return out
+
+
+def _solve(epochs: Epochs, init: FilterResult, params: Params,
+           segments: np.ndarray | None) -> GraphOutcome:
+    """:func:`smooth_graph` proper."""
     from scipy.linalg import LinAlgError, cholesky_banded, solveh_banded
 
     from . import graph_kernels as gk
@@ -278,7 +409,8 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     # filters' NLOS drive itself, which the vector chord may call with few fixes marked)
     nlos_drive = nlos_share >= float(gp["nlos_share"]) or epochs.nlos_drive
     # An RTK drive too: centimetre fixes against a 0.3-m error state did not converge.
-    err_on = bool(gp["gnss_err_states"]) and not nlos_drive and not rtk_drive(epochs, params)
+    err_on = (bool(gp["gnss_err_states"]) and not nlos_drive and segments is None
+              and not rtk_drive(epochs, params))
 
     # ---- fixes per keyframe
     sd_min = float(params["gnss"]["sigma_min_m"])
@@ -354,6 +486,13 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         err_wsd = np.sqrt(np.maximum(np.maximum(v1, v0), 1e-12))
     else:
         err_wsd = np.ones(1)
+    seg_sd = np.full(n_key, np.nan)
+    seg_vote = np.zeros(n_key)
+    seg_k = None
+    if segments is not None:
+        seg_rows = np.asarray(segments, np.int64)
+        seg_k, err_phi, err_wsd, seg_sd, seg_vote = _segment_states(
+            seg_rows[0][key_ep], seg_rows[1][key_ep], has_fix[key_ep], tk_s, gp)
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval;
     # without an odometer the receiver's speed, as the filters take it
@@ -477,10 +616,28 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     del e0, n0, ve0, vn0, psi0, yaw_bad, odo_bad, odo_good
     x[gk.B::gk.N_X] = b_mean
     x[gk.S::gk.N_X] = s_mean if b_acc0 is None else b_acc0
+    if seg_k is not None:
+        # started from a batch fit: its gyro bias and odometer scale too (at the priors'
+        # means the first step's dead reckoning disagreed with the start track by metres)
+        for slot, name in ((gk.B, "gyro_bias_radps"), (gk.S, "odo_scale")):
+            val = np.asarray(init.extras.get(name, np.zeros(0)), float)
+            if len(val) == n_ep and np.all(np.isfinite(val[key_ep])) and (
+                    slot == gk.B and have_gyro or slot == gk.S and have_odo and not acc_on):
+                x[slot::gk.N_X] = val[key_ep]
+        # each segment's error starts at its fixes' median offset from the start track
+        # (at zero, the first step pulled the track to the mean of every segment's fixes)
+        for sid in np.unique(seg_k[seg_k >= 0]):
+            ks = np.flatnonzero(seg_k == sid)
+            kf = ks[np.isfinite(fe[ks])]
+            if len(kf):
+                x[gk.N_X * ks + gk.GE] = np.median(fe[kf] - x[gk.N_X * kf + gk.E])
+                x[gk.N_X * ks + gk.GN] = np.median(fn[kf] - x[gk.N_X * kf + gk.N])
     prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean, 0.0, 0.0])
     prior_sd = np.array([float(gp["init_pos_sd_m"]), float(gp["init_pos_sd_m"]),
                          float(gp["init_heading_sd_rad"]), float(gp["init_speed_sd_mps"]),
                          b_sd, s_sd, err_sd[0], err_sd[0]])
+    if seg_k is not None and seg_k[0] >= 0:
+        prior_sd[6:] = SEGMENT_FREE_SD_M
 
     kernel = kernel_id(params, "kernel")
     c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
@@ -490,13 +647,17 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         # heading and gyro bias, and the narrower stages then kept the bend and rejected
         # the good fixes (a 600-s drive 63 m off against fixes at 35 m; decisions/0041)
         n_stages = int(gp["nlos_no_odo_gnc_stages"])
+    if seg_k is not None:
+        # started from a robust fit: a wide first stage averages the segments' biases
+        n_stages = int(gp["nlos_segment_gnc_stages"])
     n_stages = max(n_stages, 1) if kernel != KERNELS["gauss"] else 1
     stages = [(kernel, c_final * 2.0 ** (n_stages - 1 - k)) for k in range(n_stages)]
     kernel_names = str(gp["kernel"])
     # An NLOS drive whose dead reckoning holds the shape on its own: a last stage under a
     # bounded kernel, where a reflected fix costs at most c^2 however far off it is; under
     # Cauchy a run of them 20-80 m off still pulled the track (decisions/0035)
-    if str(gp["nlos_last_kernel"]) and nlos_drive and not err_on and have_odo and have_gyro:
+    if (str(gp["nlos_last_kernel"]) and nlos_drive and not err_on and have_odo and have_gyro
+            and seg_k is None):
         stages.append((kernel_id(params, "nlos_last_kernel"), c_final))
         kernel_names += "+" + str(gp["nlos_last_kernel"])
     ab = np.zeros((gk.BAND + 1, n_x), order="F")  # LAPACK's layout: factored in place
@@ -510,9 +671,15 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     args_fix = (fe, fn, sde, sdn, gspd, gcrs, err_phi, err_wsd, acc_dv, acc_t, v_sd, s_rw,
                 prior_mean, prior_sd)
 
+    seg_mult = float(gp["nlos_segment_c"]) / c_final
+    seg_kern = kernel_id(params, "nlos_segment_kernel")
+
     def cost_at(xx: np.ndarray, kern: int, c: float, want: bool) -> float:
+        # with segments the fixes are Gaussian about their segment's error
+        fix_kern = KERNELS["gauss"] if seg_k is not None else kern
         return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
-                            *args_fix, kern, c, ab, g, want)
+                            *args_fix, kern, c, ab, g, want, fix_kern, seg_sd, seg_vote,
+                            seg_kern, c * seg_mult)
 
     try:
         for kern, c in stages:
@@ -610,6 +777,10 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     w_k = np.full(n_key, np.nan)
     r2_k = np.full(n_key, np.nan)
     gk.fix_weights(x, fe, fn, sde, sdn, stages[-1][0], c_final, w_k, r2_k)
+    if seg_k is not None:
+        w_k = _segment_weights(x, seg_k, fe, fn, max(float(gp["nlos_segment_sd_m"]), 1e-3), seg_kern,
+                               c_final * seg_mult)
+        r2_k = np.where(np.isfinite(w_k), r2_k, np.nan)
     weight = np.full(n_ep, np.nan)
     weight[key_ep] = w_k
     nis = np.full(n_ep, np.nan)

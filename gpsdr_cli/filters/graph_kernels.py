@@ -213,7 +213,8 @@ def _odo_free_share(j0, j1, t_s, odo_ok):
 @njit(cache=True)
 def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
               fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs, err_phi, err_wsd,
-              acc_dv, acc_t, v_sd, s_sd, prior_mean, prior_sd, kernel, c, ab, g, want):
+              acc_dv, acc_t, v_sd, s_sd, prior_mean, prior_sd, kernel, c, ab, g, want,
+              fix_kernel, seg_sd, seg_vote, seg_kernel, seg_c):
     """Cost of the state ``x`` and, with ``want``, the normal equations H (banded, ``ab``) and
     gradient ``g`` (J^T W r) of every factor at ``x`` (IRLS weights from ``x``).
 
@@ -224,6 +225,10 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
     offset held in the S slot (m/s^2) over the ``acc_t[i]`` seconds it covers; a drive
     without an accelerometer has both at 0 (a random walk).  sd of S's random walk:
     ``s_sd[i]``.
+    Fix positions are under ``fix_kernel``, the receiver's velocity under ``kernel``.
+    ``seg_sd`` (per keyframe, NaN: none): a zero prior on the error state there, sd in m,
+    under ``seg_kernel`` at scale ``seg_c``, counted ``seg_vote`` times (one per segment
+    of fixes that share one reflected-signal bias, whatever the number of its fixes).
     Returns the cost: the robust cost of the GNSS factors plus the squared whitened
     residuals of the others."""
     n_key = len(key_ep)
@@ -377,9 +382,9 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             re = (x[b0 + E] + x[b0 + GE] - fix_e[i]) / fix_sde[i]
             rn = (x[b0 + N] + x[b0 + GN] - fix_n[i]) / fix_sdn[i]
             r2 = re * re + rn * rn
-            cost += robust_cost(r2, kernel, c)
+            cost += robust_cost(r2, fix_kernel, c)
             if want:
-                w = robust_weight(r2, kernel, c)
+                w = robust_weight(r2, fix_kernel, c)
                 J[0, E] = 1.0 / fix_sde[i]
                 J[0, GE] = 1.0 / fix_sde[i]
                 J[1, N] = 1.0 / fix_sdn[i]
@@ -405,6 +410,18 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             cost += robust_cost(r2, kernel, c)
             if want:
                 _add_block(ab, g, b0, J, r, m, N_X, robust_weight(r2, kernel, c))
+        if not math.isnan(seg_sd[i]):
+            J[:, :] = 0.0
+            re = x[b0 + GE] / seg_sd[i]
+            rn = x[b0 + GN] / seg_sd[i]
+            r2 = re * re + rn * rn
+            cost += seg_vote[i] * robust_cost(r2, seg_kernel, seg_c)
+            if want:
+                J[0, GE] = 1.0 / seg_sd[i]
+                J[1, GN] = 1.0 / seg_sd[i]
+                r[0] = re
+                r[1] = rn
+                _add_block(ab, g, b0, J, r, 2, N_X, seg_vote[i] * robust_weight(r2, seg_kernel, seg_c))
     return cost
 
 

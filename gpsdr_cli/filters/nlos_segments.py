@@ -1,0 +1,101 @@
+"""Runs of fixes that share one reflected-signal (NLOS) bias.
+
+A reflected signal moves a fix by tens of metres and keeps it there for seconds to
+minutes; between two fixes a fifth of a second apart the dead reckoning moves by
+centimetres of error.  So the offset of each fix from a dead-reckoned track (fix minus
+track, east and north) is nearly constant inside one run of reflection and jumps where
+the reflection starts, ends or changes.  Cutting the fixes where that offset jumps gives
+segments; inside one, the fixes share one bias (zero where the sky is clear).  The batch
+fit (:func:`gpsdr_cli.filters.graph.smooth_graph` with ``segments``) then gives each
+segment one bias and one vote for "this bias is zero", so a minute of consistent
+reflected fixes counts as one witness, not three hundred.
+
+The track only has to hold its shape over a fix interval: a drifting track moves the
+offsets slowly, and only a jump cuts.  Units: metres, seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ..epochs import Epochs
+    from .base import FilterResult
+
+
+def segments(t_s: np.ndarray, off_e: np.ndarray, off_n: np.ndarray, jump_m: float,
+             gap_s: float, ref_n: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """``(segment, run)`` ids (0, 1, ...) per fix, in order.  A new run, and segment, where
+    the fix's offset (``off_e``, ``off_n``: fix minus track, m) lies more than ``jump_m``
+    from the median offset of the segment's last ``ref_n`` fixes (a jump), or more than
+    ``gap_s`` after the previous fix; a new segment only where it lies that far from the
+    median of the segment's first ``ref_n`` (a slow drift: a reflection whose path changes
+    as the car moves, or the track's own drift).  A run is the evidence that votes once;
+    its segments each carry their own bias.  ``t_s`` increasing (s)."""
+    n = len(t_s)
+    seg = np.zeros(n, np.int64)
+    run = np.zeros(n, np.int64)
+    if n == 0:
+        return seg, run
+    cur = 0
+    cur_run = 0
+    start = 0
+    for i in range(1, n):
+        jump = t_s[i] - t_s[i - 1] > gap_s
+        drift = False
+        if not jump:
+            lo = max(start, i - ref_n)
+            jump = bool(np.hypot(off_e[i] - float(np.median(off_e[lo:i])),
+                                 off_n[i] - float(np.median(off_n[lo:i]))) > jump_m)
+        if not jump:
+            hi = min(i, start + ref_n)
+            drift = bool(np.hypot(off_e[i] - float(np.median(off_e[start:hi])),
+                                  off_n[i] - float(np.median(off_n[start:hi]))) > jump_m)
+        if jump or drift:
+            cur += 1
+            start = i
+        if jump:
+            cur_run += 1
+        seg[i] = cur
+        run[i] = cur_run
+    return seg, run
+
+
+def segments_near(epochs: Epochs, track: FilterResult, seg: np.ndarray,
+                  keep_m: float) -> np.ndarray:
+    """Per epoch: its fix belongs to a segment (``seg``: :func:`fix_segments`) whose median
+    offset (east, north) from ``track`` is within ``keep_m`` (m)."""
+    seg = np.asarray(seg)[0]
+    ok = np.zeros(len(epochs), bool)
+    idx = np.flatnonzero(seg >= 0)
+    if not len(idx):
+        return ok
+    de = epochs.gnss_e[idx] - track.e[idx]
+    dn = epochs.gnss_n[idx] - track.n[idx]
+    ids = seg[idx]
+    order = np.argsort(ids, kind="stable")
+    cut = np.flatnonzero(np.diff(ids[order])) + 1
+    for grp in np.split(order, cut):
+        if math.hypot(float(np.median(de[grp])), float(np.median(dn[grp]))) <= keep_m:
+            ok[idx[grp]] = True
+    return ok
+
+
+def fix_segments(epochs: Epochs, track: FilterResult, gp: dict) -> np.ndarray:
+    """Per epoch, rows (segment id, run id) of its fix (:func:`segments` on the offsets of
+    the fixes from ``track``), -1 where there is none: shape (2, epochs)."""
+    fix = np.flatnonzero(np.asarray(epochs.has_gnss, bool) & np.isfinite(epochs.gnss_e)
+                         & np.isfinite(epochs.gnss_n))
+    out = np.full((2, len(epochs)), -1, np.int64)
+    if len(fix):
+        t_s = (np.asarray(epochs.t_ns, np.int64)[fix] - int(epochs.t_ns[0])) / 1e9
+        out[0, fix], out[1, fix] = segments(
+            t_s, epochs.gnss_e[fix] - track.e[fix], epochs.gnss_n[fix] - track.n[fix],
+            float(gp["nlos_segment_jump_m"]), float(gp["nlos_segment_gap_s"]))
+    return out
+
+
+__all__ = ["fix_segments", "segments", "segments_near"]
