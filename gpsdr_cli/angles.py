@@ -52,7 +52,7 @@ def unwrap_across_gaps(t_s: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
     if len(out) < 2:
         return out
     gaps = np.flatnonzero(np.diff(t) > GAP_S)
-    drive = _drive_rate(t, out, gaps) if len(gaps) else math.nan
+    drive = drive_rate(t, out, gaps) if len(gaps) else math.nan
     for g in gaps:
         lo = int(np.searchsorted(t, t[g] - RATE_SPAN_S, side="left"))
         hi = int(np.searchsorted(t, t[g + 1] + RATE_SPAN_S, side="right"))
@@ -78,7 +78,7 @@ def unwrap_across_gaps(t_s: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
     return out
 
 
-def _drive_rate(t: np.ndarray, a: np.ndarray, gaps: np.ndarray) -> float:
+def drive_rate(t: np.ndarray, a: np.ndarray, gaps: np.ndarray) -> float:
     """The drift rate of the whole drive (rad/s): the median of the slopes fitted over each
     run of offsets between gaps, weighted by the run's duration (not by its standard error:
     a run of identical offsets would outvote the drive); NaN without one."""
@@ -92,4 +92,4 @@ def _drive_rate(t: np.ndarray, a: np.ndarray, gaps: np.ndarray) -> float:
     return fits[int(np.searchsorted(w, 0.5 * w[-1]))][0]
 
 
-__all__ = ["unwrap_across_gaps"]
+__all__ = ["GAP_S", "drive_rate", "unwrap_across_gaps"]

@@ -17,7 +17,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ..angles import unwrap_across_gaps
+from ..angles import GAP_S, drive_rate, unwrap_across_gaps
 from ..config import Params
 from ..conventions import NS_PER_S
 from ..epochs import Epochs, true_runs
@@ -251,7 +251,14 @@ def course_correction(epochs: Epochs, t_s: np.ndarray, tg: np.ndarray, psi_g: np
     far = np.abs(d - np.interp(tk, t_mean, d_mean)) > COURSE_OUTLIER_RAD
     if far.any() and (~far).sum() >= 2:
         t_mean, d_mean = _window_means(tk[~far], d[~far], window)
-    return np.interp(tg, t_mean, d_mean)
+    out = np.interp(tg, t_mean, d_mean)
+    # before the first course and after the last the offset keeps drifting at the gyro's
+    # bias: the drive's rate, not zero (held, a drive's last two minutes of reflected
+    # fixes, all left out, turned a simulated fkf heading 30 deg; decisions/0044)
+    rate = drive_rate(tk, d, np.flatnonzero(np.diff(tk) > GAP_S))
+    if math.isfinite(rate):
+        out += rate * (np.minimum(tg - t_mean[0], 0.0) + np.maximum(tg - t_mean[-1], 0.0))
+    return out
 
 
 def _window_means(tk: np.ndarray, d: np.ndarray, window: float) -> tuple[np.ndarray, np.ndarray]:

@@ -94,6 +94,27 @@ def test_course_correction_has_no_lag_at_a_gap():
     np.testing.assert_allclose(corr[~has], need[~has], atol=math.radians(0.1))
 
 
+def test_course_correction_keeps_drifting_past_the_last_course():
+    """A gyro heading off by a ramp (bias 0.2 deg/s) and no courses before 20 s or after
+    60 s (a drive's first and last reflected minutes, left out): beyond the courses the
+    correction goes on at the drive's drift rate.  Held at its last value, it let the
+    heading turn 30 deg over a simulated drive's last 120 s (fkf 46 m against fixes at 44 m)."""
+    rate_hz = 5.0
+    t = np.arange(0.0, 180.0, 1.0 / rate_hz)                  # s
+    n = len(t)
+    bias = math.radians(0.2)                                  # rad/s
+    course = np.full(n, math.radians(-60.0))
+    has = (t >= 20.0) & (t < 60.0)
+    ep = type("E", (), {})()
+    ep.has_gnss = has
+    ep.gnss_course_rad = np.where(has, course, np.nan)
+    ep.gnss_speed_mps = np.where(has, 12.0, np.nan)
+    psi_g = course - bias * t
+    corr = fkf.course_correction(ep, t, t, psi_g, config.defaults())
+    need = bias * t
+    np.testing.assert_allclose(corr, need, atol=math.radians(0.5))
+
+
 @pytest.mark.parametrize("name", ["fkf", "fafkf"])
 @pytest.mark.parametrize("smooth", [False, True])
 def test_no_gyro_straight_outage(tunnels, name, smooth):
