@@ -5,13 +5,15 @@ minutes; between two fixes a fifth of a second apart the dead reckoning moves by
 centimetres of error.  So the offset of each fix from a dead-reckoned track (fix minus
 track, east and north) is nearly constant inside one run of reflection and jumps where
 the reflection starts, ends or changes.  Cutting the fixes where that offset jumps gives
-segments; inside one, the fixes share one bias (zero where the sky is clear).  The batch
-fit (:func:`gpsdr_cli.filters.graph.smooth_graph` with ``segments``) then gives each
-segment one bias and one vote for "this bias is zero", so a minute of consistent
-reflected fixes counts as one witness, not three hundred.
+runs; inside one, the fixes share one bias (zero where the sky is clear).  A run whose
+offset drifts (a reflection whose path changes as the car moves, or the track's own
+drift) is cut again into segments that each hold one bias.  The batch fit
+(:func:`gpsdr_cli.filters.graph.smooth_graph` with ``segments``) then gives each segment
+one bias and each run one vote for "this bias is zero", so a minute of consistent
+reflected fixes counts as one witness, not three hundred (docs/decisions/0044).
 
 The track only has to hold its shape over a fix interval: a drifting track moves the
-offsets slowly, and only a jump cuts.  Units: metres, seconds.
+offsets slowly, and only a jump makes a new run.  Units: metres, seconds.
 """
 
 from __future__ import annotations

@@ -58,7 +58,7 @@ def long_run():
 def test_a_long_reflected_run_does_not_outvote_the_clean_fixes_around_it(long_run) -> None:
     """Fix by fix, the run's 200 reflected fixes outvoted the 70 clean ones before it: the
     screen kept the reflected run and left out the clean fixes, and ekf + RTS ended 12.4 m
-    from the truth.  A segment votes once: 1.4 m."""
+    from the truth.  A run votes once: 1.4 m."""
     sim = long_run
     off = run_filter(sim, copy.deepcopy(sim.drive), "ekf", smooth=True, pipeline=True,
                      overrides={"graph": {"nlos_segments": False}})
@@ -78,7 +78,7 @@ def test_a_long_reflected_run_does_not_outvote_the_clean_fixes_around_it(long_ru
 
 def test_the_graph_smoother_votes_by_segment_too(long_run) -> None:
     """The graph smoother from the screened filter's RTS track: fix by fix it followed the
-    same run (8.4 m); by segment 0.6 m, every reflected run's fixes down-weighted."""
+    same run (8.4 m); by runs 0.6 m, every reflected run's fixes down-weighted."""
     sim = long_run
     rts = run_filter(sim, copy.deepcopy(sim.drive), "ekf", smooth=True, pipeline=True)
     p = config.defaults()
