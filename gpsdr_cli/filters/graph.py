@@ -228,18 +228,14 @@ def _segment_weights(x: np.ndarray, seg_k: np.ndarray, fe: np.ndarray, fn: np.nd
     the track (in ``sd_m``), NaN without a fix.  From the offsets, not the error states:
     a short segment's error state sits near its zero prior whatever its fixes say."""
     from . import graph_kernels as gk
+    from .nlos_segments import segment_offsets
 
     out = np.full(len(seg_k), np.nan)
     fix = np.flatnonzero(np.isfinite(fe) & (seg_k >= 0))
-    if not len(fix):
-        return out
-    de = fe[fix] - x[gk.N_X * fix + gk.E]
-    dn = fn[fix] - x[gk.N_X * fix + gk.N]
-    ids = seg_k[fix]
-    cut = np.flatnonzero(np.diff(ids)) + 1
-    for grp in np.split(np.arange(len(fix)), cut):
-        r2 = (float(np.median(de[grp])) ** 2 + float(np.median(dn[grp])) ** 2) / sd_m ** 2
-        out[fix[grp]] = gk.robust_weight(r2, kernel, c)
+    off = segment_offsets(seg_k[fix], fe[fix] - x[gk.N_X * fix + gk.E],
+                          fn[fix] - x[gk.N_X * fix + gk.N])
+    for i, r in zip(fix, off, strict=True):
+        out[i] = gk.robust_weight(r * r / (sd_m * sd_m), kernel, c)
     return out
 
 
@@ -304,22 +300,42 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
     return _solve(epochs, init, params, segments)
 
 
-def _by_segments(epochs: Epochs, init: FilterResult, params: Params) -> GraphOutcome:
-    """:func:`smooth_graph` of a screened NLOS drive: segment votes, then the kept fixes."""
+def solve_by_segments(epochs: Epochs, init: FilterResult,
+                      params: Params) -> tuple[GraphOutcome, np.ndarray, np.ndarray]:
+    """The NLOS judgement the screen and the graph smoother share: the fixes cut into
+    segments and runs against ``init``'s track (:mod:`.nlos_segments`), the drive solved
+    with one bias per segment and one vote per run, each fix at its own sigma (the
+    segment's bias replaces the quality model's scaled sigmas).  Returns the outcome, the
+    segments (:func:`.nlos_segments.fix_segments`) and, per epoch, whether its fix's segment
+    lies within ``[graph] nlos_segment_keep_m`` of the solution (all False if it failed)."""
     from .nlos_segments import fix_segments, segments_near
 
-    gp = params["graph"]
+    own = own_sigmas(params)
+    seg = fix_segments(epochs, init, params["graph"])
+    out = _solve(epochs, init, own, seg)
+    if out.result is None:
+        return out, seg, np.zeros(len(epochs), bool)
+    return out, seg, segments_near(epochs, out.result, seg,
+                                   float(params["graph"]["nlos_segment_keep_m"]))
+
+
+def own_sigmas(params: Params) -> Params:
+    """``params`` with each fix at its own sigma and white (no chord scaling, no error
+    states): the NLOS fit's."""
     own = copy.deepcopy(params)
     own["gnss"]["nlos_mismatch_m"] = 0.0
     own["graph"]["gnss_err_states"] = False
-    seg = fix_segments(epochs, init, gp)
-    by_seg = _solve(epochs, init, own, seg)
+    return own
+
+
+def _by_segments(epochs: Epochs, init: FilterResult, params: Params) -> GraphOutcome:
+    """:func:`smooth_graph` of a screened NLOS drive: segment votes, then the kept fixes."""
+    by_seg, seg, near = solve_by_segments(epochs, init, params)
     if by_seg.result is None:
         return _solve(epochs, init, params, None)
     fix = np.asarray(epochs.has_gnss, bool)
-    near = segments_near(epochs, by_seg.result, seg, float(gp["nlos_segment_keep_m"]))
     kept = replace(epochs, has_gnss=fix & near)
-    out = _solve(kept, by_seg.result, own, None)
+    out = _solve(kept, by_seg.result, own_sigmas(params), None)
     if out.result is None:
         return by_seg
     # the left-out fixes: their segment's weight, rejected

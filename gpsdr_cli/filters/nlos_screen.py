@@ -25,7 +25,6 @@ metres, seconds.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 from collections.abc import Callable
@@ -76,7 +75,7 @@ def _screen(epochs: Epochs, params: Params,
             run: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
     g = params["gnss"]
     from .gnss_model import reflected_doppler
-    from .graph import smooth_graph
+    from .graph import own_sigmas, smooth_graph, solve_by_segments
 
     # the start: the filter smoothed, with an NLOS drive's receiver velocity sigmas
     probe = reflected_doppler(params, bool(epochs.has_odo.any()))
@@ -84,30 +83,23 @@ def _screen(epochs: Epochs, params: Params,
     init = run(epochs, probe)
     # each fix weighed by its own sigma: the chord check's scaled sigmas would shrink the
     # very residuals the weights are for; white fixes, as the graph takes an NLOS drive
-    fit = copy.deepcopy(probe)
-    fit["gnss"]["nlos_mismatch_m"] = 0.0
-    fit["graph"]["gnss_err_states"] = False
+    fit = own_sigmas(probe)
     # Cauchy only: with the bounded last stage the screen left seed 14 of the 283-s city
     # drives a forward track of 46 m against fixes at 35 m (decisions/0035)
     fit["graph"]["nlos_last_kernel"] = ""
     outcome = smooth_graph(epochs, init, fit)
     if outcome.result is None or len(outcome.gnss_weight) != len(epochs):
         return epochs, {"nlos_screen": f"not applied: {outcome.message}"}
-    fix = epochs.has_gnss
     w = outcome.gnss_weight
+    fix = epochs.has_gnss
     out = fix & np.isfinite(w) & (w < float(g["nlos_screen_min_weight"]))
     if bool(fit["graph"]["nlos_segments"]):
         # each run of fixes with one reflection bias votes once (a long run of reflected
-        # fixes outvoted the clean ones around it fix by fix); a run is kept when its
-        # median offset from that fit's track is small
-        from .nlos_segments import fix_segments, segments_near
-
-        seg = fix_segments(epochs, outcome.result, fit["graph"])
-        seg_out = smooth_graph(epochs, outcome.result, fit, segments=seg)
+        # fixes outvoted the clean ones around it fix by fix)
+        seg_out, _, near = solve_by_segments(epochs, outcome.result, fit)
         if seg_out.result is not None:
             outcome = seg_out
-            out = fix & ~segments_near(epochs, seg_out.result, seg,
-                                       float(fit["graph"]["nlos_segment_keep_m"]))
+            out = fix & ~near
     kept = int(np.count_nonzero(fix & ~out))
     if kept < float(g["nlos_screen_min_kept"]) * max(int(fix.sum()), 1):
         return epochs, {"nlos_screen": f"not applied: only {kept} of {int(fix.sum())} fixes agree"}

@@ -23,6 +23,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..conventions import NS_PER_S
+
 if TYPE_CHECKING:
     from ..epochs import Epochs
     from .base import FilterResult
@@ -66,23 +68,24 @@ def segments(t_s: np.ndarray, off_e: np.ndarray, off_n: np.ndarray, jump_m: floa
     return seg, run
 
 
+def segment_offsets(ids: np.ndarray, de: np.ndarray, dn: np.ndarray) -> np.ndarray:
+    """Per fix: the length (m) of its segment's median offset (``de``, ``dn``: east, north),
+    the fixes in time order (``ids`` never decreasing, as :func:`segments` gives them)."""
+    out = np.zeros(len(ids))
+    for grp in np.split(np.arange(len(ids)), np.flatnonzero(np.diff(ids)) + 1):
+        if len(grp):
+            out[grp] = math.hypot(float(np.median(de[grp])), float(np.median(dn[grp])))
+    return out
+
+
 def segments_near(epochs: Epochs, track: FilterResult, seg: np.ndarray,
                   keep_m: float) -> np.ndarray:
     """Per epoch: its fix belongs to a segment (``seg``: :func:`fix_segments`) whose median
     offset (east, north) from ``track`` is within ``keep_m`` (m)."""
-    seg = np.asarray(seg)[0]
     ok = np.zeros(len(epochs), bool)
-    idx = np.flatnonzero(seg >= 0)
-    if not len(idx):
-        return ok
-    de = epochs.gnss_e[idx] - track.e[idx]
-    dn = epochs.gnss_n[idx] - track.n[idx]
-    ids = seg[idx]
-    order = np.argsort(ids, kind="stable")
-    cut = np.flatnonzero(np.diff(ids[order])) + 1
-    for grp in np.split(order, cut):
-        if math.hypot(float(np.median(de[grp])), float(np.median(dn[grp]))) <= keep_m:
-            ok[idx[grp]] = True
+    idx = np.flatnonzero(np.asarray(seg)[0] >= 0)
+    ok[idx] = segment_offsets(np.asarray(seg)[0][idx], epochs.gnss_e[idx] - track.e[idx],
+                              epochs.gnss_n[idx] - track.n[idx]) <= keep_m
     return ok
 
 
@@ -93,11 +96,11 @@ def fix_segments(epochs: Epochs, track: FilterResult, gp: dict) -> np.ndarray:
                          & np.isfinite(epochs.gnss_n))
     out = np.full((2, len(epochs)), -1, np.int64)
     if len(fix):
-        t_s = (np.asarray(epochs.t_ns, np.int64)[fix] - int(epochs.t_ns[0])) / 1e9
+        t_s = (np.asarray(epochs.t_ns, np.int64)[fix] - int(epochs.t_ns[0])) / NS_PER_S
         out[0, fix], out[1, fix] = segments(
             t_s, epochs.gnss_e[fix] - track.e[fix], epochs.gnss_n[fix] - track.n[fix],
             float(gp["nlos_segment_jump_m"]), float(gp["nlos_segment_gap_s"]))
     return out
 
 
-__all__ = ["fix_segments", "segments", "segments_near"]
+__all__ = ["fix_segments", "segment_offsets", "segments", "segments_near"]
