@@ -35,6 +35,9 @@ from ..config import Params
 from ..epochs import Epochs
 from .base import FilterResult
 
+#: median of a 2-D Gaussian residual's length over its per-axis sigma (Rayleigh)
+RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0))
+
 #: the last screen's (key, fix east positions, has_gnss out, info): a smoothed run's quality
 #: check runs the forward filter again on the same epochs, and would screen them again
 _LAST: list[tuple[tuple, np.ndarray, np.ndarray, dict]] = []
@@ -100,6 +103,10 @@ def _screen(epochs: Epochs, params: Params,
         if seg_out.result is not None:
             outcome = seg_out
             out = fix & ~near
+    if outcome.result is not None:
+        # ... and so is a fix of a kept run that lies far from the fit's track: the edge of
+        # a reflection the receiver's own filter ramps in and out (decisions/0045)
+        out |= far_fixes(epochs, outcome.result, fix & ~out, float(g["nlos_screen_fix_sigmas"]))
     kept = int(np.count_nonzero(fix & ~out))
     if kept < float(g["nlos_screen_min_kept"]) * max(int(fix.sum()), 1):
         return epochs, {"nlos_screen": f"not applied: only {kept} of {int(fix.sum())} fixes agree"}
@@ -111,4 +118,26 @@ def _screen(epochs: Epochs, params: Params,
     return dataclasses.replace(epochs, has_gnss=fix & ~out), info
 
 
-__all__ = ["screen"]
+def far_fixes(epochs: Epochs, track: FilterResult, fixes: np.ndarray, k: float) -> np.ndarray:
+    """Of ``fixes`` (a mask over the epochs), those farther from ``track`` than ``k`` times
+    their own sigma (per axis, m), each sigma first scaled by how far the fixes' residuals
+    run beyond their sigmas (their median over the Rayleigh median sqrt(2 ln 2), never below
+    1): a receiver that states its sigma too small does not lose its clean fixes.
+    ``k`` <= 0: none."""
+    far = np.zeros(len(fixes), bool)
+    if not k > 0.0 or not fixes.any():
+        return far
+    res = np.hypot(epochs.gnss_e - track.e, epochs.gnss_n - track.n)
+    sd = np.sqrt(0.5 * (epochs.gnss_sd_e ** 2 + epochs.gnss_sd_n ** 2))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = res[fixes] / sd[fixes]
+    z = z[np.isfinite(z)]
+    if not len(z):
+        return far
+    scale = max(1.0, float(np.median(z)) / RAYLEIGH_MEDIAN)
+    with np.errstate(invalid="ignore"):
+        far[fixes] = res[fixes] > k * scale * sd[fixes]
+    return far
+
+
+__all__ = ["far_fixes", "screen"]
