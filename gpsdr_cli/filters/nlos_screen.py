@@ -15,7 +15,9 @@ Fix by fix, a 40-s run of 200 reflected fixes outvotes 70 clean ones.  So by def
 (``[graph] nlos_segments``) the fixes are then cut into runs that share one bias
 (:mod:`.nlos_segments`, against that fit's track), the fit is solved again with one vote per
 run, and the fixes kept are those of the runs within ``[graph] nlos_segment_keep_m`` of
-its track (docs/decisions/0044).
+its track (docs/decisions/0044), less any of their fixes farther from that track than
+``[gnss] nlos_screen_fix_sigmas`` of its own sigmas (:func:`far_fixes`: the edges of
+reflections, which the receiver ramps in and out; docs/decisions/0045).
 
 Only on NLOS drives with a gyro and an odometer (the batch fit needs a dead reckoning
 that holds the shape on its own), and only when the fit converges and keeps at least
