@@ -79,10 +79,12 @@ def step_estimates(t_s: np.ndarray, e: np.ndarray, n: np.ndarray, sd: np.ndarray
     return se, sn, ss
 
 
+#: median of a 2-D Gaussian error's length over its per-axis sigma: sqrt(2 ln 2) (Rayleigh)
+RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0))
 #: a step estimate's size over its stated sigma (x sqrt 2) has a median of 0.83 for fixes whose
 #: errors are as stated (a Rayleigh median of 1.18 / sqrt 2); measured 0.71-0.72 on the simulated
 #: RTK drives, 0.31 on a real u-blox F9P recording, 74-159 on simulated metre fixes stated to 1 cm
-RAYLEIGH_MEDIAN_Z = 1.1774 / math.sqrt(2.0)
+RAYLEIGH_MEDIAN_Z = RAYLEIGH_MEDIAN / math.sqrt(2.0)
 #: judged centimetre fixes needed before their claim is judged
 CLAIM_MIN_FIXES = 20
 

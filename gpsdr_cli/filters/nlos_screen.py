@@ -35,10 +35,8 @@ import numpy as np
 
 from ..config import Params
 from ..epochs import Epochs
+from ..rtk_false_fix import RAYLEIGH_MEDIAN
 from .base import FilterResult
-
-#: median of a 2-D Gaussian residual's length over its per-axis sigma (Rayleigh)
-RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0))
 
 #: the last screen's (key, fix east positions, has_gnss out, info): a smoothed run's quality
 #: check runs the forward filter again on the same epochs, and would screen them again
@@ -127,18 +125,18 @@ def far_fixes(epochs: Epochs, track: FilterResult, fixes: np.ndarray, k: float) 
     1): a receiver that states its sigma too small does not lose its clean fixes.
     ``k`` <= 0: none."""
     far = np.zeros(len(fixes), bool)
-    if not k > 0.0 or not fixes.any():
+    i = np.flatnonzero(fixes)
+    if not k > 0.0 or not len(i):
         return far
-    res = np.hypot(epochs.gnss_e - track.e, epochs.gnss_n - track.n)
-    sd = np.sqrt(0.5 * (epochs.gnss_sd_e ** 2 + epochs.gnss_sd_n ** 2))
+    res = np.hypot(epochs.gnss_e[i] - track.e[i], epochs.gnss_n[i] - track.n[i])
+    sd = np.sqrt(0.5 * (epochs.gnss_sd_e[i] ** 2 + epochs.gnss_sd_n[i] ** 2))
     with np.errstate(invalid="ignore", divide="ignore"):
-        z = res[fixes] / sd[fixes]
-    z = z[np.isfinite(z)]
-    if not len(z):
-        return far
-    scale = max(1.0, float(np.median(z)) / RAYLEIGH_MEDIAN)
-    with np.errstate(invalid="ignore"):
-        far[fixes] = res[fixes] > k * scale * sd[fixes]
+        z = res / sd
+        ok = np.isfinite(z)
+        if not ok.any():
+            return far
+        scale = max(1.0, float(np.median(z[ok])) / RAYLEIGH_MEDIAN)
+        far[i] = res > k * scale * sd
     return far
 
 
