@@ -21,6 +21,8 @@ from .base import FilterResult
 RunFn = Callable[..., FilterResult]
 
 _REGISTRY: dict[str, RunFn] = {}
+#: name -> the filter alone, without the GNSS model and the NLOS screen around it
+_BARE: dict[str, RunFn] = {}
 
 #: name -> module that registers it (imported on first use)
 MODULES: dict[str, str] = {
@@ -46,7 +48,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             # ... and only with healthy dead reckoning: a clipped gyro or an odometer that reads
             # wrong or falls silent cannot outvote fixes (it drove city tracks 250 m off)
             nlos = model_epochs.nlos_drive and not epochs.dr_unhealthy
-            screened, info = screen(epochs, params, nlos, fn)
+            screened, info = screen(epochs, params, nlos, bare("ekf"))
             if model_epochs.nlos_drive and epochs.dr_unhealthy:
                 info["nlos_screen_skipped"] = "the dead reckoning is unhealthy"
             if info.get("nlos_screened"):  # the fixes left are judged afresh
@@ -70,6 +72,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             return result
 
         _REGISTRY[name] = run
+        _BARE[name] = fn
         return fn
     return deco
 
@@ -85,6 +88,12 @@ def follow_the_fixes(params: Params) -> Params:
     return out
 
 
+def bare(name: str) -> RunFn:
+    """The ``run`` function of filter ``name`` alone: no GNSS model, no NLOS screen."""
+    get(name)
+    return _BARE[name]
+
+
 def get(name: str) -> RunFn:
     """The ``run`` function of filter ``name``."""
     if name not in MODULES:
@@ -94,4 +103,4 @@ def get(name: str) -> RunFn:
     return _REGISTRY[name]
 
 
-__all__ = ["NAMES", "FilterResult", "get", "register"]
+__all__ = ["NAMES", "FilterResult", "bare", "get", "register"]

@@ -19,6 +19,13 @@ its track (docs/decisions/0044), less any of their fixes farther from that track
 ``[gnss] nlos_screen_fix_sigmas`` of its own sigmas (:func:`far_fixes`: the edges of
 reflections, which the receiver ramps in and out; docs/decisions/0045).
 
+The runs are cut against a track the reflections still pull where no clean fix anchors it
+(a reflected run at the end of a drive was kept whole).  So ``[gnss] nlos_screen_passes``
+= 2 judges them a second time, against the ekf's smoothed track of the fixes the first
+pass kept: its gate and the dead reckoning hold that track off a reflected run which the
+fit over every fix had followed (docs/decisions/0046).  The screen's judge is the ekf
+whatever filter runs after it, so every filter is given the same fixes.
+
 Only on NLOS drives with a gyro and an odometer (the batch fit needs a dead reckoning
 that holds the shape on its own), and only when the fit converges and keeps at least
 ``nlos_screen_min_kept`` of the fixes; otherwise the epochs pass unchanged.  Units:
@@ -39,25 +46,28 @@ from ..rtk_false_fix import RAYLEIGH_MEDIAN
 from .base import FilterResult
 
 #: the last screen's (key, fix east positions, has_gnss out, info): a smoothed run's quality
-#: check runs the forward filter again on the same epochs, and would screen them again
+#: check runs the forward filter again on the same epochs, and every filter of a comparison
+#: is given the same screen
 _LAST: list[tuple[tuple, np.ndarray, np.ndarray, dict]] = []
 
 
 def _key(epochs: Epochs, params: Params) -> tuple:
-    """The same drive, filter and parameters (smoothing aside: the probe smooths anyway)."""
+    """The same drive and parameters (the filter and smoothing aside: the judge is the ekf,
+    smoothed, whatever runs after it)."""
     f = epochs.has_gnss
     rest = repr({k: v for k, v in params.items() if k != "filter"})
-    return (params["filter"]["name"], rest, len(epochs), int(f.sum()),
+    return (rest, len(epochs), int(f.sum()),
             int(epochs.t_ns[-1] - epochs.t_ns[0]) if len(epochs) else 0,
             float(np.sum(epochs.gnss_e[f])), float(np.sum(epochs.gnss_n[f])))
 
 
 def screen(epochs: Epochs, params: Params, nlos_drive: bool,
-           run: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
+           judge: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
     """``(epochs, info)``: the epochs with the outvoted fixes' ``has_gnss`` cleared, and
     what was done (``info["nlos_screened"]``: fixes left out; absent when not applied;
     ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
-    lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale)."""
+    lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale).  ``judge``: the
+    bare ekf (:func:`gpsdr_cli.filters.bare`), whichever filter runs after the screen."""
     if not nlos_drive:
         return epochs, {}
     if not (epochs.has_gyro.any() and epochs.has_odo.any()):
@@ -69,7 +79,7 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
     if _LAST and _LAST[0][0] == key and np.array_equal(_LAST[0][1], epochs.gnss_e, equal_nan=True):
         _, _, has_gnss, info = _LAST[0]
         return dataclasses.replace(epochs, has_gnss=has_gnss.copy()), dict(info)
-    out, info = _screen(epochs, params, run)
+    out, info = _screen(epochs, params, judge)
     _LAST[:] = [(key, epochs.gnss_e.copy(), out.has_gnss, dict(info))]
     return out, info
 
@@ -80,7 +90,7 @@ def _screen(epochs: Epochs, params: Params,
     from .gnss_model import reflected_doppler
     from .graph import own_sigmas, smooth_graph, solve_by_segments
 
-    # the start: the filter smoothed, with an NLOS drive's receiver velocity sigmas
+    # the start: the ekf smoothed, with an NLOS drive's receiver velocity sigmas
     probe = reflected_doppler(params, bool(epochs.has_odo.any()))
     probe["filter"]["smooth"] = True
     init = run(epochs, probe)
@@ -103,6 +113,14 @@ def _screen(epochs: Epochs, params: Params,
         if seg_out.result is not None:
             outcome = seg_out
             out = fix & ~near
+            for _ in range(int(g["nlos_screen_passes"]) - 1):
+                # ... judged again against the ekf's track of the fixes kept (decisions/0046)
+                again = run(dataclasses.replace(epochs, has_gnss=fix & ~out), probe)
+                seg_out, _, near = solve_by_segments(epochs, again, fit)
+                if seg_out.result is None:
+                    break
+                outcome = seg_out
+                out = fix & ~near
     if outcome.result is not None:
         # ... and so is a fix of a kept run that lies far from the fit's track: the edge of
         # a reflection the receiver's own filter ramps in and out (decisions/0045)
