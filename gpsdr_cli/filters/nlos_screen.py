@@ -108,23 +108,19 @@ def _screen(epochs: Epochs, params: Params,
     out = fix & np.isfinite(w) & (w < float(g["nlos_screen_min_weight"]))
     if bool(fit["graph"]["nlos_segments"]):
         # each run of fixes with one reflection bias votes once (a long run of reflected
-        # fixes outvoted the clean ones around it fix by fix)
-        seg_out, _, near = solve_by_segments(epochs, outcome.result, fit)
-        if seg_out.result is not None:
-            outcome = seg_out
-            out = fix & ~near
-            for _ in range(int(g["nlos_screen_passes"]) - 1):
-                # ... judged again against the ekf's track of the fixes kept (decisions/0046)
-                again = run(dataclasses.replace(epochs, has_gnss=fix & ~out), probe)
-                seg_out, _, near = solve_by_segments(epochs, again, fit)
-                if seg_out.result is None:
-                    break
-                outcome = seg_out
-                out = fix & ~near
-    if outcome.result is not None:
-        # ... and so is a fix of a kept run that lies far from the fit's track: the edge of
-        # a reflection the receiver's own filter ramps in and out (decisions/0045)
-        out |= far_fixes(epochs, outcome.result, fix & ~out, float(g["nlos_screen_fix_sigmas"]))
+        # fixes outvoted the clean ones around it fix by fix); the runs are cut against the
+        # fit, then against the ekf's track of the fixes kept (decisions/0046)
+        track = outcome.result
+        for n_pass in range(max(int(g["nlos_screen_passes"]), 1)):
+            if n_pass:
+                track = run(dataclasses.replace(epochs, has_gnss=fix & ~out), probe)
+            seg_out, _, near = solve_by_segments(epochs, track, fit)
+            if seg_out.result is None:
+                break
+            outcome, out = seg_out, fix & ~near
+    # ... and so is a fix of a kept run that lies far from the fit's track: the edge of a
+    # reflection the receiver's own filter ramps in and out (decisions/0045)
+    out |= far_fixes(epochs, outcome.result, fix & ~out, float(g["nlos_screen_fix_sigmas"]))
     kept = int(np.count_nonzero(fix & ~out))
     if kept < float(g["nlos_screen_min_kept"]) * max(int(fix.sum()), 1):
         return epochs, {"nlos_screen": f"not applied: only {kept} of {int(fix.sum())} fixes agree"}

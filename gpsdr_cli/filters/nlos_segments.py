@@ -82,9 +82,10 @@ def segments_near(epochs: Epochs, track: FilterResult, seg: np.ndarray,
                   keep_m: float) -> np.ndarray:
     """Per epoch: its fix belongs to a segment (``seg``: :func:`fix_segments`) whose median
     offset (east, north) from ``track`` is within ``keep_m`` (m)."""
+    ids = np.asarray(seg)[0]
     ok = np.zeros(len(epochs), bool)
-    idx = np.flatnonzero(np.asarray(seg)[0] >= 0)
-    ok[idx] = segment_offsets(np.asarray(seg)[0][idx], epochs.gnss_e[idx] - track.e[idx],
+    idx = np.flatnonzero(ids >= 0)
+    ok[idx] = segment_offsets(ids[idx], epochs.gnss_e[idx] - track.e[idx],
                               epochs.gnss_n[idx] - track.n[idx]) <= keep_m
     return ok
 
