@@ -61,6 +61,8 @@ class Epochs:
     #: dr_health left gyro samples out, or odometer samples spanning ``[health] odo_silent_s``
     #: or more, or the odometer fell silent that long: the dead reckoning cannot judge the fixes
     dr_unhealthy: bool = False
+    #: the drive with time running backwards (:func:`gpsdr_cli.qc.reverse_epochs`)
+    time_reversed: bool = False
 
     def __post_init__(self) -> None:
         n = len(self.t_ns)

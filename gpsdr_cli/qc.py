@@ -63,7 +63,7 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
 
     ``t' = t_first + t_last - t`` (int64 ns, ascending again); ``dt_s`` from ``t'``;
     ``yaw_rate_radps`` negated; ``gnss_course_rad`` + pi wrapped to (-pi, pi];
-    every other per-epoch array reversed as is.
+    every other per-epoch array reversed as is; ``time_reversed`` toggled.
     """
     n_ep = len(epochs)
     fields: dict[str, object] = {}
@@ -82,6 +82,7 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
     fields["yaw_rate_radps"] = -np.asarray(epochs.yaw_rate_radps, float)[::-1]
     course = np.asarray(epochs.gnss_course_rad, float)[::-1] + math.pi
     fields["gnss_course_rad"] = np.angle(np.exp(1j * course))  # NaN stays NaN
+    fields["time_reversed"] = not epochs.time_reversed
     return Epochs(**fields)  # type: ignore[arg-type]
 
 

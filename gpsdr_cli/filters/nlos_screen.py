@@ -45,20 +45,52 @@ from ..epochs import Epochs
 from ..rtk_false_fix import RAYLEIGH_MEDIAN
 from .base import FilterResult
 
-#: the last screen's (key, fix east positions, has_gnss out, info): a smoothed run's quality
-#: check runs the forward filter again on the same epochs, and every filter of a comparison
-#: is given the same screen
-_LAST: list[tuple[tuple, np.ndarray, np.ndarray, dict]] = []
+#: the last screen: (key, fix east, north and time steps in fix order, dead-reckoning sums,
+#: which fixes were left out, info).  A smoothed run's quality check runs the forward filter
+#: again, and every filter of a comparison is given the same screen
+_LAST: list[tuple[tuple, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                  dict]] = []
+
+
+def _span(epochs: Epochs) -> slice:
+    """The epochs from the first fix to the last: the dead reckoning the screen weighs (a
+    backward pass starts at the last fix, so its lead-in is the forward pass's tail)."""
+    f = np.flatnonzero(epochs.has_gnss)
+    return slice(int(f[0]), int(f[-1]) + 1) if len(f) else slice(0, 0)
 
 
 def _key(epochs: Epochs, params: Params) -> tuple:
-    """The same drive and parameters (the filter and smoothing aside: the judge is the ekf,
-    smoothed, whatever runs after it)."""
-    f = epochs.has_gnss
-    rest = repr({k: v for k, v in params.items() if k != "filter"})
-    return (rest, len(epochs), int(f.sum()),
-            int(epochs.t_ns[-1] - epochs.t_ns[0]) if len(epochs) else 0,
-            float(np.sum(epochs.gnss_e[f])), float(np.sum(epochs.gnss_n[f])))
+    """The same parameters (the filter and smoothing aside: the judge is the ekf, smoothed,
+    whatever runs after it) and counts over the fixes' span."""
+    s = _span(epochs)
+    return (repr({k: v for k, v in params.items() if k != "filter"}), s.stop - s.start,
+            int(np.count_nonzero(epochs.has_gnss)), int(np.count_nonzero(epochs.has_gyro[s])),
+            int(np.count_nonzero(epochs.has_odo[s])))
+
+
+def _dr_sums(epochs: Epochs) -> np.ndarray:
+    """The odometer's and the gyro's readings over the fixes' span, summed."""
+    s = _span(epochs)
+    odo, yaw = epochs.odo_speed_mps[s], epochs.yaw_rate_radps[s]
+    return np.array([np.nansum(odo[epochs.has_odo[s]]), np.nansum(yaw[epochs.has_gyro[s]])])
+
+
+def _cached(epochs: Epochs, params: Params) -> tuple[Epochs, dict] | None:
+    """The last screen's answer if ``epochs`` is its drive (the dead reckoning before the
+    first fix and after the last aside)."""
+    if not _LAST:
+        return None
+    key, fe, fn, dt, sums, out_fix, info = _LAST[0]
+    if key != _key(epochs, params) or not np.array_equal(sums, _dr_sums(epochs)):
+        return None
+    f = np.flatnonzero(epochs.has_gnss)
+    if not (np.array_equal(epochs.gnss_e[f], fe, equal_nan=True)
+            and np.array_equal(epochs.gnss_n[f], fn, equal_nan=True)
+            and np.array_equal(np.diff(np.asarray(epochs.t_ns, np.int64)[f]), dt)):
+        return None
+    has_gnss = epochs.has_gnss.copy()
+    has_gnss[f[out_fix]] = False
+    return dataclasses.replace(epochs, has_gnss=has_gnss), dict(info)
 
 
 def screen(epochs: Epochs, params: Params, nlos_drive: bool,
@@ -75,12 +107,22 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
                         else "no gyro"}
     if not params["gnss"]["nlos_screen"]:
         return epochs, {}
-    key = _key(epochs, params)
-    if _LAST and _LAST[0][0] == key and np.array_equal(_LAST[0][1], epochs.gnss_e, equal_nan=True):
-        _, _, has_gnss, info = _LAST[0]
-        return dataclasses.replace(epochs, has_gnss=has_gnss.copy()), dict(info)
+    if epochs.time_reversed:
+        # the quality check's backward pass: the drive judged forward, read backwards (the
+        # judgement is over the whole drive; judged backwards, the main track would depend
+        # on whether the check ran first)
+        from ..qc import reverse_epochs
+
+        fwd, info = screen(reverse_epochs(epochs), params, nlos_drive, judge)
+        return dataclasses.replace(epochs, has_gnss=fwd.has_gnss[::-1].copy()), info
+    hit = _cached(epochs, params)
+    if hit is not None:
+        return hit
     out, info = _screen(epochs, params, judge)
-    _LAST[:] = [(key, epochs.gnss_e.copy(), out.has_gnss, dict(info))]
+    f = np.flatnonzero(epochs.has_gnss)
+    _LAST[:] = [(_key(epochs, params), epochs.gnss_e[f].copy(), epochs.gnss_n[f].copy(),
+                 np.diff(np.asarray(epochs.t_ns, np.int64)[f]), _dr_sums(epochs),
+                 ~out.has_gnss[f], dict(info))]
     return out, info
 
 

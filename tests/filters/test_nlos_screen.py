@@ -4,6 +4,7 @@ every filter, which then follows the dead reckoning through the reflected-signal
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -135,3 +136,36 @@ def test_a_second_judgement_drops_a_reflected_run_at_the_end(name: str, after: f
     k_twice, k_once = _kept(sim, twice), _kept(sim, once)
     assert k_once[0] > 100 and k_twice[0] < 20
     assert k_twice[1] > 0.97 * k_twice[2]
+
+
+def test_the_backward_pass_is_given_the_forward_judgement(nlos, monkeypatch) -> None:
+    """The quality check's backward pass runs over the time-reversed drive: it is given the
+    forward screen read backwards, judged once, whichever pass comes first (judged backwards
+    too, an hour of NLOS city took twice as long, and the main track depended on the order)."""
+    from gpsdr_cli import config, filters
+    from gpsdr_cli.align import build_epochs
+    from gpsdr_cli.filters import gnss_model, nlos_screen
+    from gpsdr_cli.qc import reverse_epochs
+
+    p = config.defaults()
+    ep = build_epochs(copy.deepcopy(nlos.drive), nlos.frame, p)
+    assert gnss_model.gnss_error_model(ep, p)[0].nlos_drive
+    judged = []
+    real = nlos_screen._screen
+    monkeypatch.setattr(nlos_screen, "_screen", lambda *a: judged.append(1) or real(*a))
+    judge = filters.bare("ekf")
+
+    nlos_screen._LAST.clear()
+    back, info_b = nlos_screen.screen(reverse_epochs(ep), p, True, judge)
+    fwd, info_f = nlos_screen.screen(ep, p, True, judge)
+    assert len(judged) == 1 and info_b == info_f and info_f["nlos_screened"] > 1000
+    assert np.array_equal(back.has_gnss[::-1], fwd.has_gnss)
+    nlos_screen._LAST.clear()
+    again, _ = nlos_screen.screen(ep, p, True, judge)
+    assert len(judged) == 2 and np.array_equal(again.has_gnss, fwd.has_gnss)
+
+    # another odometer under the same fixes is another judgement, not the cached one
+    slow = dataclasses.replace(ep, odo_speed_mps=ep.odo_speed_mps * 1.02)
+    nlos_screen.screen(slow, p, True, judge)
+    assert len(judged) == 3
+
