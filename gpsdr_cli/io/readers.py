@@ -3,8 +3,9 @@
 :func:`sniff` decides by content, not by file name: the MCAP magic, the Parquet
 magic, the ROS 1 bag and SQLite magics (or a ROS 2 bag folder), checksum-valid UBX
 frames (alone or among NMEA lines), an RTKLIB .pos header, NMEA sentences with valid
-checksums, else a delimited text table with a header row.  Empty and binary files, and
-UTF-16 files other than NMEA, are an :class:`InputError` naming the file.
+checksums, else a delimited text table with a header row.  Empty and binary files,
+UTF-16 files other than NMEA and NovAtel ASCII logs are an :class:`InputError` naming
+the file.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 import hashlib
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -39,6 +41,9 @@ from .formats import (  # magics only: a reader is imported per format
 from .spikes import accel_spikes, gyro_spikes, odometer_spikes, receiver_velocity_spikes
 
 _HEAD_BYTES = 65536
+#: A NovAtel ASCII message at a line start: '#' (or '%' for the short header) + the upper
+#: case message name ending in A (BESTPOSA, INSPVASA), header fields, ';' before the data.
+_NOVATEL_ASCII = re.compile(rb"(?m)^[#%]([A-Z][A-Z0-9_]*A),[^;\r\n]*;")
 
 
 def _head(path: str | Path) -> bytes:
@@ -79,6 +84,11 @@ def sniff(path: str | Path) -> str:
         raise InputError(path, f"{problem}; expected MCAP, NMEA, CSV or Parquet")
     if b"$GP" in head[:4096] or b"$GN" in head[:4096]:
         return "nmea"  # NMEA whose first sentences are damaged: the NMEA reader counts them
+    novatel = _NOVATEL_ASCII.search(head[:4096])
+    if novatel:  # its comma-separated lines would pass for a CSV table
+        raise InputError(path, f"NovAtel ASCII log ({novatel.group(1).decode()} messages) is not "
+                         "supported; have the receiver log NMEA instead (e.g. LOG COM1 GPGGA "
+                         "ONTIME 1 and LOG COM1 GPRMC ONTIME 1) and give that file")
     first = head.split(b"\n", 1)[0].decode("utf-8", "replace").strip()
     if any(d in first for d in (",", ";", "\t")):
         _parse_header(path, head)  # raises when the first line is not a header

@@ -58,6 +58,36 @@ def test_sniff_rejects(tmp_path, content, match):
         read_drive(p, params=P)
 
 
+def _novatel_ascii(start: str, message: str, header: str, data: str) -> bytes:
+    """One NovAtel ASCII message with its CRC-32 (reflected 0xEDB88320, initial 0)."""
+    body = f"{message},{header};{data}".encode()
+    crc = 0
+    for byte in body:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xEDB88320 if crc & 1 else crc >> 1
+    return start.encode() + body + b"*%08x\r\n" % crc
+
+
+@pytest.mark.parametrize("line", [
+    _novatel_ascii("#", "BESTPOSA", "COM1,0,80.0,FINESTEERING,2300,345600.000,02000000,b1f6,16809",
+                   'SOL_COMPUTED,SINGLE,51.11678928,-114.03886216,1064.3,-16.2,WGS84,1.5,1.2,'
+                   '2.9,"",0.000,0.000,20,18,18,18,00,06,39,33'),
+    _novatel_ascii("%", "INSPVASA", "2300,345600.000",
+                   "2300,345600.000,51.11678928,-114.03886216,1064.3,0.1,0.2,0.0,1.5,-0.4,"
+                   "90.2,INS_SOLUTION_GOOD"),
+])
+def test_novatel_ascii_log_is_named_not_taken_for_csv(tmp_path, line):
+    p = tmp_path / "novatel.asc"
+    p.write_bytes(line * 3)
+    name = line[1:].split(b",", 1)[0].decode()
+    with pytest.raises(InputError, match=rf"NovAtel ASCII log \({name} messages\) is not "
+                                         "supported") as err:
+        read_drive(gps=p, params=P)
+    assert str(p) in str(err.value) and "CSV" not in str(err.value)
+    assert "\n" not in str(err.value)
+
+
 def test_sniff_missing_file(tmp_path):
     with pytest.raises(InputError, match="no such file"):
         sniff(tmp_path / "nope.mcap")
