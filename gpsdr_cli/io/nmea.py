@@ -78,7 +78,11 @@ Field choices, documented here once:
   them printed as finely as the chosen one gives the coordinates (a receiver
   that rounds GGA and truncates GLL; gpsd reports the last, too).
 - No fix (GGA quality 0, RMC status ``V``, empty or ``0,0`` coordinates) gives a
-  row with NaN lat/lon/alt and ``fix_quality`` 0, never zero coordinates.
+  row with NaN lat/lon/alt and ``fix_quality`` 0, never zero coordinates.  So do the
+  positions no receiver measured: GGA quality 7 (manual input) and 8 (simulator), mode
+  ``M`` or ``S`` in RMC, GLL and GNS; those sentences are also counted in the skip report
+  ("... in simulator mode ...", not fatal in strict mode), so that a log of them says why
+  it has no fix.  GGA quality 6 (dead reckoning) stays a row of quality 6.
 - ``alt_m``: ellipsoidal height = GGA altitude above mean sea level + geoid
   separation (GGA field 11).  When a receiver leaves the separation empty the
   MSL altitude is kept and ``meta['alt_without_geoid_sep']`` counts those rows.
@@ -124,6 +128,15 @@ from pathlib import Path
 
 import numpy as np
 
+from gpsdr_cli.conventions import (
+    FIX_DGPS,
+    FIX_DR,
+    FIX_FLOAT_RTK,
+    FIX_GPS,
+    FIX_NONE,
+    FIX_PPS,
+    FIX_RTK,
+)
 from gpsdr_cli.errors import ChecksumError, InputError, MissingDateError, NoDataError, ParseError
 from gpsdr_cli.io.drive import Drive, GnssFixes, SkipReport, Source
 
@@ -146,6 +159,8 @@ _TYPE_NAME = {v: k.decode() for k, v in _KNOWN.items()} | {
 _HEAD = 7
 _HEAD_PROPRIETARY = {b"$PTNL,": 10, b"$PUBX,": 9}
 _TIMED = (_GGA, _RMC, _GST, _ZDA, _GNS, _GLL, _GGK, _PUBX)
+#: Sentences that carry a date: a log whose every one of them is damaged has no date.
+_DATED = (_RMC, _ZDA, _GGK)
 #: field number of the time of day; 1 for the other timed sentences
 _TIME_FIELD = {_GLL: 5, _GGK: 2, _PUBX: 2}
 #: Position sentences, most informative first: the epoch's position comes from the first
@@ -168,9 +183,17 @@ for _c in b"ABCDEF":
     _HEX[_c] = _c - 55
     _HEX[_c + 32] = _c - 55
 
-#: RMC/GNS mode indicator (NMEA 2.3+) -> GGA-style fix quality.
-_MODE_QUALITY = {b"": 1, b"A": 1, b"D": 2, b"P": 3, b"R": 4, b"F": 5, b"E": 6,
-                 b"N": 0, b"M": 0, b"S": 0}
+#: RMC/GNS mode indicator (NMEA 2.3+) -> GGA-style fix quality.  M (manual input) and S
+#: (simulator) are positions no receiver measured: no fix.
+_MODE_QUALITY = {b"": FIX_GPS, b"A": FIX_GPS, b"D": FIX_DGPS, b"P": FIX_PPS, b"R": FIX_RTK,
+                 b"F": FIX_FLOAT_RTK, b"E": FIX_DR, b"N": FIX_NONE, b"M": FIX_NONE,
+                 b"S": FIX_NONE}
+#: GGA qualities of positions no receiver measured: typed in (7) or made up by the
+#: receiver's simulator mode (8).  No fix; they never reach ``fix_quality``.
+_GGA_MANUAL = 7
+_GGA_SIMULATOR = 8
+#: Skip reasons of sentences whose position is not a measurement, by the mode letter.
+_NOT_MEASURED = {b"M": "manual input mode", b"S": "simulator mode"}
 #: GNS mode letters from best to worst: the epoch's quality is the best any constellation
 #: reports (a fix exists if one system has one).
 _GNS_RANK = b"RFDPAE"
@@ -181,8 +204,8 @@ _GNS_RANK = b"RFDPAE"
 _GGK_QUALITY = np.array([0, 1, 5, 4, 2, 2, 5, 4, 5, 4, 5, 2, 5, 2, 5, 4])
 #: u-blox PUBX,00 navStat -> GGA-style quality: DR (the receiver's dead reckoning alone) is
 #: 6 like GGA's "estimated"; RK (GNSS combined with dead reckoning) is a fix.
-_NAVSTAT_QUALITY = {b"NF": 0, b"TT": 0, b"DR": 6, b"G2": 1, b"G3": 1, b"RK": 1, b"D2": 2,
-                    b"D3": 2}
+_NAVSTAT_QUALITY = {b"NF": FIX_NONE, b"TT": FIX_NONE, b"DR": FIX_DR, b"G2": FIX_GPS,
+                    b"G3": FIX_GPS, b"RK": FIX_GPS, b"D2": FIX_DGPS, b"D3": FIX_DGPS}
 KMH_MPS = 1.0 / 3.6  # 1 km/h in m/s
 
 _CHUNK_BYTES = 1 << 22  # 4 MiB of whole lines scanned at a time
@@ -456,8 +479,21 @@ def _position(s: _Sentences, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _has_fix(q: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-    """A fix: a quality above 0 and a position, not the ``0,0`` some receivers print."""
-    return (q > 0) & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+    """A fix: a measured quality (above 0, not GGA's manual input 7 or simulator 8) and a
+    position, not the ``0,0`` some receivers print."""
+    measured = (q > FIX_NONE) & (q != _GGA_MANUAL) & (q != _GGA_SIMULATOR)
+    return measured & np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+
+
+def _count_not_measured(probs: _Problems, tname: str, pos: np.ndarray, mode: np.ndarray) -> None:
+    """Count the sentences whose mode (one letter, or GNS's one per system) says manual
+    input or simulator: the user sees why a log of them gives no fix."""
+    left = np.ones(len(pos), bool)
+    for letter, how in _NOT_MEASURED.items():
+        hit = left & (np.strings.find(mode, letter) >= 0)
+        left &= ~hit
+        probs.add(f"{tname} in {how} (mode {letter.decode()}, not a measurement)", pos[hit],
+                  fatal=False)
 
 
 def _dop(v: np.ndarray) -> np.ndarray:
@@ -603,6 +639,22 @@ def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndar
     return starts[take], st[take], starts[other]
 
 
+def _count_damaged_dated(arr: np.ndarray, starts: np.ndarray, reason: str, stats: dict) -> None:
+    """Count in ``stats['damaged_dated']`` by (type, ``reason``) the skipped sentences at
+    ``starts`` whose address is a dated kind (RMC, ZDA, PTNL,GGK): they tell why a log
+    has no date."""
+    if len(starts) == 0:
+        return
+    wide = max(_HEAD_PROPRIETARY.values())
+    idx = np.minimum(starts[:, None] + np.arange(wide), len(arr) - 1)
+    heads = np.ascontiguousarray(arr[idx]).view(f"S{wide}").ravel()
+    uniq, counts = np.unique(heads, return_counts=True)
+    for head, count in zip(uniq.tolist(), counts.tolist(), strict=True):
+        kind = _classify(head[1:], head[:1] == b"!")
+        if kind in _DATED:
+            stats["damaged_dated"][(_TYPE_NAME[kind], reason)] += count
+
+
 def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems,
                 acc: dict[int, list[dict[str, np.ndarray]]], stats: dict) -> int:
     """Steps 1-4 on one chunk of whole lines (``arr``, starting at byte ``base`` of the file).
@@ -642,8 +694,9 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         arr, starts[no_ck], end[no_ck], star[no_ck], eol, commas)
     stats["no_checksum"] += len(nock_start)
     probs.add("unknown sentence without checksum", nock_other + base, fatal=False)
-    probs.add("no checksum (truncated sentence)",
-              np.setdiff1d(starts[no_ck], np.r_[nock_start, nock_other]) + base)
+    truncated = np.setdiff1d(starts[no_ck], np.r_[nock_start, nock_other])
+    probs.add("no checksum (truncated sentence)", truncated + base)
+    _count_damaged_dated(arr, truncated, "no checksum (truncated sentence)", stats)
 
     # ---- 2. checksums, all at once
     s1 = starts[has_ck] + 1
@@ -661,6 +714,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         computed = np.char.mod("computed *%02X", xor[~good])
         probs.add("bad checksum", starts[has_ck][~good] + base, exc=ChecksumError,
                   detail=computed)
+        _count_damaged_dated(arr, starts[has_ck][~good], "bad checksum", stats)
     ok_start = starts[has_ck][good]
     ok_st_a = st[good]
     if len(nock_start):
@@ -737,6 +791,10 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             probs.add("malformed fix quality in GGA", s.pos[bq & keep & ~badpos])
             keep &= ~badpos & ~bq
             qi = np.where(np.isfinite(q) & ~bq, q, 0).astype(np.int64)
+            for code, how in ((_GGA_MANUAL, "manual input mode"),
+                              (_GGA_SIMULATOR, "simulator mode")):
+                probs.add(f"GGA in {how} (quality {code}, not a measurement)",
+                          s.pos[(qi == code) & keep], fatal=False)
             fix = _has_fix(qi, lat, lon)
             nsat, bs = _num(s.f(7))
             hdop, bh = _num(s.f(8))
@@ -756,9 +814,12 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             lat, lon, res, badpos = _position(s, 2)
             probs.add("malformed position in GNS", s.pos[badpos & keep])
             keep &= ~badpos
-            qi, bm = _gns_quality(s.f(6))
+            mode = s.f(6)
+            qi, bm = _gns_quality(mode)
             probs.add("malformed mode in GNS", s.pos[bm & keep & ~badpos])
             keep &= ~bm
+            none = keep & (qi == FIX_NONE)  # a letter of a fix in any system wins
+            _count_not_measured(probs, "GNS", s.pos[none], mode[none])
             fix = _has_fix(qi, lat, lon)
             nsat, bs = _num(s.f(7))
             hdop, bh = _num(s.f(8))
@@ -829,8 +890,11 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             badpos &= status == b"A"
             probs.add("malformed position in GLL", s.pos[badpos & keep])
             keep &= ~badpos
-            mq = _mode_quality(s.f(7))
+            mode = s.f(7)
+            mq = _mode_quality(mode)
             probs.add("malformed mode in GLL (field ignored)", s.pos[(mq < 0) & keep])
+            ok = keep & (mq >= 0)
+            _count_not_measured(probs, "GLL", s.pos[ok], mode[ok])
             mq[mq < 0] = 1
             fix = (status == b"A") & _has_fix(mq, lat, lon)
             p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
@@ -844,6 +908,8 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             mode = s.f(12)
             mq = _mode_quality(mode)
             probs.add("malformed mode in RMC (field ignored)", s.pos[(mq < 0) & keep])
+            ok = keep & (mq >= 0)
+            _count_not_measured(probs, "RMC", s.pos[ok], mode[ok])
             mq[mq < 0] = 1
             valid = status == b"A"
             fix = valid & _has_fix(mq, lat, lon)
@@ -1121,8 +1187,10 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     where the two differ by 1.7e-6 deg).  Either way the disagreeing epochs are counted
     in ``meta['position_disagreements']`` and a note (``gpsdr info`` prints it).
     UTF-16 and Latin-1 input is decoded (``meta['encoding']`` and a note).
-    Raises :class:`InputError` for empty or binary input and
-    :class:`NoDataError` when no epoch with a time (and a date) can be built.
+    Raises :class:`InputError` for empty or binary input,
+    :class:`NoDataError` when no epoch with a time (and a date) can be built and
+    :class:`MissingDateError` for fixes without a date (its message names the RMC, ZDA or
+    PTNL,GGK sentences skipped, else the skip summary).
     """
     data = bytes(data)  # bytearray / memoryview welcome
     if isinstance(date, datetime.datetime):
@@ -1139,7 +1207,7 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     probs = _Problems()
     acc: dict[int, list[dict[str, np.ndarray]]] = {}
     stats: dict = {"doubled_starts": 0, "sentences": Counter(), "talkers": Counter(),
-                   "alt_without_geoid_sep": 0, "no_checksum": 0}
+                   "alt_without_geoid_sep": 0, "no_checksum": 0, "damaged_dated": Counter()}
     # whole lines per chunk bound the temporaries' memory (about 10 bytes per input byte)
     all_breaks = []
     n_valid = 0
@@ -1176,12 +1244,13 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     disagree = e.pop("disagree")
     day, meta["date_source"] = _epoch_days(parsed, epoch_sod, date)
     if day is None:
+        why = _why_undated(report, stats["damaged_dated"])
         if (e["q"][row] > 0).any():
             raise MissingDateError(name, "no date in the log (no RMC, ZDA or PTNL,GGK sentence with "
-                                    "a date); "
-                                    "pass --date YYYY-MM-DD (the UTC date of the first fix)")
+                                         f"a date; {why}); "
+                                         "pass --date YYYY-MM-DD (the UTC date of the first fix)")
         raise NoDataError(name, "no fix and no date in the log (only no-fix epochs without "
-                                "RMC/ZDA/PTNL,GGK dates)")
+                                f"RMC/ZDA/PTNL,GGK dates; {why})")
     if not row.any():
         raise NoDataError(name, "no GGA, GNS, RMC or GLL sentence with a time of day (nor "
                                 f"PTNL,GGK or PUBX,00) ({_summary(report)})")
@@ -1309,6 +1378,19 @@ def _summary(report: SkipReport) -> str:
         return "nothing skipped"
     parts = [f"{n} {r}" for r, n in report.counts.most_common(4)]
     return "skipped: " + "; ".join(parts)
+
+
+def _why_undated(report: SkipReport, damaged: Counter) -> str:
+    """What was skipped of the dated sentences (RMC, ZDA, PTNL,GGK), for a log left without a
+    date: "3 RMC skipped: bad checksum"; else the skip summary."""
+    parts = [f"{n} {t} skipped: {r}" for (t, r), n in damaged.most_common(3)]
+    for reason, n in report.counts.most_common():
+        for t in (_TYPE_NAME[k] for k in _DATED):
+            # reasons that drop the sentence (or its date) name the type like this
+            if (reason.endswith(f" in {t}") or reason.startswith(f"{t} without time")
+                    or reason == f"malformed date in {t} (field ignored)"):
+                parts.append(f"{n} {reason}")
+    return "; ".join(parts[:3]) if parts else _summary(report)
 
 
 def read_nmea(path: str | Path, *, date: datetime.date | None = None,

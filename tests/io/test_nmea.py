@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from gpsdr_cli.errors import ChecksumError, InputError, NoDataError, ParseError
+from gpsdr_cli.errors import ChecksumError, InputError, MissingDateError, NoDataError, ParseError
 from gpsdr_cli.io.nmea import KNOT_MPS, looks_like_nmea, parse_nmea, read_nmea
 
 DAY = datetime.date(2024, 5, 17)
@@ -116,6 +116,32 @@ def test_no_fix_rows_are_nan_never_zero() -> None:
 def test_dgps_rtk_and_dead_reckoning_qualities_kept(q: int) -> None:
     fixes, _, _ = parse_nmea(log(gga("120000", q=q)), date=DAY)
     assert fixes.fix_quality[0] == q and fixes.valid[0]
+
+
+@pytest.mark.parametrize(("q", "how"), [(7, "manual input"), (8, "simulator")])
+def test_manual_input_and_simulator_gga_are_no_fix_and_counted(q: int, how: str) -> None:
+    # quality 7 is a position typed in, 8 one the receiver's simulator made up: neither is
+    # measured; dead reckoning (6) stays what it was
+    data = log(gga("120000", q=q), gga("120001", q=6), gga("120002"))
+    fixes, report, _ = parse_nmea(data, date=DAY)
+    assert fixes.fix_quality.tolist() == [0, 6, 1]
+    assert fixes.valid.tolist() == [False, True, True] and np.isnan(fixes.lat_deg[0])
+    assert dict(report.counts) == {f"GGA in {how} mode (quality {q}, not a measurement)": 1}
+    fixes, _, _ = parse_nmea(data, date=DAY, strict=True)  # well formed: not a strict error
+    assert fixes.fix_quality.tolist() == [0, 6, 1]
+
+
+@pytest.mark.parametrize(("mode", "how"), [("M", "manual input"), ("S", "simulator")])
+def test_manual_input_and_simulator_rmc_gll_are_no_fix_and_counted(mode: str, how: str) -> None:
+    data = log(ck(f"GPRMC,120000,A,4807.038,N,01131.000,E,022.4,084.4,170524,003.1,W,{mode}"),
+               ck(f"GPGLL,4807.038,N,01131.000,E,120001,A,{mode}"),
+               ck(f"GPRMC,120002,V,4807.038,N,01131.000,E,0.0,0.0,170524,003.1,W,{mode}"),
+               rmc("120003"))
+    fixes, report, _ = parse_nmea(data)
+    assert fixes.fix_quality.tolist() == [0, 0, 0, 1]
+    assert np.isnan(fixes.lat_deg[:3]).all()
+    assert dict(report.counts) == {f"RMC in {how} mode (mode {mode}, not a measurement)": 2,
+                                   f"GLL in {how} mode (mode {mode}, not a measurement)": 1}
 
 
 def test_gga_with_13_and_15_fields() -> None:
@@ -227,6 +253,29 @@ def test_no_date_source_asks_for_date_option() -> None:
         parse_nmea(log(gga("120000")), name="x.nmea")
     with pytest.raises(NoDataError, match="no fix"):
         parse_nmea(log(gga("120000", q=0)), name="x.nmea")
+
+
+def test_missing_date_names_the_dated_sentences_skipped() -> None:
+    # RMC broken over two lines just before its checksum digits: each is truncated, so the
+    # GGA fixes are left without a date, and the message says why
+    def wrapped(sentence: str) -> str:
+        return sentence[:-2] + "\r\n" + sentence[-2:]
+
+    data = log(*[line for tod in ("120000", "120001", "120002")
+                 for line in (wrapped(rmc(tod)), gga(tod))])
+    with pytest.raises(MissingDateError) as err:
+        parse_nmea(data, name="x.nmea")
+    message = str(err.value)
+    assert "3 RMC skipped: no checksum (truncated sentence)" in message
+    assert "--date YYYY-MM-DD" in message and "\n" not in message
+    bad = rmc("120000")[:-2] + ("00" if rmc("120000")[-2:] != "00" else "11")
+    with pytest.raises(MissingDateError, match="1 RMC skipped: bad checksum"):
+        parse_nmea(log(bad, gga("120000")), name="x.nmea")
+    with pytest.raises(MissingDateError, match=r"1 malformed time in RMC\)"):
+        parse_nmea(log(rmc("1200"), gga("120000")), name="x.nmea")
+    # no dated sentence skipped: the skip summary
+    with pytest.raises(MissingDateError, match=r"with a date; skipped: 1 unknown sentence GSV\)"):
+        parse_nmea(log(gga("120000"), ck("GPGSV,1,1,00")), name="x.nmea")
 
 
 def test_week_rollover_date_kept_and_warned() -> None:

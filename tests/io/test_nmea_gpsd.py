@@ -90,6 +90,26 @@ def test_one_gga_per_constellation_sums_the_satellites():
     assert fixes.n_sats.tolist() == [11]
 
 
+def test_simulator_mode_gives_no_fix_and_says_why():
+    # a Garmin GPSmap 76S in simulator mode: GGA quality 8, RMC status V and mode S, GLL
+    # mode S; the positions are made up, so no epoch is a fix and the skip report says why
+    fixes, report, _ = parse_nmea((DATA / "GPSmap-76S.log").read_bytes(), name="x.log")
+    assert len(fixes) == 3 and not fixes.valid.any()
+    assert fixes.fix_quality.tolist() == [0, 0, 0]
+    for what in ("GGA in simulator mode (quality 8", "RMC in simulator mode (mode S",
+                 "GLL in simulator mode (mode S"):
+        assert report.counts[f"{what}, not a measurement)"] == 3
+
+
+def test_simulator_mode_log_as_gps_input_has_no_usable_fix():
+    from gpsdr_cli import config
+    from gpsdr_cli.io.readers import read_drive
+
+    drive = read_drive(gps=DATA / "GPSmap-76S.log", params=config.defaults())
+    assert len(drive.gnss) == 3 and not drive.gnss.valid.any()
+    assert drive.skipped.counts["GGA in simulator mode (quality 8, not a measurement)"] == 3
+
+
 def _strip_checksums(data: bytes) -> bytes:
     return re.sub(rb"\*[0-9A-F]{2}(?=\r?\n)", b"", data)
 
