@@ -63,6 +63,16 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 fkf_p = model_params["fkf"]
                 if "nlos_screen_odo_scale" in info and not float(fkf_p["known_odo_scale"]) > 0:
                     fkf_p["known_odo_scale"] = info["nlos_screen_odo_scale"]
+                # ... and white about the dead reckoning (ekf/aekf): what was correlated in them
+                # was the reflections; a 2-m bias state took the dead reckoning's drift across a
+                # screened gap for a fix bias and the smoother carried it back over clean
+                # fixes (decisions/0047)
+                if not bool(params["gnss"]["nlos_screened_err_states"]) and \
+                        model_params["aekf"]["gnss_err_states"]:
+                    model_params["aekf"]["gnss_err_states"] = False
+                    if name in ("ekf", "aekf"):
+                        info["gnss_err_states_off"] = ("the NLOS screen kept only fixes that "
+                                                       "agree with the dead reckoning")
             if epochs.dr_unhealthy:
                 model_params = follow_the_fixes(model_params)
                 info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"
