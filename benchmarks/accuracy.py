@@ -817,7 +817,7 @@ def targets_markdown(tgts: list[Target]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scenarios", default=",".join((*SCENARIOS, NLOS)))
+    ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--filters", default="")
     ap.add_argument("--quick", action="store_true", help="3-minute drives, no one_hour, no oracle")
     ap.add_argument("--no-comma", action="store_true")
@@ -835,7 +835,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     seeds = [int(x) for x in args.seeds.split(",") if x.strip()]
     names = available_filters([s for s in args.filters.split(",") if s] or None)
-    scen = [s for s in args.scenarios.split(",") if s]
+    scen = list(dict.fromkeys(s for s in args.scenarios.split(",") if s))  # each once
     if args.quick:
         scen = [s for s in scen if s != "one_hour"]
     smooth_modes: list[bool | str] = [False] if args.no_smooth else [False, True]
