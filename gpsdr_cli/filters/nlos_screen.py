@@ -34,6 +34,7 @@ metres, seconds.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Callable
@@ -153,13 +154,19 @@ def _screen(epochs: Epochs, params: Params,
         # fixes outvoted the clean ones around it fix by fix); the runs are cut against the
         # fit, then against the ekf's track of the fixes kept (decisions/0046)
         track = outcome.result
+        seg = None
         for n_pass in range(max(int(g["nlos_screen_passes"]), 1)):
             if n_pass:
                 track = run(dataclasses.replace(epochs, has_gnss=fix & ~out), probe)
-            seg_out, _, near = solve_by_segments(epochs, track, fit)
+            seg_out, seg_pass, near = solve_by_segments(epochs, track, fit)
             if seg_out.result is None:
                 break
-            outcome, out = seg_out, fix & ~near
+            outcome, out, seg = seg_out, fix & ~near, seg_pass
+        # ... the last run of the drive once more, against the fixes before it (decisions/0048)
+        if seg is not None:
+            out |= last_run_drift(epochs, fix & ~out, seg, run, probe,
+                                  float(g["nlos_screen_last_sigmas"]),
+                                  float(fit["graph"]["nlos_segment_keep_m"]))
     # ... and so is a fix of a kept run that lies far from the fit's track: the edge of a
     # reflection the receiver's own filter ramps in and out (decisions/0045)
     out |= far_fixes(epochs, outcome.result, fix & ~out, float(g["nlos_screen_fix_sigmas"]))
@@ -172,6 +179,38 @@ def _screen(epochs: Epochs, params: Params,
     if math.isfinite(outcome.odo_scale):
         info["nlos_screen_odo_scale"] = outcome.odo_scale
     return dataclasses.replace(epochs, has_gnss=fix & ~out), info
+
+
+def last_run_drift(epochs: Epochs, kept: np.ndarray, seg: np.ndarray,
+                   run: Callable[[Epochs, Params], FilterResult], probe: Params, k: float,
+                   keep_m: float) -> np.ndarray:
+    """Of the ``kept`` fixes (a mask over the epochs), the later segments of the drive's last
+    run that lie farther than max(``keep_m``, ``k`` sigmas) from the ekf's smoothed track of
+    the kept fixes without them (``seg``: rows segment id and run id per epoch,
+    :func:`.nlos_segments.fix_segments`; sigma: that track's, m; ``probe``: the judge's
+    parameters).  No clean fix follows the last run to hold the track off a reflection that
+    ramps in (no jump, so no new run), and the judge's track follows it there; the dead
+    reckoning from the run's first segment does not.  ``k`` <= 0: none."""
+    drop = np.zeros(len(kept), bool)
+    idx = np.flatnonzero(kept)
+    if not k > 0.0 or not len(idx):
+        return drop
+    last = kept & (seg[1] == seg[1][idx[-1]])
+    ids = np.unique(seg[0][last])
+    if len(ids) < 2 or last.sum() == kept.sum():
+        return drop
+    later = last & (seg[0] != ids[0])
+    judge = copy.deepcopy(probe)
+    judge["filter"]["smooth"] = True
+    track = run(dataclasses.replace(epochs, has_gnss=kept & ~later), judge)
+    for sid in ids[1:]:
+        f = np.flatnonzero(last & (seg[0] == sid))
+        off = math.hypot(float(np.median(epochs.gnss_e[f] - track.e[f])),
+                         float(np.median(epochs.gnss_n[f] - track.n[f])))
+        sd = float(np.median(np.sqrt(track.var_e[f] + track.var_n[f])))
+        if off > max(keep_m, k * sd):
+            drop[f] = True
+    return drop
 
 
 def far_fixes(epochs: Epochs, track: FilterResult, fixes: np.ndarray, k: float) -> np.ndarray:
@@ -196,4 +235,4 @@ def far_fixes(epochs: Epochs, track: FilterResult, fixes: np.ndarray, k: float) 
     return far
 
 
-__all__ = ["far_fixes", "screen"]
+__all__ = ["far_fixes", "last_run_drift", "screen"]
