@@ -24,7 +24,12 @@ The runs are cut against a track the reflections still pull where no clean fix a
 = 2 judges them a second time, against the ekf's smoothed track of the fixes the first
 pass kept: its gate and the dead reckoning hold that track off a reflected run which the
 fit over every fix had followed (docs/decisions/0046).  The screen's judge is the ekf
-whatever filter runs after it, so every filter is given the same fixes.
+whatever filter runs after it, so every filter is given the same fixes.  No clean fix
+follows the drive's last run to hold a track off a reflection that ramps in there, so the
+later segments of that run are judged once more, against the ekf's track of the fixes
+before them (:func:`last_run_drift`, ``[gnss] nlos_screen_last_sigmas``; decisions/0048).
+The screen is a judgement over the whole drive: the quality check's backward pass, over the
+time-reversed drive, is given the forward judgement read backwards.
 
 Only on NLOS drives with a gyro and an odometer (the batch fit needs a dead reckoning
 that holds the shape on its own), and only when the fit converges and keeps at least
@@ -34,7 +39,6 @@ metres, seconds.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 from collections.abc import Callable
@@ -188,9 +192,9 @@ def last_run_drift(epochs: Epochs, kept: np.ndarray, seg: np.ndarray,
     run that lie farther than max(``keep_m``, ``k`` sigmas) from the ekf's smoothed track of
     the kept fixes without them (``seg``: rows segment id and run id per epoch,
     :func:`.nlos_segments.fix_segments`; sigma: that track's, m; ``probe``: the judge's
-    parameters).  No clean fix follows the last run to hold the track off a reflection that
-    ramps in (no jump, so no new run), and the judge's track follows it there; the dead
-    reckoning from the run's first segment does not.  ``k`` <= 0: none."""
+    parameters, smoothed).  No clean fix follows the last run to hold the track off a
+    reflection that ramps in (no jump, so no new run), and the judge's track follows it
+    there; the dead reckoning from the run's first segment does not.  ``k`` <= 0: none."""
     drop = np.zeros(len(kept), bool)
     idx = np.flatnonzero(kept)
     if not k > 0.0 or not len(idx):
@@ -200,9 +204,7 @@ def last_run_drift(epochs: Epochs, kept: np.ndarray, seg: np.ndarray,
     if len(ids) < 2 or last.sum() == kept.sum():
         return drop
     later = last & (seg[0] != ids[0])
-    judge = copy.deepcopy(probe)
-    judge["filter"]["smooth"] = True
-    track = run(dataclasses.replace(epochs, has_gnss=kept & ~later), judge)
+    track = run(dataclasses.replace(epochs, has_gnss=kept & ~later), probe)
     for sid in ids[1:]:
         f = np.flatnonzero(last & (seg[0] == sid))
         off = math.hypot(float(np.median(epochs.gnss_e[f] - track.e[f])),
