@@ -98,6 +98,55 @@ def test_fuse_reads_nmea_from_stdin(gpsdr, drive_dir: Path) -> None:
     assert len(lines) > 5000
 
 
+def _ck(body: str) -> str:
+    x = 0
+    for c in body.encode():
+        x ^= c
+    return f"${body}*{x:02X}"
+
+
+def test_standard_sentences_not_used_are_told_apart_from_damage(gpsdr, tmp_path: Path) -> None:
+    """GSV and DTM are counted as "not used: ...", not as unknown; the summary line splits
+    them from damaged records and the total stays every record not used."""
+    from gpsdr_cli.cli.fuse import skipped_summary
+    from gpsdr_cli.io.nmea import parse_nmea
+
+    lines = []
+    for i in range(6):
+        tod = f"1200{i:02d}.00"
+        lat = f"4807.{38 + 5 * i:03d},N"
+        lines += [_ck("GNDTM,W84,,0.0,N,0.0,E,0.0,W84"),
+                  _ck(f"GNRMC,{tod},A,{lat},01131.000,E,0.2,0.0,170524,,,A"),
+                  _ck(f"GNGGA,{tod},{lat},01131.000,E,1,08,0.9,545.4,M,46.9,M,,"),
+                  _ck("GPGSV,2,1,08,01,40,083,46,02,17,308,41,12,07,344,39,14,22,228,45"),
+                  _ck("GPGSV,2,2,08,15,40,083,46,16,17,308,41,17,07,344,39,18,22,228,45")]
+    lines += [_ck("GPXYZ,1,2,3"), _ck("GNGGA,120009.00,4807.100,N,01131.000,E,1,08")[:-2] + "00"]
+    data = ("\r\n".join(lines) + "\r\n").encode()
+    fixes, report, _ = parse_nmea(data, name="u.nmea")
+    assert len(fixes) == 6
+    assert report.counts["not used: GSV (satellites in view)"] == 12
+    assert report.counts["not used: DTM (datum reference)"] == 6
+    assert report.first["not used: DTM (datum reference)"] == "u.nmea:1"
+    assert report.counts["unknown sentence XYZ"] == 1 and report.counts["bad checksum"] == 1
+    assert report.total == 20
+    assert skipped_summary(report.counts) == (
+        "20 input records skipped (18 sentences not used: GSV, DTM; 2 damaged or unusable)")
+    assert skipped_summary({}) == "0 input records skipped"
+    assert skipped_summary({"bad checksum": 2}) == "2 input records skipped (2 damaged or unusable)"
+    assert skipped_summary({"not used: TXT (text message)": 1}) == (
+        "1 input records skipped (1 sentence not used: TXT)")
+
+    path = tmp_path / "u.nmea"
+    path.write_bytes(data)
+    result = gpsdr(["fuse", "--gps", path, "-o", tmp_path / "u.parquet"])
+    assert result.exit_code == 0, result.stderr
+    assert ("6 GNSS fixes used, 20 input records skipped (18 sentences not used: GSV, DTM; "
+            "2 damaged or unusable) -> ") in result.stderr
+    info = gpsdr(["info", path])
+    assert "not used: GSV (satellites in view)" in info.stdout
+    assert "unknown sentence GSV" not in info.stdout
+
+
 def test_fuse_mcap_default_outputs(gpsdr, tmp_path: Path) -> None:
     src = SHARED_DATA / "mcap_samples" / "ublox_gps_ros2.mcap"
     if not src.exists():

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import json
 import math
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any, Self
 
@@ -47,6 +48,46 @@ def stats_next_to(track: Path, fmt: str) -> Path:
         stem = stem.removesuffix(suffix)
     stem = stem.removesuffix(".fused")
     return track.with_name(f"{stem}.stats.{'parquet' if fmt == 'parquet' else 'csv'}")
+
+
+#: Skip reasons of records a reader left out on purpose (standard sentences it does not
+#: use, e.g. ``"not used: GSV (satellites in view)"``), not because they were damaged.
+NOT_USED_PREFIX = "not used:"
+#: At most this many sentence types are named in the summary line.
+_NOT_USED_NAMED = 4
+
+
+def skipped_summary(counts: Mapping[str, int]) -> str:
+    """``"56 input records skipped (42 sentences not used: GSV, DTM; 14 damaged or
+    unusable)"`` from the skip counts by reason; a part with no records is left out, and
+    with nothing skipped: ``"0 input records skipped"``."""
+    total = int(sum(counts.values()))
+    text = f"{total} input records skipped"
+    if total == 0:
+        return text
+    unused: dict[str, int] = {}
+    for reason, n in counts.items():
+        if reason.startswith(NOT_USED_PREFIX):
+            kind = (reason[len(NOT_USED_PREFIX):].split() or ["?"])[0]  # "GSV"
+            unused[kind] = unused.get(kind, 0) + int(n)
+    n_unused = sum(unused.values())
+    parts = []
+    if n_unused:
+        kinds = sorted(unused, key=lambda k: -unused[k])  # most first; ties in report order
+        names = ", ".join(kinds[:_NOT_USED_NAMED]) + (", ..." if len(kinds) > _NOT_USED_NAMED else "")
+        parts.append(f"{n_unused} sentence{'s' if n_unused != 1 else ''} not used: {names}")
+    if total - n_unused:
+        parts.append(f"{total - n_unused} damaged or unusable")
+    return f"{text} ({'; '.join(parts)})"
+
+
+def _skip_counts(info: Mapping[str, str]) -> dict[str, int]:
+    """Skip counts by reason from the track metadata (``skipped``: JSON reason -> count)."""
+    try:
+        return {r: int(v["count"]) for r, v in json.loads(info.get("skipped", "{}")).items()}
+    except (ValueError, TypeError, KeyError):
+        total = int(info.get("skipped_total", 0) or 0)
+        return {"": total} if total else {}
 
 
 @click.command(cls=SmoothCommand)
@@ -300,7 +341,7 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
         tag = " + RTS"
     click.echo(f"{info['filter']}{tag}: "
                f"{len(res.track)} epochs, {info['gnss_used']} GNSS fixes used, "
-               f"{info['skipped_total']} input records skipped -> {where}"
+               f"{skipped_summary(_skip_counts(info))} -> {where}"
                + (f", {stats_out}" if stats_out else ""), file=err)
     if auto:
         click.echo(f"GNSS time offset (auto): {res.gnss_offset_s:+.3f} s ({res.gnss_offset_note})",

@@ -112,9 +112,11 @@ decoded; Latin-1 bytes need no decoding (NMEA is ASCII); both are named in
 Everything that is skipped is counted by reason in the :class:`SkipReport`
 with the first ``name:line`` where it occurred; ``strict=True`` raises
 :class:`ParseError` (or :class:`ChecksumError`) for the first such line
-instead.  Unknown but well-formed sentences (GSV, proprietary ``$P...`` other than the
-two above, AIS ``!AIVDM``, numeric talkers, six-letter addresses) are counted and never
-fatal.
+instead.  Well-formed sentences this reader does not read are counted and never fatal:
+standard NMEA 0183 types it does not use (GSV, DTM, TXT, ... listed in ``_NOT_USED``) as
+``"not used: GSV (satellites in view)"``; unknown ones (other types, proprietary ``$P...``
+other than the two above, AIS ``!AIVDM``, numeric talkers, six-letter addresses) as
+``"unknown sentence ..."``.
 """
 
 from __future__ import annotations
@@ -154,6 +156,36 @@ _KNOWN = {b"GGA": _GGA, b"RMC": _RMC, b"GSA": _GSA, b"VTG": _VTG, b"GST": _GST, 
 _PROPRIETARY = {(b"PTNL", b"GGK"): _GGK, (b"PUBX", b"00"): _PUBX}
 _TYPE_NAME = {v: k.decode() for k, v in _KNOWN.items()} | {
     v: f"{a.decode()},{m.decode()}" for (a, m), v in _PROPRIETARY.items()}
+#: Standard NMEA 0183 sentence types (any talker) this reader does not use, with a short
+#: plain name: counted as ``"not used: GSV (satellites in view)"``, not as unknown, so a
+#: log full of them does not read as damaged.  Never fatal, like unknown sentences.
+_NOT_USED = {
+    b"GSV": "satellites in view",
+    b"DTM": "datum reference",
+    b"TXT": "text message",
+    b"GBS": "satellite fault detection",
+    b"GRS": "range residuals",
+    b"GPQ": "poll request",
+    b"GNQ": "poll request",
+    b"GLQ": "poll request",
+    b"GBQ": "poll request",
+    b"VLW": "distance travelled",
+    b"HDT": "true heading",
+    b"HDG": "magnetic heading, deviation and variation",
+    b"HDM": "magnetic heading",
+    b"THS": "true heading and status",
+    b"ROT": "rate of turn",
+    b"RMB": "navigation to a waypoint",
+    b"RMA": "Loran-C fix",
+    b"BOD": "bearing origin to destination",
+    b"BWC": "bearing and distance to a waypoint",
+    b"XTE": "cross-track error",
+    b"RTE": "route",
+    b"WPL": "waypoint location",
+    b"APB": "autopilot sentence B",
+    b"MSS": "beacon receiver status",
+    b"ALM": "GPS almanac",
+}
 #: Bytes of a sentence's start that tell its kind: '$' + address + ','; for the
 #: proprietary addresses read, the message id and its comma too.
 _HEAD = 7
@@ -522,6 +554,8 @@ def _classify(head: bytes, bang: bool) -> int | str:
             return kind
         if talker[:1] == b"P":
             return "unknown sentence (proprietary $P...)"
+        if typ in _NOT_USED:
+            return f"not used: {typ.decode()} ({_NOT_USED[typ]})"
         return f"unknown sentence {typ.decode()}"
     if addr[:1] == b"P" and addr.isalnum():
         return "unknown sentence (proprietary $P...)"

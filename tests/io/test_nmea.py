@@ -274,7 +274,8 @@ def test_missing_date_names_the_dated_sentences_skipped() -> None:
     with pytest.raises(MissingDateError, match=r"1 malformed time in RMC\)"):
         parse_nmea(log(rmc("1200"), gga("120000")), name="x.nmea")
     # no dated sentence skipped: the skip summary
-    with pytest.raises(MissingDateError, match=r"with a date; skipped: 1 unknown sentence GSV\)"):
+    with pytest.raises(MissingDateError,
+                       match=r"with a date; skipped: 1 not used: GSV \(satellites in view\)\)"):
         parse_nmea(log(gga("120000"), ck("GPGSV,1,1,00")), name="x.nmea")
 
 
@@ -353,8 +354,8 @@ def test_skip_counts_by_reason_with_first_line() -> None:
                ck("GPGSV,3,2,11,01,06,014,08,12,43,207,28,14,06,049,,15,44,171,23"))
     fixes, report, _ = parse_nmea(data, name="r.nmea")
     assert len(fixes) == 1
-    assert report.counts["unknown sentence GSV"] == 2
-    assert report.first["unknown sentence GSV"] == "r.nmea:3"
+    assert report.counts["not used: GSV (satellites in view)"] == 2
+    assert report.first["not used: GSV (satellites in view)"] == "r.nmea:3"
     assert report.counts["unknown sentence (proprietary $P...)"] == 1
     assert report.counts["unknown sentence (numeric talker)"] == 1
     assert report.counts["unknown sentence (six-letter address)"] == 1
@@ -393,7 +394,7 @@ def test_strict_raises_at_first_bad_line() -> None:
     with pytest.raises(ParseError, match=r"^s\.nmea:1: malformed time in GGA: '\$GPGGA,1200,.*"
                                          r"expected hhmmss\[\.sss\]"):
         parse_nmea(log(gga("1200")), name="s.nmea", strict=True, date=DAY)
-    fixes, _, _ = parse_nmea(log(rmc("120000"), ck("GPGSV,1,1,00")), strict=True)  # unknown: fine
+    fixes, _, _ = parse_nmea(log(rmc("120000"), ck("GPGSV,1,1,00")), strict=True)  # not used: fine
     assert len(fixes) == 1
 
 

@@ -109,7 +109,7 @@ def test_signalk_gps_log_gga_gsa_rmc_vtg_cycle() -> None:
     assert g.pdop[0] == pytest.approx(3.11)  # GSA after the GGA joins its epoch
     assert g.speed_mps[0] == pytest.approx(0.58 * 1852 / 3600, abs=1e-9)
     assert np.isfinite(g.pdop[:-1]).all()
-    assert dict(drive.skipped.counts) == {"unknown sentence GSV": 943}
+    assert dict(drive.skipped.counts) == {"not used: GSV (satellites in view)": 943}
 
 
 def test_mixed_ubx_binary_and_nmea() -> None:
@@ -120,7 +120,7 @@ def test_mixed_ubx_binary_and_nmea() -> None:
     assert g.lon_deg[0] == pytest.approx(-(2 + 14.42234 / 60), abs=DEG)
     assert g.alt_m[0] == pytest.approx(65.4 + 48.5)
     assert g.pdop.tolist() == [12.55, 12.55] and g.vdop.tolist() == [9.07, 9.06]  # 4 GSAs merged
-    assert drive.skipped.counts["unknown sentence GSV"] == 5
+    assert drive.skipped.counts["not used: GSV (satellites in view)"] == 5
     assert drive.meta["date_source"] == "argument"
     with pytest.raises(NoDataError, match="--date"):
         read_nmea(DATA / "pygpsdata-mixed.log")
