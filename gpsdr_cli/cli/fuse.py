@@ -50,9 +50,6 @@ def stats_next_to(track: Path, fmt: str) -> Path:
     return track.with_name(f"{stem}.stats.{'parquet' if fmt == 'parquet' else 'csv'}")
 
 
-#: Skip reasons of records a reader left out on purpose (standard sentences it does not
-#: use, e.g. ``"not used: GSV (satellites in view)"``), not because they were damaged.
-NOT_USED_PREFIX = "not used:"
 #: At most this many sentence types are named in the summary line.
 _NOT_USED_NAMED = 4
 
@@ -61,14 +58,16 @@ def skipped_summary(counts: Mapping[str, int]) -> str:
     """``"56 input records skipped (42 sentences not used: GSV, DTM; 14 damaged or
     unusable)"`` from the skip counts by reason; a part with no records is left out, and
     with nothing skipped: ``"0 input records skipped"``."""
+    from ..io.drive import NOT_USED
+
     total = int(sum(counts.values()))
     text = f"{total} input records skipped"
     if total == 0:
         return text
     unused: dict[str, int] = {}
     for reason, n in counts.items():
-        if reason.startswith(NOT_USED_PREFIX):
-            kind = (reason[len(NOT_USED_PREFIX):].split() or ["?"])[0]  # "GSV"
+        if reason.startswith(NOT_USED):
+            kind = (reason[len(NOT_USED):].split() or ["?"])[0]  # "GSV"
             unused[kind] = unused.get(kind, 0) + int(n)
     n_unused = sum(unused.values())
     parts = []
@@ -79,15 +78,6 @@ def skipped_summary(counts: Mapping[str, int]) -> str:
     if total - n_unused:
         parts.append(f"{total - n_unused} damaged or unusable")
     return f"{text} ({'; '.join(parts)})"
-
-
-def _skip_counts(info: Mapping[str, str]) -> dict[str, int]:
-    """Skip counts by reason from the track metadata (``skipped``: JSON reason -> count)."""
-    try:
-        return {r: int(v["count"]) for r, v in json.loads(info.get("skipped", "{}")).items()}
-    except (ValueError, TypeError, KeyError):
-        total = int(info.get("skipped_total", 0) or 0)
-        return {"": total} if total else {}
 
 
 @click.command(cls=SmoothCommand)
@@ -339,9 +329,10 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
     tag = {"rts": " + RTS", "graph": " + graph"}.get(info.get("smoother", ""), "")
     if "smoother" not in info and info.get("smoothed") == "true":
         tag = " + RTS"
+    skipped = {r: v["count"] for r, v in json.loads(info["skipped"]).items()}
     click.echo(f"{info['filter']}{tag}: "
                f"{len(res.track)} epochs, {info['gnss_used']} GNSS fixes used, "
-               f"{skipped_summary(_skip_counts(info))} -> {where}"
+               f"{skipped_summary(skipped)} -> {where}"
                + (f", {stats_out}" if stats_out else ""), file=err)
     if auto:
         click.echo(f"GNSS time offset (auto): {res.gnss_offset_s:+.3f} s ({res.gnss_offset_note})",

@@ -50,51 +50,40 @@ from ..epochs import Epochs
 from ..rtk_false_fix import RAYLEIGH_MEDIAN
 from .base import FilterResult
 
-#: the last screen: (key, fix east, north and time steps in fix order, dead-reckoning sums,
-#: which fixes were left out, info).  A smoothed run's quality check runs the forward filter
-#: again, and every filter of a comparison is given the same screen
-_LAST: list[tuple[tuple, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                  dict]] = []
+#: the last screen: (its drive's :func:`_fingerprint`, which of the fixes were left out, info).
+#: A smoothed run's quality check runs the forward filter again, and every filter of a
+#: comparison is given the same screen
+_LAST: list[tuple[tuple, np.ndarray, dict]] = []
 
 
-def _span(epochs: Epochs) -> slice:
-    """The epochs from the first fix to the last: the dead reckoning the screen weighs (a
-    backward pass starts at the last fix, so its lead-in is the forward pass's tail)."""
+def _fingerprint(epochs: Epochs, params: Params) -> tuple:
+    """What the screen weighs: the parameters (the filter and smoothing aside: the judge is
+    the ekf, smoothed, whatever runs after it), the fixes (east, north, time steps) and the
+    dead reckoning from the first fix to the last (counts, sums of readings; a backward
+    pass starts at the last fix, so its lead-in is the forward pass's tail)."""
     f = np.flatnonzero(epochs.has_gnss)
-    return slice(int(f[0]), int(f[-1]) + 1) if len(f) else slice(0, 0)
-
-
-def _key(epochs: Epochs, params: Params) -> tuple:
-    """The same parameters (the filter and smoothing aside: the judge is the ekf, smoothed,
-    whatever runs after it) and counts over the fixes' span."""
-    s = _span(epochs)
+    s = slice(int(f[0]), int(f[-1]) + 1) if len(f) else slice(0, 0)
+    gyro, odo = epochs.has_gyro[s], epochs.has_odo[s]
     return (repr({k: v for k, v in params.items() if k != "filter"}), s.stop - s.start,
-            int(np.count_nonzero(epochs.has_gnss)), int(np.count_nonzero(epochs.has_gyro[s])),
-            int(np.count_nonzero(epochs.has_odo[s])))
+            int(np.count_nonzero(gyro)), int(np.count_nonzero(odo)),
+            float(np.nansum(epochs.odo_speed_mps[s][odo])),
+            float(np.nansum(epochs.yaw_rate_radps[s][gyro])),
+            epochs.gnss_e[f], epochs.gnss_n[f], np.diff(np.asarray(epochs.t_ns, np.int64)[f]))
 
 
-def _dr_sums(epochs: Epochs) -> np.ndarray:
-    """The odometer's and the gyro's readings over the fixes' span, summed."""
-    s = _span(epochs)
-    odo, yaw = epochs.odo_speed_mps[s], epochs.yaw_rate_radps[s]
-    return np.array([np.nansum(odo[epochs.has_odo[s]]), np.nansum(yaw[epochs.has_gyro[s]])])
+def _same(a: tuple, b: tuple) -> bool:
+    """Two fingerprints agree (arrays element by element, NaN equal to NaN)."""
+    return all(np.array_equal(x, y, equal_nan=True) if isinstance(x, np.ndarray) else x == y
+               for x, y in zip(a, b, strict=True))
 
 
-def _cached(epochs: Epochs, params: Params) -> tuple[Epochs, dict] | None:
-    """The last screen's answer if ``epochs`` is its drive (the dead reckoning before the
-    first fix and after the last aside)."""
-    if not _LAST:
+def _cached(epochs: Epochs, fp: tuple) -> tuple[Epochs, dict] | None:
+    """The last screen's answer if ``fp`` (:func:`_fingerprint`) is its drive's."""
+    if not _LAST or not _same(_LAST[0][0], fp):
         return None
-    key, fe, fn, dt, sums, out_fix, info = _LAST[0]
-    if key != _key(epochs, params) or not np.array_equal(sums, _dr_sums(epochs)):
-        return None
-    f = np.flatnonzero(epochs.has_gnss)
-    if not (np.array_equal(epochs.gnss_e[f], fe, equal_nan=True)
-            and np.array_equal(epochs.gnss_n[f], fn, equal_nan=True)
-            and np.array_equal(np.diff(np.asarray(epochs.t_ns, np.int64)[f]), dt)):
-        return None
+    _, out_fix, info = _LAST[0]
     has_gnss = epochs.has_gnss.copy()
-    has_gnss[f[out_fix]] = False
+    has_gnss[np.flatnonzero(has_gnss)[out_fix]] = False
     return dataclasses.replace(epochs, has_gnss=has_gnss), dict(info)
 
 
@@ -120,14 +109,12 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
 
         fwd, info = screen(reverse_epochs(epochs), params, nlos_drive, judge)
         return dataclasses.replace(epochs, has_gnss=fwd.has_gnss[::-1].copy()), info
-    hit = _cached(epochs, params)
+    fp = _fingerprint(epochs, params)
+    hit = _cached(epochs, fp)
     if hit is not None:
         return hit
     out, info = _screen(epochs, params, judge)
-    f = np.flatnonzero(epochs.has_gnss)
-    _LAST[:] = [(_key(epochs, params), epochs.gnss_e[f].copy(), epochs.gnss_n[f].copy(),
-                 np.diff(np.asarray(epochs.t_ns, np.int64)[f]), _dr_sums(epochs),
-                 ~out.has_gnss[f], dict(info))]
+    _LAST[:] = [(fp, ~out.has_gnss[epochs.has_gnss], dict(info))]
     return out, info
 
 

@@ -102,6 +102,10 @@ class ForwardAccel:
         return len(self.t_ns)
 
 
+#: The reason prefix of records a reader left out on purpose (standard sentences it does not
+#: use: "not used: GSV (satellites in view)"), not because they were damaged.
+NOT_USED = "not used:"
+
 @dataclass
 class SkipReport:
     """Records a reader skipped, counted by reason, with the first place each occurred."""

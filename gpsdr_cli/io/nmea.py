@@ -140,7 +140,7 @@ from gpsdr_cli.conventions import (
     FIX_RTK,
 )
 from gpsdr_cli.errors import ChecksumError, InputError, MissingDateError, NoDataError, ParseError
-from gpsdr_cli.io.drive import Drive, GnssFixes, SkipReport, Source
+from gpsdr_cli.io.drive import NOT_USED, Drive, GnssFixes, SkipReport, Source
 
 __all__ = ["looks_like_nmea", "parse_nmea", "read_nmea"]
 
@@ -555,7 +555,7 @@ def _classify(head: bytes, bang: bool) -> int | str:
         if talker[:1] == b"P":
             return "unknown sentence (proprietary $P...)"
         if typ in _NOT_USED:
-            return f"not used: {typ.decode()} ({_NOT_USED[typ]})"
+            return f"{NOT_USED} {typ.decode()} ({_NOT_USED[typ]})"
         return f"unknown sentence {typ.decode()}"
     if addr[:1] == b"P" and addr.isalnum():
         return "unknown sentence (proprietary $P...)"
