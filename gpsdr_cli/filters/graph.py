@@ -10,8 +10,9 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   eps_e, eps_n (m); b and s are
   random walks from keyframe to keyframe (``[gyro] bias_sd_radps`` over its correlation
   time, ``[odo] scale_rw_sd``), so every factor links neighbours only.
-* Dead reckoning between keyframes: integrated from the raw epochs at every iteration
-  (exact in psi, b and s; its Jacobians summed alongside: :mod:`.graph_kernels`), with the
+* Dead reckoning between keyframes: preintegrated from the raw epochs once per interval
+  (exact in psi and s; in b through moments of the gyro time, taken again when b moves
+  far: :func:`.graph_kernels._preintegrate`; Jacobians alongside), with the
   covariance of the displacement from the sensors' declared noise (``[gyro]``, ``[odo]``)
   plus a per-metre random walk ``[graph] dr_dist_sd``.  Without an odometer the speed
   state carries the position: driven by the forward accelerometer where there is one
@@ -679,6 +680,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     ab = np.zeros((gk.BAND + 1, n_x), order="F")  # LAPACK's layout: factored in place
     g = np.zeros(n_x)
     q = np.zeros((max(n_key - 1, 1), gk.N_Q))
+    pre = np.full((max(n_key - 1, 1), gk.N_PRE), np.nan)
     max_it = int(gp["max_iterations"])
     tol = float(gp["tolerance"])
     its = 0
@@ -695,7 +697,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         fix_kern = KERNELS["gauss"] if seg_k is not None else kern
         return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                             *args_fix, kern, c, ab, g, want, fix_kern, seg_sd, seg_vote,
-                            seg_kern, c * seg_mult)
+                            seg_kern, c * seg_mult, pre)
 
     try:
         for kern, c in stages:
