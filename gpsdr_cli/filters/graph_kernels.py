@@ -567,6 +567,23 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
 
 
 @njit(cache=True)
+def keyframe_epochs(t_s, mark, step_s):
+    """Greedy keyframes: epoch 0, every ``mark``ed epoch, and the first epoch ``step_s`` (s)
+    or more after the last keyframe (compiled: a Python loop over an hour at 100 Hz took
+    0.3 s per solve)."""
+    out = np.empty(len(t_s), np.int64)
+    out[0] = 0
+    m = 1
+    last_t = t_s[0]
+    for k in range(1, len(t_s)):
+        if mark[k] or t_s[k] - last_t >= step_s - 1e-9:
+            out[m] = k
+            m += 1
+            last_t = t_s[k]
+    return out[:m].copy()
+
+
+@njit(cache=True)
 def fix_weights(x, fix_e, fix_n, fix_sde, fix_sdn, kernel, c, w_out, r2_out):
     """Robust weight and squared normalised residual of each keyframe's fix (NaN: none)."""
     for i in range(len(fix_e)):
