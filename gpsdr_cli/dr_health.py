@@ -270,7 +270,8 @@ def screen(drive, params: dict, fix_en: tuple[np.ndarray, np.ndarray] | None = N
                                                                        strict=True))) / NS_PER_S
             out.odo_bad_s = secs
             out.notes.append(
-                f"odometer: {int(bad.sum())} of {len(bad)} readings ({secs:.0f} s in "
+                f"odometer: {int(bad.sum())} of {len(bad)} readings "
+                f"({secs:.{0 if secs >= 10 else 1}f} s in "
                 f"{len(starts_i)} stretch{'es' if len(starts_i) > 1 else ''}, first at "
                 f"{_when(int(odo_t[starts_i[0]]), t0)}) are not used: {why}; the track "
                 "follows the fixes there")
