@@ -627,11 +627,29 @@ _MIN_FIELDS_NO_CK = {b"GGA": 14, b"GNS": 12, b"RMC": 12, b"GLL": 7, b"GSA": 18, 
                      b"GST": 9, b"ZDA": 6}
 
 
+def _without_checksum_reasons(arr: np.ndarray, starts: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """The whole lines without ``*hh`` that are not read, grouped by skip reason: a standard
+    type the reader does not use is counted as that type (``not used: GSV ...``), as it is
+    with a checksum; any other line as an unknown sentence without checksum."""
+    if len(starts) == 0:
+        return []
+    cols = [arr[np.minimum(starts + 1 + j, len(arr) - 1)] for j in range(5)]
+    heads = np.ascontiguousarray(np.stack(cols, axis=1)).view("S5").ravel()
+    uniq, inverse = np.unique(heads, return_inverse=True)
+    why = []
+    for h in uniq.tolist():  # once per distinct address
+        reason = _classify(h, False)
+        why.append(reason if isinstance(reason, str) and reason.startswith(NOT_USED)
+                   else "unknown sentence without checksum")
+    by_reason = np.asarray(why)[inverse.ravel()]
+    return [(r, starts[by_reason == r]) for r in sorted(set(why))]
+
+
 def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndarray,
                                star: np.ndarray, eol: np.ndarray,
                                commas: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Of the sentences without ``*hh``, those read anyway: (starts, body ends), and the
-    starts of whole lines of a type this reader does not use (counted as unknown).
+    starts of whole lines of a type this reader does not use (:func:`_without_checksum_reasons`).
 
     NMEA 0183 made the checksum optional for most sentences before 2.0 and some
     receivers (old Garmin and Magellan handhelds, loggers that strip it) never send one;
@@ -727,7 +745,8 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     nock_start, nock_st, nock_other = _complete_without_checksum(
         arr, starts[no_ck], end[no_ck], star[no_ck], eol, commas)
     stats["no_checksum"] += len(nock_start)
-    probs.add("unknown sentence without checksum", nock_other + base, fatal=False)
+    for reason, at in _without_checksum_reasons(arr, nock_other):
+        probs.add(reason, at + base, fatal=False)
     truncated = np.setdiff1d(starts[no_ck], np.r_[nock_start, nock_other])
     probs.add("no checksum (truncated sentence)", truncated + base)
     _count_damaged_dated(arr, truncated, "no checksum (truncated sentence)", stats)
