@@ -84,9 +84,8 @@ def robust_cost(r2: float, kernel: int, c: float) -> float:
 def _add_block(ab, g, base, J, r, m, ncol, w, nz):
     """H += w J^T J and g += w J^T r for rows J[:m, :ncol] on unknowns base .. base+ncol-1.
 
-    Row by row over the row's non-zero columns: a factor's row touches 2-12 of the 16
-    unknowns, so the dense product cost six times the arithmetic (the assembly was
-    three quarters of an iteration)."""
+    Row by row over the row's non-zero columns (``nz``: scratch, ``ncol`` long): a
+    factor's row touches 2-12 of the 16 unknowns."""
     for k in range(m):
         cnt = 0
         for a in range(ncol):
@@ -172,16 +171,17 @@ def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
             var_sp, t_free, t_nogyro, turned)
 
 
-# per-interval preintegrated sums (:func:`_preintegrate`): the bias they were taken at, the
-# longest gyro time in the interval (s), the raw heading change (rad, bias aside), the gyro
-# time (s), then per speed source (odometer; speed state's start, end) the moments
-# sum(w tau^n e^(i a)), n = 0..N_MOM-1, as (re, im) pairs
-PRE_B, PRE_TAU, PRE_PHI, PRE_TG = 0, 1, 2, 3
+# per-interval preintegrated sums (:func:`_preintegrate`): the bias they were taken at
+# (rad/s), the raw heading change (rad, bias aside), the gyro time (s), then per speed source
+# (odometer; speed state's start, end) the moments sum(w tau^n e^(i a)), n = 0..N_MOM-1, as
+# (re, im) pairs
+PRE_B, PRE_PHI, PRE_TG = 0, 1, 2
 N_MOM = 5
-PRE_M = 4
+PRE_M = 3
 N_PRE = PRE_M + 3 * 2 * N_MOM
 #: largest bias change x gyro time (rad) the moments are expanded over before they are taken
-#: again: the expansion's error is below (0.02)^5 / 120 of the displacement
+#: again: the expansion's error is below (0.02)^4 / 24 (the bias Jacobian's sum, one order
+#: short of the displacement's) relative
 PRE_REFRESH_RAD = 0.02
 
 
@@ -226,7 +226,6 @@ def _preintegrate(pre, i, j0, j1, bias, t_s, yaw, odo, gyro_ok, odo_ok, prm):
             _moments(pre, i, PRE_M + 2 * N_MOM, (1.0 - tau) * dt, tg_mid, ca, sa)
             _moments(pre, i, PRE_M + 4 * N_MOM, tau * dt, tg_mid, ca, sa)
     pre[i, PRE_B] = bias
-    pre[i, PRE_TAU] = t_gyro
     pre[i, PRE_PHI] = phi
     pre[i, PRE_TG] = t_gyro
 
@@ -266,7 +265,7 @@ def _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre):
     psi0 = x[b0 + PSI]
     bias = x[b0 + B]
     d = bias - pre[i, PRE_B]
-    if not abs(d) * pre[i, PRE_TAU] <= PRE_REFRESH_RAD:  # also NaN: not yet taken
+    if not abs(d) * pre[i, PRE_TG] <= PRE_REFRESH_RAD:  # also NaN: not yet taken
         _preintegrate(pre, i, j0, j1, bias, t_s, yaw, odo, gyro_ok, odo_ok, prm)
         d = 0.0
     c0 = math.cos(psi0)
