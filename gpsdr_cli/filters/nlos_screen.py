@@ -124,10 +124,12 @@ def _screen(epochs: Epochs, params: Params,
     from .gnss_model import reflected_doppler
     from .graph import own_sigmas, smooth_graph, solve_by_segments
 
-    # the start: the ekf smoothed, with an NLOS drive's receiver velocity sigmas
+    # the start: the ekf, with an NLOS drive's receiver velocity sigmas (forward only: the fit
+    # reached the same fixes from it as from the smoothed track, one RTS pass sooner)
     probe = reflected_doppler(params, bool(epochs.has_odo.any()))
-    probe["filter"]["smooth"] = True
+    probe["filter"]["smooth"] = False
     init = run(epochs, probe)
+    probe["filter"]["smooth"] = True
     # each fix weighed by its own sigma: the chord check's scaled sigmas would shrink the
     # very residuals the weights are for; white fixes, as the graph takes an NLOS drive
     fit = own_sigmas(probe)
