@@ -104,6 +104,15 @@ def _add_block(ab, g, base, J, r, m, ncol, w, nz):
 
 
 @njit(cache=True)
+def _turn(yaw_k, bias, dt, gyro_ok_k, t_gyro):
+    """One step's heading change (rad) with the gyro's reading, 0 without one, and the gyro
+    time (s) to the step's middle and to its end, from ``t_gyro`` at its start."""
+    if gyro_ok_k:
+        return -(yaw_k - bias) * dt, t_gyro + 0.5 * dt, t_gyro + dt
+    return 0.0, t_gyro, t_gyro
+
+
+@njit(cache=True)
 def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
     """Dead reckoning over epochs j0+1 .. j1 from keyframe i's state.
 
@@ -135,13 +144,8 @@ def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
             t_free += dt
             continue
         k = j - 1
-        if gyro_ok[k]:
-            step = -(yaw[k] - bias) * dt
-            tg_mid = t_gyro + 0.5 * dt
-            t_gyro += dt
-        else:
-            step = 0.0
-            tg_mid = t_gyro
+        step, tg_mid, t_gyro = _turn(yaw[k], bias, dt, gyro_ok[k], t_gyro)
+        if not gyro_ok[k]:
             t_nogyro += dt
         turned += abs(step)
         psi_mid = psi0 + dpsi + 0.5 * step
@@ -207,14 +211,9 @@ def _preintegrate(pre, i, j0, j1, bias, t_s, yaw, odo, gyro_ok, odo_ok, prm):
         if dt <= 0.0 or dt > max_step:
             continue
         k = j - 1
+        step, tg_mid, t_gyro = _turn(yaw[k], bias, dt, gyro_ok[k], t_gyro)
         if gyro_ok[k]:
-            step = -(yaw[k] - bias) * dt
-            tg_mid = t_gyro + 0.5 * dt
-            t_gyro += dt
-            phi += -yaw[k] * dt
-        else:
-            step = 0.0
-            tg_mid = t_gyro
+            phi -= yaw[k] * dt
         a = dpsi + 0.5 * step
         dpsi += step
         ca = math.cos(a)
