@@ -44,8 +44,8 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   user's calibration (``--gyro-bias``, ``--odo-scale``) or loosely at 0 and 1.
 
 Engine: Levenberg-Marquardt over iteratively reweighted least squares on the banded normal
-equations (15 super-diagonals), solved by banded Cholesky
-(LAPACK's ``dpbsv``): O(keyframes) per iteration; an accepted step is doubled
+equations (15 super-diagonals), solved by LAPACK's banded Cholesky (``dpbsv``):
+O(keyframes) per iteration; an accepted step is doubled
 while the robust cost keeps falling (:data:`EXTRAPOLATE_MAX`), which halves the iterations
 where reweighting lets a reflected run go slowly.  Chosen over GTSAM (its
 Python-side custom factors cost milliseconds each, and a pose chain with a per-sample
