@@ -57,8 +57,8 @@ _LAST: list[tuple[tuple, np.ndarray, dict]] = []
 
 
 def _fingerprint(epochs: Epochs, params: Params) -> tuple:
-    """What the screen weighs: the parameters (the filter and smoothing aside: the judge is
-    the ekf, smoothed, whatever runs after it), the fixes (east, north, time steps) and the
+    """What the screen weighs: the parameters (the filter and smoothing aside: the judges are
+    the ekf whatever runs after it), the fixes (east, north, time steps) and the
     dead reckoning from the first fix to the last (counts, sums of readings; a backward
     pass starts at the last fix, so its lead-in is the forward pass's tail)."""
     f = np.flatnonzero(epochs.has_gnss)

@@ -106,6 +106,7 @@ class ForwardAccel:
 #: use: "not used: GSV (satellites in view)"), not because they were damaged.
 NOT_USED = "not used:"
 
+
 @dataclass
 class SkipReport:
     """Records a reader skipped, counted by reason, with the first place each occurred."""

@@ -627,15 +627,20 @@ _MIN_FIELDS_NO_CK = {b"GGA": 14, b"GNS": 12, b"RMC": 12, b"GLL": 7, b"GSA": 18, 
                      b"GST": 9, b"ZDA": 6}
 
 
+def _heads(arr: np.ndarray, at: np.ndarray, width: int) -> np.ndarray:
+    """The ``width`` bytes from each offset in ``at`` (clipped at the end of ``arr``), one
+    ``S{width}`` value each: a sentence's address, classified once per distinct one."""
+    idx = np.minimum(np.asarray(at, np.int64)[:, None] + np.arange(width), len(arr) - 1)
+    return np.ascontiguousarray(arr[idx]).view(f"S{width}").ravel()
+
+
 def _without_checksum_reasons(arr: np.ndarray, starts: np.ndarray) -> list[tuple[str, np.ndarray]]:
     """The whole lines without ``*hh`` that are not read, grouped by skip reason: a standard
     type the reader does not use is counted as that type (``not used: GSV ...``), as it is
     with a checksum; any other line as an unknown sentence without checksum."""
     if len(starts) == 0:
         return []
-    cols = [arr[np.minimum(starts + 1 + j, len(arr) - 1)] for j in range(5)]
-    heads = np.ascontiguousarray(np.stack(cols, axis=1)).view("S5").ravel()
-    uniq, inverse = np.unique(heads, return_inverse=True)
+    uniq, inverse = np.unique(_heads(arr, starts + 1, 5), return_inverse=True)
     why = []
     for h in uniq.tolist():  # once per distinct address
         reason = _classify(h, False)
@@ -672,9 +677,7 @@ def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndar
     ok &= printable[st] - printable[starts + 1] == 0
     nf = np.searchsorted(commas, st) - np.searchsorted(commas, starts) + 1
     idx = np.flatnonzero(ok)
-    cols = [arr[np.minimum(starts[idx] + 1 + j, len(arr) - 1)] for j in range(8)]
-    heads = np.ascontiguousarray(np.stack(cols, axis=1)).view("S8").ravel()
-    uniq, inverse = np.unique(heads, return_inverse=True)
+    uniq, inverse = np.unique(_heads(arr, starts[idx] + 1, 8), return_inverse=True)
     never = np.iinfo(np.int64).max
     need = np.full(len(uniq), never)
     address = np.zeros(len(uniq), bool)
@@ -697,10 +700,8 @@ def _count_damaged_dated(arr: np.ndarray, starts: np.ndarray, reason: str, stats
     has no date."""
     if len(starts) == 0:
         return
-    wide = max(_HEAD_PROPRIETARY.values())
-    idx = np.minimum(starts[:, None] + np.arange(wide), len(arr) - 1)
-    heads = np.ascontiguousarray(arr[idx]).view(f"S{wide}").ravel()
-    uniq, counts = np.unique(heads, return_counts=True)
+    uniq, counts = np.unique(_heads(arr, starts, max(_HEAD_PROPRIETARY.values())),
+                             return_counts=True)
     for head, count in zip(uniq.tolist(), counts.tolist(), strict=True):
         kind = _classify(head[1:], head[:1] == b"!")
         if kind in _DATED:
