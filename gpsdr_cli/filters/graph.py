@@ -44,7 +44,7 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   user's calibration (``--gyro-bias``, ``--odo-scale``) or loosely at 0 and 1.
 
 Engine: Levenberg-Marquardt over iteratively reweighted least squares on the banded normal
-equations (15 super-diagonals), solved by LAPACK's banded Cholesky (``dpbsv``):
+equations (10 super-diagonals), solved by LAPACK's banded Cholesky (``dpbsv``):
 O(keyframes) per iteration; an accepted step is doubled
 while the robust cost keeps falling (:data:`EXTRAPOLATE_MAX`), which halves the iterations
 where reweighting lets a reflected run go slowly.  Chosen over GTSAM (its
@@ -661,12 +661,15 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
             if len(kf):
                 x[gk.N_X * ks + gk.GE] = np.median(fe[kf] - x[gk.N_X * kf + gk.E])
                 x[gk.N_X * ks + gk.GN] = np.median(fn[kf] - x[gk.N_X * kf + gk.N])
-    prior_mean = np.array([x[0], x[1], x[2], x[3], b_mean, s_mean, 0.0, 0.0])
-    prior_sd = np.array([float(gp["init_pos_sd_m"]), float(gp["init_pos_sd_m"]),
-                         float(gp["init_heading_sd_rad"]), float(gp["init_speed_sd_mps"]),
-                         b_sd, s_sd, err_sd[0], err_sd[0]])
+    prior_mean = x[:gk.N_X].copy()
+    prior_mean[[gk.B, gk.S, gk.GE, gk.GN]] = b_mean, s_mean, 0.0, 0.0
+    prior_sd = np.zeros(gk.N_X)
+    prior_sd[[gk.E, gk.N]] = float(gp["init_pos_sd_m"])
+    prior_sd[gk.PSI] = float(gp["init_heading_sd_rad"])
+    prior_sd[gk.V] = float(gp["init_speed_sd_mps"])
+    prior_sd[[gk.B, gk.S, gk.GE, gk.GN]] = b_sd, s_sd, err_sd[0], err_sd[0]
     if seg_k is not None and seg_k[0] >= 0:
-        prior_sd[6:] = SEGMENT_FREE_SD_M
+        prior_sd[[gk.GE, gk.GN]] = SEGMENT_FREE_SD_M
 
     kernel = kernel_id(params, "kernel")
     c_final = float(gp["kernel_scale_err_states"] if err_on else gp["kernel_scale"])
@@ -784,7 +787,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         cb = None
         var_e_k = sb[gk.BAND, gk.E::gk.N_X].copy()
         var_n_k = sb[gk.BAND, gk.N::gk.N_X].copy()
-        cov_en_k = sb[gk.BAND - 1, gk.N::gk.N_X].copy()   # H^-1[8i, 8i+1]
+        cov_en_k = sb[gk.BAND + gk.E - gk.N, gk.N::gk.N_X].copy()   # H^-1[E_i, N_i]
         s_var = sb[gk.BAND, gk.S::gk.N_X].copy()
         b_var = sb[gk.BAND, gk.B::gk.N_X].copy()
         sb = None
