@@ -89,6 +89,18 @@ def _longest_run_s(t_ns: np.ndarray, flag: np.ndarray) -> float:
                default=0.0)
 
 
+def flagged_seconds(t_ns: np.ndarray, flag: np.ndarray) -> float:
+    """Time the ``flag``ged readings cover (s): each stretch from its first stamp to one
+    reporting interval (the median spacing of ``t_ns``) past its last, so that a stretch of
+    n readings counts n intervals, not n - 1."""
+    starts, ends = _runs(flag)
+    if not len(starts):
+        return 0.0
+    period = float(np.median(np.diff(t_ns))) if len(t_ns) > 1 else 0.0
+    return float(sum(int(t_ns[b - 1] - t_ns[a]) + period
+                     for a, b in zip(starts, ends, strict=True))) / NS_PER_S
+
+
 def clipped_gyro(rate_radps: np.ndarray, min_rate_radps: float, min_samples: int,
                  pile_up: float) -> tuple[np.ndarray, list[float]]:
     """Samples at a clipping limit, and the limits found (rad/s, signed).
@@ -265,9 +277,8 @@ def screen(drive, params: dict, fix_en: tuple[np.ndarray, np.ndarray] | None = N
         bad &= np.isfinite(odo_v)
         if bad.any():
             out.odo_ok = ~bad
-            starts_i, ends_i = _runs(bad)
-            secs = float(sum((odo_t[b - 1] - odo_t[a]) for a, b in zip(starts_i, ends_i,
-                                                                       strict=True))) / NS_PER_S
+            starts_i, _ = _runs(bad)
+            secs = flagged_seconds(odo_t, bad)
             out.odo_bad_s = secs
             out.notes.append(
                 f"odometer: {int(bad.sum())} of {len(bad)} readings "
@@ -278,4 +289,5 @@ def screen(drive, params: dict, fix_en: tuple[np.ndarray, np.ndarray] | None = N
     return out
 
 
-__all__ = ["Health", "chord_sides_with_doppler", "clipped_gyro", "odometer_mismatch", "screen"]
+__all__ = ["Health", "chord_sides_with_doppler", "clipped_gyro", "flagged_seconds",
+           "odometer_mismatch", "screen"]

@@ -50,6 +50,20 @@ def _zero_while_moving(sim, start_s: float, duration_s: float, min_speed_mps: fl
     return h, t, (t >= start_s) & (t < start_s + duration_s) & (v > min_speed_mps)
 
 
+def test_flagged_seconds_count_every_reading_s_interval() -> None:
+    """47 readings at 100 Hz in two stretches (23 and 24) cover 0.47 s, and one lone
+    reading 0.01 s: first to last stamp alone said 0.45 s and 0 s."""
+    t_ns = np.arange(1000, dtype=np.int64) * 10_000_000
+    flag = np.zeros(1000, bool)
+    flag[100:123] = True
+    flag[500:524] = True
+    assert dr_health.flagged_seconds(t_ns, flag) == pytest.approx(0.47, abs=1e-9)
+    one = np.zeros(1000, bool)
+    one[7] = True
+    assert dr_health.flagged_seconds(t_ns, one) == pytest.approx(0.01, abs=1e-9)
+    assert dr_health.flagged_seconds(t_ns, np.zeros(1000, bool)) == 0.0
+
+
 def test_odometer_zero_while_moving_is_left_out(city) -> None:
     h, t, moving = _zero_while_moving(city, 100.0, 300.0, 1.0)
     assert h.odo_ok is not None and "odometer" in h.notes[0]
