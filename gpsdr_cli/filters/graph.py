@@ -56,11 +56,11 @@ graduated (graduated non-convexity, Yang et al. 2020): the Cauchy scale starts a
 2^(``gnc_stages`` - 1) x ``kernel_scale`` and halves stage by stage to ``kernel_scale``,
 so the start -- the forward filter's track, already pulled towards the biased fixes --
 does not lock the solution into accepting them (on an NLOS drive without an odometer over
-``nlos_no_odo_gnc_stages`` only).  On an NLOS drive with a gyro and an odometer a last stage follows under
-the bounded Geman-McClure kernel (``[graph] nlos_last_kernel``), as GNC's own last stage
-would be: Cauchy's cost keeps growing with the residual, so a long reflected run still pulls.
-A stage before the last only leads into the next, and ends at the looser
-``gnc_stage_tolerance``; the last converges to ``tolerance``.
+``nlos_no_odo_gnc_stages`` only).  On an NLOS drive with a gyro and an odometer a last
+stage follows under the bounded Geman-McClure kernel (``[graph] nlos_last_kernel``), as
+GNC's own last stage would be: Cauchy's cost keeps growing with the residual, so a long
+reflected run still pulls.  A stage before the last only leads into the next, and ends at
+the looser ``gnc_stage_tolerance``; the last converges to ``tolerance``.
 Kernel and scale by benchmark: docs/decisions/0002-graph-smoother.md and 0035.
 
 Marginal sigmas: the entries of H^-1 inside the band by the Takahashi recursion on the
