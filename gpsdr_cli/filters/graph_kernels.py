@@ -97,6 +97,8 @@ def _add_block(ab, g, base, J, r, m, ncol, w, nz):
             if J[k, a] != 0.0:
                 nz[cnt] = a
                 cnt += 1
+        if cnt and nz[cnt - 1] - nz[0] > BAND:  # the columns are ascending
+            raise ValueError("a factor couples unknowns outside the band")
         wr = w * r[k]
         for ia in range(cnt):
             a = nz[ia]
@@ -105,8 +107,6 @@ def _add_block(ab, g, base, J, r, m, ncol, w, nz):
             g[ra] += J[k, a] * wr
             for ib in range(ia, cnt):
                 bb = nz[ib]
-                if bb - a > BAND:
-                    raise ValueError("a factor couples unknowns outside the band")
                 ab[BAND + ra - (base + bb), base + bb] += wa * J[k, bb]
 
 
