@@ -68,7 +68,7 @@ def test_rts_step_against_the_textbook_gain() -> None:
     x_sn = x_prior + rng.normal(size=n)
     P_sn = 0.5 * P_prior
     B = np.zeros((n, n))
-    phi_times(Phi, P, B)
+    phi_times(n, Phi, P, B)
     np.testing.assert_allclose(B, Phi @ P, rtol=1e-13, atol=1e-13)
     x_s, P_s = np.zeros(n), np.zeros((n, n))
     rts_step(n, x, P, B, x_prior, P_prior, x_sn, P_sn, x_s, P_s, np.zeros((n, n)), np.zeros(n))

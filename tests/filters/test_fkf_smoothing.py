@@ -102,7 +102,7 @@ def test_fused_rts_step_is_the_generic_step_bit_for_bit(T: float, static: bool) 
         kf.phi_matrix(T, static, par, Phi, x_post)
         x_g, P_g = np.zeros(kf.NX), np.zeros((kf.NX, kf.NX))
         B = np.zeros((kf.NX, kf.NX))
-        phi_times(Phi, P_post, B)
+        phi_times(kf.NX, Phi, P_post, B)
         rts_step(kf.NX, x_post, P_post, B, x_prior, P_prior, x_sn, P_sn, x_g, P_g,
                  np.zeros((kf.NX, kf.NX)), np.zeros(kf.NX))
         x_f, P_f = np.zeros(kf.NX), np.zeros((kf.NX, kf.NX))

@@ -14,10 +14,9 @@ from numba import njit
 from .linalg import chol_solve, cholesky, symmetrize
 
 
-@njit(cache=True)
-def phi_times(Phi: np.ndarray, P: np.ndarray, B: np.ndarray) -> None:
-    """B <- Phi P (dense, k x k)."""
-    k = P.shape[0]
+@njit(cache=True, inline="always")
+def phi_times(k: int, Phi: np.ndarray, P: np.ndarray, B: np.ndarray) -> None:
+    """B <- Phi P (dense, k x k; inlined, as :func:`rts_step`)."""
     for i in range(k):
         for j in range(k):
             s = 0.0
