@@ -237,8 +237,7 @@ def _segment_weights(x: np.ndarray, seg_k: np.ndarray, fe: np.ndarray, fn: np.nd
     fix = np.flatnonzero(np.isfinite(fe) & (seg_k >= 0))
     off = segment_offsets(seg_k[fix], fe[fix] - x[gk.N_X * fix + gk.E],
                           fn[fix] - x[gk.N_X * fix + gk.N])
-    for i, r in zip(fix, off, strict=True):
-        out[i] = gk.robust_weight(r * r / (sd_m * sd_m), kernel, c)
+    out[fix] = gk.robust_weights(off * off / (sd_m * sd_m), kernel, c)
     return out
 
 

@@ -73,6 +73,15 @@ def robust_weight(r2: float, kernel: int, c: float) -> float:
 
 
 @njit(cache=True)
+def robust_weights(r2: np.ndarray, kernel: int, c: float) -> np.ndarray:
+    """:func:`robust_weight` of each element of ``r2``."""
+    out = np.empty(len(r2))
+    for i in range(len(r2)):
+        out[i] = robust_weight(r2[i], kernel, c)
+    return out
+
+
+@njit(cache=True)
 def robust_cost(r2: float, kernel: int, c: float) -> float:
     """rho(r2): 2 x the negative log-likelihood up to a constant (r2 for the Gaussian)."""
     if kernel == K_CAUCHY:
