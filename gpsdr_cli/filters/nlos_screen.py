@@ -17,7 +17,9 @@ Fix by fix, a 40-s run of 200 reflected fixes outvotes 70 clean ones.  So by def
 run, and the fixes kept are those of the runs within ``[graph] nlos_segment_keep_m`` of
 its track (docs/decisions/0044), less any of their fixes farther from that track than
 ``[gnss] nlos_screen_fix_sigmas`` of its own sigmas (:func:`far_fixes`: the edges of
-reflections, which the receiver ramps in and out; docs/decisions/0045).
+reflections, which the receiver ramps in and out; docs/decisions/0045), and less the
+fixes next to a left-out run that lie ``nlos_screen_edge_sigmas`` its way (:func:`edge_fixes`:
+the start of that ramp, nearer than far; docs/decisions/0049).
 
 The runs are cut against a track the reflections still pull where no clean fix anchors it
 (a reflected run at the end of a drive was kept whole).  So ``[gnss] nlos_screen_passes``
@@ -163,6 +165,9 @@ def _screen(epochs: Epochs, params: Params,
     # ... and so is a fix of a kept run that lies far from the fit's track: the edge of a
     # reflection the receiver's own filter ramps in and out (decisions/0045)
     out |= far_fixes(epochs, outcome.result, fix & ~out, float(g["nlos_screen_fix_sigmas"]))
+    out |= edge_fixes(epochs, outcome.result, fix & ~out, fix & out,
+                      float(g["nlos_screen_edge_sigmas"]), float(g["nlos_screen_edge_s"]),
+                      float(fit["graph"]["nlos_segment_keep_m"]))
     kept = int(np.count_nonzero(fix & ~out))
     if kept < float(g["nlos_screen_min_kept"]) * max(int(fix.sum()), 1):
         return epochs, {"nlos_screen": f"not applied: only {kept} of {int(fix.sum())} fixes agree"}
@@ -216,14 +221,75 @@ def far_fixes(epochs: Epochs, track: FilterResult, fixes: np.ndarray, k: float) 
         return far
     res = np.hypot(epochs.gnss_e[i] - track.e[i], epochs.gnss_n[i] - track.n[i])
     sd = np.sqrt(0.5 * (epochs.gnss_sd_e[i] ** 2 + epochs.gnss_sd_n[i] ** 2))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        z = res / sd
-        ok = np.isfinite(z)
-        if not ok.any():
-            return far
-        scale = max(1.0, float(np.median(z[ok])) / RAYLEIGH_MEDIAN)
-        far[i] = res > k * scale * sd
+    scale = _sigma_scale(res, sd)
+    if math.isfinite(scale):
+        with np.errstate(invalid="ignore"):
+            far[i] = res > k * scale * sd
     return far
 
 
-__all__ = ["far_fixes", "last_run_drift", "screen"]
+def _sigma_scale(res: np.ndarray, sd: np.ndarray) -> float:
+    """How far the fixes' residuals ``res`` (m, horizontal) run beyond their sigmas ``sd``
+    (m, per axis): their median ratio over the Rayleigh median sqrt(2 ln 2), never below 1;
+    NaN without a finite ratio."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = res / sd
+    ok = np.isfinite(z)
+    if not ok.any():
+        return math.nan
+    return max(1.0, float(np.median(z[ok])) / RAYLEIGH_MEDIAN)
+
+
+def edge_fixes(epochs: Epochs, track: FilterResult, kept: np.ndarray, out: np.ndarray,
+               k: float, edge_s: float, far_m: float) -> np.ndarray:
+    """Of the ``kept`` fixes (a mask over the epochs), those next to a run of left-out ones
+    (``out``) whose offset from ``track`` (fix minus track, m) points the way the run's
+    median offset does by more than ``k`` of their sigmas (scaled as :func:`far_fixes`
+    scales them): the ramp of a reflection that
+    the receiver's own filter blends in and out over a second or more, too small yet to
+    be far (:func:`far_fixes`).  Only runs of two or more fixes whose median offset is
+    beyond ``far_m`` (m): next to a run left out for the track's own error, the
+    neighbours point the same way because that error is smooth in time, not because
+    they are reflected.  At most (L - 1) / 2 of the L kept fixes between two left-out
+    runs (or a run and the drive's end) go from each side: a lone clean fix after a
+    reflection is what holds the track there.  Walked outwards from each run, fix by fix, within
+    ``edge_s`` seconds of it, and stopped at the first fix that does not point that way.
+    ``k`` <= 0 or ``edge_s`` <= 0: none."""
+    drop = np.zeros(len(kept), bool)
+    f = np.flatnonzero(kept | out)
+    if not (k > 0.0 and edge_s > 0.0) or not out.any() or not kept.any():
+        return drop
+    t_s = (np.asarray(epochs.t_ns, np.int64)[f] - int(epochs.t_ns[0])) / 1e9
+    de = epochs.gnss_e[f] - track.e[f]
+    dn = epochs.gnss_n[f] - track.n[f]
+    sd = np.sqrt(0.5 * (epochs.gnss_sd_e[f] ** 2 + epochs.gnss_sd_n[f] ** 2))
+    is_out = out[f]
+    ok = kept[f] & np.isfinite(de) & np.isfinite(dn) & np.isfinite(sd) & (sd > 0)
+    scale = _sigma_scale(np.hypot(de[ok], dn[ok]), sd[ok])
+    if not math.isfinite(scale):
+        return drop
+    sd = sd * scale
+    starts = np.flatnonzero(is_out & ~np.concatenate(([False], is_out[:-1])))
+    ends = np.flatnonzero(is_out & ~np.concatenate((is_out[1:], [False])))
+    for a, b in zip(starts, ends, strict=True):
+        ue, un = float(np.nanmedian(de[a:b + 1])), float(np.nanmedian(dn[a:b + 1]))
+        size = math.hypot(ue, un)
+        if b == a or not size > far_m:
+            continue
+        ue, un = ue / size, un / size
+        for j, stop, t_edge in ((a - 1, -1, t_s[a]), (b + 1, len(f), t_s[b])):
+            step = -1 if stop < 0 else 1
+            stretch = 0  # the kept fixes between this run and the next left-out one
+            while j + step * stretch != stop and not is_out[j + step * stretch]:
+                stretch += 1
+            room = (stretch - 1) // 2
+            while room > 0 and ok[j] and abs(t_s[j] - t_edge) <= edge_s:
+                room -= 1
+                if not de[j] * ue + dn[j] * un > k * sd[j]:
+                    break
+                drop[f[j]] = True
+                j += step
+    return drop
+
+
+__all__ = ["edge_fixes", "far_fixes", "last_run_drift", "screen"]
