@@ -10,13 +10,16 @@ So :func:`split` cuts the drive at the first usable fix, the filter runs from th
 :func:`backfill` dead-reckons the epochs before it *backwards* from the filter's first
 state, with the gyro (heading, ``d(psi)/dt = -yaw_rate``, less its bias
 taken from the track after the fix, :func:`calibration`) and the odometer (speed, divided
-by its scale against the track; without an odometer the first state's speed, held).  Units: metres
+by its scale against the track; without an odometer the first state's speed, held along
+the gyro's heading when it is fast enough for a course, else the first position held: a
+GNSS-only log's no-fix records measured no motion).  Units: metres
 ENU, seconds, radians, heading clockwise from north.
 
 The lead-in's sigma is a plain bound, not a covariance (nothing measured the position
 there): the first state's position variance plus ``(LEAD_IN_DIST_SD * distance)^2``
-plus, without an odometer, ``(LEAD_IN_SPEED_SD_MPS * time)^2``, with distance and time
-counted back from the first fix.  Written by hand: it is a cumulative sum over the
+plus, without an odometer, ``(LEAD_IN_SPEED_SD_MPS * time)^2`` (without any sensor, the
+filters' 60 m/s bound on an unmeasured step instead), with distance and time counted back
+from the first fix (time at most ``NO_DR_MAX_S``).  Written by hand: it is a cumulative sum over the
 lead-in; no library does a backward dead reckoning on our epoch layout.
 """
 
@@ -38,6 +41,9 @@ MIN_LEAD_IN_S = 0.25
 LEAD_IN_DIST_SD = 0.03
 #: sigma (m/s) of the speed held backwards without an odometer
 LEAD_IN_SPEED_SD_MPS = 1.0
+#: s: the lead-in's sigma stops growing this far back (the filters' default ``[aekf]
+#: max_gap_s``: a larger bound means nothing more)
+NO_DR_MAX_S = 600.0
 #: heading from the filter's velocity only at or above this speed (m/s)
 HEADING_MIN_SPEED_MPS = 1.0
 #: s after the first fix over which the gyro bias and odometer scale are taken from the track
@@ -49,14 +55,16 @@ MIN_CALIBRATION_M = 100.0
 
 def split(epochs: Epochs) -> tuple[int, Epochs]:
     """``(k, epochs[k:])`` where k is the first usable fix when the epochs before it span
-    ``MIN_LEAD_IN_S`` or more and hold a gyro or odometer record; else ``(0, epochs)``."""
+    ``MIN_LEAD_IN_S`` or more; else ``(0, epochs)``.  Also without a gyro or odometer record
+    before it (a GNSS-only log's no-fix records): the filter run from epoch 0 had carried
+    its first velocity through them, 830 m in 165 s of a simulated cold start."""
     if not epochs.has_gnss.any():
         return 0, epochs
     k = int(np.argmax(epochs.has_gnss))                 # the first usable fix
     if k == 0:
         return 0, epochs
     span_s = (int(epochs.t_ns[k]) - int(epochs.t_ns[0])) / NS_PER_S
-    if span_s < MIN_LEAD_IN_S or not (epochs.has_gyro[:k].any() or epochs.has_odo[:k].any()):
+    if span_s < MIN_LEAD_IN_S:
         return 0, epochs
     fields = {}
     for f in dataclasses.fields(Epochs):
@@ -136,8 +144,16 @@ def backfill(epochs: Epochs, k: int, result: FilterResult) -> FilterResult:
         speed = np.abs(_held(has_odo, epochs.odo_speed_mps)[: k + 1]) / odo_scale
         time_sd = 0.0
     else:
-        speed = np.full(k + 1, speed0)
+        # the first speed held along the gyro's heading; without a gyro before the fix, or
+        # slower than a course can be told, nothing says where it went: the position held
+        held = has_gyro[:k].any() and speed0 >= HEADING_MIN_SPEED_MPS
+        speed = np.full(k + 1, speed0 if held else 0.0)
         time_sd = LEAD_IN_SPEED_SD_MPS
+        if not (has_gyro[:k].any() or has_odo[:k].any()):
+            # no sensor at all: the bound the filters give an unmeasured step
+            from .filters.aekf import MAX_SPEED_MPS
+
+            time_sd = MAX_SPEED_MPS
     v_e = speed * np.sin(psi)
     v_n = speed * np.cos(psi)
     # position at epoch i < k: the first fix's minus the displacement from t_i to t_k
@@ -145,7 +161,7 @@ def backfill(epochs: Epochs, k: int, result: FilterResult) -> FilterResult:
     de = np.concatenate((np.cumsum((0.5 * (v_e[1:] + v_e[:-1]) * dt)[::-1])[::-1], [0.0]))
     dn = np.concatenate((np.cumsum((0.5 * (v_n[1:] + v_n[:-1]) * dt)[::-1])[::-1], [0.0]))
     dist = np.concatenate((np.cumsum((0.5 * (speed[1:] + speed[:-1]) * dt)[::-1])[::-1], [0.0]))
-    add = (LEAD_IN_DIST_SD * dist) ** 2 + (time_sd * t_s) ** 2
+    add = (LEAD_IN_DIST_SD * dist) ** 2 + (time_sd * np.maximum(t_s, -NO_DR_MAX_S)) ** 2
     pre = slice(0, k)
 
     def cat(lead: np.ndarray, rest: np.ndarray) -> np.ndarray:

@@ -80,3 +80,39 @@ def test_no_split_when_the_fix_comes_first() -> None:
     ep = build_epochs(copy.deepcopy(sim.drive), sim.frame, p)
     k, rest = lead_in.split(ep)
     assert k == 0 and rest is ep
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_a_gnss_only_log_holds_its_first_fix_before_it(smooth: bool) -> None:
+    """A GNSS-only log whose first 165 s are no-fix records (a cold start; the car drove
+    ~900 m then stopped, and the first fix comes while it stands).  The filter run from the
+    first record had carried the velocity it found after the fix back through them: 830 m
+    of invented motion forward, 285 m smoothed.  Nothing measured motion there: the first
+    fix's position is held, its sigma the filters' 60 m/s bound on an unmeasured step."""
+    from gpsdr_cli.testing.faults import drop_streams
+
+    sim = simulate_drive("open_sky", seed=3, duration_s=300.0)  # stopped from 157 to 178 s
+    drive = drop_streams(copy.deepcopy(sim.drive), "gyro", "odo")
+    g = drive.gnss
+    cold = g.t_ns < g.t_ns[0] + int(165.0 * NS_PER_S)
+    gone = np.where(cold, np.nan, 1.0)
+    drive.gnss = dataclasses.replace(
+        g, lat_deg=g.lat_deg * gone, lon_deg=g.lon_deg * gone, alt_m=g.alt_m * gone,
+        speed_mps=g.speed_mps * gone, course_deg=g.course_deg * gone,
+        fix_quality=np.where(cold, 0, g.fix_quality).astype(g.fix_quality.dtype))
+    p = config.defaults()
+    p["filter"]["smooth"] = smooth
+    res = pipeline.fuse(drive, p)
+    k = res.result.info["lead_in_epochs"]
+    assert abs(res.result.info["lead_in_s"] - 165.0) < 0.25
+    e, n = res.track["e"].to_numpy(), res.track["n"].to_numpy()
+    assert np.all(np.isfinite(e)) and np.all(np.isfinite(n))
+    assert float(np.max(np.hypot(e[:k] - e[k], n[:k] - n[k]))) < 1e-6
+    sd = res.track["sigma_e"].to_numpy()
+    assert sd[0] > 60.0 * 164.0 and np.all(np.diff(sd[:k]) <= 1e-9)   # shrinking to the fix
+    tr = sim.truth
+    te, tn = res.frame.forward(tr["lat"].to_numpy(), tr["lon"].to_numpy())
+    t = res.epochs.t_ns
+    err = np.hypot(e - np.interp(t, tr.t_ns, te), n - np.interp(t, tr.t_ns, tn))
+    assert float(np.max(err[:k])) > 300.0          # the car did move: the hold is a bound
+    assert np.all(err[:k] < 3.0 * sd[:k] + 1.0)
