@@ -15,13 +15,41 @@ ESF-RAW       wheel ticks (averaged), else 6/7 front ones, else 10 single tick
               -> odometer through ``[odo] ticks_per_m``; 16 accelerometer x ->
               forward accel; the other types (12 gyro temperature, 13/14 gyro
               y/x, 17/18 accelerometer y/z) are counted in ``meta`` only
-NMEA          lines between the UBX frames, through :func:`parse_nmea`; used
-              for the fixes only when the log has no NAV-PVT with a UTC time
+NAV-POSLLH    without NAV-PVT in the log (u-blox 6/7, timing firmware): lat/lon,
+              height above the ellipsoid, hAcc as the sigmas (as NAV-PVT's)
+NAV-SOL       without NAV-PVT and NAV-POSLLH: the ECEF position (cm) as
+              lat/lon/height, pAcc (cm, 3-D) as the horizontal estimate (a
+              cautious one), the ECEF velocity, numSV, pDOP; the fix status
+              and GPS week of the other position messages of its iTOW
+NAV-POSECEF   without any of the above: the ECEF position and pAcc
+NAV-STATUS    gpsFix, gpsFixOk, diffSoln, carrSoln of the same iTOW: the fix
+              quality of the three above (over NAV-SOL's own)
+NAV-TIMEGPS   the GPS week (and leapS) that dates the three above
+NAV-VELNED    velN/velE (cm/s) as speed and course for the three above, else
+              the ECEF velocity of NAV-SOL or NAV-VELECEF
+NMEA          lines between the UBX frames, through :func:`parse_nmea`, when
+              they hold a fix, time or DOP sentence; used for the fixes only
+              when the UBX messages give none
 ============  ===============================================================
+
+NAV-PVT is preferred when a log has it: the older messages of the same epochs are
+then not read, so no epoch is doubled.  Without NAV-PVT the first of NAV-POSLLH,
+NAV-SOL, NAV-POSECEF that the log holds gives the positions; their validity comes
+from NAV-STATUS, else NAV-SOL, of the same iTOW (gpsFix 2-D, 3-D, GNSS + dead
+reckoning with gpsFixOk is a fix; 0 and 5, time only, are not).  When the log has
+neither NAV-STATUS nor NAV-SOL at all, every position not all zeros is taken
+as a 3-D fix (a receiver set to send NAV-POSLLH alone) and a note says so.  Time:
+GPS week (of the NAV-SOL or NAV-TIMEGPS nearest in the stream, or of ``--date``)
+and iTOW, minus GPS - UTC (NAV-TIMEGPS's leapS, else the IERS table); without a
+week the fixes are skipped and counted, as NAV-PVT without a date is.  A log whose
+every fix message is time only (fixType / gpsFix 5: a timing receiver at a fixed,
+surveyed position) and which has no gyro or odometer is an error that says so.
 
 Fix quality (NMEA GGA codes): fixType 1 (dead reckoning only) -> 6; no
 gnssFixOK, fixType 0 or 5 (time only), or invalidLlh -> 0; else carrSoln 2
-(fixed) -> 4, carrSoln 1 (float) -> 5, diffSoln -> 2, otherwise 1.
+(fixed) -> 4, carrSoln 1 (float) -> 5, diffSoln -> 2, otherwise 1.  The same for
+NAV-STATUS / NAV-SOL's gpsFix, gpsFixOk, diffSoln and (NAV-STATUS, when
+carrSolnValid) carrSoln.
 
 Sigmas: hAcc is u-blox's "horizontal accuracy estimate", one number for the
 horizontal plane.  It is read as the radial (2-D) 1-sigma error, so that
@@ -36,22 +64,31 @@ forward, as the charter's.  Wheel ticks are 23-bit absolute counters with the
 direction in bit 23 (1 = backward); speed = the counter's step (mod 2**23) /
 ticks_per_m / dt, negative when backward.
 
-Time of ESF messages: their ``timeTag`` (ESF-MEAS) / ``sTtag`` (ESF-RAW) is the
-receiver's local millisecond counter, not GPS time.  It is mapped to UTC by a
-fitted offset: each ESF message is given the UTC of its place in the stream,
-interpolated between the NAV-PVT messages before and after it (messages are
-output in time order, one epoch apart at most), and the offset is the median
-of (that UTC - its time tag) over the log; the tag plus the offset is its time.
-The median over thousands of messages makes the per-message spread (up to one
-epoch) cancel to milliseconds.  Without NAV-PVT UTC times the ESF messages are
-skipped and counted.
+Time of ESF messages: ESF-MEAS's ``timeTag`` is the receiver's local millisecond
+counter (32 bits), not GPS time.  ESF-RAW's per-sample ``sTtag`` is the sensor's own
+24-bit count of 1/25.6 ms (39.0625 us; wraps every 655.36 s).  u-blox's published
+protocol description gives no unit for it; Swift Navigation's gnss-converters, which
+also reads ESF-RAW, notes as much and takes 39.0625 us, the Bosch BMI160's sensor
+time step; a real NEO-M8U log (gpsd's ublox-neo-m8u.log) agrees: ~256 units per
+10-ms sample, 2.9 s of samples over its 2.9 s of messages.  Each counter is mapped to
+UTC from the log itself: each ESF message is given the UTC of its place in the
+stream, interpolated between the fix messages (NAV-PVT, else the NAV-POSLLH/SOL/
+POSECEF ones) before and after it (messages are output in time order, one epoch
+apart at most), and the offset is the median of (that UTC - its time tag) over the
+log; the tag plus the offset is its time.  The median over thousands of messages
+makes the per-message spread (up to one epoch) cancel to milliseconds.  An ESF-RAW
+message stands by the tag of its last sample (it is output after it).  The sensor's
+clock is not the receiver's (0.2-0.3 % slow on that M8U against the millisecond
+count), so over ESF-RAW logs of a minute or more its rate is fitted too (least
+squares of UTC on tag), else a 10-minute log would drift by a second or more.
+Without fix UTC times the ESF messages are skipped and counted.
 
 What pyubx2 does and what is hand-written, and why: pyubx2 (the maintained
 UBX library) parses about 2 k messages/s here, a Python object per message,
 two orders of magnitude short of the 200 k messages/s an hour-long F9R log at
 100 Hz needs.  So the frames are found and checksummed by a compiled scan
 (:func:`_scan`: sync bytes, length, the 8-bit Fletcher checksum from running
-sums, resynchronising two bytes on after a bad frame), and NAV-PVT / NAV-DOP / NAV-HPPOSLLH payloads
+sums, resynchronising two bytes on after a bad frame), and the NAV payloads
 are decoded as numpy structured arrays whose field names, types and offsets are
 built from pyubx2's own message definitions (``UBX_PAYLOADS_GET``), so no
 offset is typed by hand; the ESF data words (24-bit field, 6-bit type) are
@@ -65,6 +102,7 @@ import datetime as dt
 import functools
 import hashlib
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -78,6 +116,12 @@ from .formats import UBX_SYNC
 
 CLASS_NAV, CLASS_ESF = 0x01, 0x10
 ID_PVT, _DOP, _HPPOSLLH = 0x07, 0x04, 0x14
+#: NAV messages of receivers without NAV-PVT (u-blox 6/7, timing firmware) and their
+#: payload lengths, bytes
+_POSECEF, _POSLLH, _NAV_STATUS, _SOL, _VELECEF, _VELNED, _TIMEGPS = (
+    0x01, 0x02, 0x03, 0x06, 0x11, 0x12, 0x20)
+_LEN = {"NAV-POSECEF": 20, "NAV-POSLLH": 28, "NAV-STATUS": 16, "NAV-SOL": 52,
+        "NAV-VELECEF": 20, "NAV-VELNED": 36, "NAV-TIMEGPS": 16}
 _MEAS, _RAW = 0x02, 0x03
 #: NAV-PVT up to pDOP (the u-blox 7 length); M8/F9 send 92 bytes.
 PVT_MIN = 84
@@ -92,6 +136,19 @@ _ACCEL_SCALE = 2.0 ** -10
 _SPEED_SCALE = 1e-3
 _TICK_MODULUS = 1 << 23
 _MS = 1_000_000  # ns per ms
+#: ESF-RAW sTtag: a 24-bit counter of 1/25.6 ms = 39.0625 us (78125 / 2 ns) per unit
+_RAW_TAG_MODULUS = 1 << 24
+_RAW_TAG_NS_NUM, _RAW_TAG_NS_DEN = 78125, 2
+#: ESF-RAW's sensor clock (0.2-0.3 % off nominal on an M8U) has its rate fitted only over
+#: logs this long (ns): frames placed between fixes by rank scatter by up to half a fix
+#: interval, and in simulation (1 Hz fixes, 10 Hz frames) the slope fitted over 20 s was
+#: still up to 0.3 % off, over 45 s within 0.06 %
+_RATE_FIT_MIN_SPAN_NS = 60 * NS_PER_S
+#: a fitted sensor clock rate further than this from nominal is not believed
+_RATE_MAX_ERROR = 0.05
+#: GPS time: 1980-01-06 00:00:00 UTC in ns since 1970; a week in ms
+_GPS_EPOCH_NS = 315_964_800 * NS_PER_S
+_WEEK_MS = 604_800_000
 
 _STATUS = {1: "UBX frame with a bad checksum (skipped)",
            2: "UBX frame truncated at the end of the file (skipped)"}
@@ -321,18 +378,10 @@ def nav_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: Sk
     pvt_start = start[sel]
 
     fix_type = pvt["fixType"].astype(np.int64)
-    fix_ok = _bit(pvt, "NAV-PVT", "gnssFixOk") == 1
-    carr = _bit(pvt, "NAV-PVT", "carrSoln")
-    diff = _bit(pvt, "NAV-PVT", "diffSoln") == 1
-    q = np.full(n, FIX_GPS, np.int8)
-    q[diff] = FIX_DGPS
-    q[carr == 1] = FIX_FLOAT_RTK
-    q[carr == 2] = FIX_RTK
-    no_fix = ~fix_ok | (fix_type == 0) | (fix_type == 5)
-    # flags3 bit 0 (F9, within the first 84 bytes; reserved and zero on u-blox 7)
-    no_fix |= _bit(pvt, "NAV-PVT", "invalidLlh") == 1
-    q[no_fix] = FIX_NONE
-    q[fix_type == 1] = FIX_DR
+    # invalidLlh: flags3 bit 0 (F9, within the first 84 bytes; reserved and zero on u-blox 7)
+    q = _quality(fix_type, _bit(pvt, "NAV-PVT", "gnssFixOk") == 1,
+                 _bit(pvt, "NAV-PVT", "diffSoln") == 1, _bit(pvt, "NAV-PVT", "carrSoln"),
+                 _bit(pvt, "NAV-PVT", "invalidLlh") == 1)
     lat = pvt["lat"] * 1e-7
     lon = pvt["lon"] * 1e-7
     bad_ll = (np.abs(lat) > 90) | (np.abs(lon) > 180)
@@ -357,16 +406,9 @@ def nav_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: Sk
     # course over ground clockwise from north (charter): atan2(east, north)
     g.course_deg = np.where(has, np.degrees(np.arctan2(ve, vn)) % 360.0, np.nan)[ok]
     itow_ok = itow[ok]
-    counts = {"nav_pvt": n, "nav_dop": 0, "nav_hpposllh": 0}
-
-    dsel = (cls == CLASS_NAV) & (mid == _DOP) & (length >= 18)
-    if dsel.any() and len(g):
-        dop = _table(buf, start[dsel], "NAV-DOP", 18)
-        counts["nav_dop"] = len(dop)
-        j, found = _match(itow_ok, dop["iTOW"].astype(np.int64))
-        g.hdop = np.where(found, dop["hDOP"][j] * 0.01, np.nan)
-        g.vdop = np.where(found, dop["vDOP"][j] * 0.01, np.nan)
-        g.pdop = np.where(np.isnan(g.pdop) & found, dop["pDOP"][j] * 0.01, g.pdop)
+    counts = {"nav_pvt": n, "nav_dop": 0, "nav_hpposllh": 0,
+              "pvt_time_only": int((fix_type == 5).sum())}
+    _add_dop(buf, fr, g, itow_ok, counts)
     hsel = (cls == CLASS_NAV) & (mid == _HPPOSLLH) & (length >= 36)
     if hsel.any() and len(g):
         hp = _table(buf, start[hsel], "NAV-HPPOSLLH", 36)
@@ -386,6 +428,34 @@ def nav_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: Sk
     return g, pvt_start, t_ns, itow, counts
 
 
+def _quality(fix_type: np.ndarray, fix_ok: np.ndarray, diff: np.ndarray, carr: np.ndarray,
+             invalid: np.ndarray) -> np.ndarray:
+    """NMEA GGA fix quality from u-blox's fix type (0 none, 1 dead reckoning only, 2 2-D,
+    3 3-D, 4 GNSS + dead reckoning, 5 time only), gnssFixOK, diffSoln, carrSoln (1 float,
+    2 fixed) and an invalid-position flag."""
+    q = np.full(len(fix_type), FIX_GPS, np.int8)
+    q[diff] = FIX_DGPS
+    q[carr == 1] = FIX_FLOAT_RTK
+    q[carr == 2] = FIX_RTK
+    q[~fix_ok | (fix_type == 0) | (fix_type == 5) | invalid] = FIX_NONE
+    q[fix_type == 1] = FIX_DR
+    return q
+
+
+def _add_dop(buf: np.ndarray, fr: dict[str, np.ndarray], g: GnssFixes, itow: np.ndarray,
+             counts: dict) -> None:
+    """hDOP, vDOP (and pDOP where ``g`` has none) from the NAV-DOP of each fix's iTOW."""
+    dsel = (fr["cls"] == CLASS_NAV) & (fr["id"] == _DOP) & (fr["length"] >= 18)
+    if not (dsel.any() and len(g)):
+        return
+    dop = _table(buf, fr["start"][dsel], "NAV-DOP", 18)
+    counts["nav_dop"] = len(dop)
+    j, found = _match(itow, dop["iTOW"].astype(np.int64))
+    g.hdop = np.where(found, dop["hDOP"][j] * 0.01, np.nan)
+    g.vdop = np.where(found, dop["vDOP"][j] * 0.01, np.nan)
+    g.pdop = np.where(np.isnan(g.pdop) & found, dop["pDOP"][j] * 0.01, g.pdop)
+
+
 def _match(itow: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each iTOW, the index of the (last) ``other`` message with the same iTOW."""
     if not len(other):
@@ -398,12 +468,224 @@ def _match(itow: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return order[kc], found
 
 
+# --------------------------------------------------------------------------- NAV without NAV-PVT
+
+#: position messages in the order they are preferred when a log has no NAV-PVT
+LEGACY_SOURCES = ("NAV-POSLLH", "NAV-SOL", "NAV-POSECEF")
+_LEGACY_IDS = {"NAV-POSLLH": _POSLLH, "NAV-SOL": _SOL, "NAV-POSECEF": _POSECEF,
+               "NAV-STATUS": _NAV_STATUS, "NAV-TIMEGPS": _TIMEGPS, "NAV-VELNED": _VELNED,
+               "NAV-VELECEF": _VELECEF}
+
+
+@functools.cache
+def _ecef_to_llh():
+    """The WGS 84 ECEF -> geodetic Transformer: (x, y, z) m in, (lon, lat, h) out."""
+    from pyproj import Transformer
+
+    return Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
+
+
+def _nav_table(buf: np.ndarray, fr: dict[str, np.ndarray], name: str, path: str,
+               skipped: SkipReport) -> tuple[np.ndarray, np.ndarray]:
+    """Frame starts and payload table of every NAV message ``name``; shorter payloads than
+    its length are skipped and counted."""
+    sel = (fr["cls"] == CLASS_NAV) & (fr["id"] == _LEGACY_IDS[name])
+    size = _LEN[name]
+    short = sel & (fr["length"] < size)
+    skipped.add(f"UBX {name} shorter than {size} bytes (skipped)", path, int(short.sum()))
+    st = fr["start"][sel & ~short]
+    return st, _table(buf, st, name, size)
+
+
+def _nearest(ref_start: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Index of the reference frame (starts sorted) nearest in the stream to each ``at``."""
+    k = np.searchsorted(ref_start, at)
+    lo = np.clip(k - 1, 0, len(ref_start) - 1)
+    hi = np.clip(k, 0, len(ref_start) - 1)
+    return np.where(np.abs(at - ref_start[lo]) <= np.abs(ref_start[hi] - at), lo, hi)
+
+
+def _gpst_minus_utc_s(t_gps_ns: np.ndarray) -> np.ndarray:
+    """GPS - UTC leap seconds at GPS times ``t_gps_ns`` (ns since 1970 on the GPS scale),
+    from the IERS table the RTKLIB reader keeps."""
+    from .rtklib import LEAP_SECONDS
+
+    day0 = dt.date(1970, 1, 1).toordinal()
+    edges = np.array([((d.toordinal() - day0) * 86400 + n) * NS_PER_S for d, n in LEAP_SECONDS],
+                     np.int64)
+    return np.searchsorted(edges, t_gps_ns, side="right").astype(np.int64)
+
+
+def _gps_utc_ns(start: np.ndarray, itow: np.ndarray, tabs: dict, date: dt.date | None
+                ) -> tuple[np.ndarray, str]:
+    """UTC (ns; 0 where no week is known) of the epochs at frame ``start`` with GPS time of
+    week ``itow`` (ms), and where the week came from.
+
+    The week is that of the NAV-SOL (wknSet) or NAV-TIMEGPS (weekValid) message nearest in
+    the stream, moved by one where the two times of week lie more than half a week apart
+    (the week turned between them); with neither in the log, that of ``date`` (noon UTC).
+    GPS - UTC is NAV-TIMEGPS's leapS where valid, else the IERS table."""
+    refs = []
+    sol_st, sol = tabs["NAV-SOL"]
+    if len(sol_st):
+        m = (_bit(sol, "NAV-SOL", "wknSet") == 1) & (_bit(sol, "NAV-SOL", "towSet") == 1)
+        refs.append((sol_st[m], sol["week"][m], sol["iTOW"][m], sol["fTOW"][m]))
+    tg_st, tg = tabs["NAV-TIMEGPS"]
+    if len(tg_st):
+        m = (_bit(tg, "NAV-TIMEGPS", "weekValid") == 1) & (_bit(tg, "NAV-TIMEGPS", "towValid") == 1)
+        refs.append((tg_st[m], tg["week"][m], tg["iTOW"][m], tg["fTOW"][m]))
+    r_st, r_week, r_itow, r_ftow = (np.concatenate([np.asarray(r[i], np.int64) for r in refs])
+                                    if refs else np.zeros(0, np.int64) for i in range(4))
+    source = "NAV-SOL/NAV-TIMEGPS week"
+    if not len(r_st):
+        if date is None:
+            return np.zeros(len(itow), np.int64), "none"
+        noon_ns = (date.toordinal() - dt.date(1970, 1, 1).toordinal()) * 86400 * NS_PER_S \
+            + 12 * 3600 * NS_PER_S
+        gps_ms = (noon_ns - _GPS_EPOCH_NS) // _MS + 1000 * int(
+            _gpst_minus_utc_s(np.array([noon_ns], np.int64))[0])
+        r_st, r_week, r_itow = (np.zeros(1, np.int64), np.array([gps_ms // _WEEK_MS]),
+                                np.array([gps_ms % _WEEK_MS]))
+        r_ftow = np.zeros(1, np.int64)
+        source = f"the week of --date {date.isoformat()}"
+    order = np.argsort(r_st, kind="stable")
+    r_st, r_week, r_itow, r_ftow = (a[order] for a in (r_st, r_week, r_itow, r_ftow))
+    k = _nearest(r_st, start)
+    week = r_week[k] + np.rint((r_itow[k] - itow) / _WEEK_MS).astype(np.int64)
+    # fTOW (ns, +-0.5 ms) refines iTOW when the reference is of the same epoch
+    ftow = np.where(r_itow[k] == itow, r_ftow[k], 0)
+    t_gps = _GPS_EPOCH_NS + (week * _WEEK_MS + itow) * _MS + ftow
+    leap = _gpst_minus_utc_s(t_gps)
+    if len(tg_st):
+        m = _bit(tg, "NAV-TIMEGPS", "leapSValid") == 1
+        if m.any():
+            j = _nearest(tg_st[m], start)
+            leap = tg["leapS"][m][j].astype(np.int64)
+    return t_gps - leap * NS_PER_S, source
+
+
+def _ecef_vel_to_en(v: tuple[np.ndarray, np.ndarray, np.ndarray], lat_deg: np.ndarray,
+                    lon_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """East and north components (m/s) of an ECEF velocity (m/s) at lat/lon."""
+    la, lo = np.radians(lat_deg), np.radians(lon_deg)
+    vx, vy, vz = v
+    east = -np.sin(lo) * vx + np.cos(lo) * vy
+    north = -np.sin(la) * np.cos(lo) * vx - np.sin(la) * np.sin(lo) * vy + np.cos(la) * vz
+    return east, north
+
+
+def legacy_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: SkipReport,
+                 date: dt.date | None = None) -> tuple[GnssFixes, np.ndarray, np.ndarray, dict]:
+    """Fixes of a log without NAV-PVT: positions from NAV-POSLLH, else NAV-SOL, else
+    NAV-POSECEF (see the module docstring); also each position message's frame start and
+    UTC (ns, 0 when undated) for the ESF time mapping, and counts for ``meta``."""
+    tabs = {name: _nav_table(buf, fr, name, path, skipped) for name in _LEGACY_IDS}
+    counts: dict[str, Any] = {"nav_" + name[4:].lower(): len(tabs[name][0])
+                              for name in _LEGACY_IDS if len(tabs[name][0])}
+    source = next((name for name in LEGACY_SOURCES if len(tabs[name][0])), None)
+    if source is None:
+        e = np.zeros(0, np.int64)
+        return GnssFixes.empty(0), e, e, counts
+    st, pos = tabs[source]
+    n = len(st)
+    itow = pos["iTOW"].astype(np.int64)
+    if source == "NAV-POSLLH":
+        lat, lon = pos["lat"] * 1e-7, pos["lon"] * 1e-7
+        alt = pos["height"] * 1e-3
+        # hAcc (mm) is the horizontal accuracy estimate, read as NAV-PVT's is
+        sig = pos["hAcc"] * 1e-3 / math.sqrt(2.0)
+        unset = (pos["lat"] == 0) & (pos["lon"] == 0)  # what a receiver sends before a fix
+    else:
+        xyz = [pos[f"ecef{c}"] * 1e-2 for c in "XYZ"]  # cm
+        lon, lat, alt = (np.asarray(a, float) for a in _ecef_to_llh().transform(*xyz))
+        # pAcc (cm) is 3-D: as the horizontal estimate it errs on the cautious side
+        sig = pos["pAcc"] * 1e-2 / math.sqrt(2.0)
+        unset = (pos["ecefX"] == 0) & (pos["ecefY"] == 0) & (pos["ecefZ"] == 0)
+
+    # fix validity from the NAV-SOL and NAV-STATUS of the same epoch (NAV-STATUS wins)
+    fix_type = np.full(n, -1, np.int64)
+    fix_ok = np.zeros(n, bool)
+    diff = np.zeros(n, bool)
+    carr = np.zeros(n, np.int64)
+    have = np.zeros(n, bool)
+    for name, ok_bit in (("NAV-SOL", "gpsfixOK"), ("NAV-STATUS", "gpsFixOk")):
+        tab = tabs[name][1]
+        if not len(tab):
+            continue
+        j, found = _match(itow, tab["iTOW"].astype(np.int64))
+        fix_type = np.where(found, tab["gpsFix"][j], fix_type)
+        fix_ok = np.where(found, _bit(tab, name, ok_bit)[j] == 1, fix_ok)
+        diff = np.where(found, _bit(tab, name, "diffSoln")[j] == 1, diff)
+        if name == "NAV-STATUS":
+            valid_carr = _bit(tab, name, "carrSolnValid")[j] == 1
+            carr = np.where(found & valid_carr, _bit(tab, name, "carrSoln")[j], carr)
+        have |= found
+    if not (len(tabs["NAV-SOL"][0]) or len(tabs["NAV-STATUS"][0])):
+        # Assumption: with no fix status in the log at all, a set position is a 3-D fix (a
+        # receiver configured to send only NAV-POSLLH); its hAcc still weighs it.
+        fix_type[:], fix_ok[:], have[:] = 3, True, True
+        counts["fix_assumed"] = n
+    skipped.add(f"UBX {source} without NAV-STATUS or NAV-SOL in its epoch (kept as no fix)",
+                path, int((~have).sum()))
+    q = _quality(fix_type, fix_ok, diff, carr, unset | ~have)
+    bad_ll = ~(np.isfinite(lat) & np.isfinite(lon)) | (np.abs(lat) > 90) | (np.abs(lon) > 180)
+    skipped.add(f"UBX {source} with latitude/longitude out of range (kept as no fix)", path,
+                int((bad_ll & (q > 0)).sum()))
+    q[bad_ll] = FIX_NONE
+    has = q > 0
+
+    t_utc, week_from = _gps_utc_ns(st, itow, tabs, date)
+    dated = t_utc != 0
+    skipped.add(f"UBX {source} without a GPS week (no NAV-SOL or NAV-TIMEGPS in the log, and "
+                "no --date) (skipped)", path, int((~dated).sum()))
+    counts.update(fix_source=source, week_from=week_from, legacy_undated=int((~dated).sum()),
+                  legacy_time_only=int((fix_type == 5).sum()), legacy_epochs=n)
+
+    # velocity: NAV-VELNED (cm/s), else the ECEF velocity of NAV-SOL or NAV-VELECEF (cm/s)
+    ve = np.full(n, np.nan)
+    vn = np.full(n, np.nan)
+    vel = tabs["NAV-VELNED"][1]
+    if len(vel):
+        j, found = _match(itow, vel["iTOW"].astype(np.int64))
+        ve = np.where(found, vel["velE"][j] * 1e-2, ve)
+        vn = np.where(found, vel["velN"][j] * 1e-2, vn)
+    for name in ("NAV-SOL", "NAV-VELECEF"):
+        tab = tabs[name][1]
+        if not len(tab):
+            continue
+        j, found = _match(itow, tab["iTOW"].astype(np.int64))
+        found &= np.isnan(ve)
+        e, nn = _ecef_vel_to_en(tuple(tab[f"ecefV{c}"][j] * 1e-2 for c in "XYZ"), lat, lon)
+        ve = np.where(found, e, ve)
+        vn = np.where(found, nn, vn)
+
+    g = GnssFixes.empty(int(dated.sum()))
+    g.t_ns = t_utc[dated]
+    g.fix_quality = q[dated]
+    g.lat_deg = np.where(has, lat, np.nan)[dated]
+    g.lon_deg = np.where(has, lon, np.nan)[dated]
+    g.alt_m = np.where(has, alt, np.nan)[dated]
+    g.sigma_e_m = np.where(has, sig, np.nan)[dated]
+    g.sigma_n_m = g.sigma_e_m.copy()
+    g.speed_mps = np.where(has, np.hypot(ve, vn), np.nan)[dated]
+    # course over ground clockwise from north, as NAV-PVT's
+    g.course_deg = np.where(has, np.degrees(np.arctan2(ve, vn)) % 360.0, np.nan)[dated]
+    sol = tabs["NAV-SOL"][1]
+    if len(sol):
+        j, found = _match(itow, sol["iTOW"].astype(np.int64))
+        g.n_sats = np.where(found, sol["numSV"][j], -1).astype(np.int16)[dated]
+        g.pdop = np.where(found & (sol["pDOP"][j] > 0), sol["pDOP"][j] * 0.01, np.nan)[dated]
+    _add_dop(buf, fr, g, itow[dated], counts)
+    return g, st, t_utc, counts
+
+
 # --------------------------------------------------------------------------- ESF
 
 def _esf_words(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: SkipReport
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Every ESF-MEAS and ESF-RAW data word: (frame start, time tag ms, data type,
-    24-bit field, source 0 MEAS / 1 RAW)."""
+    """Every ESF-MEAS and ESF-RAW data word: (frame start, time tag, data type, 24-bit
+    field, source 0 MEAS / 1 RAW).  The tag is ESF-MEAS's 32-bit millisecond count or
+    ESF-RAW's 24-bit sensor count (1/25.6 ms units)."""
     cls, mid, length, start = fr["cls"], fr["id"], fr["length"], fr["start"]
     parts = []
     meas = (cls == CLASS_ESF) & (mid == _MEAS) & (length >= 8)
@@ -433,8 +715,8 @@ def _esf_words(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped: S
         k = np.arange(len(rep)) - np.repeat(first, n_w)
         q = p[rep] + 4 + 8 * k
         word = _u32(buf, q)
-        parts.append((st[rep], _u32(buf, q + 4), (word >> 24) & 0xFF, word & 0xFFFFFF,
-                      np.ones(len(rep), np.int8)))
+        parts.append((st[rep], _u32(buf, q + 4) & (_RAW_TAG_MODULUS - 1), (word >> 24) & 0xFF,
+                      word & 0xFFFFFF, np.ones(len(rep), np.int8)))
     if not parts:
         e = np.zeros(0, np.int64)
         return e, e, e, e, np.zeros(0, np.int8)
@@ -453,8 +735,9 @@ def _signed24(v: np.ndarray) -> np.ndarray:
     return np.where(v >= 1 << 23, v - (1 << 24), v)
 
 
-def _unwrap_ms(tag: np.ndarray, modulus: int) -> np.ndarray:
-    """A wrapping millisecond counter made monotonic (steps taken mod ``modulus``)."""
+def _unwrap(tag: np.ndarray, modulus: int) -> np.ndarray:
+    """A wrapping counter made monotonic (steps taken mod ``modulus``; a gap of half the
+    modulus or more between two readings cannot be told from a step back)."""
     if len(tag) < 2:
         return tag.astype(np.int64)
     step = np.diff(tag) % modulus
@@ -462,34 +745,64 @@ def _unwrap_ms(tag: np.ndarray, modulus: int) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(step)]) + int(tag[0])
 
 
-def esf_offset_ns(frame_start: np.ndarray, tag_ms: np.ndarray, pvt_start: np.ndarray,
-                  pvt_t_ns: np.ndarray) -> int | None:
-    """UTC minus sensor time (ns): each ESF message's UTC is interpolated between the
-    NAV-PVT messages before and after it in the stream (by frame index); the offset is the
-    median of (UTC - tag) over the messages with a NAV-PVT on both sides.  None when the
-    log has fewer than two NAV-PVT UTC times."""
+def _frame_utc(frame_start: np.ndarray, tag_ns: np.ndarray, pvt_start: np.ndarray,
+               pvt_t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """(tag, UTC - base, base) in ns of the distinct ESF frames lying between two fixes with
+    a UTC time: each frame's UTC is interpolated between the fix messages before and after
+    it in the stream by its rank among the frames between them.  The tag is the first of
+    the frame's.  None when fewer than two fixes have a UTC time or no frame lies between."""
     good = pvt_t_ns != 0
     ps, pt = pvt_start[good], pvt_t_ns[good]
     if len(ps) < 2 or not len(frame_start):
         return None
-    # the distinct ESF frames, in order: one time tag each
     fs, first = np.unique(frame_start, return_index=True)
-    tags = tag_ms[first] * _MS
+    tags = tag_ns[first]
     k = np.searchsorted(ps, fs)
     inside = (k > 0) & (k < len(ps))
     if not inside.any():
         return None
     k = k[inside]
     fs, tags = fs[inside], tags[inside]
-    # position between the two NAV-PVTs: the rank of the ESF frame among those between them
     seg = k - 1
     idx = np.arange(len(fs))
     seg_first = np.searchsorted(seg, seg, side="left")
     seg_count = np.searchsorted(seg, seg, side="right") - seg_first
     frac = (idx - seg_first + 0.5) / seg_count
     base = int(pt[0])  # int64 differences first: float64 ns since 1970 would lose 0.25 us
-    rel = (pt[seg] - base - tags) + frac * (pt[seg + 1] - pt[seg])
-    return base + round(float(np.median(rel)))
+    rel = (pt[seg] - base) + frac * (pt[seg + 1] - pt[seg])
+    return tags, rel, base
+
+
+def esf_offset_ns(frame_start: np.ndarray, tag: np.ndarray, pvt_start: np.ndarray,
+                  pvt_t_ns: np.ndarray, *, unit_ns: int = _MS) -> int | None:
+    """UTC minus sensor time (ns): the median of (interpolated UTC - tag) over the ESF
+    frames with a fix of known UTC on both sides (:func:`_frame_utc`); ``tag`` in units of
+    ``unit_ns``.  None when the log has fewer than two fix UTC times."""
+    got = _frame_utc(frame_start, np.asarray(tag, np.int64) * unit_ns, pvt_start, pvt_t_ns)
+    if got is None:
+        return None
+    tags, rel, base = got
+    return base + round(float(np.median(rel - tags)))
+
+
+def esf_clock_fit(frame_start: np.ndarray, tag_ns: np.ndarray, pvt_start: np.ndarray,
+                  pvt_t_ns: np.ndarray) -> tuple[int, int, float] | None:
+    """A sensor clock mapped onto UTC with its rate fitted: (tag0, UTC at tag0, rate), so
+    that UTC = UTC at tag0 + rate (tag - tag0), all ns.  The rate is the least-squares
+    slope of interpolated UTC on tag when the frames span at least
+    :data:`_RATE_FIT_MIN_SPAN_NS`, else 1; the UTC at tag0 is the median of the residuals
+    (robust to frames output late).  None as :func:`esf_offset_ns`."""
+    got = _frame_utc(frame_start, tag_ns, pvt_start, pvt_t_ns)
+    if got is None:
+        return None
+    tags, rel, base = got
+    tag0 = int(tags[0])
+    x = (tags - tag0).astype(float)
+    rate = 1.0
+    if x[-1] - x[0] >= _RATE_FIT_MIN_SPAN_NS and len(x) >= 3:
+        xc = x - x.mean()
+        rate = float(np.dot(xc, rel - rel.mean()) / np.dot(xc, xc))
+    return tag0, base + round(float(np.median(rel - rate * x))), rate
 
 
 def _esf_streams(buf: np.ndarray, fr: dict[str, np.ndarray], pvt_start: np.ndarray,
@@ -507,16 +820,37 @@ def _esf_streams(buf: np.ndarray, fr: dict[str, np.ndarray], pvt_start: np.ndarr
         m = src == s
         if not m.any():
             continue
-        # 32-bit millisecond counters of the receiver's local clock
-        tag_u = _unwrap_ms(tag[m], 1 << 32)
-        off = esf_offset_ns(fstart[m], tag_u, pvt_start, pvt_t_ns)
         name = "ESF-MEAS" if s == 0 else "ESF-RAW"
-        if off is None:
+        if s == 0:
+            # the receiver's 32-bit millisecond counter: one offset, no rate
+            tag_ns = _unwrap(tag[m], 1 << 32) * _MS
+            fs_m, tag_fit = fstart[m], tag_ns
+        else:
+            # the sensor's 24-bit count; a frame holds up to ten samples and is output after
+            # its last, so the last one's tag stands for the frame
+            tag_ns = _unwrap(tag[m], _RAW_TAG_MODULUS) * _RAW_TAG_NS_NUM // _RAW_TAG_NS_DEN
+            last = np.flatnonzero(np.r_[fstart[m][1:] != fstart[m][:-1], True])
+            fs_m, tag_fit = fstart[m][last], tag_ns[last]
+        fit = esf_clock_fit(fs_m, tag_fit, pvt_start, pvt_t_ns) if s == 1 else None
+        if fit is not None and abs(fit[2] - 1.0) > _RATE_MAX_ERROR:
+            warnings.append(f"{path}: {name} sensor clock fitted {100 * (fit[2] - 1):+.1f} % off "
+                            "its nominal rate, beyond belief; the nominal rate is used")
+            fit = None
+        if fit is None:
+            off = esf_offset_ns(fs_m, tag_fit, pvt_start, pvt_t_ns, unit_ns=1)
+            fit = None if off is None else (0, off, 1.0)
+        if fit is None:
             skipped.add(f"UBX {name} without NAV-PVT UTC times to date it (skipped)", path,
                         int(m.sum()))
             continue
-        meta.setdefault("esf_offset_ns", {})[name] = off
-        t = tag_u * _MS + off
+        tag0, utc0, rate = fit
+        meta.setdefault("esf_offset_ns", {})[name] = utc0 - tag0
+        if s == 1:
+            meta["esf_raw_clock_rate"] = rate
+        if rate == 1.0:
+            t = tag_ns - tag0 + utc0
+        else:
+            t = utc0 + np.rint((tag_ns - tag0) * rate).astype(np.int64)
         d, f = dtype[m], field[m]
         got = {}
         gz = d == T_GYRO_Z
@@ -573,9 +907,29 @@ def _ticks_odometer(t: np.ndarray, d: np.ndarray, f: np.ndarray, ticks_per_m: fl
 
 # --------------------------------------------------------------------------- reader
 
+#: the start of an NMEA sentence of a kind :func:`parse_nmea` reads (fix, time, DOP,
+#: velocity or error sentences); other bytes between the frames (binary junk, text
+#: headers, TXT/GSV sentences) hold nothing to read
+_NMEA_START = re.compile(rb"\$(?:[A-Z]{2}(?:GGA|GNS|RMC|GLL|GSA|VTG|GST|ZDA)|PTNL,GGK|PUBX,00),")
+
+
+def _message_names(messages: dict[str, int]) -> str:
+    """'NAV-SAT x151, NAV-STATUS x151, ...': the log's messages by count, named as u-blox
+    names them (unknown ones as class-id hex)."""
+    from pyubx2.ubxtypes_core import UBX_MSGIDS
+
+    named = []
+    for key, c in sorted(messages.items(), key=lambda kv: -kv[1]):
+        name = UBX_MSGIDS.get(bytes.fromhex(key.replace("-", "")), key)
+        named.append(f"{name} x{c}")
+    return ", ".join(named) or "none"
+
+
 def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
               ticks_per_m: float = 0.0) -> Drive:
-    """Read a UBX (or mixed UBX + NMEA) byte stream; see the module docstring."""
+    """Read a UBX (or mixed UBX + NMEA) byte stream; see the module docstring.  ``date``
+    dates NMEA lines without one, and NAV-POSLLH/NAV-SOL/NAV-POSECEF fixes when the log has
+    no GPS week."""
     buf = np.frombuffer(data, np.uint8)
     fr = _scan(buf)
     skipped = SkipReport()
@@ -584,20 +938,42 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
         if len(at):
             skipped.add(reason, f"{name}: byte {int(at[0])}", len(at))
     warnings: list[str] = []
+    notes: list[str] = []
     meta: dict[str, Any] = {"frames": len(fr["start"]), "bad_frames": len(fr["bad_at"])}
     ids, counts = np.unique(fr["cls"].astype(np.int64) * 256 + fr["id"], return_counts=True)
     meta["messages"] = {f"{i >> 8:02X}-{i & 0xFF:02X}": int(c) for i, c in zip(ids, counts, strict=False)}
-    gnss, pvt_start, pvt_t, _, nav_counts = nav_fixes(buf, fr, name, skipped)
+    gnss, anchor_start, anchor_t, _, nav_counts = nav_fixes(buf, fr, name, skipped)
     meta.update(nav_counts)
-    gyro, odo, accel = _esf_streams(buf, fr, pvt_start, pvt_t, ticks_per_m, name, skipped,
-                                    warnings, meta)
+    time_only = None
+    legacy_ids = np.array(sorted(_LEGACY_IDS[k] for k in LEGACY_SOURCES))
+    has_legacy = bool(((fr["cls"] == CLASS_NAV) & np.isin(fr["id"], legacy_ids)).any())
+    if nav_counts["nav_pvt"]:
+        if has_legacy:
+            meta["legacy_ignored"] = "NAV-PVT preferred over NAV-POSLLH/NAV-SOL/NAV-POSECEF"
+        if nav_counts["pvt_time_only"] == nav_counts["nav_pvt"]:
+            time_only = (f"every one of its {nav_counts['nav_pvt']} NAV-PVT messages is "
+                         "time-only (fixType 5)")
+    elif has_legacy:
+        gnss, anchor_start, anchor_t, leg = legacy_fixes(buf, fr, name, skipped, date)
+        meta.update(leg)
+        src = leg["fix_source"]
+        if leg.get("fix_assumed"):
+            notes.append(f"{name}: no NAV-STATUS or NAV-SOL in the log: every set {src} "
+                         "position taken as a 3-D fix")
+        if leg["legacy_time_only"] == leg["legacy_epochs"]:
+            status = "NAV-STATUS" if leg.get("nav_status") else "NAV-SOL"
+            time_only = (f"every one of its {leg['legacy_epochs']} {src} epochs is time-only "
+                         f"({status} gpsFix 5)")
+    gyro, odo, accel = _esf_streams(buf, fr, anchor_start, anchor_t, ticks_per_m, name,
+                                    skipped, warnings, meta)
     text = np.flatnonzero(fr["text"])
-    notes: list[str] = []
-    if len(text) and b"$" in data:
+    nmea_bytes = buf[text].tobytes()
+    meta["bytes_outside_frames"] = len(nmea_bytes)
+    nmea_error: InputError | None = None
+    if _NMEA_START.search(nmea_bytes):
         day = date
         if day is None and len(gnss):
             day = dt.datetime.fromtimestamp(int(gnss.t_ns[0]) // NS_PER_S, dt.UTC).date()
-        nmea_bytes = buf[text].tobytes()
         try:
             from .nmea import parse_nmea
 
@@ -605,17 +981,19 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
         except MissingDateError:
             raise
         except (InputError, NoDataError) as err:
-            if not len(gnss) and gyro is None and odo is None:
+            # a file of UBX frames without a usable message gets the UBX error below
+            if not len(fr["start"]) and not len(gnss) and gyro is None and odo is None:
                 raise
+            nmea_error = err
             warnings.append(f"{name}: NMEA lines between the UBX frames not read: {err}")
         else:
             meta["nmea"] = nmea_meta
             if len(gnss):
-                meta["nmea_ignored"] = "NAV-PVT fixes preferred over the NMEA epochs"
+                meta["nmea_ignored"] = "UBX fixes preferred over the NMEA epochs"
             else:
                 gnss = fixes
                 skipped.merge(rep)
-                notes = nmea_meta.get("notes", [])  # e.g. sentences that disagree
+                notes.extend(nmea_meta.get("notes", []))  # e.g. sentences that disagree
     drive = Drive(skipped=skipped, sources=[Source(name, hashlib.sha256(data).hexdigest())])
     drive.gnss = gnss if len(gnss) else None
     drive.gyro, drive.odo, drive.accel = gyro, odo, accel
@@ -626,10 +1004,22 @@ def parse_ubx(data: bytes, *, name: str = "<ubx>", date: dt.date | None = None,
         drive.meta["warnings"] = warnings
     if notes:
         drive.meta["notes"] = list(notes)
+    if not streams and meta.get("legacy_undated"):
+        raise MissingDateError(name, f"{meta['legacy_undated']} {meta['fix_source']} fixes but "
+                               "no GPS week to date them (no NAV-SOL or NAV-TIMEGPS in the log); "
+                               "give --date")
+    found = (f"{meta['frames']} valid frames, {meta['bad_frames']} damaged; messages: "
+             f"{_message_names(meta['messages'])}") if not streams or time_only else ""
     if not streams:
-        raise NoDataError(name, f"no usable UBX NAV-PVT or ESF message and no NMEA fix "
-                          f"({meta['frames']} valid frames, {meta['bad_frames']} damaged; "
-                          f"messages: {', '.join(meta['messages']) or 'none'})")
+        why = f"; NMEA lines: {nmea_error.reason}" if nmea_error is not None else ""
+        raise NoDataError(name, "no usable UBX message: gpsdr reads fixes from NAV-PVT (else "
+                          "NAV-POSLLH, NAV-SOL or NAV-POSECEF), gyro, odometer and accelerometer "
+                          "from ESF-MEAS or ESF-RAW, and NMEA fix sentences between the frames "
+                          f"({found}){why}")
+    if time_only and streams == ("gnss",) and not drive.gnss.valid.any():
+        raise NoDataError(name, f"no position fix: {time_only}, as a timing receiver reports "
+                          "while it holds its antenna at a fixed, surveyed position; there is "
+                          f"no navigation fix to make a track from ({found})")
     return drive
 
 

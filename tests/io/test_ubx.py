@@ -295,7 +295,8 @@ def test_esf_raw_gyro_and_accel() -> None:
     events = _pvts(11)
     for k in range(50):  # ESF-RAW: 4 reserved bytes, then (data word, sTtag) pairs
         t = T0 + k * 40_000_000
-        tag = (t // 10**6 + 77) & 0xFFFFFFFF  # the 32-bit ms counter wraps every 49.7 days
+        # the sensor time tag: 24-bit counts of 39.0625 us (wraps every 655.36 s)
+        tag = (round((t - T0) / 39_062.5) + 77) & 0xFFFFFF
         words = [((14 << 24) | 5, tag), ((5 << 24) | ((-4096) & 0xFFFFFF), tag),
                  ((16 << 24) | 2048, tag)]
         payload = b"\0" * 4 + b"".join(struct.pack("<II", w, s) for w, s in words)
