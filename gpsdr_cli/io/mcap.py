@@ -42,15 +42,38 @@ is used and the others are listed in ``meta["mcap"]``.
 The container walk is :mod:`gpsdr_cli.io.mcap_walk` (damage keeps what was read
 before it); protobuf's wire format is :mod:`gpsdr_cli.io.protobuf`.
 
-Speed from ``twist.linear.x`` assumes a body-frame twist.  Some GNSS drivers
-(u-blox ``/fix_velocity``) publish the velocity in a navigation frame (ENU),
-recognised by a large lateral component while moving.  Beside GNSS fixes that
-carry no speed (NavSatFix never does), such a channel is the receiver's Doppler
-velocity: it becomes the fixes' speed and course (nearest message within
-0.1 s), which the filters' receiver-velocity update uses, and it is not taken
+A twist's ``linear`` is read in one of two frames (:func:`twist_reading`): the body
+frame, ``x`` = forward speed (wheel odometry; negative only while reversing), or a
+navigation frame, ENU (``x`` = east, ``y`` = north, m/s), as GNSS drivers publish it
+(nmea_navsat_driver ``/vel``, u-blox ``/fix_velocity``).  The frame_id says little
+(those drivers stamp the receiver's own frame, e.g. "gps") and is not decoded, and the
+type not much more (nav_msgs/Odometry's twist is meant to be in its child frame, the
+body, but nothing enforces it), so the values decide:
+
+1. beside GNSS fixes, the fixes' own motion: over spans of about :data:`_PAIR_S`
+   the fixes' displacement per second (ENU, in the drive's local frame) equals the
+   twist's mean (x, y) when it is ENU, and only its length equals the mean x when
+   it is a forward speed; a frame wins by a clear majority of the spans that fit
+   one reading and miss the other (heading west, north or south; heading east the
+   two agree), provided it fits a fair share of all moving spans;
+2. else a large lateral share (median ``|y| / |(x, y)|`` above :data:`_LATERAL_SHARE`
+   while moving) means ENU;
+3. else ``x`` negative for long (below :data:`_BACKWARD_MPS` in more than
+   :data:`_BACKWARD_SHARE` of the moving messages, or a negative median, for over
+   :data:`_REVERSING_MAX_S` in all) is no forward speed: it is read as
+   ``|linear.xy|`` with a warning (the speed of an ENU velocity, or of a sensor
+   mounted backwards); a shorter backward stretch stays signed, as reversing;
+4. else a stream that moves is a forward speed; one that barely moves (a parked
+   log) has no telling frame and is read as ``|linear.xy|``, right in either frame
+   but for the sign of reversing, with a warning.
+
+Beside GNSS fixes that carry no speed (NavSatFix never does), an ENU channel is the
+receiver's Doppler velocity: it becomes the fixes' speed and course (nearest message
+within 0.1 s), which the filters' receiver-velocity update uses, and it is not taken
 as the odometer (a warning says so when no other odometer channel exists).
-Without GNSS fixes, or when a topic override names it, it is read as an
-odometer speed = |linear.xy|, with a warning.  An Imu whose ``angular_velocity_covariance[0]``
+Otherwise, or when a topic override names it, it is read as an odometer speed =
+|linear.xy|, with a warning.  ``meta["twist_frame"]`` holds each twist channel's
+frame and the evidence.  An Imu whose ``angular_velocity_covariance[0]``
 is -1 declares that it has no angular velocity (sensor_msgs convention); such
 messages are skipped and counted, not read as zero yaw rate (unless their z
 rates vary, which makes the flag sloppy metadata: then they are kept, with a
@@ -98,10 +121,32 @@ _LAYOUTS["foxglove_msgs/msg/LocationFix"] = "locationfix"
 _LAYOUTS["ublox_msgs/msg/NavPVT"] = "navpvt"
 _LAYOUTS["ublox_msgs/NavPVT"] = "navpvt"
 
-#: Navigation-frame twist detection: moving faster than this, m/s ...
+#: Twist frame (:func:`twist_reading`): a message or span moves faster than this, m/s.
 _MOVING_MPS = 0.5
-#: ... with a median |linear.y| / |linear.xy| above this share.
+#: ENU when the median |linear.y| / |linear.xy| while moving is above this share.
 _LATERAL_SHARE = 0.3
+#: A forward speed is negative only while reversing, which is slow and short: linear.x
+#: below this (m/s) in more than _BACKWARD_SHARE of the moving messages (or a negative
+#: median), for more than _REVERSING_MAX_S of backward motion in all, is none.
+_BACKWARD_MPS = -1.0
+_BACKWARD_SHARE = 0.2
+_REVERSING_MAX_S = 30.0
+#: The fixes' motion test: fixes paired about this far apart (s), long enough that
+#: metre-level fix noise stays a fraction of a m/s, short enough that a turn's chord
+#: is still close to its arc (3 s at 0.3 rad/s: 3 % short).
+_PAIR_S = 3.0
+#: a reading fits a span within max(_FIT_MPS, _FIT_SHARE x its speed), m/s ...
+_FIT_MPS = 0.3
+_FIT_SHARE = 0.1
+#: ... or this many times the fixes' stated noise on the span's displacement per second
+_FIT_SD = 1.5
+#: ... votes for a frame when it fits and the other misses by twice that, and wins
+#: with at least _MIN_VOTES votes and _VOTE_MAJORITY times the other's.
+_MIN_VOTES = 5
+_VOTE_MAJORITY = 4
+#: ... provided it fits at least this share of all the moving spans (urban fixes with
+#: metres of multipath fit under half of them)
+_FIT_MIN_SHARE = 1 / 3
 #: an ENU velocity message belongs to the fix stamped within this (u-blox: the same stamp)
 _VELOCITY_MATCH_NS = 100_000_000
 
@@ -479,7 +524,8 @@ class _NoStream(Exception):
 
 
 def _build(kind: str, chan: Channel, *, path: str, use_log_time: bool, date: dt.date | None,
-           skipped: SkipReport, meta: dict, warnings: list[str]) -> Any:
+           skipped: SkipReport, meta: dict, warnings: list[str],
+           twist: TwistReading | None = None) -> Any:
     if chan.layout == "navpvt":  # no header: its times are its own UTC fields
         skipped.merge(chan.fix_skips)
         if chan.n_undecodable:
@@ -516,28 +562,151 @@ def _build(kind: str, chan: Channel, *, path: str, use_log_time: bool, date: dt.
         return YawRates(t_ns=t_ns[keep], yaw_rate_radps=wz[keep])
     vx = _cat(chan, "vx", np.float64)
     vy = _cat(chan, "vy", np.float64)
-    speed = vx
-    if _navigation_frame(chan):
-        speed = np.hypot(vx, vy)
-        warnings.append(f"{where}: twist.linear has a large lateral (y) component while moving: "
-                        "read as a navigation-frame (ENU) velocity, speed = |linear.xy|")
-        meta.setdefault("twist_frame", {})[chan.topic] = "navigation (ENU): speed = hypot(x, y)"
+    reading = twist if twist is not None else twist_reading(chan, None, use_log_time)
+    speed = np.hypot(vx, vy) if reading.hypot else vx
+    if reading.frame == "enu":
+        warnings.append(f"{where}: twist.linear read as a navigation-frame (ENU) velocity "
+                        f"({reading.why}): speed = |linear.xy|")
+    elif reading.warning:
+        warnings.append(f"{where}: {reading.warning}")
     bad = ~np.isfinite(speed)
     skipped.add("non-finite speed", where, int(bad.sum()))
     return Odometry(t_ns=t_ns[~bad], speed_mps=speed[~bad])
 
 
-def _navigation_frame(chan: Channel) -> bool:
-    """A twist channel whose linear velocity is in a navigation frame (ENU, as u-blox
-    ``/fix_velocity``) rather than the body frame: a large lateral (y) share while moving."""
-    if chan.layout is None or KIND_OF_LAYOUT[chan.layout] != "odo":
-        return False
+@dataclass(frozen=True)
+class TwistReading:
+    """How a twist channel's ``linear`` is read (module docstring)."""
+
+    #: "enu" (x east, y north), "body" (x forward) or "unknown"
+    frame: str
+    #: speed = |linear.xy| (True) or linear.x (False), m/s
+    hypot: bool
+    #: the evidence, for ``meta["twist_frame"]`` and warnings
+    why: str
+    #: a line for the drive's warnings when read as an odometer ("" for a plain reading)
+    warning: str = ""
+
+    def describe(self) -> dict[str, str]:
+        return {"frame": self.frame, "speed": "hypot(x, y)" if self.hypot else "x",
+                "evidence": self.why}
+
+
+def twist_reading(chan: Channel, gnss: GnssFixes | None, use_log_time: bool) -> TwistReading:
+    """The frame of a twist channel's linear velocity, from the GNSS fixes' motion when
+    they tell, else from the twist alone (the rules in the module docstring)."""
+    t_ns, _ = _times(chan, use_log_time)
     vx = _cat(chan, "vx", np.float64)
     vy = _cat(chan, "vy", np.float64)
+    if not np.isfinite(vx).any():  # nothing to read (undecodable): no verdict to warn about
+        return TwistReading("body", False, "no finite linear.x")
+    pre = ""  # the fixes' verdict when they did not decide, kept as evidence
+    if gnss is not None and len(gnss):
+        frame, why = _frame_from_fixes(t_ns, vx, vy, gnss)
+        if frame:
+            return TwistReading(frame, frame == "enu", why)
+        pre = f"fixes undecided: {why}; "
     norm = np.hypot(vx, vy)
     moving = np.isfinite(norm) & (norm > _MOVING_MPS)
-    return bool(moving.sum() >= 10
-                and np.median(np.abs(vy[moving]) / norm[moving]) > _LATERAL_SHARE)
+    n_moving = int(moving.sum())
+    if n_moving >= 10:
+        share = float(np.median(np.abs(vy[moving]) / norm[moving]))
+        if share > _LATERAL_SHARE:
+            return TwistReading("enu", True, f"{pre}a large lateral (y) component while "
+                                f"moving: median |y|/|xy| {share:.2f}")
+    x_moving = vx[moving]
+    dt_s = float(np.median(np.diff(np.sort(t_ns)))) / NS_PER_S if len(t_ns) > 1 else 0.0
+    backward_s = int((x_moving < 0).sum()) * dt_s
+    strong = float(np.mean(x_moving < _BACKWARD_MPS)) if n_moving else 0.0
+    negative = n_moving > 0 and float(np.median(x_moving)) < 0
+    if strong > _BACKWARD_SHARE or negative:
+        why = (f"{pre}linear.x below {_BACKWARD_MPS:g} m/s in {strong:.0%} of the {n_moving} "
+               f"moving messages, median {float(np.median(x_moving)):.2f} m/s, "
+               f"{backward_s:.0f} s backwards")
+        if backward_s > _REVERSING_MAX_S:
+            # wheels turn backwards only to reverse, briefly: this is an ENU velocity
+            # (or a sensor mounted backwards), whose speed either way is |linear.xy|
+            return TwistReading("unknown", True, why, f"not a forward speed ({why}; reversing "
+                                f"lasts under {_REVERSING_MAX_S:g} s): read as speed = "
+                                "|linear.xy|, the speed of an ENU velocity or of a backward "
+                                "mounted sensor")
+        if negative:
+            return TwistReading("body", False, why, f"moving backwards for most of the log "
+                                f"({why}): kept as reversing, speed = linear.x < 0")
+    if n_moving < 10:
+        why = f"{pre}{n_moving} messages faster than {_MOVING_MPS:g} m/s"
+        return TwistReading("unknown", True, why, f"too little motion to tell an ENU velocity "
+                            f"from a forward speed ({why}): read as speed = |linear.xy|, right in "
+                            "either frame but for the sign of reversing")
+    return TwistReading("body", False, f"{pre}x forward while moving ({n_moving} messages)")
+
+
+def _frame_from_fixes(t_v: np.ndarray, vx: np.ndarray, vy: np.ndarray,
+                      gnss: GnssFixes) -> tuple[str, str]:
+    """("enu", why), ("body", why) or ("", why) from spans of about :data:`_PAIR_S` between
+    fixes: their displacement per second (east, north m/s) against the twist's mean over
+    the same span, read as ENU (x, y) or as a forward speed x (the displacement's length)."""
+    ok = np.isfinite(vx) & np.isfinite(vy)
+    t_v, vx, vy = t_v[ok], vx[ok], vy[ok]
+    valid = gnss.valid
+    t_g, lat, lon = gnss.t_ns[valid], gnss.lat_deg[valid], gnss.lon_deg[valid]
+    sd = np.fmax(gnss.sigma_e_m[valid], gnss.sigma_n_m[valid])
+    if len(t_v) < 2 or len(t_g) < 2:
+        return "", "too few fixes or twist messages to compare"
+    order = np.argsort(t_g, kind="stable")
+    t_g, lat, lon, sd = t_g[order], lat[order], lon[order], np.nan_to_num(sd[order])
+    step = int(_PAIR_S * NS_PER_S)
+    # the first fix of each step-long bin: spans that do not overlap, whatever the fix rate
+    _, first = np.unique((t_g - t_g[0]) // step, return_index=True)
+    a, b = first[:-1], first[1:]
+    dt = (t_g[b] - t_g[a]) / NS_PER_S
+    from ..geodesy import LocalFrame
+
+    e, n = LocalFrame.for_fixes(lat, lon).forward(lat, lon)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ve = (e[b] - e[a]) / dt
+        vn = (n[b] - n[a]) / dt
+    order = np.argsort(t_v, kind="stable")
+    t_v, vx, vy = t_v[order], vx[order], vy[order]
+    # the twist's mean over a span is its integral (trapezoids) between the span's ends
+    s = (t_v - t_v[0]) / NS_PER_S
+    h = np.diff(s) / 2
+    cx = np.concatenate([[0.0], np.cumsum(h * (vx[1:] + vx[:-1]))])
+    cy = np.concatenate([[0.0], np.cumsum(h * (vy[1:] + vy[:-1]))])
+    sa, sb = (t_g[a] - t_v[0]) / NS_PER_S, (t_g[b] - t_v[0]) / NS_PER_S
+    # a span needs the twist on both ends and no hole in it longer than a span
+    holes = np.concatenate([[0], np.cumsum(np.diff(t_v) > step)])
+    ia = np.clip(np.searchsorted(t_v, t_g[a], "right") - 1, 0, len(t_v) - 1)
+    ib = np.clip(np.searchsorted(t_v, t_g[b], "left"), 0, len(t_v) - 1)
+    use = ((dt > 0) & (dt <= 2 * _PAIR_S) & (t_g[a] >= t_v[0]) & (t_g[b] <= t_v[-1])
+           & (holes[ib] == holes[ia]) & np.isfinite(ve) & np.isfinite(vn))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mx = (np.interp(sb, s, cx) - np.interp(sa, s, cx)) / (sb - sa)
+        my = (np.interp(sb, s, cy) - np.interp(sa, s, cy)) / (sb - sa)
+    v_fix = np.hypot(ve, vn)
+    v_tw = np.hypot(mx, my)
+    moving = use & (np.maximum(v_fix, v_tw) > _MOVING_MPS)
+    # the fixes' stated noise widens it: a displacement over dt is off by ~hypot(sd_a, sd_b)
+    # / dt (less when, as usual, the fixes' errors are correlated in time)
+    tol = np.maximum.reduce([np.full(len(a), _FIT_MPS), _FIT_SHARE * np.maximum(v_fix, v_tw),
+                             _FIT_SD * np.hypot(sd[a], sd[b]) / np.where(dt > 0, dt, np.inf)])
+    e_enu = np.hypot(mx - ve, my - vn)
+    e_body = np.abs(mx - v_fix)
+    fit_enu, fit_body = moving & (e_enu < tol), moving & (e_body < tol)
+    n_enu = int((fit_enu & (e_body > 2 * tol)).sum())
+    n_body = int((fit_body & (e_enu > 2 * tol)).sum())
+    n_moving = int(moving.sum())
+    why = (f"{n_moving} moving {_PAIR_S:g} s spans between fixes: {n_enu} fit the fixes' "
+           f"displacement as ENU (x east, y north) and not as a forward speed, {n_body} the "
+           "reverse")
+    for frame, n_win, n_lose, fits in (("enu", n_enu, n_body, fit_enu),
+                                       ("body", n_body, n_enu, fit_body)):
+        # a frame wins only where the two differ, by a clear majority, and must also fit
+        # a good share of all moving spans: a stream that fits neither decides nothing
+        if (n_win >= _MIN_VOTES and n_win >= _VOTE_MAJORITY * n_lose
+                and int(fits.sum()) >= _FIT_MIN_SHARE * n_moving):
+            return frame, why
+    return "", why
 
 
 def _attach_velocity(gnss: GnssFixes, chan: Channel, use_log_time: bool) -> tuple[GnssFixes, int]:
@@ -639,15 +808,20 @@ def drive_from_channels(path_s: str, sha256: str, channels: list[Channel], *,
     drive = Drive(skipped=skipped, sources=[Source(path_s, sha256)])
     chosen: dict[str, str] = {}
     alternatives: dict[str, list[str]] = {}
+    readings: dict[int, TwistReading] = {}
     for kind in ("gnss", "gyro", "odo"):
         cands = [c for c in channels
                  if c.layout is not None and KIND_OF_LAYOUT[c.layout] == kind
                  and (wanted[kind] is None or c.topic == wanted[kind])]
+        if kind == "odo":
+            readings = {c.id: twist_reading(c, drive.gnss, use_log_time) for c in cands}
+            for c in cands:
+                meta.setdefault("twist_frame", {})[c.topic] = readings[c.id].describe()
         if kind == "odo" and wanted["odo"] is None and drive.gnss is not None:
             # A navigation-frame (ENU) twist beside GNSS fixes is the receiver's own Doppler
             # velocity (u-blox /fix_velocity), not a wheel odometer: it becomes the fixes'
             # speed and course, which every filter's receiver-velocity update uses.
-            nav = [c for c in cands if _navigation_frame(c)]
+            nav = [c for c in cands if readings[c.id].frame == "enu"]
             if nav and not np.isfinite(drive.gnss.speed_mps).any():
                 nav.sort(key=lambda c: c.n_msgs, reverse=True)
                 drive.gnss, n_vel = _attach_velocity(drive.gnss, nav[0], use_log_time)
@@ -668,7 +842,8 @@ def drive_from_channels(path_s: str, sha256: str, channels: list[Channel], *,
             warnings.append(f"{path_s}: {len(cands)} {kind} channels; using {best.topic} "
                             f"({best.n_msgs} messages), not {', '.join(alternatives[kind])}")
         stream = _build(kind, best, path=path_s, use_log_time=use_log_time, date=date,
-                        skipped=skipped, meta=meta, warnings=warnings)
+                        skipped=skipped, meta=meta, warnings=warnings,
+                        twist=readings.get(best.id) if kind == "odo" else None)
         if len(stream):
             setattr(drive, kind, stream)
             chosen[kind] = best.topic
