@@ -1292,7 +1292,13 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
         what = ("GGA/GNS/RMC/GLL/GSA/VTG/GST/ZDA/PTNL,GGK/PUBX,00 sentence with a valid checksum"
                 if not parsed else "GGA, GNS, RMC or GLL sentence with a time of day (nor "
                 "PTNL,GGK or PUBX,00)")
-        raise NoDataError(name, f"no {what} ({_summary(report)})")
+        hint = ""
+        if not parsed and report.counts.get("bad checksum", 0) >= 0.9 * sum(report.counts.values()):
+            # a writer that computes every checksum wrongly, or a file edited by hand
+            hint = ("; every checksum is wrong: the program that wrote the log computes them "
+                    "wrongly, or the file was edited; recompute each *hh as the XOR of the "
+                    "bytes between $ and *")
+        raise NoDataError(name, f"no {what} ({_summary(report)}){hint}")
     e = _merge_epochs(parsed, len(epoch_sod), position_from)
     row = e.pop("row")
     disagree = e.pop("disagree")

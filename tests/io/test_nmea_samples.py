@@ -141,6 +141,19 @@ def test_bad_checksums_counted() -> None:
     assert len(drive.gnss) == 1
 
 
+def test_a_log_whose_every_checksum_is_wrong_says_so(tmp_path: Path) -> None:
+    """A program that writes every checksum wrongly: one error line that says what to do."""
+    good = (DATA / "pygpsdata-nmea4lc.log").read_text().splitlines()
+    bad = [ln[:-2] + ("00" if ln[-2:].upper() != "00" else "11") for ln in good if "*" in ln]
+    f = tmp_path / "wrong.nmea"
+    f.write_text("\n".join(bad) + "\n")
+    with pytest.raises(NoDataError) as err:
+        read_nmea(f)
+    msg = str(err.value)
+    assert f"{len(bad)} bad checksum" in msg and "every checksum is wrong" in msg
+    assert "recompute each *hh as the XOR" in msg
+
+
 def test_malformed_checksum_hex_is_no_checksum() -> None:
     drive = read_nmea(DATA / "pygpsdata-nmeabadck2.log")  # "*3)" on line 2
     assert drive.skipped.first["no checksum (truncated sentence)"].endswith(":2")
