@@ -81,7 +81,8 @@ def sniff(path: str | Path) -> str:
     if looks_like_nmea(head) or _nmea_after_noise(head, looks_like_nmea):
         return "nmea"
     if problem:
-        raise InputError(path, f"{problem}; expected MCAP, NMEA, CSV or Parquet")
+        raise InputError(path, f"{problem}; expected MCAP, a ROS bag, u-blox UBX, NMEA, "
+                               "an RTKLIB .pos, CSV or Parquet")
     if b"$GP" in head[:4096] or b"$GN" in head[:4096]:
         return "nmea"  # NMEA whose first sentences are damaged: the NMEA reader counts them
     novatel = _NOVATEL_ASCII.search(head[:4096])
