@@ -156,14 +156,20 @@ def test_the_ramp_next_to_a_left_out_run_is_left_out_too() -> None:
     blending a reflection in or out, 2 sigmas its way next to the run the screen left out,
     go as well: 29 -> 25 reflected fixes used, the same 574 clean ones, fkf + RTS 2.45 ->
     1.94 m."""
-    sim = simulate_drive("urban_nlos", 5, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    on = run_filter(sim, copy.deepcopy(sim.drive), "fkf", smooth=True, pipeline=True)
-    off = run_filter(sim, copy.deepcopy(sim.drive), "fkf", smooth=True, pipeline=True,
-                     overrides={"gnss": {"nlos_screen_edge_sigmas": 0.0}})
+    on, off, k_on, k_off = _fkf_rts_with_and_without(5, "nlos_screen_edge_sigmas")
     assert off.rmse_m > 2.3 and on.rmse_m < 2.1
-    k_on, k_off = _kept(sim, on), _kept(sim, off)
     assert k_on[0] <= k_off[0] - 3
     assert k_on[1] == k_off[1]
+
+
+def _fkf_rts_with_and_without(seed: int, key: str):
+    """fkf + RTS on the 283-s city drive ``seed`` (5-Hz gyro and odometer) with the screen's
+    ``[gnss] key`` at its default and at 0 (off): (on, off, :func:`_kept` of each)."""
+    sim = simulate_drive("urban_nlos", seed, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
+    on = run_filter(sim, copy.deepcopy(sim.drive), "fkf", smooth=True, pipeline=True)
+    off = run_filter(sim, copy.deepcopy(sim.drive), "fkf", smooth=True, pipeline=True,
+                     overrides={"gnss": {key: 0.0}})
+    return on, off, _kept(sim, on), _kept(sim, off)
 
 
 def _kept(sim, r) -> tuple[int, int, int]:
@@ -181,12 +187,8 @@ def test_the_far_fixes_of_kept_runs_are_left_out_too() -> None:
     fixes the screen kept sat metres off the fit's track, the edges of reflections.  Left
     out at 3 of their sigmas, fkf + RTS 3.32 -> 1.41 m, with 4 reflected fixes fewer and 3
     clean ones of 342 lost."""
-    sim = simulate_drive("urban_nlos", 19, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    on = run_filter(sim, copy.deepcopy(sim.drive), "fkf", smooth=True, pipeline=True)
-    off = run_filter(sim, copy.deepcopy(sim.drive), "fkf", smooth=True, pipeline=True,
-                     overrides={"gnss": {"nlos_screen_fix_sigmas": 0.0}})
+    on, off, k_on, k_off = _fkf_rts_with_and_without(19, "nlos_screen_fix_sigmas")
     assert off.rmse_m > 3.0 and on.rmse_m < 1.7
-    k_on, k_off = _kept(sim, on), _kept(sim, off)
     assert k_on[0] < k_off[0]
     assert k_on[1] > 0.97 * k_on[2]
 
