@@ -870,6 +870,9 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             keep &= ~badpos
             mode = s.f(6)
             qi, bm = _gns_quality(mode)
+            # a per-system GNS beside the combined GN one (NMEA 4.1: Trimble, u-blox) carries
+            # its satellite count only: empty mode, no position; not a damaged sentence
+            bm &= ~((mode == b"") & np.isnan(lat) & np.isnan(lon))
             probs.add("malformed mode in GNS", s.pos[bm & keep & ~badpos])
             keep &= ~bm
             none = keep & (qi == FIX_NONE)  # a letter of a fix in any system wins

@@ -242,3 +242,20 @@ def test_real_furuno_gns_agrees_with_its_gga_and_reads_alone() -> None:
             assert np.datetime64(t.rstrip("Z"), "ns").astype(np.int64) == tn
             assert abs(a - float(la)) < 1e-6 and abs(b - float(lo)) < 1e-6
             assert abs(alt - float(h)) < 1e-6  # m, ellipsoidal (gpsd's altHAE)
+
+
+def test_per_system_gns_with_counts_only_is_not_damage() -> None:
+    """NMEA 4.1 receivers (a Trimble R2 log) write a combined GNGNS and, per system, a GNS
+    with its satellite count only: empty position and mode.  Those are not counted as
+    malformed; the combined one is the fix (float RTK: 'FFNNN')."""
+    lines = []
+    for s in range(3):
+        hms = f"2356{47 + s:02d}.00"
+        lines += [ck(f"GNGNS,{hms},3403.47162394,N,11711.80927093,W,FFNNN,10,1.2,403.600,"
+                     "-32.133,,"),
+                  ck(f"GPGNS,{hms},,,,,,6,,,,1.0,0"), ck(f"GLGNS,{hms},,,,,,4,,,,1.0,0")]
+    g, report, _ = parse_nmea(log(*lines), date=DAY)
+    assert "malformed mode in GNS" not in report.counts
+    assert len(g) == 3 and np.all(g.fix_quality == 5)
+    assert g.lat_deg[0] == pytest.approx(34 + 3.47162394 / 60, abs=1e-9)
+    assert g.t_ns[0] == t_ns(DAY, 23, 56, 47.0)
