@@ -356,3 +356,18 @@ def test_fixes_stamped_off_the_dead_reckoning_get_a_hint(gpsdr, drive_dir: Path)
     assert calibrated.exit_code == 0, calibrated.output
     assert "time stamps look" not in calibrated.stderr
     assert "odometer's speed reads" not in calibrated.stderr
+
+
+def test_info_on_a_log_without_a_date_does_not_call_it_a_rollover(gpsdr, tmp_path: Path) -> None:
+    """A GGA-only log has times of day and no date: info shows them on 1970-01-01 and says
+    so, without the receiver-bug warning that date would earn if a receiver had sent it."""
+    from tests.io.test_nmea import ck
+
+    lines = [ck(f"GPGGA,1200{s:02d}.00,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,")
+             for s in range(10)]
+    log = tmp_path / "gga.nmea"
+    log.write_text("\r\n".join(lines) + "\r\n")
+    result = gpsdr(["info", log])
+    assert result.exit_code == 0, result.output
+    assert "times of day shown on 1970-01-01" in result.output
+    assert "suspicious date" not in result.output and "rollover" not in result.output
