@@ -478,9 +478,25 @@ def coast_psd(epochs: Epochs, params: Params) -> float:
     Coasting: in a GNSS outage with nothing measuring the speed, the kernel takes
     zero-acceleration rows ``a_e = a_n = 0`` with ``r = q_c / T`` (kernels_aekf step 3).
     The current statistical model's mean keeps the last acceleration estimate, so without
-    them a drive-off or a braking carried on through the outage.
+    them a drive-off or a braking carried on through the outage.  A drive without a gyro or
+    odometer holds its outages instead (:func:`no_dr_hold`).
     """
     return max(float(params["aekf"]["coast_acc_psd"]), 0.0)
+
+
+def no_dr_hold(epochs: Epochs, params: Params) -> tuple[float, float]:
+    """``(1, aekf.no_dr_vel_psd)`` on a GNSS-only drive (no gyro or odometer record), else
+    ``(0, 0)``: the kernel's GNSS outages of such a drive are held.
+
+    Nothing measures the motion there, and the current statistical model's mean carried the
+    last acceleration on (coast_acc_psd only slowed it: a real receiver log's no-fix records
+    after its last fix took the speed from 1.9 to 13.3 m/s in a minute).  Before each step
+    into the outage the kernel takes rows ``a = 0`` (``kernels_aekf.NO_DR_COAST_Q``), and the
+    velocity's variance grows by ``no_dr_vel_psd`` (m^2/s^3) x T per axis instead.
+    """
+    if epochs.has_gyro.any() or epochs.has_odo.any():
+        return 0.0, 0.0
+    return 1.0, max(float(params["aekf"]["no_dr_vel_psd"]), 0.0)
 
 
 def drive_off_var(params: Params) -> tuple[float, float]:
@@ -521,6 +537,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     x0, P0, psi0, heading_known = initial_state(epochs, params)
     prm, flg = kernel_params(params, adaptive, smooth)
     prm[kn.PAR_COAST_Q] = coast_psd(epochs, params)
+    prm[kn.PAR_NO_DR], prm[kn.PAR_NO_DR_VEL_Q] = no_dr_hold(epochs, params)
     prm[kn.PAR_UNKNOWN_W_VAR] = unknown_rate_var(params)
     prm[kn.PAR_OFF_VVAR], prm[kn.PAR_OFF_AVAR] = drive_off_var(params)
     st = np.zeros(kn.N_ST)

@@ -276,7 +276,7 @@ def run_federated(kind: str, epochs: Epochs, params: Params) -> FilterResult:
     if smoothed and rts:
         if segment <= 0:                            # every epoch's x and P were stored
             out, smooth_not_spd, restarts = kf.smooth_fused(xs, Ps, prep.dt, prep.static,
-                                                            prep.eps_w, prep.par)
+                                                            prep.has_gnss, prep.eps_w, prep.par)
         smoothing = "rts_fused"
     del xs, Ps
     static, info, gnss_on = prep.static, dict(prep.info), bool(prep.flags[kf.FLG_GNSS_ON])

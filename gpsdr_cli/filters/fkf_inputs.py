@@ -813,6 +813,10 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.PAR_DR_STALE_S] = fp["dr_stale_s"]
     # no odometer: in GNSS outages nothing measures the speed (kernels_fkf: zero-acceleration rows)
     par[kf.PAR_COAST_Q] = fp["coast_acc_psd"]  # the kernel coasts only while no distance is fresh
+    # no gyro, no odometer: a no-fix record measures nothing, its epoch is held (kernels_fkf)
+    par[kf.PAR_NO_DR] = 0.0 if dr_on else 1.0
+    par[kf.PAR_NO_DR_VEL_Q] = max(float(fp["no_dr_vel_psd"]), 0.0)
+    par[kf.PAR_NO_DR_HEAD_Q] = max(float(fp["no_dr_heading_psd"]), 0.0)
     positive = {"fkf.heading_sd_rad": fp["heading_sd_rad"], "odo.noise_sd_mps": par[kf.PAR_ODO_SD],
                 "standstill.zupt_sd_mps": sp["zupt_sd_mps"], "fkf.gnss_err_sd_m": fp["gnss_err_sd_m"],
                 "fkf.gnss_err_obstructed_sd_m": fp["gnss_err_obstructed_sd_m"],

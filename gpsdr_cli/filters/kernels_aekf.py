@@ -32,6 +32,14 @@ Every scalar update uses the Joseph form and re-symmetrises P.  A remembered
 heading (from the velocity above the direction threshold, gyro-integrated
 below it) keeps the odometer row defined when the vehicle starts from rest.
 
+GNSS outages without an odometer record coast (``aekf.coast_acc_psd``: zero-acceleration
+rows in step 3).  On a drive with neither a gyro nor an odometer (``PAR_NO_DR``) an outage
+is held instead: before each step into it rows ``a_e = a_n = 0`` that correct the
+acceleration only (``NO_DR_COAST_Q``), and in the step's prior the velocity's variance grows
+by ``aekf.no_dr_vel_psd`` x T per axis (kept with the heading floor's in ``fl_*``, so the
+smoother's prior is the forward one).  The last fixes' velocity is held and the sigma grows;
+the current statistical model's mean had carried the last acceleration on.
+
 Cold start (the first run after installing, before numba's cache exists): the
 options off by default are None keyword arguments whose branches numba prunes
 before type inference (:func:`kernel_options`), scratch arrays come from the
@@ -95,7 +103,9 @@ PAR_GE_VAR, PAR_GE_RATE, PAR_GE_DIST_RATE, PAR_COAST_Q, PAR_OFF_VVAR, PAR_OFF_AV
 PAR_UNKNOWN_W_VAR = 39
 PAR_VGATE_VAR = 40  # (m/s)^2, the receiver velocity gate's least variance per axis
 PAR_VGATE_RESET = 41  # s: receiver velocities gated this long are taken again (no lock-out)
-N_PRM = 42
+PAR_NO_DR = 42  # 1: a GNSS-only drive (no gyro, no odometer): its GNSS outages are held
+PAR_NO_DR_VEL_Q = 43  # m^2/s^3 per axis: the velocity's random walk through such an outage
+N_PRM = 44
 # indices into the integer flag vector ``flg``
 FLG_ADAPT_Q, FLG_STANDSTILL, FLG_GATE, FLG_INNOV, FLG_FADING, FLG_SAGE_HUSA = range(6)
 FLG_CHECK_SPD, FLG_STORE = 6, 7
@@ -123,6 +133,11 @@ N_ST = 30
 STALE_ODO_S = 1.0
 #: largest heading variance (rad^2) of the heading floor: a heading uniform on (-pi, pi]
 VPSI_MAX = math.pi ** 2 / 3.0
+#: m^2/s^3: the zero-acceleration rows of a GNSS-only drive before each step into its GNSS
+#: outage (``r = this / T``, the rate does not matter): the acceleration is ~0 when the step
+#: starts; at coast_acc_psd = 1 against the current statistical model's held mean the speed
+#: ran 1.9 -> 13.3 m/s in the minute after a real log's last fix
+NO_DR_COAST_Q = 1e-3
 # stored prior scalars per epoch (columns of ``prior_store``: PRI_, the prior's, not Q)
 PRI_QA_E, PRI_QA_N, PRI_LAM, PRI_GAIN, PRI_ADD_E, PRI_ADD_N, PRI_W = range(7)
 PRI_FL_EE, PRI_FL_NN, PRI_FL_EN, PRI_FB = 7, 8, 9, 10
@@ -934,6 +949,9 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
     drift_consider = flg[FLG_DRIFT_CONSIDER]
     odo_consider = flg[FLG_ODO_CONSIDER]
     coast_q = prm[PAR_COAST_Q]
+    no_dr = prm[PAR_NO_DR] != 0.0
+    n_ep = dt.shape[0]
+    cons_not_acc = np.int64(CONS_NOT_ACC)
     off_vvar = prm[PAR_OFF_VVAR]
     off_avar = prm[PAR_OFF_AVAR]
     omega_min = prm[PAR_OMEGA_MIN]
@@ -1075,6 +1093,15 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                         P[IVN, IVN] += fl_nn
                         P[IVE, IVN] += fl_en
                         P[IVN, IVE] = P[IVE, IVN]
+            if no_dr and outage[k] and not hold:
+                # a GNSS-only drive's outage: the acceleration is held at 0 (the rows in step 3),
+                # so the velocity's variance grows as a random walk instead (the car may brake or
+                # drive off); kept with the floor's deficit in fl_*, the smoother's process noise
+                q_v = prm[PAR_NO_DR_VEL_Q] * T
+                fl_ee += q_v
+                fl_nn += q_v
+                P[IVE, IVE] += q_v
+                P[IVN, IVN] += q_v
         # ---- 2. GNSS position fix
         nis_out[k] = math.nan
         gnss_used[k] = False
@@ -1145,16 +1172,32 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
                         for i in range(n):
                             gw[GW_H + n_rows, i] = H[i]
                         n_rows = ge_push(gw, n_rows, GW_ODO, H, PHt, prm[PAR_R_ODO], u - h)
-        if coast_q > 0.0 and outage[k] and not is_static and T > 0.0 and t - odo_t > STALE_ODO_S:
+        coast = False
+        r_c = 0.0
+        c_cons = no_cons
+        if no_dr:
+            # a GNSS-only drive: nothing measures the motion in an outage; rows a = 0 before each
+            # step into it (NO_DR_COAST_Q) hold the velocity from the step's start, the prior's
+            # velocity variance grows instead (PAR_NO_DR_VEL_Q, step 1).  They correct the
+            # acceleration only: the last fixes' velocity is what is held (as an optimal row,
+            # through P's velocity-acceleration covariance, it took 1.9 -> 1.2 m/s off a real
+            # log's last fix)
+            if k + 1 < n_ep and outage[k + 1] and not is_static and dt[k + 1] > 0.0:
+                coast = True
+                r_c = NO_DR_COAST_Q / dt[k + 1]
+                c_cons = cons_not_acc
+        elif coast_q > 0.0 and outage[k] and not is_static and T > 0.0 and t - odo_t > STALE_ODO_S:
             # coasting (aekf.coast_acc_psd; a drive without an odometer, in a GNSS outage): nothing
             # measures the speed, and the current statistical model's mean (abar = a_hat) carries
             # the last acceleration through the outage, and the speed ran away;
             # zero-acceleration rows with r = q_c / T (information T / q_c per step, whatever the
             # rate) hold the speed instead, as fkf's kernels_fkf coasting
+            coast = True
             r_c = coast_q / T
+        if coast:
             for idx in (2, 5):
                 y = -x[idx]
-                if not unit_update(x, P, idx, y, r_c, 1.0, K, PHt, no_cons):
+                if not unit_update(x, P, idx, y, r_c, 1.0, K, PHt, c_cons):
                     info[INF_SKIPPED] += 1.0
                 elif ge_on is not None:
                     n_rows = ge_push(gw, n_rows, float(idx), H, PHt, r_c, y)

@@ -39,6 +39,16 @@ filter takes zero-acceleration rows ``a_e = a_n = 0`` with ``r = q_c / T``
 (information ``T / q_c`` per step, so the rate does not matter): the
 white-jerk model otherwise carries a drive-off's acceleration through a GNSS
 outage (evidence: docs/decisions/0015-evidence-behind-the-filter-choices.md#kernels-fkf).
+Held steps (our choice): on a drive without a gyro or odometer (only the GNSS filter
+exists) the step into a no-fix epoch (a receiver's record without a position, e.g. the
+quality-0 GGA/RMC it keeps writing after losing the fix) is held: before it the GNSS filter
+takes rows ``a_e = a_n = 0`` that correct the acceleration only (``NO_DR_COAST_Q``,
+``HOLD_ACC_ONLY``), and the step's prior gets a velocity random walk instead
+(:func:`held_noise`, ``[fkf] no_dr_vel_psd`` per axis and ``no_dr_heading_psd`` x speed^2
+across the track), which the smoother adds as well (:func:`held_step` reads the inputs
+only).  The velocity of the last fixes is held and its sigma grows; the white-jerk model had
+carried the last acceleration on (a real log's speed 2.7 -> 239 m/s in a minute of no-fix
+records).
 
 GNSS local filter (Tang et al. eqs. (4)-(6), erratum: row 2 selects n)::
 
@@ -155,6 +165,10 @@ ZUPT_CONSIDER = (1 << IE) | (1 << IN) | (1 << IEPS_E) | (1 << IEPS_N)
 #: a stop says nothing about the gyro heading's alignment error: read through the velocity's
 #: covariance, the braking transient moved it 1.3 -> 10.7 deg at one city stop (decisions/0023)
 ZUPT_KEEP_HEADING = 1 << IQW
+#: the zero-acceleration rows before a held step correct the acceleration only: the last fixes'
+#: velocity is what is held (an optimal row, through P's velocity-acceleration covariance,
+#: took 2.70 -> 2.35 m/s off a real log's last fix)
+HOLD_ACC_ONLY = ((1 << NX) - 1) & ~((1 << IAE) | (1 << IAN))
 
 # ---- float parameter vector (built by fkf.kernel_parameters) ---------------------------
 PAR_TAU_EPS = 0      # s, correlation time of eps_e, eps_n
@@ -192,7 +206,10 @@ PAR_EPS_RESET = 30   # 1: the step into this epoch starts a new, independent eps
 PAR_VGATE_VAR = 31   # (m/s)^2, the receiver velocity gate's least variance per axis
 PAR_VGATE_RESET_S = 32  # s: receiver velocities gated this long are taken again (no lock-out)
 PAR_RES_DEMEAN = 33  # 1: covariance matching on the residuals' scatter about their window mean
-N_PAR = 34
+PAR_NO_DR = 34       # 1: a GNSS-only drive (no gyro, no odometer): its no-fix epochs are held
+PAR_NO_DR_VEL_Q = 35  # m^2/s^3, per axis: velocity random walk of a step into a held epoch
+PAR_NO_DR_HEAD_Q = 36  # rad^2/s: heading random walk of that step (cross-track, x speed^2)
+N_PAR = 37
 #: added to a regime share w in ``eps_w``: the step into that epoch starts a new eps
 #: (an RTK drive's fix kind changed: fkf_inputs.multipath_regime)
 EPS_RESET = 10.0
@@ -200,6 +217,12 @@ EPS_RESET = 10.0
 #: heading row only while v^2 >= this x var(speed), var(speed) = u^T P_vv u, u = v/|v|:
 #: a speed of 3 sigmas or more
 HEAD_SPEED_SNR2 = 9.0
+
+#: m^2/s^3: the zero-acceleration rows before a held step (``r = this / T``, the rate does not
+#: matter): the acceleration is ~0 when the step starts; as coasting rows at coast_acc_psd = 1
+#: in the no-fix epochs they still let in about a second of the last acceleration (2.7 ->
+#: 5.9 m/s after a real log's last fix)
+NO_DR_COAST_Q = 1e-3
 
 #: RTS guard: smoothed-minus-forward position NEES above this restarts the recursion
 #: (chi-square(2) at 1 - 4e-6)
@@ -431,6 +454,38 @@ def predict_uncapped(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: 
     P[IEPS_N, IEPS_N] += qe * d[IEPS_N] ** 2
     P[IQW, IQW] += par[PAR_QW_RW] ** 2 * T * d[IQW] ** 2   # random walks q_w, q_s
     P[IQS, IQS] += par[PAR_QS_RW] ** 2 * T * d[IQS] ** 2
+
+
+@njit(cache=True)
+def held_step(k: int, dt: np.ndarray, static: np.ndarray, has_gnss: np.ndarray,
+              par: np.ndarray) -> bool:
+    """Whether the step into epoch ``k`` is held: a GNSS-only drive (``PAR_NO_DR``), a
+    no-fix epoch (a receiver's record without a position), moving, ``dt[k] > 0``.
+
+    From the inputs alone, so the smoother's prior (:func:`smooth_range`) is the forward one.
+    """
+    return (par[PAR_NO_DR] != 0.0 and k < dt.shape[0] and dt[k] > 0.0 and not static[k]
+            and not has_gnss[k])
+
+
+@njit(cache=True)
+def held_noise(x: np.ndarray, P: np.ndarray, T: float, par: np.ndarray) -> None:
+    """Velocity variance of a held step of T s (:func:`held_step`), added to the prior P.
+
+    With nothing measuring the motion the velocity is held (the zero-acceleration rows before
+    the step, ``NO_DR_COAST_Q``) and its variance grows instead: per axis a random walk of
+    ``PAR_NO_DR_VEL_Q`` (m^2/s^3: the speed may change), and across the track one of
+    ``PAR_NO_DR_HEAD_Q`` (rad^2/s) x speed^2 (the heading may change; ``c c^T speed^2`` with
+    ``c = (v_n, -v_e)/speed`` needs no division).  ``x``: the predicted state.
+    """
+    qv = par[PAR_NO_DR_VEL_Q] * T
+    qh = par[PAR_NO_DR_HEAD_Q] * T
+    ve = x[IVE]
+    vn = x[IVN]
+    P[IVE, IVE] += qv + qh * vn * vn
+    P[IVN, IVN] += qv + qh * ve * ve
+    P[IVE, IVN] -= qh * ve * vn
+    P[IVN, IVE] = P[IVE, IVN]
 
 
 @njit(cache=True)
@@ -1033,8 +1088,8 @@ def _load_checkpoint(segment: int | None, row: np.ndarray, vec: np.ndarray, mats
 
 
 def _smooth_segment(segment: int | None, xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int,
-                    k_lo: int, n: int, dt: np.ndarray, static: np.ndarray, eps_w: np.ndarray,
-                    par: np.ndarray,
+                    k_lo: int, n: int, dt: np.ndarray, static: np.ndarray, has_gnss: np.ndarray,
+                    eps_w: np.ndarray, par: np.ndarray,
                     x_sn: np.ndarray, P_sn: np.ndarray, out: np.ndarray,
                     stats: np.ndarray) -> None:  # pragma: no cover
     """:func:`smooth_range`, or nothing when ``segment`` is None."""
@@ -1062,11 +1117,11 @@ def _ol_load_checkpoint(segment, row, vec, mats, aux, ring, pc, sc):
 
 
 @overload(_smooth_segment)
-def _ol_smooth_segment(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, eps_w, par, x_sn,
-                       P_sn, out, stats):
+def _ol_smooth_segment(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, has_gnss, eps_w, par,
+                       x_sn, P_sn, out, stats):
     if isinstance(segment, types.NoneType):
-        return (lambda segment, xs, Ps, off, k_hi, k_lo, n, dt, static, eps_w, par, x_sn, P_sn,
-                out, stats: None)
+        return (lambda segment, xs, Ps, off, k_hi, k_lo, n, dt, static, has_gnss, eps_w, par,
+                x_sn, P_sn, out, stats: None)
     return smooth_range
 
 
@@ -1304,6 +1359,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
             else:
                 if gnss_on:
                     predict(x1, P1, T, st, par, d1)
+                    if held_step(kx, dt, static, has_gnss, par):
+                        held_noise(x1, P1, T, par)
                 if dr_on:
                     predict(x2, P2, T, st, par, d2)
             zupt_consider = ZUPT_KEEP_HEADING
@@ -1392,6 +1449,16 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                     else:
                         p_rej[ko] = True
                         p_counters[C_GNSS_REJECTED] += 1
+                if held_step(kx + 1, dt, static, has_gnss, par):
+                    # the next step is held (no fix, no gyro or odometer): the white-jerk model
+                    # carried the last acceleration on (+3.75 m/s every second after a real
+                    # log's last fix); rows a = 0 here, before the step, hold the speed
+                    rc = NO_DR_COAST_Q / dt[kx + 1]
+                    local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IAE), -x1[IAE],
+                                           rc, s, kk, np.int64(HOLD_ACC_ONLY))
+                    local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IAN), -x1[IAN],
+                                           rc, s, kk, np.int64(HOLD_ACC_ONLY))
+                    p_counters[C_COAST] += 1
             else:
                 t_last_acc = t_now
 
@@ -1606,8 +1673,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
         sc[ST_T_LAST_FIX] = t_last_fix
         sc[ST_T_LAST_VACC] = t_last_vacc
         if job >= n_fwd:                            # RTS backward over the segment
-            _smooth_segment(segment, xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, eps_w, par,
-                            x_sn, P_sn, out, stats)
+            _smooth_segment(segment, xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, has_gnss,
+                            eps_w, par, x_sn, P_sn, out, stats)
     return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps, stats
 
 
@@ -1628,13 +1695,15 @@ def kernel_flags(fafkf: bool, flags: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndarray,
-                 eps_w: np.ndarray, par: np.ndarray) -> tuple[np.ndarray, int, int]:
+                 has_gnss: np.ndarray, eps_w: np.ndarray,
+                 par: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Fixed-interval RTS smoother over the fused sequence with the master's prediction,
     from the fused x and packed P_g of every epoch (``segment <= 0``: O(n) storage).
 
     The prior of epoch k+1 is recomputed from the fused posterior of k
-    (``Phi(dt[k+1]) x_g``, ``Phi P_g Phi^T + Q``, Q unscaled): nothing but the
-    fused x and packed P are stored per epoch.  Returns the smoothed outputs
+    (``Phi(dt[k+1]) x_g``, ``Phi P_g Phi^T + Q``, Q unscaled, plus a held step's velocity
+    variance, :func:`held_step` from ``has_gnss``): nothing but the fused x and packed P are
+    stored per epoch.  Returns the smoothed outputs
     (rows as the forward ``out``), the count of epochs whose smoothed P
     failed the SPD test and the count of restarts (see :func:`smooth_range`).
     """
@@ -1643,12 +1712,13 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
     x_sn = np.zeros(NX)
     P_sn = np.zeros((NX, NX))
     stats = np.zeros(2, np.int64)
-    _smooth_segment(n, xs, Ps, 0, n - 1, 0, n, dt, static, eps_w, par, x_sn, P_sn, out, stats)
+    _smooth_segment(n, xs, Ps, 0, n - 1, 0, n, dt, static, has_gnss, eps_w, par, x_sn, P_sn,
+                    out, stats)
     return out, stats[0], stats[1]
 
 
-def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, eps_w, par, x_sn, P_sn,
-                 out, stats):  # hints: _smooth_segment
+def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, has_gnss, eps_w, par, x_sn,
+                 P_sn, out, stats):  # hints: _smooth_segment
     """Backward RTS steps k = k_hi, k_hi - 1, .., k_lo over the fused posteriors
     ``xs[k - off]``, ``Ps[k - off]`` (packed) of an n-epoch pass.
 
@@ -1684,6 +1754,8 @@ def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, eps_w, par, x_
             copy_state(x_post, P_post, x_prior, P_prior)
             select_eps(par, eps_w[k + 1])           # the forward pass's model of this step
             predict(x_prior, P_prior, dt[k + 1], static[k + 1], par, ones)
+            if held_step(k + 1, dt, static, has_gnss, par):
+                held_noise(x_prior, P_prior, dt[k + 1], par)
             rts_step_fused(x_post, P_post, x_prior, P_prior, dt[k + 1], static[k + 1],
                            eps_decay(x_post, dt[k + 1], par), x_sn, P_sn, x_s, P_s, wL, wB,
                            dx)
