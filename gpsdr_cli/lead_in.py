@@ -12,15 +12,15 @@ state, with the gyro (heading, ``d(psi)/dt = -yaw_rate``, less its bias
 taken from the track after the fix, :func:`calibration`) and the odometer (speed, divided
 by its scale against the track; without an odometer the first state's speed, held along
 the gyro's heading when it is fast enough for a course, else the first position held: a
-GNSS-only log's no-fix records measured no motion).  Units: metres
-ENU, seconds, radians, heading clockwise from north.
+GNSS-only log's no-fix records measured no motion).  Units: metres ENU, seconds, radians,
+heading clockwise from north.
 
 The lead-in's sigma is a plain bound, not a covariance (nothing measured the position
 there): the first state's position variance plus ``(LEAD_IN_DIST_SD * distance)^2``
 plus, without an odometer, ``(LEAD_IN_SPEED_SD_MPS * time)^2`` (without any sensor, the
 filters' 60 m/s bound on an unmeasured step instead), with distance and time counted back
-from the first fix (time at most ``NO_DR_MAX_S``).  Written by hand: it is a cumulative sum over the
-lead-in; no library does a backward dead reckoning on our epoch layout.
+from the first fix (time at most ``NO_DR_MAX_S``).  Written by hand: it is a cumulative
+sum over the lead-in; no library does a backward dead reckoning on our epoch layout.
 """
 
 from __future__ import annotations
