@@ -973,10 +973,6 @@ def describe_log(path: str, params: Params, *, topics: dict[str, str] | None = N
             except NoDataError as err2:
                 return {"path": str(path), "kind": kind, "streams": [], "skipped": {},
                         "notes": [f"nothing usable: {err2.reason}"]}
-            # the placeholder day is ours, not a receiver's rollover bug
-            drive.meta["warnings"] = [w for w in drive.meta.get("warnings", [])
-                                      if "suspicious date 1970-01-01" not in w]
-            drive.meta.get("warning_counts", {}).pop("suspicious date", None)
             drive.meta.setdefault("notes", []).append(
                 "no date in the log (no RMC/ZDA date): times are times of day shown on "
                 "1970-01-01; give --date YYYY-MM-DD")

@@ -48,7 +48,8 @@ from collections.abc import Callable
 import numpy as np
 
 from ..config import Params
-from ..epochs import Epochs
+from ..conventions import NS_PER_S
+from ..epochs import Epochs, true_runs
 from ..rtk_false_fix import RAYLEIGH_MEDIAN
 from .base import FilterResult
 
@@ -245,21 +246,20 @@ def edge_fixes(epochs: Epochs, track: FilterResult, kept: np.ndarray, out: np.nd
     """Of the ``kept`` fixes (a mask over the epochs), those next to a run of left-out ones
     (``out``) whose offset from ``track`` (fix minus track, m) points the way the run's
     median offset does by more than ``k`` of their sigmas (scaled as :func:`far_fixes`
-    scales them): the ramp of a reflection that
-    the receiver's own filter blends in and out over a second or more, too small yet to
-    be far (:func:`far_fixes`).  Only runs of two or more fixes whose median offset is
-    beyond ``far_m`` (m): next to a run left out for the track's own error, the
-    neighbours point the same way because that error is smooth in time, not because
-    they are reflected.  At most (L - 1) / 2 of the L kept fixes between two left-out
-    runs (or a run and the drive's end) go from each side: a lone clean fix after a
-    reflection is what holds the track there.  Walked outwards from each run, fix by fix, within
-    ``edge_s`` seconds of it, and stopped at the first fix that does not point that way.
-    ``k`` <= 0 or ``edge_s`` <= 0: none."""
+    scales them): the ramp of a reflection that the receiver's own filter blends in and
+    out over a second or more, too small yet to be far (:func:`far_fixes`).  Only runs of
+    two or more fixes whose median offset is beyond ``far_m`` (m): next to a run left out
+    for the track's own error, the neighbours point the same way because that error is
+    smooth in time, not because they are reflected.  At most (L - 1) / 2 of the L kept
+    fixes between two left-out runs (or a run and the drive's end) go from each side: a
+    lone clean fix after a reflection is what holds the track there.  Walked outwards from
+    each run, fix by fix, within ``edge_s`` seconds of it, and stopped at the first fix
+    that does not point that way.  ``k`` <= 0 or ``edge_s`` <= 0: none."""
     drop = np.zeros(len(kept), bool)
     f = np.flatnonzero(kept | out)
     if not (k > 0.0 and edge_s > 0.0) or not out.any() or not kept.any():
         return drop
-    t_s = (np.asarray(epochs.t_ns, np.int64)[f] - int(epochs.t_ns[0])) / 1e9
+    t_s = (np.asarray(epochs.t_ns, np.int64)[f] - int(epochs.t_ns[0])) / NS_PER_S
     de = epochs.gnss_e[f] - track.e[f]
     dn = epochs.gnss_n[f] - track.n[f]
     sd = np.sqrt(0.5 * (epochs.gnss_sd_e[f] ** 2 + epochs.gnss_sd_n[f] ** 2))
@@ -269,9 +269,7 @@ def edge_fixes(epochs: Epochs, track: FilterResult, kept: np.ndarray, out: np.nd
     if not math.isfinite(scale):
         return drop
     sd = sd * scale
-    starts = np.flatnonzero(is_out & ~np.concatenate(([False], is_out[:-1])))
-    ends = np.flatnonzero(is_out & ~np.concatenate((is_out[1:], [False])))
-    for a, b in zip(starts, ends, strict=True):
+    for a, b in zip(*true_runs(is_out), strict=True):
         ue, un = float(np.nanmedian(de[a:b + 1])), float(np.nanmedian(dn[a:b + 1]))
         size = math.hypot(ue, un)
         if b == a or not size > far_m:

@@ -562,7 +562,9 @@ def _build(kind: str, chan: Channel, *, path: str, use_log_time: bool, date: dt.
         return YawRates(t_ns=t_ns[keep], yaw_rate_radps=wz[keep])
     vx = _cat(chan, "vx", np.float64)
     vy = _cat(chan, "vy", np.float64)
-    reading = twist if twist is not None else twist_reading(chan, None, use_log_time)
+    if twist is None:
+        raise ValueError(f"{where}: a twist channel needs its reading (twist_reading)")
+    reading = twist
     speed = np.hypot(vx, vy) if reading.hypot else vx
     if reading.frame == "enu":
         warnings.append(f"{where}: twist.linear read as a navigation-frame (ENU) velocity "
@@ -843,7 +845,7 @@ def drive_from_channels(path_s: str, sha256: str, channels: list[Channel], *,
                             f"({best.n_msgs} messages), not {', '.join(alternatives[kind])}")
         stream = _build(kind, best, path=path_s, use_log_time=use_log_time, date=date,
                         skipped=skipped, meta=meta, warnings=warnings,
-                        twist=readings.get(best.id) if kind == "odo" else None)
+                        twist=readings[best.id] if kind == "odo" else None)
         if len(stream):
             setattr(drive, kind, stream)
             chosen[kind] = best.topic

@@ -1332,8 +1332,10 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     dates = [datetime.date(1970, 1, 1) + datetime.timedelta(days=int(d)) for d in udays]
     meta["dates"] = [d.isoformat() for d in dates]
     today = datetime.datetime.now(datetime.UTC).date()
+    # only dates the log gave: a receiver's rollover bug, not a caller's --date
     suspicious = [d.isoformat() for d in dates
-                  if d.year < 2000 or d > today + datetime.timedelta(days=1)]
+                  if d.year < 2000 or d > today + datetime.timedelta(days=1)
+                  ] if meta["date_source"].startswith("log") else []
     meta["warnings"] = []
     meta["warning_counts"] = {}
     if suspicious:

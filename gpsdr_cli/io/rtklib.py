@@ -47,7 +47,8 @@ import numpy as np
 from gpsdr_cli.errors import InputError, NoDataError
 from gpsdr_cli.io.drive import Drive, GnssFixes, SkipReport, Source
 
-__all__ = ["LEAP_SECONDS", "Q_TO_GGA", "looks_like_rtklib", "parse_rtklib", "read_rtklib"]
+__all__ = ["LEAP_SECONDS", "Q_TO_GGA", "ecef_to_llh", "gpst_minus_utc_ns", "looks_like_rtklib",
+           "parse_rtklib", "read_rtklib"]
 
 #: RTKLIB Q -> NMEA GGA fix quality (see the module docstring for PPP).
 Q_TO_GGA = {0: 0, 1: 4, 2: 5, 3: 2, 4: 2, 5: 1, 6: 2}
@@ -74,14 +75,14 @@ _FORMS = (("latitude(deg)", "llh"), ("latitude(d'\")", "dms"), ("x-ecef", "xyz")
 
 
 @functools.cache
-def _ecef_to_llh():
+def ecef_to_llh():
     """The one ECEF -> geodetic Transformer (lon, lat, h out, ``always_xy``)."""
     from pyproj import Transformer
 
     return Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
 
 
-def _gpst_minus_utc_ns(t_gpst_ns: np.ndarray) -> np.ndarray:
+def gpst_minus_utc_ns(t_gpst_ns: np.ndarray) -> np.ndarray:
     """GPST - UTC (ns) at GPS times ``t_gpst_ns`` (ns since the Unix epoch, GPS scale)."""
     edges = np.array([(int(datetime.datetime(d.year, d.month, d.day,
                                              tzinfo=datetime.UTC).timestamp()) + n) * _NS
@@ -246,7 +247,7 @@ def parse_rtklib(data: bytes, *, name: str = "<pos>") -> tuple[GnssFixes, SkipRe
     (the_form,) = forms_seen
     t_ns, pos, q, ns, sd = t_ns[keep], pos[keep], q[keep], ns[keep], sd[keep]
     if the_form == "xyz":
-        lon, lat, h = _ecef_to_llh().transform(pos[:, 0], pos[:, 1], pos[:, 2])
+        lon, lat, h = ecef_to_llh().transform(pos[:, 0], pos[:, 1], pos[:, 2])
         sig_e, sig_n = _enu_sigmas(sd, np.radians(lat), np.radians(lon))
     elif the_form == "enu":
         lat, lon, h = _enu_to_llh(pos, ref_ecef)
@@ -255,7 +256,7 @@ def parse_rtklib(data: bytes, *, name: str = "<pos>") -> tuple[GnssFixes, SkipRe
         lat, lon, h = pos[:, 0], pos[:, 1], pos[:, 2]
         lon = np.where(lon > 180.0, lon - 360.0, lon)
         sig_n, sig_e = sd[:, 0], sd[:, 1]
-    leap_ns = _gpst_minus_utc_ns(t_ns) if tsys == "GPST" else np.zeros(len(t_ns), np.int64)
+    leap_ns = gpst_minus_utc_ns(t_ns) if tsys == "GPST" else np.zeros(len(t_ns), np.int64)
     if tsys == "GPST":
         t_ns = t_ns - leap_ns
     elif tsys == "JST":
@@ -314,9 +315,9 @@ def _enu_rotation(lat_rad: float, lon_rad: float) -> np.ndarray:
 def _enu_to_llh(enu: np.ndarray, ref_ecef: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Baselines east/north/up (m) from the base at ``ref_ecef`` -> lat, lon (deg), h (m)."""
-    lon0, lat0, _h0 = _ecef_to_llh().transform(*ref_ecef)
+    lon0, lat0, _h0 = ecef_to_llh().transform(*ref_ecef)
     ecef = ref_ecef[None, :] + enu @ _enu_rotation(np.radians(lat0), np.radians(lon0))
-    lon, lat, h = _ecef_to_llh().transform(ecef[:, 0], ecef[:, 1], ecef[:, 2])
+    lon, lat, h = ecef_to_llh().transform(ecef[:, 0], ecef[:, 1], ecef[:, 2])
     return lat, lon, h
 
 

@@ -113,6 +113,7 @@ from ..conventions import FIX_DGPS, FIX_DR, FIX_FLOAT_RTK, FIX_GPS, FIX_NONE, FI
 from ..errors import InputError, MissingDateError, NoDataError
 from .drive import Drive, ForwardAccel, GnssFixes, Odometry, SkipReport, Source, YawRates
 from .formats import UBX_SYNC
+from .rtklib import ecef_to_llh, gpst_minus_utc_ns
 
 CLASS_NAV, CLASS_ESF = 0x01, 0x10
 ID_PVT, _DOP, _HPPOSLLH = 0x07, 0x04, 0x14
@@ -477,14 +478,6 @@ _LEGACY_IDS = {"NAV-POSLLH": _POSLLH, "NAV-SOL": _SOL, "NAV-POSECEF": _POSECEF,
                "NAV-VELECEF": _VELECEF}
 
 
-@functools.cache
-def _ecef_to_llh():
-    """The WGS 84 ECEF -> geodetic Transformer: (x, y, z) m in, (lon, lat, h) out."""
-    from pyproj import Transformer
-
-    return Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
-
-
 def _nav_table(buf: np.ndarray, fr: dict[str, np.ndarray], name: str, path: str,
                skipped: SkipReport) -> tuple[np.ndarray, np.ndarray]:
     """Frame starts and payload table of every NAV message ``name``; shorter payloads than
@@ -503,17 +496,6 @@ def _nearest(ref_start: np.ndarray, at: np.ndarray) -> np.ndarray:
     lo = np.clip(k - 1, 0, len(ref_start) - 1)
     hi = np.clip(k, 0, len(ref_start) - 1)
     return np.where(np.abs(at - ref_start[lo]) <= np.abs(ref_start[hi] - at), lo, hi)
-
-
-def _gpst_minus_utc_s(t_gps_ns: np.ndarray) -> np.ndarray:
-    """GPS - UTC leap seconds at GPS times ``t_gps_ns`` (ns since 1970 on the GPS scale),
-    from the IERS table the RTKLIB reader keeps."""
-    from .rtklib import LEAP_SECONDS
-
-    day0 = dt.date(1970, 1, 1).toordinal()
-    edges = np.array([((d.toordinal() - day0) * 86400 + n) * NS_PER_S for d, n in LEAP_SECONDS],
-                     np.int64)
-    return np.searchsorted(edges, t_gps_ns, side="right").astype(np.int64)
 
 
 def _gps_utc_ns(start: np.ndarray, itow: np.ndarray, tabs: dict, date: dt.date | None
@@ -542,8 +524,8 @@ def _gps_utc_ns(start: np.ndarray, itow: np.ndarray, tabs: dict, date: dt.date |
             return np.zeros(len(itow), np.int64), "none"
         noon_ns = (date.toordinal() - dt.date(1970, 1, 1).toordinal()) * 86400 * NS_PER_S \
             + 12 * 3600 * NS_PER_S
-        gps_ms = (noon_ns - _GPS_EPOCH_NS) // _MS + 1000 * int(
-            _gpst_minus_utc_s(np.array([noon_ns], np.int64))[0])
+        gps_ms = (noon_ns - _GPS_EPOCH_NS
+                  + int(gpst_minus_utc_ns(np.array([noon_ns], np.int64))[0])) // _MS
         r_st, r_week, r_itow = (np.zeros(1, np.int64), np.array([gps_ms // _WEEK_MS]),
                                 np.array([gps_ms % _WEEK_MS]))
         r_ftow = np.zeros(1, np.int64)
@@ -555,7 +537,7 @@ def _gps_utc_ns(start: np.ndarray, itow: np.ndarray, tabs: dict, date: dt.date |
     # fTOW (ns, +-0.5 ms) refines iTOW when the reference is of the same epoch
     ftow = np.where(r_itow[k] == itow, r_ftow[k], 0)
     t_gps = _GPS_EPOCH_NS + (week * _WEEK_MS + itow) * _MS + ftow
-    leap = _gpst_minus_utc_s(t_gps)
+    leap = gpst_minus_utc_ns(t_gps) // NS_PER_S
     if len(tg_st):
         m = _bit(tg, "NAV-TIMEGPS", "leapSValid") == 1
         if m.any():
@@ -597,7 +579,7 @@ def legacy_fixes(buf: np.ndarray, fr: dict[str, np.ndarray], path: str, skipped:
         unset = (pos["lat"] == 0) & (pos["lon"] == 0)  # what a receiver sends before a fix
     else:
         xyz = [pos[f"ecef{c}"] * 1e-2 for c in "XYZ"]  # cm
-        lon, lat, alt = (np.asarray(a, float) for a in _ecef_to_llh().transform(*xyz))
+        lon, lat, alt = (np.asarray(a, float) for a in ecef_to_llh().transform(*xyz))
         # pAcc (cm) is 3-D: as the horizontal estimate it errs on the cautious side
         sig = pos["pAcc"] * 1e-2 / math.sqrt(2.0)
         unset = (pos["ecefX"] == 0) & (pos["ecefY"] == 0) & (pos["ecefZ"] == 0)
