@@ -328,7 +328,8 @@ def _is_dms(rest: list[str]) -> bool:
         m1, m2 = float(rest[1]), float(rest[4])
     except ValueError:
         return False
-    return m1 == int(m1) and m2 == int(m2) and 0 <= m1 < 60 and 0 <= m2 < 60 \
+    # range first: int() of an "inf" or "nan" field raises
+    return 0 <= m1 < 60 and 0 <= m2 < 60 and m1 == int(m1) and m2 == int(m2) \
         and "." not in rest[1] and "." not in rest[4]
 
 

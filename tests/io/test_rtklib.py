@@ -190,3 +190,15 @@ def test_dispatch_and_fuse_with_gps_pos(tmp_path: Path, sample_dir: Path, gpsdr)
     info = gpsdr(["info", pos])
     assert info.exit_code == 0 and "rtklib" in info.output
     assert "converted to UTC" not in info.output  # a UTC file
+
+
+def test_an_infinite_field_where_dms_minutes_would_be_is_skipped_not_raised() -> None:
+    """A damaged line with "inf" in the second field (a d m s line's minutes) was an
+    OverflowError out of the form test; it is one skipped line, the others read."""
+    head = LLH_HEAD.format(ts="UTC")
+    good = ("2024/05/17 12:00:00.000   48.117300000   11.516700000   520.0000   1  14"
+            "   0.0100   0.0200   0.0300   0.0000   0.0000   0.0000   0.00    9.9\n")
+    bad = ("2024/05/17 12:00:01.000   48.117300000   inf   11.516700000   520.   1  14"
+           "   0.0100   0.0200   0.0300   0.0000   0.0000   0.0000   0.00    9.9\n")
+    g, report, _ = parse_rtklib((head + good + bad + good.replace(":00.000", ":02.000")).encode())
+    assert len(g) == 2 and report.total == 1
