@@ -464,3 +464,42 @@ def test_preintegrated_dead_reckoning_matches_the_step_by_step_integral() -> Non
         assert abs(ref[0]) > 5.0 and abs(ref[3]) > 1.0  # metres moved, turned
         np.testing.assert_allclose(got, ref, rtol=1e-12 + tol, atol=1e-12 + 10 * tol)
         assert pre[0, gk.PRE_B] == (0.002 if bias < 0.1 else bias)  # re-taken only far off
+
+
+def test_banded_cholesky_solves_as_lapack_does() -> None:
+    """The compiled banded Cholesky and its solve against scipy's LAPACK ``solveh_banded``
+    on a random positive-definite band of the smoother's width; a matrix with a negative
+    pivot is reported by its column, as LAPACK's ``info`` does."""
+    from scipy.linalg import solveh_banded
+
+    from gpsdr_cli.filters import graph_kernels as gk
+
+    rng = np.random.default_rng(7)
+    n, kd = 300, gk.BAND
+    lower = np.zeros((kd + 1, n), order="F")
+    lower[1:] = rng.normal(size=(kd, n))
+    for d in range(1, kd + 1):
+        lower[d, n - d:] = 0.0
+    # diagonally dominant: positive definite
+    lower[0] = 2.0 * kd + 1.0 + rng.uniform(size=n)
+    rhs = rng.normal(size=n)
+    ref = solveh_banded(lower, rhs, lower=True)
+    work = lower.copy(order="F")
+    assert gk.band_cholesky(work) == 0
+    x = gk.band_solve(work, rhs)
+    assert np.max(np.abs(x - ref)) < 1e-12 * np.max(np.abs(ref)) * n
+    # U = L^T in the upper layout the band inverse takes
+    dense_l = np.zeros((n, n))
+    for d in range(kd + 1):
+        dense_l[np.arange(d, n), np.arange(n - d)] = work[d, :n - d]
+    h = np.zeros((n, n))
+    for d in range(kd + 1):
+        h[np.arange(d, n), np.arange(n - d)] = lower[d, :n - d]
+        h[np.arange(n - d), np.arange(d, n)] = lower[d, :n - d]
+    sb = gk.banded_inverse_band(gk.upper_of_lower(work), n)
+    inv = np.linalg.inv(h)
+    assert np.allclose(sb[kd], np.diag(inv), rtol=1e-10, atol=0.0)
+    assert np.allclose(dense_l @ dense_l.T, h, atol=1e-10)
+    bad = lower.copy(order="F")
+    bad[0, 150] = -1.0
+    assert gk.band_cholesky(bad) == 151

@@ -44,8 +44,9 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   user's calibration (``--gyro-bias``, ``--odo-scale``) or loosely at 0 and 1.
 
 Engine: Levenberg-Marquardt over iteratively reweighted least squares on the banded normal
-equations (10 super-diagonals), solved by LAPACK's banded Cholesky (``dpbsv``):
-O(keyframes) per iteration; an accepted step is doubled
+equations (10 sub-diagonals), solved by a banded Cholesky factorisation compiled with the
+factors (:func:`.graph_kernels.band_cholesky`; LAPACK's ``dpbsv`` took twice as long on a
+band this narrow): O(keyframes) per iteration; an accepted step is doubled
 while the robust cost keeps falling (:data:`EXTRAPOLATE_MAX`), which halves the iterations
 where reweighting lets a reflected run go slowly.  Chosen over GTSAM (its
 Python-side custom factors cost milliseconds each, and a pose chain with a per-sample
@@ -355,25 +356,23 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
 
 
 def _banded_solve(ab: np.ndarray, rhs: np.ndarray, work: np.ndarray) -> np.ndarray:
-    """H^-1 rhs for the banded H in ``ab`` (LAPACK's upper form), factored in ``work``:
-    LAPACK's ``dpbsv`` as ``scipy.linalg.solveh_banded`` calls it, without the wrapper's
-    checks and its fresh copy of ``ab`` at every call (a fifth of the solve's time)."""
+    """H^-1 rhs for the banded H in ``ab`` (lower form, :mod:`.graph_kernels`), factored in
+    ``work``: ``ab`` stays as it is for a retry at another damping."""
     from scipy.linalg import LinAlgError
-    from scipy.linalg.lapack import dpbsv
+
+    from . import graph_kernels as gk
 
     work[...] = ab
-    _, x, info = dpbsv(work, rhs, lower=0, overwrite_ab=1, overwrite_b=0)
-    if info > 0:
+    info = gk.band_cholesky(work)
+    if info:
         raise LinAlgError(f"{info}-th leading minor not positive definite")
-    if info < 0:
-        raise ValueError(f"illegal value in {-info}-th argument of dpbsv")
-    return x
+    return gk.band_solve(work, rhs)
 
 
 def _solve(epochs: Epochs, init: FilterResult, params: Params,
            segments: np.ndarray | None) -> GraphOutcome:
     """:func:`smooth_graph` proper."""
-    from scipy.linalg import LinAlgError, cholesky_banded
+    from scipy.linalg import LinAlgError
 
     from . import graph_kernels as gk
 
@@ -693,7 +692,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
             and seg_k is None):
         stages.append((kernel_id(params, "nlos_last_kernel"), c_final))
         kernel_names += "+" + str(gp["nlos_last_kernel"])
-    ab = np.zeros((gk.BAND + 1, n_x), order="F")  # LAPACK's layout: factored in place
+    ab = np.zeros((gk.BAND + 1, n_x), order="F")  # H's lower band, column by column
     g = np.zeros(n_x)
     q = np.zeros((max(n_key - 1, 1), gk.N_Q))
     pre = np.full((max(n_key - 1, 1), gk.N_PRE), np.nan)
@@ -728,10 +727,10 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
             cost = cost_at(x, kern, c, True)
             while its < max_it:
                 its += 1
-                diag = ab[gk.BAND].copy()
+                diag = ab[0].copy()
                 step = None
                 while lam < 1e10:
-                    ab[gk.BAND] = diag * (1.0 + lam) + 1e-12
+                    ab[0] = diag * (1.0 + lam) + 1e-12
                     try:
                         step = _banded_solve(ab, -g, work)
                     except (LinAlgError, ValueError):
@@ -743,7 +742,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
                             break
                     lam *= 10.0
                     step = None
-                ab[gk.BAND] = diag
+                ab[0] = diag
                 if step is None:
                     stage_done = True  # no descent left at any damping: a minimum
                     break
@@ -784,9 +783,12 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     var_e_k = var_n_k = cov_en_k = None
     g = q = None
     try:
-        ab[gk.BAND] += 1e-12
+        ab[0] += 1e-12
         # factor in place, and keep only the marginals read from the band inverse
-        cb = cholesky_banded(ab, overwrite_ab=True, lower=False, check_finite=False)
+        info = gk.band_cholesky(ab)
+        if info:
+            raise LinAlgError(f"{info}-th leading minor not positive definite")
+        cb = gk.upper_of_lower(ab)
         ab = None
         sb = gk.banded_inverse_band(cb, n_x)
         cb = None
