@@ -271,7 +271,7 @@ def _initial_heading(t_s: np.ndarray, yaw: np.ndarray, gyro_ok: np.ndarray,
 
 
 def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
-                 segments: np.ndarray | None = None) -> GraphOutcome:
+                 segments: np.ndarray | None = None, *, sigmas: bool = True) -> GraphOutcome:
     """Solve the drive as one robust least-squares problem, started from ``init`` (the
     forward filter's RTS result on the same epochs).
 
@@ -292,26 +292,31 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
     segment's bias replaces the quality model's scaled sigmas); then the segments within
     ``[graph] nlos_segment_keep_m`` of that solution are solved again fix by fix (white
     fixes, robust kernel), the others left out.  A segment's single vote decides which
-    fixes are clean; the clean fixes then weigh one by one, as in the filters."""
+    fixes are clean; the clean fixes then weigh one by one, as in the filters.
+
+    ``sigmas`` False: the track's variances (and the calibration's sds) are left NaN, for a
+    caller that only weighs the fixes against the track (:mod:`.nlos_screen`): the band of
+    H^-1 costs a factorisation and a recursion over the whole drive."""
     if (segments is None and len(epochs) and "nlos_screened" in init.info
             and bool(params["graph"]["nlos_segments"])):
         return _by_segments(epochs, init, params)
-    return _solve(epochs, init, params, segments)
+    return _solve(epochs, init, params, segments, sigmas)
 
 
-def solve_by_segments(epochs: Epochs, init: FilterResult,
-                      params: Params) -> tuple[GraphOutcome, np.ndarray, np.ndarray]:
+def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
+                      sigmas: bool = True) -> tuple[GraphOutcome, np.ndarray, np.ndarray]:
     """The NLOS judgement the screen and the graph smoother share: the fixes cut into
     segments and runs against ``init``'s track (:mod:`.nlos_segments`), the drive solved
     with one bias per segment and one vote per run, each fix at its own sigma (the
     segment's bias replaces the quality model's scaled sigmas).  Returns the outcome, the
     segments (:func:`.nlos_segments.fix_segments`) and, per epoch, whether its fix's segment
-    lies within ``[graph] nlos_segment_keep_m`` of the solution (all False if it failed)."""
+    lies within ``[graph] nlos_segment_keep_m`` of the solution (all False if it failed).
+    ``sigmas``: as :func:`smooth_graph`'s."""
     from .nlos_segments import fix_segments, segments_near
 
     own = own_sigmas(params)
     seg = fix_segments(epochs, init, params["graph"])
-    out = _solve(epochs, init, own, seg)
+    out = _solve(epochs, init, own, seg, sigmas)
     if out.result is None:
         return out, seg, np.zeros(len(epochs), bool)
     return out, seg, segments_near(epochs, out.result, seg,
@@ -369,8 +374,25 @@ def _banded_solve(ab: np.ndarray, rhs: np.ndarray, work: np.ndarray) -> np.ndarr
     return gk.band_solve(work, rhs)
 
 
+def _marginals(ab: np.ndarray, n_x: int) -> tuple[np.ndarray, ...]:
+    """Per keyframe, from H's lower band ``ab`` (factored in place): var(e), var(n), cov(e, n)
+    (m^2), var(s) and var(b), read from the band of H^-1."""
+    from scipy.linalg import LinAlgError
+
+    from . import graph_kernels as gk
+
+    ab[0] += 1e-12
+    info = gk.band_cholesky(ab)
+    if info:
+        raise LinAlgError(f"{info}-th leading minor not positive definite")
+    sb = gk.banded_inverse_band(gk.upper_of_lower(ab), n_x)
+    return (sb[gk.BAND, gk.E::gk.N_X].copy(), sb[gk.BAND, gk.N::gk.N_X].copy(),
+            sb[gk.BAND + gk.E - gk.N, gk.N::gk.N_X].copy(),   # H^-1[E_i, N_i]
+            sb[gk.BAND, gk.S::gk.N_X].copy(), sb[gk.BAND, gk.B::gk.N_X].copy())
+
+
 def _solve(epochs: Epochs, init: FilterResult, params: Params,
-           segments: np.ndarray | None) -> GraphOutcome:
+           segments: np.ndarray | None, sigmas: bool = True) -> GraphOutcome:
     """:func:`smooth_graph` proper."""
     from scipy.linalg import LinAlgError
 
@@ -655,12 +677,14 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
                 x[slot::gk.N_X] = val[key_ep]
         # each segment's error starts at its fixes' median offset from the start track
         # (at zero, the first step pulled the track to the mean of every segment's fixes)
-        for sid in np.unique(seg_k[seg_k >= 0]):
-            ks = np.flatnonzero(seg_k == sid)
-            kf = ks[np.isfinite(fe[ks])]
-            if len(kf):
-                x[gk.N_X * ks + gk.GE] = np.median(fe[kf] - x[gk.N_X * kf + gk.E])
-                x[gk.N_X * ks + gk.GN] = np.median(fn[kf] - x[gk.N_X * kf + gk.N])
+        from .nlos_segments import segment_medians
+
+        me, mn = segment_medians(seg_k, fe - x[gk.E::gk.N_X], fn - x[gk.N::gk.N_X],
+                                 np.isfinite(fe))
+        ks = np.flatnonzero(np.isfinite(me))
+        x[gk.N_X * ks + gk.GE] = me[ks]
+        x[gk.N_X * ks + gk.GN] = mn[ks]
+        del me, mn, ks
     prior_mean = x[:gk.N_X].copy()
     prior_mean[[gk.B, gk.S, gk.GE, gk.GN]] = b_mean, s_mean, 0.0, 0.0
     prior_sd = np.zeros(gk.N_X)
@@ -779,29 +803,17 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         return GraphOutcome(None, False, its, message or "not converged")
 
     # ---- marginal covariance inside the band (H at the solution, final weights)
-    cost_at(x, stages[-1][0], c_final, True)
-    var_e_k = var_n_k = cov_en_k = None
-    g = q = None
-    try:
-        ab[0] += 1e-12
-        # factor in place, and keep only the marginals read from the band inverse
-        info = gk.band_cholesky(ab)
-        if info:
-            raise LinAlgError(f"{info}-th leading minor not positive definite")
-        cb = gk.upper_of_lower(ab)
-        ab = None
-        sb = gk.banded_inverse_band(cb, n_x)
-        cb = None
-        var_e_k = sb[gk.BAND, gk.E::gk.N_X].copy()
-        var_n_k = sb[gk.BAND, gk.N::gk.N_X].copy()
-        cov_en_k = sb[gk.BAND + gk.E - gk.N, gk.N::gk.N_X].copy()   # H^-1[E_i, N_i]
-        s_var = sb[gk.BAND, gk.S::gk.N_X].copy()
-        b_var = sb[gk.BAND, gk.B::gk.N_X].copy()
-        sb = None
-    except (LinAlgError, ValueError) as err:
-        return GraphOutcome(None, False, its, f"information matrix not positive definite: {err}")
-    if not (np.all(np.isfinite(var_e_k)) and np.all(np.isfinite(var_n_k))):
-        return GraphOutcome(None, False, its, "marginal covariance not finite")
+    var_e_k = var_n_k = cov_en_k = s_var = b_var = np.full(n_key, np.nan)
+    if sigmas:
+        cost_at(x, stages[-1][0], c_final, True)
+        try:
+            var_e_k, var_n_k, cov_en_k, s_var, b_var = _marginals(ab, n_x)
+        except (LinAlgError, ValueError) as err:
+            return GraphOutcome(None, False, its,
+                                f"information matrix not positive definite: {err}")
+        if not (np.all(np.isfinite(var_e_k)) and np.all(np.isfinite(var_n_k))):
+            return GraphOutcome(None, False, its, "marginal covariance not finite")
+    ab = g = q = None
 
     # ---- to every epoch
     e = np.zeros(n_ep)

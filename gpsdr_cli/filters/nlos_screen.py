@@ -139,7 +139,7 @@ def _screen(epochs: Epochs, params: Params,
     # Cauchy only: with the bounded last stage the screen left seed 14 of the 283-s city
     # drives a forward track of 46 m against fixes at 35 m (decisions/0035)
     fit["graph"]["nlos_last_kernel"] = ""
-    outcome = smooth_graph(epochs, init, fit)
+    outcome = smooth_graph(epochs, init, fit, sigmas=False)  # the fixes weighed, not the track
     if outcome.result is None or len(outcome.gnss_weight) != len(epochs):
         return epochs, {"nlos_screen": f"not applied: {outcome.message}"}
     w = outcome.gnss_weight
@@ -154,7 +154,7 @@ def _screen(epochs: Epochs, params: Params,
         for n_pass in range(max(int(g["nlos_screen_passes"]), 1)):
             if n_pass:
                 track = run(dataclasses.replace(epochs, has_gnss=fix & ~out), probe)
-            seg_out, seg_pass, near = solve_by_segments(epochs, track, fit)
+            seg_out, seg_pass, near = solve_by_segments(epochs, track, fit, sigmas=False)
             if seg_out.result is None:
                 break
             outcome, out, seg = seg_out, fix & ~near, seg_pass
