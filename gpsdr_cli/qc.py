@@ -8,7 +8,8 @@ Backward pass
     (the GNSS course turned by pi); ``d(psi')/dt' = d(psi)/dt`` in value, but a
     reversed film turns the other way, so the yaw rate (CCW-positive) changes sign;
     speeds (odometer, receiver) are magnitudes and positions are where they were, so
-    both stay.  ``gnss_outage`` is symmetric in time (a gap is as long either way),
+    both stay; the forward accelerometer's axis turns round with the car, so its reading
+    (specific force, gravity on a slope included) changes sign.  ``gnss_outage`` is symmetric in time (a gap is as long either way),
     PDOP and sigmas are attributes of an instant.  The filters' own standstill
     detection and their start at the first fix (``pipeline._run_once``'s lead-in,
     which dead-reckons the epochs before the first fix) see the reversed drive as
@@ -63,11 +64,13 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
 
     ``t' = t_first + t_last - t`` (int64 ns, ascending again); ``dt_s`` from ``t'``;
     ``yaw_rate_radps`` negated; ``gnss_course_rad`` + pi wrapped to (-pi, pi];
-    every other per-epoch array reversed as is; ``time_reversed`` toggled.
+    ``accel_mps2`` negated (the car drives backwards: its forward axis turns round, and
+    the specific force along it, gravity on a slope included, changes sign); every other
+    per-epoch array reversed as is; ``time_reversed`` toggled.
     """
     n_ep = len(epochs)
     fields: dict[str, object] = {}
-    made_below = ("t_ns", "dt_s", "yaw_rate_radps", "gnss_course_rad")
+    made_below = ("t_ns", "dt_s", "yaw_rate_radps", "gnss_course_rad", "accel_mps2")
     for f in dataclasses.fields(Epochs):
         value = getattr(epochs, f.name)
         if f.name not in made_below:
@@ -80,6 +83,7 @@ def reverse_epochs(epochs: Epochs) -> Epochs:
         dt[1:] = np.diff(t_rev) / NS_PER_S
     fields["dt_s"] = dt
     fields["yaw_rate_radps"] = -np.asarray(epochs.yaw_rate_radps, float)[::-1]
+    fields["accel_mps2"] = -np.asarray(epochs.accel_mps2, float)[::-1]
     course = np.asarray(epochs.gnss_course_rad, float)[::-1] + math.pi
     fields["gnss_course_rad"] = np.angle(np.exp(1j * course))  # NaN stays NaN
     fields["time_reversed"] = not epochs.time_reversed
