@@ -291,7 +291,8 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
     fixes jump off ``init``'s track and solved as above, each fix at its own sigma (the
     segment's bias replaces the quality model's scaled sigmas); then the segments within
     ``[graph] nlos_segment_keep_m`` of that solution are solved again fix by fix (white
-    fixes, robust kernel), the others left out.  A segment's single vote decides which
+    fixes, robust kernel, ``nlos_kept_gnc_stages`` graduated stages: the start is that
+    solution), the others left out.  A segment's single vote decides which
     fixes are clean; the clean fixes then weigh one by one, as in the filters.
 
     ``sigmas`` False: the track's variances (and the calibration's sds) are left NaN, for a
@@ -339,7 +340,10 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
         return _solve(epochs, init, params, None)
     fix = np.asarray(epochs.has_gnss, bool)
     kept = replace(epochs, has_gnss=fix & near)
-    out = _solve(kept, by_seg.result, own_sigmas(params), None)
+    own = own_sigmas(params)
+    # started from the segment fit's solution, a wide first stage only walks back to it
+    own["graph"]["gnc_stages"] = int(params["graph"]["nlos_kept_gnc_stages"])
+    out = _solve(kept, by_seg.result, own, None)
     if out.result is None:
         return by_seg
     # the left-out fixes: their segment's weight, rejected
