@@ -9,8 +9,9 @@ Backward pass
     reversed film turns the other way, so the yaw rate (CCW-positive) changes sign;
     speeds (odometer, receiver) are magnitudes and positions are where they were, so
     both stay; the forward accelerometer's axis turns round with the car, so its reading
-    (specific force, gravity on a slope included) changes sign.  ``gnss_outage`` is symmetric in time (a gap is as long either way),
-    PDOP and sigmas are attributes of an instant.  The filters' own standstill
+    (specific force, gravity on a slope included) changes sign.  ``gnss_outage`` is
+    symmetric in time (a gap is as long either way), PDOP and sigmas are attributes of
+    an instant.  The filters' own standstill
     detection and their start at the first fix (``pipeline._run_once``'s lead-in,
     which dead-reckons the epochs before the first fix) see the reversed drive as
     any other: the backward lead-in is the forward tail after the last fix.  Every
