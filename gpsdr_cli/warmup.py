@@ -229,11 +229,17 @@ def refresh_cpu_target() -> None:
     module object (Cython keeps one instance per process).  Nothing changes where scipy
     is missing or ``scipy.linalg`` is already imported.
     """
+    from numba.core.compiler_lock import global_compiler_lock
     from numba.core.registry import cpu_target
 
     seeded = _seed_cython_blas()
     try:
-        cpu_target.target_context.refresh()
+        # under numba's compiler lock: :class:`Preload` runs this in a thread while the main
+        # thread may compile a kernel not in the cache (align's, for out-of-order stamps),
+        # and a compile that typed against a half-refreshed target failed with "Unknown
+        # attribute 'max' of type array(int64, 1d, C)"
+        with global_compiler_lock:
+            cpu_target.target_context.refresh()
     finally:
         if seeded:
             package = sys.modules.get("scipy.linalg")

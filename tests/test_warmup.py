@@ -275,3 +275,25 @@ def test_preload_is_joined_before_the_filter_runs() -> None:
     assert pre.wait() and pre.wait()
     assert not any(t.name == "gpsdr-preload" for t in threading.enumerate())
     assert "aekf" in filters._REGISTRY
+
+
+
+def test_the_preload_thread_refreshes_numba_under_its_compiler_lock(monkeypatch) -> None:
+    """The preload thread refreshes numba's target under numba's compiler lock, so that a
+    compile in the main thread meanwhile (align's kernel, on a log with out-of-order stamps,
+    is not in the cache) waits for it: typed against a half-refreshed target it failed with
+    "Unknown attribute 'max' of type array(int64, 1d, C)" on a real NMEA log."""
+    import threading
+
+    from numba.core.compiler_lock import global_compiler_lock
+    from numba.core.registry import cpu_target
+
+    from gpsdr_cli import warmup
+
+    held: list[bool] = []
+    monkeypatch.setattr(cpu_target.target_context, "refresh",
+                        lambda: held.append(global_compiler_lock.is_locked()))
+    thread = threading.Thread(target=warmup.refresh_cpu_target)
+    thread.start()
+    thread.join(30.0)
+    assert held == [True]
