@@ -491,7 +491,7 @@ def no_dr_hold(epochs: Epochs, params: Params) -> tuple[float, float]:
     Nothing measures the motion there, and the current statistical model's mean carried the
     last acceleration on (coast_acc_psd only slowed it: a real receiver log's no-fix records
     after its last fix took the speed from 1.9 to 13.3 m/s in a minute).  Before each step
-    into the outage the kernel takes rows ``a = 0`` (``kernels_aekf.NO_DR_COAST_Q``), and the
+    into the outage the kernel takes rows ``a = 0`` (``core.update.NO_DR_COAST_Q``), and the
     velocity's variance grows by ``no_dr_vel_psd`` (m^2/s^3) x T per axis instead.
     """
     if epochs.has_gyro.any() or epochs.has_odo.any():

@@ -89,6 +89,7 @@ from .core import update as core_update
 from .core.gate import GATE_FAIL, GATE_RESET, RESET_AFTER_FIRST_REJECT, chi2_gate
 from .core.linalg import cholesky
 from .core.packing import pack
+from .core.update import NO_DR_COAST_Q
 
 # indices into the float parameter vector ``prm`` (PAR_) and the flags ``flg`` (FLG_):
 # prefixes that cannot be read as the matrices P, F, Q, K, S of the filter
@@ -133,11 +134,6 @@ N_ST = 30
 STALE_ODO_S = 1.0
 #: largest heading variance (rad^2) of the heading floor: a heading uniform on (-pi, pi]
 VPSI_MAX = math.pi ** 2 / 3.0
-#: m^2/s^3: the zero-acceleration rows of a GNSS-only drive before each step into its GNSS
-#: outage (``r = this / T``, the rate does not matter): the acceleration is ~0 when the step
-#: starts; at coast_acc_psd = 1 against the current statistical model's held mean the speed
-#: ran 1.9 -> 13.3 m/s in the minute after a real log's last fix
-NO_DR_COAST_Q = 1e-3
 # stored prior scalars per epoch (columns of ``prior_store``: PRI_, the prior's, not Q)
 PRI_QA_E, PRI_QA_N, PRI_LAM, PRI_GAIN, PRI_ADD_E, PRI_ADD_N, PRI_W = range(7)
 PRI_FL_EE, PRI_FL_NN, PRI_FL_EN, PRI_FB = 7, 8, 9, 10

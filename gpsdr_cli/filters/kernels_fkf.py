@@ -153,7 +153,7 @@ from .core.gate import GATE_FAIL, GATE_PASS, GATE_RESET, RESET_AFTER_LAST_ACCEPT
 from .core.linalg import cholesky, is_spd
 from .core.packing import pack, unpack
 from .core.rts import rts_step
-from .core.update import dense_update, unit_update
+from .core.update import NO_DR_COAST_Q, dense_update, unit_update
 
 NX = 10
 IE, IVE, IAE, IN, IVN, IAN, IEPS_E, IEPS_N, IQW, IQS = range(NX)
@@ -217,12 +217,6 @@ EPS_RESET = 10.0
 #: heading row only while v^2 >= this x var(speed), var(speed) = u^T P_vv u, u = v/|v|:
 #: a speed of 3 sigmas or more
 HEAD_SPEED_SNR2 = 9.0
-
-#: m^2/s^3: the zero-acceleration rows before a held step (``r = this / T``, the rate does not
-#: matter): the acceleration is ~0 when the step starts; as coasting rows at coast_acc_psd = 1
-#: in the no-fix epochs they still let in about a second of the last acceleration (2.7 ->
-#: 5.9 m/s after a real log's last fix)
-NO_DR_COAST_Q = 1e-3
 
 #: RTS guard: smoothed-minus-forward position NEES above this restarts the recursion
 #: (chi-square(2) at 1 - 4e-6)

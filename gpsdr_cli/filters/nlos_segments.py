@@ -86,7 +86,8 @@ def _segments(t_s, off_e, off_n, jump_m, gap_s, ref_n):  # pragma: no cover - co
 
 def segment_offsets(ids: np.ndarray, de: np.ndarray, dn: np.ndarray) -> np.ndarray:
     """Per fix: the length (m) of its segment's median offset (``de``, ``dn``: east, north),
-    the fixes in time order (``ids`` never decreasing, as :func:`segments` gives them)."""
+    the fixes in time order (``ids`` never decreasing and >= 0, as :func:`segments` gives
+    them; :func:`segment_medians` over every fix)."""
     return _segment_offsets(np.ascontiguousarray(ids, np.int64),
                             np.ascontiguousarray(de, np.float64),
                             np.ascontiguousarray(dn, np.float64))
@@ -95,12 +96,10 @@ def segment_offsets(ids: np.ndarray, de: np.ndarray, dn: np.ndarray) -> np.ndarr
 @njit(cache=True)
 def _segment_offsets(ids, de, dn):  # pragma: no cover - compiled
     # compiled: thousands of segments an hour, a numpy median call each cost 0.15 s a pass
-    out = np.zeros(len(ids))
-    lo = 0
-    for i in range(1, len(ids) + 1):
-        if i == len(ids) or ids[i] != ids[lo]:
-            out[lo:i] = math.hypot(_median(de[lo:i]), _median(dn[lo:i]))
-            lo = i
+    me, mn = _segment_medians(ids, de, dn, np.ones(len(ids), np.bool_))
+    out = np.empty(len(ids))
+    for i in range(len(ids)):
+        out[i] = math.hypot(me[i], mn[i])
     return out
 
 

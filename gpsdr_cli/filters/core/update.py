@@ -29,6 +29,13 @@ import math
 import numpy as np
 from numba import njit
 
+#: m^2/s^3: both families' zero-acceleration rows before a GNSS-only drive's step into a
+#: no-fix epoch (``R = this / T``, so the rate does not matter): the acceleration is ~0 when
+#: the step starts, and the last fixes' velocity is held.  As coasting rows at
+#: coast_acc_psd = 1 they let in about a second of the last acceleration: after a real log's
+#: last fix the speed ran 1.9 -> 13.3 m/s in a minute (aekf), 2.7 -> 5.9 m/s (fkf)
+NO_DR_COAST_Q = 1e-3
+
 
 @njit(cache=True, error_model="numpy", inline="always")
 def joseph_apply(n: int, P: np.ndarray, K: np.ndarray, PHt: np.ndarray, HPHt: float, R: float) -> None:
