@@ -503,3 +503,16 @@ def test_banded_cholesky_solves_as_lapack_does() -> None:
     bad = lower.copy(order="F")
     bad[0, 150] = -1.0
     assert gk.band_cholesky(bad) == 151
+    # the damped factor: H + lam diag(H) solved as LAPACK does, H itself left as it was
+    lam = 0.5
+    damped = lower.copy(order="F")
+    damped[0] = lower[0] * (1.0 + lam) + 1e-12
+    kept = lower.copy(order="F")
+    out = np.empty_like(lower, order="F")
+    assert gk.band_cholesky_damped(lower, lam, out) == 0
+    assert np.array_equal(lower, kept)
+    x = gk.band_solve(out, rhs)
+    ref = solveh_banded(damped, rhs, lower=True)
+    assert np.max(np.abs(x - ref)) < 1e-12 * np.max(np.abs(ref)) * n
+    assert np.max(np.abs(x - solveh_banded(lower, rhs, lower=True))) > 1e-3
+    assert gk.band_cholesky_damped(bad, 0.0, out) == 151

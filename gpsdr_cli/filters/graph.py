@@ -77,6 +77,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.linalg import LinAlgError
 
 from ..angles import unwrap_across_gaps
 from ..config import Params
@@ -364,15 +365,12 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params) -> GraphOut
     return out
 
 
-def _banded_solve(ab: np.ndarray, rhs: np.ndarray, work: np.ndarray) -> np.ndarray:
-    """H^-1 rhs for the banded H in ``ab`` (lower form, :mod:`.graph_kernels`), factored in
-    ``work``: ``ab`` stays as it is for a retry at another damping."""
-    from scipy.linalg import LinAlgError
-
+def _banded_solve(ab: np.ndarray, rhs: np.ndarray, lam: float, work: np.ndarray) -> np.ndarray:
+    """(H + lam diag(H))^-1 rhs for the banded H in ``ab`` (lower form, :mod:`.graph_kernels`),
+    factored in ``work``: ``ab`` stays as it is for a retry at another damping."""
     from . import graph_kernels as gk
 
-    work[...] = ab
-    info = gk.band_cholesky(work)
+    info = gk.band_cholesky_damped(ab, lam, work)
     if info:
         raise LinAlgError(f"{info}-th leading minor not positive definite")
     return gk.band_solve(work, rhs)
@@ -381,8 +379,6 @@ def _banded_solve(ab: np.ndarray, rhs: np.ndarray, work: np.ndarray) -> np.ndarr
 def _marginals(ab: np.ndarray, n_x: int) -> tuple[np.ndarray, ...]:
     """Per keyframe, from H's lower band ``ab`` (factored in place): var(e), var(n), cov(e, n)
     (m^2), var(s) and var(b), read from the band of H^-1."""
-    from scipy.linalg import LinAlgError
-
     from . import graph_kernels as gk
 
     ab[0] += 1e-12
@@ -467,8 +463,6 @@ def _dr_inputs(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray, 
 def _solve(epochs: Epochs, init: FilterResult, params: Params,
            segments: np.ndarray | None, sigmas: bool = True) -> GraphOutcome:
     """:func:`smooth_graph` proper."""
-    from scipy.linalg import LinAlgError
-
     from . import graph_kernels as gk
 
     gp = params["graph"]
@@ -789,12 +783,10 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
             cost = cost_at(x, kern, c, True)
             while its < max_it:
                 its += 1
-                diag = ab[0].copy()
                 step = None
                 while lam < 1e10:
-                    ab[0] = diag * (1.0 + lam) + 1e-12
                     try:
-                        step = _banded_solve(ab, -g, work)
+                        step = _banded_solve(ab, -g, lam, work)
                     except (LinAlgError, ValueError):
                         step = None
                     if step is not None and np.all(np.isfinite(step)):
@@ -804,7 +796,6 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
                             break
                     lam *= 10.0
                     step = None
-                ab[0] = diag
                 if step is None:
                     stage_done = True  # no descent left at any damping: a minimum
                     break

@@ -43,8 +43,10 @@ N_2 = 2 * N_X
 # kernel ids
 K_GAUSS, K_HUBER, K_CAUCHY, K_GEMAN = 0, 1, 2, 3
 
-# per-interval noise table columns (frozen between relinearisations of the noise)
-Q_AE, Q_AN, Q_NN, Q_PSI = 0, 1, 2, 3   # position covariance (ee, en, nn) and heading variance
+# per-interval noise table columns (frozen between relinearisations of the noise): the
+# displacement's whitening, L^-1 = [[w11, 0], [w21, w22]] with L L^T its covariance, and the
+# heading change's sd (rad)
+Q_W11, Q_W21, Q_W22, Q_SD_PSI = 0, 1, 2, 3
 N_Q = 4
 
 # parameter vector
@@ -278,9 +280,11 @@ def _expand(pre, i, col, d, first):
 
 
 @njit(cache=True)
-def _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre):
+def _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre, jac):
     """:func:`_integrate`'s first 14 results from the preintegrated sums ``pre`` (taken again
-    for interval i when the bias has moved too far from the one they were taken at)."""
+    for interval i when the bias has moved too far from the one they were taken at).
+    Without ``jac`` the bias Jacobian (results 5 and 6) is left at zero: the cost alone
+    needs the displacement, and its expansion is half the work."""
     b0 = N_X * i
     psi0 = x[b0 + PSI]
     bias = x[b0 + B]
@@ -297,14 +301,15 @@ def _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre):
     for f in range(3):
         col = PRE_M + 2 * N_MOM * f
         zr, zi = _expand(pre, i, col, d, 0)
-        tr, ti = _expand(pre, i, col, d, 1)
         ws = s0 * zr + c0 * zi
         wc = c0 * zr - s0 * zi
         u = x[b0 + S] if f == 0 else (x[b0 + V] if f == 1 else x[b0 + N_X + V])
         de += u * ws
         dn += u * wc
-        jbe += u * (c0 * tr - s0 * ti)
-        jbn -= u * (s0 * tr + c0 * ti)
+        if jac:
+            tr, ti = _expand(pre, i, col, d, 1)
+            jbe += u * (c0 * tr - s0 * ti)
+            jbn -= u * (s0 * tr + c0 * ti)
         if f == 0:
             se, sn_ = ws, wc
         elif f == 1:
@@ -318,8 +323,9 @@ def _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre):
 
 @njit(cache=True)
 def interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, v_psd, q_out):
-    """Covariance of each interval's dead-reckoned displacement (ee, en, nn) and heading
-    change, from the sensors' noise at the state ``x`` (frozen while the state is solved).
+    """The whitening of each interval's dead-reckoned displacement and the sd of its heading
+    change (:data:`Q_W11` ...), from the sensors' noise at the state ``x`` (frozen while the
+    state is solved; taken here once, not at each of the solve's many cost evaluations).
     ``v_psd``: per interval, the PSD of the speed state's unmodelled acceleration (m^2/s^3)."""
     n_key = len(key_ep)
     for i in range(n_key - 1):
@@ -343,10 +349,16 @@ def interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, v_psd, q_out)
         psi_m = x[N_X * i + PSI] + 0.5 * dpsi
         sa, ca = math.sin(psi_m), math.cos(psi_m)
         # along = (sin, cos), cross = (cos, -sin)
-        q_out[i, Q_AE] = var_a * sa * sa + var_c * ca * ca
-        q_out[i, Q_AN] = var_a * sa * ca - var_c * ca * sa
-        q_out[i, Q_NN] = var_a * ca * ca + var_c * sa * sa
-        q_out[i, Q_PSI] = var_psi + (10.0 * t_free) ** 2
+        qee = var_a * sa * sa + var_c * ca * ca
+        qen = var_a * sa * ca - var_c * ca * sa
+        qnn = var_a * ca * ca + var_c * sa * sa
+        l11 = math.sqrt(qee)
+        l21 = qen / l11
+        l22 = math.sqrt(max(qnn - l21 * l21, 1e-18))
+        q_out[i, Q_W11] = 1.0 / l11
+        q_out[i, Q_W21] = -l21 / (l11 * l22)
+        q_out[i, Q_W22] = 1.0 / l22
+        q_out[i, Q_SD_PSI] = math.sqrt(var_psi + (10.0 * t_free) ** 2)
 
 
 @njit(cache=True)
@@ -412,16 +424,11 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
         j0, j1 = key_ep[i], key_ep[i + 1]
         T = t_s[j1] - t_s[j0]
         b0 = N_X * i
-        res = _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre)
+        res = _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre, want)
         de, dn, dpsi = res[0], res[1], res[2]
         t_gyro = res[13]
         # ---- displacement: r = p1 - p0 - D, whitened by the inverse Cholesky factor of Q
-        qee, qen, qnn = q[i, Q_AE], q[i, Q_AN], q[i, Q_NN]
-        l11 = math.sqrt(qee)
-        l21 = qen / l11
-        l22 = math.sqrt(max(qnn - l21 * l21, 1e-18))
-        # L^-1 = [[1/l11, 0], [-l21/(l11 l22), 1/l22]]
-        m11, m21, m22 = 1.0 / l11, -l21 / (l11 * l22), 1.0 / l22
+        m11, m21, m22 = q[i, Q_W11], q[i, Q_W21], q[i, Q_W22]
         re = x[b0 + N_X + E] - x[b0 + E] - de
         rn = x[b0 + N_X + N] - x[b0 + N] - dn
         w0 = m11 * re
@@ -451,7 +458,7 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             r[0] = w0
             r[1] = w1
         # ---- heading change against the gyro
-        sd_psi = math.sqrt(q[i, Q_PSI])
+        sd_psi = q[i, Q_SD_PSI]
         rp = wrap(x[b0 + N_X + PSI] - x[b0 + PSI] - dpsi) / sd_psi
         cost += rp * rp
         m = 3
@@ -635,6 +642,21 @@ def band_cholesky(ab):
                 for q in range(p, m + 1):
                     ab[q - p, j + p] -= ab[q, j] * v
     return 0
+
+
+@njit(cache=True)
+def band_cholesky_damped(ab, lam, out):
+    """:func:`band_cholesky` of H with its diagonal times (1 + ``lam``), plus 1e-12 (the
+    Levenberg-Marquardt damping), into ``out``; ``ab`` is left as it is for a retry at
+    another damping.  One pass over the columns: numpy's damping and restoring of ``ab``'s
+    diagonal (a strided row) took longer than the factor on an hour's drive."""
+    n = ab.shape[1]
+    scale = 1.0 + lam
+    for j in range(n):
+        out[0, j] = ab[0, j] * scale + 1e-12
+        for p in range(1, ab.shape[0]):
+            out[p, j] = ab[p, j]
+    return band_cholesky(out)
 
 
 @njit(cache=True)
