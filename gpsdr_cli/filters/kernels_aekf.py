@@ -139,7 +139,8 @@ PRI_QA_E, PRI_QA_N, PRI_LAM, PRI_GAIN, PRI_ADD_E, PRI_ADD_N, PRI_W = range(7)
 PRI_FL_EE, PRI_FL_NN, PRI_FL_EN, PRI_FB = 7, 8, 9, 10
 PRI_JUMP_E, PRI_JUMP_N = 11, 12  # the bias gate's mean move of b into the position (m)
 PRI_VB = 13  # b's stationary variance at this epoch (m^2; its regime's)
-N_PRIOR = 14
+PRI_ADD_VE, PRI_ADD_VN = 14, 15  # velocity variance a gate reset added (m^2/s^2)
+N_PRIOR = 16
 # counters (``info`` vector)
 INF_SPD_FAIL, INF_MIN_DIAG, INF_SKIPPED, INF_GATE_RESETS, INF_NONFINITE, INF_INFLATED = range(6)
 INF_VEL_GATED = 6  # receiver velocities the gate left out (their fix was used)
@@ -624,6 +625,8 @@ def rebuild_prior(P: np.ndarray, x: np.ndarray, T: float, alpha: float, tau_eps:
         inflate_kinematic(P, pr[PRI_GAIN])
     P[IE, IE] += pr[PRI_ADD_E]
     P[IN, IN] += pr[PRI_ADD_N]
+    P[IVE, IVE] += pr[PRI_ADD_VE]
+    P[IVN, IVN] += pr[PRI_ADD_VN]
 
 
 
@@ -634,7 +637,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
              gap: bool, gate: bool, ge_pred: bool, add_e: float, add_n: float,
              innov_on: int | None = None, sage_on: int | None = None,
              whiten_off: int | None = None, inflate_on: int | None = None,
-             ge_on: int | None = None) -> tuple[float, float, float, int, bool, float, bool, bool]:
+             ge_on: int | None = None
+             ) -> tuple[float, float, float, float, float, int, bool, float, bool, bool]:
     """Section 2 of :func:`cs_filter_kernel`: the GNSS position fix of an epoch (5 Hz).
 
     Its own function for the cold start: numba's type inference and SSA
@@ -650,7 +654,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     kernel; ``add_e, add_n`` the position variance added to P(k|k-1) so far
     (m^2).  The options are the kernel's None-or-int keyword arguments (numba
     prunes a None one before type inference).  Returns the updated ``add_e,
-    add_n``, the innovation adaptive factor g applied to P(k|k-1), the number of DR rows
+    add_n``, the velocity variance a gate reset added (m^2/s^2 per axis, GNSS-only
+    drives), the innovation adaptive factor g applied to P(k|k-1), the number of DR rows
     queued in ``gw`` for the block, ``ge_pred``, the NIS, and whether the fix was used
     and whether the gate rejected it.
     """
@@ -666,6 +671,8 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     used = False
     rej = False
     n_rows = np.int64(0)  # not the literal 0: one ge_push specialisation, not two
+    add_ve = 0.0  # velocity variance a gate reset added on a GNSS-only drive (m^2/s^2)
+    add_vn = 0.0
 
     rej_since = st[ST_REJ_SINCE]
     sh_r = st[ST_SH_R]
@@ -771,6 +778,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     r_fac = 1.0
     if gate and n_fix >= prm[PAR_GATE_WARMUP]:  # no gate before the filter has converged
         thr = prm[PAR_GATE_THR]
+        run_s = t - rej_since if rej_since >= 0.0 else 0.0
         verdict, rej_since = chi2_gate(nis, thr, t, rej_since, prm[PAR_GATE_RESET],
                                        RESET_AFTER_FIRST_REJECT, False)
         if verdict == GATE_RESET:
@@ -806,6 +814,17 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
             add_n += yn * yn
             P[IE, IE] += ye * ye
             P[IN, IN] += yn * yn
+            if prm[PAR_NO_DR] > 0.0:
+                # GNSS only: the fixes alone measured the motion, so the state ran off (a
+                # manoeuvre the model did not follow), its velocity by about the innovation
+                # over the run's seconds.  With the position alone freed, the old velocity
+                # carried the track off again (a real GNSS-only log's U-turn: 65 m from its
+                # fixes even after a 1-s reset)
+                tv = max(run_s, 1.0)
+                add_ve = (ye / tv) ** 2
+                add_vn = (yn / tv) ** 2
+                P[IVE, IVE] += add_ve
+                P[IVN, IVN] += add_vn
         if sage_on is not None:  # Zeng et al. Sage-Husa on a scale of R, with the divergence guard
             sample = (ye * ye - P[IE, IE] + yn * yn - P[IN, IN]) / (r_e + r_n)
             sh_r = sage_husa_r(sh_r, sh_m, prm[PAR_SH_B], sample, prm[PAR_SH_RMIN],
@@ -882,7 +901,7 @@ def gnss_fix(z_e: float, z_n: float, r_e: float, r_n: float, gv_e: float, gv_n: 
     st[ST_WH_M] = wh_m
     st[ST_WH_STATIC] = wh_static
     st[ST_B_SINCE] = b_since
-    return add_e, add_n, g, n_rows, ge_pred, nis, used, rej
+    return add_e, add_n, add_ve, add_vn, g, n_rows, ge_pred, nis, used, rej
 
 
 @njit(cache=True, error_model="numpy")
@@ -980,6 +999,8 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
         g = 1.0
         add_e = 0.0
         add_n = 0.0
+        add_ve = 0.0
+        add_vn = 0.0
         w_use = math.nan
         r_turn = r_w
         fl_ee = 0.0
@@ -1103,7 +1124,8 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
         gnss_used[k] = False
         gnss_rej[k] = False
         if has_gnss[k]:
-            add_e, add_n, g, n_rows, ge_pred, nis_out[k], gnss_used[k], gnss_rej[k] = gnss_fix(
+            add_e, add_n, add_ve, add_vn, g, n_rows, ge_pred, nis_out[k], gnss_used[k], \
+                gnss_rej[k] = gnss_fix(
                 z_e[k], z_n[k], r_e[k], r_n[k], gv_e[k], gv_n[k], x, P, st, prm, ge, gw, wk, info,
                 t, is_static, gap, gate, ge_pred, add_e, add_n, innov_on, sage_on, whiten_off,
                 inflate_on, ge_on)
@@ -1284,6 +1306,8 @@ def cs_filter_kernel(inp: CsInputs, state: CsState, k_start: int, k_end: int, p_
             prior_store[k, PRI_GAIN] = g
             prior_store[k, PRI_ADD_E] = add_e
             prior_store[k, PRI_ADD_N] = add_n
+            prior_store[k, PRI_ADD_VE] = add_ve
+            prior_store[k, PRI_ADD_VN] = add_vn
             prior_store[k, PRI_W] = w_use
             prior_store[k, PRI_FL_EE] = fl_ee
             prior_store[k, PRI_FL_NN] = fl_nn
