@@ -30,7 +30,8 @@ MAX_OFF_M = 50.0
 AFTER_OFF_M = 5.0
 
 
-def u_turn_drive(seed: int = 3, v: float = 17.0, radius: float = 30.0) -> tuple[Drive, np.ndarray, np.ndarray, np.ndarray]:
+def u_turn_drive(seed: int = 3, v: float = 20.0, radius: float = 40.0
+                 ) -> tuple[Drive, np.ndarray, np.ndarray, np.ndarray]:
     """1-Hz fixes (1 m noise) of a vehicle heading east at ``v`` m/s for 30 s, turning left
     through 180 degrees on a ``radius`` m circle, then west for 30 s.  Returns the drive, the
     true east/north (m) at each fix and the index of the first fix after the turn."""
@@ -64,7 +65,7 @@ def u_turn_drive(seed: int = 3, v: float = 17.0, radius: float = 30.0) -> tuple[
 @pytest.mark.parametrize("smooth", [False, True])
 @pytest.mark.parametrize("name", ["ekf", "aekf"])
 def test_a_gnss_only_u_turn_is_followed(name: str, smooth: bool) -> None:
-    drive, e_true, n_true, first_after = u_turn_drive(3, 20.0, 40.0)
+    drive, e_true, n_true, first_after = u_turn_drive()
     p = config.defaults()
     p["filter"]["name"] = name
     p["filter"]["smoother"] = "rts" if smooth else "none"
