@@ -460,9 +460,15 @@ def test_preintegrated_dead_reckoning_matches_the_step_by_step_integral() -> Non
         x[gk.B] = bias
         ref = np.array(gk._integrate(x, 0, 0, n - 1, t_s, yaw, odo, gyro_ok, odo_ok, prm)[:14])
         got = np.array(gk._integrate_pre(x, 0, 0, n - 1, t_s, yaw, odo, gyro_ok, odo_ok, prm,
-                                         pre))
+                                         pre, True))
         assert abs(ref[0]) > 5.0 and abs(ref[3]) > 1.0  # metres moved, turned
         np.testing.assert_allclose(got, ref, rtol=1e-12 + tol, atol=1e-12 + 10 * tol)
+        # the cost alone: the same displacement, the bias Jacobian (results 5, 6) not taken
+        cost_only = np.array(gk._integrate_pre(x, 0, 0, n - 1, t_s, yaw, odo, gyro_ok, odo_ok,
+                                               prm, pre, False))
+        keep = np.r_[0:5, 7:14]
+        np.testing.assert_array_equal(cost_only[keep], got[keep])
+        assert cost_only[5] == cost_only[6] == 0.0 and abs(got[5]) + abs(got[6]) > 0.1
         assert pre[0, gk.PRE_B] == (0.002 if bias < 0.1 else bias)  # re-taken only far off
 
 
