@@ -648,8 +648,9 @@ def band_cholesky(ab):
 def band_cholesky_damped(ab, lam, out):
     """:func:`band_cholesky` of H with its diagonal times (1 + ``lam``), plus 1e-12 (the
     Levenberg-Marquardt damping), into ``out``; ``ab`` is left as it is for a retry at
-    another damping.  One pass over the columns: numpy's damping and restoring of ``ab``'s
-    diagonal (a strided row) took longer than the factor on an hour's drive."""
+    another damping (``out`` may be ``ab`` itself when it is not needed again).  One pass
+    over the columns: numpy's damping and restoring of ``ab``'s diagonal (a strided row)
+    took longer than the factor on an hour's drive."""
     n = ab.shape[1]
     scale = 1.0 + lam
     for j in range(n):
