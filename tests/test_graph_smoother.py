@@ -180,6 +180,45 @@ def test_gnss_only_and_a_handful_of_fixes_are_finite() -> None:
         assert np.all(np.isfinite(col))
 
 
+@pytest.mark.parametrize("n_fix", [1, 2, 3])
+def test_a_log_of_one_to_three_fixes(tmp_path, n_fix: int) -> None:
+    """A GNSS-only log of fewer unknowns than the band is wide (one fix: 8 unknowns, band
+    11) is solved, not an internal error; the track sits on its fixes, 5 s apart at 10 m/s
+    east."""
+    import pandas as pd
+    from click.testing import CliRunner
+
+    from gpsdr_cli.cli.main import cli
+
+    def nmea(body: str) -> str:
+        ck = 0
+        for ch in body:
+            ck ^= ord(ch)
+        return f"${body}*{ck:02X}\n"
+
+    lines = []
+    for i in range(n_fix):
+        lon_min = 31.0 + i * 50.0 / (1852.0 * 60.0 * np.cos(np.radians(48.1173))) * 60.0
+        hhmmss = f"1235{19 + 5 * i:02d}"
+        lines.append(nmea(f"GPGGA,{hhmmss},4807.038,N,011{lon_min:07.4f},E,1,08,0.9,545.4,M,46.9,M,,"))
+        lines.append(nmea(f"GPRMC,{hhmmss},A,4807.038,N,011{lon_min:07.4f},E,019.4,090.0,230324,,,A"))
+    log = tmp_path / "few.nmea"
+    log.write_text("".join(lines))
+    out = tmp_path / "few.parquet"
+    res = CliRunner().invoke(cli, ["fuse", "--gps", str(log), "--smooth", "graph", "-q",
+                                   "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    track = pd.read_parquet(out)
+    assert len(track) == n_fix
+    num = track.select_dtypes("number")
+    assert np.isfinite(num.drop(columns=["pdop"]).to_numpy(float)).all()
+    # 50 m apart east: the track on its fixes within their sigma
+    gap = np.hypot(track.e - track.gnss_e, track.n - track.gnss_n)
+    assert gap.max() < 2.0 * track.sigma_e.max()
+    if n_fix > 1:
+        assert np.diff(track.e).min() > 40.0
+
+
 def test_parse_prior() -> None:
     assert parse_prior("1.02", 0.005, "--odo-scale") == (1.02, 0.005)
     assert parse_prior("1.02+-0.001", 0.005, "--odo-scale") == (1.02, 0.001)

@@ -682,7 +682,7 @@ def upper_of_lower(lb: np.ndarray) -> np.ndarray:
     """The upper band of U = L^T (``cb[BAND + r - c, c] = U[r, c]``) from L's lower band."""
     n = lb.shape[1]
     cb = np.zeros_like(lb)
-    for d in range(BAND + 1):
+    for d in range(min(BAND + 1, n)):  # a drive of fewer unknowns than the band is wide
         cb[BAND - d, d:] = lb[d, :n - d]
     return cb
 
