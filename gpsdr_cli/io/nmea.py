@@ -114,9 +114,10 @@ with the first ``name:line`` where it occurred; ``strict=True`` raises
 :class:`ParseError` (or :class:`ChecksumError`) for the first such line
 instead.  Well-formed sentences this reader does not read are counted and never fatal:
 standard NMEA 0183 types it does not use (GSV, DTM, TXT, ... listed in ``_NOT_USED``) as
-``"not used: GSV (satellites in view)"``; unknown ones (other types, proprietary ``$P...``
-other than the two above, AIS ``!AIVDM``, numeric talkers, six-letter addresses) as
-``"unknown sentence ..."``.
+``"not used: GSV (satellites in view)"``, and so are Unicore's secondary-antenna variants of
+them (``$GNGGAH``, ``$GNRMCH`` ...: a dual-antenna receiver's heading antenna, not the
+position); unknown ones (other types, proprietary ``$P...`` other than the two above, AIS
+``!AIVDM``, numeric talkers, other six-letter addresses) as ``"unknown sentence ..."``.
 """
 
 from __future__ import annotations
@@ -562,6 +563,10 @@ def _classify(head: bytes, bang: bool) -> int | str:
     if addr[:2].isdigit():
         return "unknown sentence (numeric talker)"
     if len(addr) == 6 and addr.isalpha() and addr.isupper():
+        if addr[5:] == b"H" and (addr[2:5] in _KNOWN or addr[2:5] in _NOT_USED):
+            # Unicore's dual-antenna receivers: GGAH, RMCH, GSTH ... describe the secondary
+            # (heading) antenna, a baseline away from the position the plain sentences give
+            return f"{NOT_USED} {addr[2:].decode()} (the secondary antenna of a dual-antenna receiver)"
         return "unknown sentence (six-letter address)"
     label = "".join(chr(c) if 32 < c < 127 else "?" for c in addr[:6])
     return f"unknown sentence {label!r}"
@@ -1292,7 +1297,8 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     report = _report(probs, name, lines, strict, buf)
     epoch_sod = _assign_epochs(parsed)
     if epoch_sod is None:
-        what = ("GGA/GNS/RMC/GLL/GSA/VTG/GST/ZDA/PTNL,GGK/PUBX,00 sentence with a valid checksum"
+        checksums = " with a valid checksum" if report.counts.get("bad checksum", 0) else ""
+        what = (f"GGA/GNS/RMC/GLL/GSA/VTG/GST/ZDA/PTNL,GGK/PUBX,00 sentence{checksums}"
                 if not parsed else "GGA, GNS, RMC or GLL sentence with a time of day (nor "
                 "PTNL,GGK or PUBX,00)")
         hint = ""

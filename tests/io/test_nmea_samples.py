@@ -187,10 +187,25 @@ def test_um981_nmea41_rmc_with_nav_status() -> None:
 
 
 def test_six_letter_addresses_are_unknown() -> None:
+    """Unicore's GGAH, RMCH ... (a dual-antenna receiver's secondary antenna) are not the
+    vehicle's position: a log of nothing else is an error that says so, and not one about
+    checksums (every checksum in it is right); other six-letter addresses are unknown."""
     data = (DATA / "unicore_nmea.log").read_bytes()
     with pytest.raises(NoDataError) as err:
         parse_nmea(data, name="unicore_nmea.log")
+    assert "secondary antenna" in str(err.value)
+    assert "checksum" not in str(err.value)
+    extra = b"$GPABCDE,1,2*" + b"%02X" % _xor(b"GPABCDE,1,2") + b"\r\n"
+    with pytest.raises(NoDataError) as err:
+        parse_nmea(extra, name="x.nmea")
     assert "six-letter address" in str(err.value)
+
+
+def _xor(body: bytes) -> int:
+    ck = 0
+    for b in body:
+        ck ^= b
+    return ck
 
 
 def test_pynmea2_example_log_needs_date() -> None:
