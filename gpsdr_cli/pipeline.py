@@ -997,15 +997,21 @@ def _read_csv_any(path: str, params: Params) -> tuple[Drive | None, Any]:
     with open(path, "rb") as fh:
         header = fh.readline().decode("utf-8", "replace").lstrip("\ufeff")
     cols = {c.strip().lower() for c in header.split(",")}
+    if cols & {"latitude", "lat"} and cols & {"longitude", "lon", "lng"} and not {"lat", "lon"} <= cols:
+        # positions under other names (a phone's export): not an odometer for its speed
+        raise InputError(path, f"line 1: CSV header {header.strip()!r} holds positions; gpsdr "
+                               "reads a CSV of positions as a reference with columns t (or time, "
+                               "timestamp; UTC POSIX s), lat, lon (rename them), and GNSS "
+                               "input from NMEA, UBX, RTKLIB .pos, ROS bag or MCAP logs")
     if params["gyro"]["column"].lower() in cols:
         return read_gyro_csv(path, params["gyro"]), None
-    odo_cols = {"speed", "distance", "ticks", params["odo"]["column"].lower()} - {""}
-    if cols & odo_cols:
-        return read_odo_csv(path, params["odo"]), None
-    if {"lat", "lon"} <= cols:
+    if {"lat", "lon"} <= cols:  # a reference, whatever else it carries (a speed column)
         from .io.reference import read_reference
 
         return None, read_reference(path)
+    odo_cols = {"speed", "distance", "ticks", params["odo"]["column"].lower()} - {""}
+    if cols & odo_cols:
+        return read_odo_csv(path, params["odo"]), None
     raise InputError(path, f"line 1: CSV header {header.strip()!r} is neither a gyro log "
                            f"({params['gyro']['column']}), an odometer log (speed, distance, "
                            "ticks) nor a reference (t, lat, lon)")

@@ -371,3 +371,20 @@ def test_info_on_a_log_without_a_date_does_not_call_it_a_rollover(gpsdr, tmp_pat
     assert result.exit_code == 0, result.output
     assert "times of day shown on 1970-01-01" in result.output
     assert "suspicious date" not in result.output and "rollover" not in result.output
+
+
+def test_info_on_a_csv_of_positions(gpsdr, tmp_path: Path) -> None:
+    """A CSV with lat/lon is a reference even with a speed column (not an odometer log); one
+    whose columns are named latitude/longitude gets an error that says how to rename them."""
+    rows = [f"{1554706360.0 + i},39.95 ,116.43,{1.0 + 0.1 * i}" for i in range(5)]
+    ref = tmp_path / "ref.csv"
+    ref.write_text("t,lat,lon,speed\n" + "\n".join(rows) + "\n")
+    result = gpsdr(["info", ref])
+    assert result.exit_code == 0, result.output
+    assert "reference csv" in result.output and "odo " not in result.output
+    phone = tmp_path / "phone.csv"
+    phone.write_text("latitude,longitude,speed,timestamp\n39.95,116.43,1.0,1554706360.0\n")
+    result = gpsdr(["info", phone])
+    assert result.exit_code != 0
+    assert "holds positions" in result.output and "lat, lon" in result.output
+    assert "odo.t_column" not in result.output
