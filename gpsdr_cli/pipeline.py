@@ -180,6 +180,11 @@ def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame,
     lat, lon = frame.inverse(e, n)
     # heading clockwise from north: psi = atan2(v_e, v_n)  (conventions charter)
     heading = np.degrees(np.arctan2(v_e, v_n)) % 360.0
+    # ... taken before a stop's decayed velocity (1e-200 m/s and less after a minute of
+    # zero-velocity updates) is written as the 0 it is; the heading keeps its direction
+    still = np.hypot(v_e, v_n) < 1e-9
+    v_e = np.where(still, 0.0, v_e)
+    v_n = np.where(still, 0.0, v_n)
     if pdop is None:
         pdop = pd.Series(np.asarray(epochs.pdop, float)).ffill().to_numpy()  # latest GNSS record
     cols: dict[str, Any] = {
