@@ -388,3 +388,17 @@ def test_info_on_a_csv_of_positions(gpsdr, tmp_path: Path) -> None:
     assert result.exit_code != 0
     assert "holds positions" in result.output and "lat, lon" in result.output
     assert "odo.t_column" not in result.output
+
+
+def test_info_on_a_log_with_nothing_usable_does_not_say_nothing_was_skipped(
+        gpsdr, tmp_path: Path) -> None:
+    """The note counts what was skipped; a "skipped records: 0" line under it said the
+    opposite."""
+    from tests.io.test_nmea import ck
+
+    log = tmp_path / "gsv.nmea"
+    log.write_text("\r\n".join(ck("GPGSV,1,1,01,01,06,014,08") for _ in range(5)) + "\r\n")
+    result = gpsdr(["info", log])
+    assert result.exit_code == 0, result.output
+    assert "nothing usable" in result.output and "5 not used: GSV" in result.output
+    assert "skipped records: 0" not in result.output

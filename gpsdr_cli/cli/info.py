@@ -104,6 +104,8 @@ def _print(desc: dict[str, Any]) -> None:
     for note in desc.get("notes", []):
         echo(f"  note: {note}")
     skipped = desc.get("skipped", {})
+    if not skipped and any(n.startswith("nothing usable") for n in desc.get("notes", [])):
+        return  # the note counted what was skipped; "0" under it would contradict it
     total = sum(v["count"] for v in skipped.values())
     echo(f"  skipped records: {total}")
     for reason, v in skipped.items():
