@@ -189,19 +189,14 @@ def test_a_log_of_one_to_three_fixes(tmp_path, n_fix: int) -> None:
     from click.testing import CliRunner
 
     from gpsdr_cli.cli.main import cli
-
-    def nmea(body: str) -> str:
-        ck = 0
-        for ch in body:
-            ck ^= ord(ch)
-        return f"${body}*{ck:02X}\n"
+    from tests.io.test_nmea import ck
 
     lines = []
     for i in range(n_fix):
         lon_min = 31.0 + i * 50.0 / (1852.0 * 60.0 * np.cos(np.radians(48.1173))) * 60.0
         hhmmss = f"1235{19 + 5 * i:02d}"
-        lines.append(nmea(f"GPGGA,{hhmmss},4807.038,N,011{lon_min:07.4f},E,1,08,0.9,545.4,M,46.9,M,,"))
-        lines.append(nmea(f"GPRMC,{hhmmss},A,4807.038,N,011{lon_min:07.4f},E,019.4,090.0,230324,,,A"))
+        lines.append(ck(f"GPGGA,{hhmmss},4807.038,N,011{lon_min:07.4f},E,1,08,0.9,545.4,M,46.9,M,,") + "\n")
+        lines.append(ck(f"GPRMC,{hhmmss},A,4807.038,N,011{lon_min:07.4f},E,019.4,090.0,230324,,,A") + "\n")
     log = tmp_path / "few.nmea"
     log.write_text("".join(lines))
     out = tmp_path / "few.parquet"

@@ -19,6 +19,7 @@ from click.testing import CliRunner
 from gpsdr_cli import config
 from gpsdr_cli.cli.main import cli
 from gpsdr_cli.filters.gnss_model import clamped_speeds
+from tests.io.test_nmea import ck
 
 from . import tiny_drive
 
@@ -26,13 +27,6 @@ from . import tiny_drive
 #: before: 18 / 15 / 61 m, the track parked for the whole creep)
 MAX_ERR_M = {"none": 6.0, "rts": 4.5, "graph": 3.5}
 CREEP_MPS = 1.2
-
-
-def _nmea(body: str) -> str:
-    ck = 0
-    for ch in body:
-        ck ^= ord(ch)
-    return f"${body}*{ck:02X}\n"
 
 
 def _creep_log(path) -> np.ndarray:
@@ -53,8 +47,8 @@ def _creep_log(path) -> np.ndarray:
         la = f"{int(lat):02d}{(lat - int(lat)) * 60:07.4f}"
         lo = f"{int(abs(lon)):03d}{(abs(lon) - int(abs(lon))) * 60:07.4f}"
         kn = 0.0 if v < 1.5 else v / 0.514444
-        lines.append(_nmea(f"GPGGA,{t},{la},N,{lo},W,1,08,1.0,100.0,M,47.9,M,,"))
-        lines.append(_nmea(f"GPRMC,{t},A,{la},N,{lo},W,{kn:.2f},90.00,140808,,,A"))
+        lines.append(ck(f"GPGGA,{t},{la},N,{lo},W,1,08,1.0,100.0,M,47.9,M,,") + "\n")
+        lines.append(ck(f"GPRMC,{t},A,{la},N,{lo},W,{kn:.2f},90.00,140808,,,A") + "\n")
     path.write_text("".join(lines))
     return np.asarray(east)
 

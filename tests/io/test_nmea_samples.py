@@ -195,17 +195,12 @@ def test_six_letter_addresses_are_unknown() -> None:
         parse_nmea(data, name="unicore_nmea.log")
     assert "secondary antenna" in str(err.value)
     assert "checksum" not in str(err.value)
-    extra = b"$GPABCDE,1,2*" + b"%02X" % _xor(b"GPABCDE,1,2") + b"\r\n"
+    from tests.io.test_nmea import ck
+
+    extra = (ck("GPABCDE,1,2") + "\r\n").encode()
     with pytest.raises(NoDataError) as err:
         parse_nmea(extra, name="x.nmea")
     assert "six-letter address" in str(err.value)
-
-
-def _xor(body: bytes) -> int:
-    ck = 0
-    for b in body:
-        ck ^= b
-    return ck
 
 
 def test_pynmea2_example_log_needs_date() -> None:
