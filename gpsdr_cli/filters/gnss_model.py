@@ -45,10 +45,10 @@ receiver's own figures cannot say:
   a fix whose own displacement (the median positions either side,
   :func:`.standstill.fix_speeds` over ``[fkf] fix_standstill_window_s``) is faster than
   ``fix_standstill_speed_mps`` (the speed that ends a positions-only stop) is dropped with
-  its course: :func:`clamped_speeds`.  Only an exact
-  zero: a Doppler speed measured at a stop scatters by centimetres per second, and a
-  reflected fix's jump in a city must not cost the filters a real stop (a speed threshold
-  did: 3 more of 40 simulated city drives without an odometer above their fixes).
+  its course: :func:`clamped_speeds` (decisions/0051).  Only an exact zero: a Doppler
+  speed measured at a stop scatters by centimetres per second, and a reflected fix's jump
+  in a city must not cost the filters a real stop (a speed threshold did: 3 more of 40
+  simulated city drives without an odometer above their fixes).
 
 Applied by the filter registry (:func:`gpsdr_cli.filters.register`) to every run, so
 no caller can skip it.  Units: metres, seconds.
