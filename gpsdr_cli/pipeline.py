@@ -182,9 +182,9 @@ def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame,
     heading = np.degrees(np.arctan2(v_e, v_n)) % 360.0
     # ... taken before a stop's decayed velocity (1e-200 m/s and less after a minute of
     # zero-velocity updates) is written as the 0 it is; the heading keeps its direction
-    still = np.hypot(v_e, v_n) < 1e-9
-    v_e = np.where(still, 0.0, v_e)
-    v_n = np.where(still, 0.0, v_n)
+    speed = np.hypot(v_e, v_n)
+    still = speed < 1e-9
+    v_e, v_n, speed = (np.where(still, 0.0, a) for a in (v_e, v_n, speed))
     if pdop is None:
         pdop = pd.Series(np.asarray(epochs.pdop, float)).ffill().to_numpy()  # latest GNSS record
     cols: dict[str, Any] = {
@@ -195,7 +195,7 @@ def track_frame(epochs: Epochs, result: FilterResult, frame: LocalFrame,
         "n": n,
         "v_e": v_e,
         "v_n": v_n,
-        "speed": np.hypot(v_e, v_n),
+        "speed": speed,
         "heading_deg": heading,
         "sigma_e": _sd(result.var_e),
         "sigma_n": _sd(result.var_n),

@@ -45,13 +45,15 @@ receiver's own figures cannot say:
   a fix whose own displacement (the median positions either side,
   :func:`.standstill.fix_speeds` over ``[fkf] fix_standstill_window_s``) is faster than
   ``fix_standstill_speed_mps`` (the speed that ends a positions-only stop) is dropped with
-  its course: :func:`clamped_speeds` (decisions/0051).  Only an exact zero: a Doppler
+  its course by :func:`clamped_speeds`, once, as the epochs are built
+  (:func:`gpsdr_cli.align.build_epochs`; decisions/0051).  Only an exact zero: a Doppler
   speed measured at a stop scatters by centimetres per second, and a reflected fix's jump
   in a city must not cost the filters a real stop (a speed threshold did: 3 more of 40
   simulated city drives without an odometer above their fixes).
 
 Applied by the filter registry (:func:`gpsdr_cli.filters.register`) to every run, so
-no caller can skip it.  Units: metres, seconds.
+no caller can skip it (the clamped speeds excepted: they are the input's, dropped once).
+Units: metres, seconds.
 """
 
 from __future__ import annotations
@@ -199,7 +201,6 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     ``vector``: the vector chord may call the drive NLOS (not when the fixes the NLOS screen
     kept are judged again: those agree with the dead reckoning by construction)."""
     g = params["gnss"]
-    epochs = clamped_speeds(epochs, params)
     if rtk_drive(epochs, params):
         return rtk_error_model(epochs, params)
     thr = float(g["nlos_mismatch_m"])

@@ -141,9 +141,10 @@ def test_kernel_reproduces_the_reference_without_odometer(kind: str, mode: str, 
     result = filters.get(kind)(epochs, params)
     assert result.info["zupt_epochs"] > 0 and result.info["coast_updates"] > 0
     assert result.info["spd_failures"] == 0
-    # the reference on what the filter registry gives the kernel: the GNSS model drops the
-    # simulated receiver's exact-zero speeds at the stop's hard edges (0.2 s each side:
-    # gnss_model.clamped_speeds), and the chord check then calls the drive NLOS
+    # the reference on what the filter registry gives the kernel, the GNSS model's epochs and
+    # parameters: build_epochs dropped the simulated receiver's exact-zero speeds at the
+    # stop's hard edges (0.2 s each side: gnss_model.clamped_speeds), and without them the
+    # chord check calls the drive NLOS
     model_epochs, model_params = gnss_error_model(epochs, params)
     ref = run_reference(fkf.prepare(model_epochs, model_params), kind, smooth=smooth)
     fkf_tests.assert_matches_reference(result, ref)
