@@ -76,6 +76,12 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             if epochs.dr_unhealthy:
                 model_params = follow_the_fixes(model_params)
                 info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"
+            elif not epochs.has_odo.any():
+                # the R factors hand the track to the dead reckoning; without an odometer its
+                # speed is the fixes' own (an HDOP-6 fix's 11-m sigma x 10 let a velocity
+                # from one bad fix carry the track 135 m away from every later one)
+                model_params = follow_the_fixes(model_params)
+                info["pdop_r_factors"] = "off: no odometer measures the speed"
             result = fn(model_epochs, model_params)
             result.info.update(info)
             result.info["nlos_drive"] = bool(model_epochs.nlos_drive)
