@@ -69,7 +69,7 @@ from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
 from .base import FilterResult
-from .gnss_model import pdop_factors, rtk_bias_sd
+from .gnss_model import gnss_only_gate_reset_s, pdop_factors, rtk_bias_sd
 from .smoothing import rts_checkpointed
 
 #: Speed sigma (m/s) assigned to a velocity taken from the receiver's speed and course.
@@ -538,12 +538,11 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
     prm, flg = kernel_params(params, adaptive, smooth)
     prm[kn.PAR_COAST_Q] = coast_psd(epochs, params)
     prm[kn.PAR_NO_DR], prm[kn.PAR_NO_DR_VEL_Q] = no_dr_hold(epochs, params)
-    if prm[kn.PAR_NO_DR] > 0.0 and float(params["fkf"]["no_odo_gate_reset_s"]) > 0.0:
+    if prm[kn.PAR_NO_DR] > 0.0:
         # GNSS only: the motion model alone judges the fixes, and fixes gated for seconds
-        # mean the state ran off (fkf's reset without an odometer; with a gyro the turn is
-        # measured, and on simulated city drives the shorter reset let reflected runs in)
-        prm[kn.PAR_GATE_RESET] = min(prm[kn.PAR_GATE_RESET],
-                                     float(params["fkf"]["no_odo_gate_reset_s"]))
+        # mean the state ran off (with a gyro the turn is measured, and on simulated city
+        # drives a shorter reset let reflected runs in)
+        prm[kn.PAR_GATE_RESET] = min(prm[kn.PAR_GATE_RESET], gnss_only_gate_reset_s(params))
     prm[kn.PAR_UNKNOWN_W_VAR] = unknown_rate_var(params)
     prm[kn.PAR_OFF_VVAR], prm[kn.PAR_OFF_AVAR] = drive_off_var(params)
     st = np.zeros(kn.N_ST)

@@ -24,7 +24,7 @@ from ..epochs import Epochs, true_runs
 from ..errors import ConfigError, NoDataError
 from . import kernels_fkf as kf
 from .adaptive import gate_threshold
-from .gnss_model import rtk_bias_sd
+from .gnss_model import gnss_only_gate_reset_s, rtk_bias_sd
 from .standstill import standstill_from_gnss
 
 #: seconds: an odometer reading older than this does not decide standstill
@@ -787,7 +787,9 @@ def prepare(epochs: Epochs, params: Params) -> Prepared:
     par[kf.PAR_OMEGA_MIN] = max(sp["omega_min_speed_mps"], 1e-3)
     par[kf.PAR_GATE_CHI2] = gate_threshold(g_p["gate_prob"], 2) if g_p["gate"] else 0.0
     par[kf.PAR_GATE_RESET_S] = g_p["gate_reset_s"]
-    if not len(o) and fp["no_odo_gate_reset_s"] > 0:   # no odometer: the state is the outlier sooner
+    if not len(o) and not epochs.has_gyro.any():    # GNSS only: the model alone judges the fixes
+        par[kf.PAR_GATE_RESET_S] = gnss_only_gate_reset_s(params)
+    elif not len(o) and fp["no_odo_gate_reset_s"] > 0:   # no odometer: the state is the outlier sooner
         par[kf.PAR_GATE_RESET_S] = min(g_p["gate_reset_s"], fp["no_odo_gate_reset_s"])
     par[kf.PAR_GATE_WARMUP] = g_p["gate_warmup_fixes"]
     par[kf.PAR_GVEL_VAR] = fp["gnss_velocity_sd_mps"] ** 2 if fp["gnss_velocity"] else 0.0

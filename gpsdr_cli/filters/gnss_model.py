@@ -73,6 +73,21 @@ from ..rtk_false_fix import centimetre_fixes
 SPEED_MAX_AGE_S = 0.5
 
 
+def gnss_only_gate_reset_s(params: Params) -> float:
+    """s: ``[gnss] gate_reset_s`` on a GNSS-only drive (no gyro, no odometer), every filter.
+
+    ``[gnss] gnss_only_gate_reset_s``, else ``[fkf] no_odo_gate_reset_s`` (0 in both: the
+    full ``gate_reset_s``).  A white-jerk or current-statistical model cannot foresee the end
+    of a turn: a simulated 1-Hz U-turn at 10 m/s^2 had the next three fixes gated, each
+    farther from the prediction (18, 44, 75 m), until a 3-s reset let them in
+    (docs/decisions/0054).
+    """
+    for sec, key in (("gnss", "gnss_only_gate_reset_s"), ("fkf", "no_odo_gate_reset_s")):
+        if float(params[sec][key]) > 0.0:
+            return min(float(params["gnss"]["gate_reset_s"]), float(params[sec][key]))
+    return float(params["gnss"]["gate_reset_s"])
+
+
 def pdop_factors(pdop: np.ndarray, g: dict) -> tuple[np.ndarray, np.ndarray]:
     """R factor k and Q factor K_a for each PDOP (Fang et al.'s table; NaN PDOP -> good)."""
     good, poor = float(g["pdop_good"]), float(g["pdop_poor"])
