@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -556,3 +557,18 @@ def test_banded_cholesky_solves_as_lapack_does() -> None:
     assert np.max(np.abs(x - ref)) < 1e-12 * np.max(np.abs(ref)) * n
     assert np.max(np.abs(x - solveh_banded(lower, rhs, lower=True))) > 1e-3
     assert gk.band_cholesky_damped(bad, 0.0, out) == 151
+
+
+def test_gyro_scale_sd_is_the_graphs_own() -> None:
+    """``[graph] gyro_scale_sd`` (the gyro's scale error as heading noise per radian turned)
+    is the graph's: NaN takes ``[gyro] scale_sd`` (0.005, the filters'), the same solution
+    to the bit; a value of its own moves the solution (stop_and_go, six 900-s drives: 0.005
+    0.439 m, 0.01 0.376 m: docs/decisions/0056)."""
+    sim = simulate_drive("urban_canyon", seed=1, duration_s=120.0)
+    p = config.defaults()
+    assert p["graph"]["gyro_scale_sd"] == 0.01 and p["gyro"]["scale_sd"] == 0.005
+    _, _, own, _, _ = _run(sim, sim.drive, {"gyro_scale_sd": 0.005})
+    _, _, fallback, _, _ = _run(sim, sim.drive, {"gyro_scale_sd": math.nan})
+    _, _, default, _, _ = _run(sim, sim.drive)
+    np.testing.assert_array_equal(own.result.e, fallback.result.e)
+    assert np.max(np.abs(default.result.e - own.result.e)) > 1e-4

@@ -13,7 +13,9 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
 * Dead reckoning between keyframes: preintegrated from the raw epochs once per interval
   (exact in psi and s; in b through moments of the gyro time, taken again when b moves
   far: :func:`.graph_kernels._preintegrate`; Jacobians alongside), with the
-  covariance of the displacement from the sensors' declared noise (``[gyro]``, ``[odo]``)
+  covariance of the displacement from the sensors' declared noise (``[gyro]``, ``[odo]``;
+  the gyro's scale error is ``[graph] gyro_scale_sd`` per radian turned, or the filters'
+  ``[gyro] scale_sd`` on an NLOS drive: docs/decisions/0056)
   plus a per-metre random walk ``[graph] dr_dist_sd``.  Without an odometer the speed
   state carries the position: driven by the forward accelerometer where there is one
   (``dv = (a - s) dt``, the S slot then holding the reading's offset, bias + g sin(pitch),
@@ -327,10 +329,11 @@ def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
 
 def own_sigmas(params: Params) -> Params:
     """``params`` with each fix at its own sigma and white (no chord scaling, no error
-    states): the NLOS fit's."""
+    states) and the gyro's scale error at ``[gyro] scale_sd``: the NLOS fit's."""
     own = copy.deepcopy(params)
     own["gnss"]["nlos_mismatch_m"] = 0.0
     own["graph"]["gnss_err_states"] = False
+    own["graph"]["gyro_scale_sd"] = math.nan    # the filters' tighter heading (see _solve)
     return own
 
 
@@ -612,7 +615,12 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     prm[gk.P_Q_DIST] = float(gp["dr_dist_sd"])
     prm[gk.P_POS_FLOOR] = float(gp["dr_floor_m"])
     prm[gk.P_HEAD_RW] = float(gp["heading_rw_sd"])
-    prm[gk.P_GYRO_SCALE] = float(params["gyro"]["scale_sd"])
+    # the gyro's scale error: the graph's own, but on an NLOS drive the filters' tighter one
+    # (a looser heading let a reflected run bend a simulated city drive: 1.60 -> 11.2 m)
+    scale_sd = float(gp["gyro_scale_sd"])
+    if nlos_drive or init.info.get("nlos_drive") or not math.isfinite(scale_sd):
+        scale_sd = float(params["gyro"]["scale_sd"])
+    prm[gk.P_GYRO_SCALE] = scale_sd
     prm[gk.P_NOGYRO_RW] = float(gp["no_gyro_heading_rw_sd"])
     prm[gk.P_ACC_SD] = float(gp["accel_sd"])
     tau_b = float(params["gyro"]["bias_tau_s"])
