@@ -563,7 +563,7 @@ def test_gyro_scale_sd_is_the_graphs_own() -> None:
     """``[graph] gyro_scale_sd`` (the gyro's scale error as heading noise per radian turned)
     is the graph's: NaN takes ``[gyro] scale_sd`` (0.005, the filters'), the same solution
     to the bit; a value of its own moves the solution (stop_and_go, six 900-s drives: 0.005
-    0.439 m, 0.01 0.376 m: docs/decisions/0056)."""
+    0.439 m, 0.01 0.398 m: docs/decisions/0056)."""
     sim = simulate_drive("urban_canyon", seed=1, duration_s=120.0)
     p = config.defaults()
     assert p["graph"]["gyro_scale_sd"] == 0.01 and p["gyro"]["scale_sd"] == 0.005
