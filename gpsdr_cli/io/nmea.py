@@ -1026,6 +1026,11 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             days, invalid = _ymd_days(y, mo, d, ok)
             bad_date = bd | bm | by | (have & ~ok) | invalid
             probs.add("malformed date in ZDA (field ignored)", s.pos[bad_date & keep])
+            # a ZDA whose date fields are empty (a receiver before its almanac, some marine
+            # loggers) still gives the time; it is why a log has no date, if it has none
+            empty = int(np.count_nonzero(~have & ~(bd | bm | by) & keep))
+            if empty:
+                stats["damaged_dated"][("ZDA", "with empty date fields")] += empty
             p["days"] = days
         p["pos"] = s.pos
         acc.setdefault(kind, []).append({k: v[keep] for k, v in p.items()})
@@ -1453,8 +1458,10 @@ def _summary(report: SkipReport) -> str:
 
 def _why_undated(report: SkipReport, damaged: Counter) -> str:
     """What was skipped of the dated sentences (RMC, ZDA, PTNL,GGK), for a log left without a
-    date: "3 RMC skipped: bad checksum"; else the skip summary."""
-    parts = [f"{n} {t} skipped: {r}" for (t, r), n in damaged.most_common(3)]
+    date: "3 RMC skipped: bad checksum", "21 ZDA with empty date fields"; else the skip
+    summary."""
+    parts = [f"{n} {t} {r}" if r.startswith("with ") else f"{n} {t} skipped: {r}"
+             for (t, r), n in damaged.most_common(3)]
     for reason, n in report.counts.most_common():
         for t in (_TYPE_NAME[k] for k in _DATED):
             # reasons that drop the sentence (or its date) name the type like this

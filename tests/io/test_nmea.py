@@ -273,6 +273,10 @@ def test_missing_date_names_the_dated_sentences_skipped() -> None:
         parse_nmea(log(bad, gga("120000")), name="x.nmea")
     with pytest.raises(MissingDateError, match=r"1 malformed time in RMC\)"):
         parse_nmea(log(rmc("1200"), gga("120000")), name="x.nmea")
+    # a ZDA with its date fields empty (a marine logger's): its time is used, its date is why
+    zda = ck("GPZDA,120000.00,,,,00,")
+    with pytest.raises(MissingDateError, match=r"with a date; 1 ZDA with empty date fields\)"):
+        parse_nmea(log(zda, gga("120000")), name="x.nmea")
     # no dated sentence skipped: the skip summary
     with pytest.raises(MissingDateError,
                        match=r"with a date; skipped: 1 not used: GSV \(satellites in view\)\)"):
