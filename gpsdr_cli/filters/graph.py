@@ -618,7 +618,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     # the gyro's scale error: the graph's own, but on an NLOS drive the filters' tighter one
     # (a looser heading let a reflected run bend a simulated city drive: 1.60 -> 11.2 m)
     scale_sd = float(gp["gyro_scale_sd"])
-    if nlos_drive or init.info.get("nlos_drive") or not math.isfinite(scale_sd):
+    if nlos_drive or not math.isfinite(scale_sd):
         scale_sd = float(params["gyro"]["scale_sd"])
     prm[gk.P_GYRO_SCALE] = scale_sd
     prm[gk.P_NOGYRO_RW] = float(gp["no_gyro_heading_rw_sd"])

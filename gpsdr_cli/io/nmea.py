@@ -700,9 +700,9 @@ def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndar
 
 
 def _count_damaged_dated(arr: np.ndarray, starts: np.ndarray, reason: str, stats: dict) -> None:
-    """Count in ``stats['damaged_dated']`` by (type, ``reason``) the skipped sentences at
-    ``starts`` whose address is a dated kind (RMC, ZDA, PTNL,GGK): they tell why a log
-    has no date."""
+    """Count in ``stats['damaged_dated']`` by (type, "skipped: ``reason``") the skipped
+    sentences at ``starts`` whose address is a dated kind (RMC, ZDA, PTNL,GGK): they tell
+    why a log has no date."""
     if len(starts) == 0:
         return
     uniq, counts = np.unique(_heads(arr, starts, max(_HEAD_PROPRIETARY.values())),
@@ -710,7 +710,7 @@ def _count_damaged_dated(arr: np.ndarray, starts: np.ndarray, reason: str, stats
     for head, count in zip(uniq.tolist(), counts.tolist(), strict=True):
         kind = _classify(head[1:], head[:1] == b"!")
         if kind in _DATED:
-            stats["damaged_dated"][(_TYPE_NAME[kind], reason)] += count
+            stats["damaged_dated"][(_TYPE_NAME[kind], f"skipped: {reason}")] += count
 
 
 def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems,
@@ -1460,8 +1460,7 @@ def _why_undated(report: SkipReport, damaged: Counter) -> str:
     """What was skipped of the dated sentences (RMC, ZDA, PTNL,GGK), for a log left without a
     date: "3 RMC skipped: bad checksum", "21 ZDA with empty date fields"; else the skip
     summary."""
-    parts = [f"{n} {t} {r}" if r.startswith("with ") else f"{n} {t} skipped: {r}"
-             for (t, r), n in damaged.most_common(3)]
+    parts = [f"{n} {t} {r}" for (t, r), n in damaged.most_common(3)]
     for reason, n in report.counts.most_common():
         for t in (_TYPE_NAME[k] for k in _DATED):
             # reasons that drop the sentence (or its date) name the type like this
