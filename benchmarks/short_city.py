@@ -10,6 +10,8 @@ each track's, the graph's, the fixes the NLOS screen left out and the worst trac
 fixes (``WORSE`` above 1.0).  Defaults: the length and the rates of the real
 city-centre drive that issue 14 reports (283 s, 5 Hz CAN).  RMSE in metres.
 ``--no-odometer``: the same drives with the gyro alone, where nothing screens the fixes.
+``--nlos-ramp LO,HI``: the reflections ramp in and out over LO-HI seconds instead of the
+simulator's 1-4 s (a receiver whose own filter blends a reflection in slowly).
 ``--set SECTION.KEY=VALUE`` (repeatable, VALUE as in the TOML config) changes a default for
 every run, e.g. ``--set gnss.nlos_fkf_velocity_sd_mps=0.2``.  The last lines give the
 median, mean and worst of track RMSE over the fixes' RMSE per column.
@@ -30,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 from dr_rate import graph_rmse  # noqa: E402
 
-from gpsdr_cli import config  # noqa: E402
+from gpsdr_cli import config, simulate  # noqa: E402
 from gpsdr_cli.simulate import simulate_drive  # noqa: E402
 from gpsdr_cli.testing.faults import drop_streams, with_drive  # noqa: E402
 from gpsdr_cli.testing.sim import run_filter  # noqa: E402
@@ -45,6 +47,8 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=5.0, help="gyro and odometer rate, Hz")
     ap.add_argument("--no-odometer", action="store_true",
                     help="drop the odometer (gyro only: nothing screens the fixes)")
+    ap.add_argument("--nlos-ramp", default="", metavar="LO,HI",
+                    help="the reflections' on and off ramps, s (default: the simulator's)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="change a default for every run (repeatable)")
     args = ap.parse_args()
@@ -53,6 +57,9 @@ def main() -> int:
         key, _, value = item.partition("=")
         section, _, name = key.partition(".")
         overrides.setdefault(section, {})[name] = tomllib.loads(f"v = {value}")["v"]
+    if args.nlos_ramp:
+        lo, hi = (float(v) for v in args.nlos_ramp.split(","))
+        simulate.NLOS_RAMP_S = (lo, hi)  # read by simulate_drive at each call
     warnings.filterwarnings("ignore")
     t0 = time.perf_counter()
     head = " | ".join(f"{f} / +RTS" for f in FILTERS)

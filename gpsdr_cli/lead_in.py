@@ -32,7 +32,7 @@ import numpy as np
 
 from .conventions import NS_PER_S
 from .epochs import Epochs
-from .filters.base import FilterResult
+from .filters.base import MAX_SPEED_MPS, FilterResult
 
 #: a lead-in shorter than this (s) is left to the filter (one GNSS interval or less: the
 #: filter's own initial position sigma covers it)
@@ -151,8 +151,6 @@ def backfill(epochs: Epochs, k: int, result: FilterResult) -> FilterResult:
         time_sd = LEAD_IN_SPEED_SD_MPS
         if not (has_gyro[:k].any() or has_odo[:k].any()):
             # no sensor at all: the bound the filters give an unmeasured step
-            from .filters.aekf import MAX_SPEED_MPS
-
             time_sd = MAX_SPEED_MPS
     v_e = speed * np.sin(psi)
     v_n = speed * np.cos(psi)

@@ -68,7 +68,7 @@ from ..rtk_false_fix import centimetre_fixes
 from . import kernels_aekf as kn
 from . import register
 from .adaptive import gate_threshold
-from .base import FilterResult
+from .base import MAX_SPEED_MPS, FilterResult
 from .gnss_model import gnss_only_gate_reset_s, pdop_factors, rtk_bias_sd
 from .smoothing import rts_checkpointed
 
@@ -81,8 +81,6 @@ CHORD_MIN_M = 5.0
 #: Heading sigma (rad) for a DR-only start with a given heading / without one.
 DR_HEADING_SD_RAD = math.radians(5.0)
 DR_UNKNOWN_HEADING_SD_RAD = math.pi
-#: Upper bound (m/s) on the speed before the first fix when no odometer tells it.
-MAX_SPEED_MPS = 60.0
 
 
 def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarray, np.ndarray,

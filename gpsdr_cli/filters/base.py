@@ -9,6 +9,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+#: Upper bound (m/s) on the speed over a step no sensor measured (before the first fix
+#: without an odometer, a lead-in without any sensor).
+MAX_SPEED_MPS = 60.0
+
 
 @dataclass
 class FilterResult:
