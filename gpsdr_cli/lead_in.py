@@ -12,8 +12,9 @@ state, with the gyro (heading, ``d(psi)/dt = -yaw_rate``, less its bias
 taken from the track after the fix, :func:`calibration`) and the odometer (speed, divided
 by its scale against the track; without an odometer the first state's speed, held along
 the gyro's heading when it is fast enough for a course, else the first position held: a
-GNSS-only log's no-fix records measured no motion).  Units: metres ENU, seconds, radians,
-heading clockwise from north.
+GNSS-only log's no-fix records measured no motion).  A track that never moves after the
+fix tells no heading: the first fix is then held, the odometer's distance back to each
+epoch as its sigma.  Units: metres ENU, seconds, radians, heading clockwise from north.
 
 The lead-in's sigma is a plain bound, not a covariance (nothing measured the position
 there): the first state's position variance plus ``(LEAD_IN_DIST_SD * distance)^2``
@@ -140,6 +141,10 @@ def backfill(epochs: Epochs, k: int, result: FilterResult) -> FilterResult:
     cum = np.concatenate(([0.0], np.cumsum(0.5 * (yaw[1:] + yaw[:-1]) * np.diff(t_all))))
     psi = psi_j + (cum[min(k + j, n_all - 1)] - cum[: k + 1])
     has_odo = epochs.has_odo & np.isfinite(epochs.odo_speed_mps)
+    # the track never moves after the fix (a log that ends parked): the odometer says how
+    # far the car went before it, nothing says which way (heading 0 put a simulated lead-in
+    # 535 m off, its sigma 9 m); the first fix held, the distance as its sigma
+    lost = has_odo[: k + 1].any() and not len(moving)
     if has_odo[: k + 1].any():
         speed = np.abs(_held(has_odo, epochs.odo_speed_mps)[: k + 1]) / odo_scale
         time_sd = 0.0
@@ -152,14 +157,15 @@ def backfill(epochs: Epochs, k: int, result: FilterResult) -> FilterResult:
         if not (has_gyro[:k].any() or has_odo[:k].any()):
             # no sensor at all: the bound the filters give an unmeasured step
             time_sd = MAX_SPEED_MPS
-    v_e = speed * np.sin(psi)
-    v_n = speed * np.cos(psi)
+    v_e = speed * np.sin(psi) * (not lost)
+    v_n = speed * np.cos(psi) * (not lost)
     # position at epoch i < k: the first fix's minus the displacement from t_i to t_k
     dt = np.diff(t_s)                                             # > 0
     de = np.concatenate((np.cumsum((0.5 * (v_e[1:] + v_e[:-1]) * dt)[::-1])[::-1], [0.0]))
     dn = np.concatenate((np.cumsum((0.5 * (v_n[1:] + v_n[:-1]) * dt)[::-1])[::-1], [0.0]))
     dist = np.concatenate((np.cumsum((0.5 * (speed[1:] + speed[:-1]) * dt)[::-1])[::-1], [0.0]))
-    add = (LEAD_IN_DIST_SD * dist) ** 2 + (time_sd * np.maximum(t_s, -NO_DR_MAX_S)) ** 2
+    add = ((1.0 if lost else LEAD_IN_DIST_SD) * dist) ** 2 \
+        + (time_sd * np.maximum(t_s, -NO_DR_MAX_S)) ** 2
     pre = slice(0, k)
 
     def cat(lead: np.ndarray, rest: np.ndarray) -> np.ndarray:

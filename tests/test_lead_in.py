@@ -33,7 +33,7 @@ def late_fix():
     return sim, drive
 
 
-def _errors(sim, drive, name: str, smooth: bool):
+def _errors(sim, drive, name: str, smooth: bool, lead_s: float = LEAD_IN_S):
     p = config.defaults()
     p["filter"]["name"] = name
     p["filter"]["smooth"] = smooth
@@ -43,7 +43,7 @@ def _errors(sim, drive, name: str, smooth: bool):
     te, tn = res.frame.forward(tr["lat"].to_numpy(), tr["lon"].to_numpy())  # fuse's own frame
     err = np.hypot(res.track["e"].to_numpy() - np.interp(t, tr.t_ns, te),
                    res.track["n"].to_numpy() - np.interp(t, tr.t_ns, tn))
-    lead = (t - t[0]) / NS_PER_S < LEAD_IN_S
+    lead = (t - t[0]) / NS_PER_S < lead_s
     return err, lead, res
 
 
@@ -70,6 +70,25 @@ def test_without_the_lead_in_the_filter_starts_wrong(late_fix, monkeypatch) -> N
     monkeypatch.setattr(lead_in, "split", lambda epochs: (0, epochs))
     err, lead, _ = _errors(sim, drive, "ekf", False)
     assert float(np.max(err[lead])) > 100.0
+
+
+def test_a_lead_in_whose_heading_nothing_tells_holds_the_first_fix() -> None:
+    """A 150-s stop-and-go drive whose fixes start at 60 s, when the car has been parked for
+    30 s and stays parked: nothing after the first fix says which way the car came.  The
+    lead-in went back along heading 0 (north; the car had driven south to its spot): 535 m
+    off with a sigma of 9 m.  The first fix is held with the odometer's distance as its sigma."""
+    sim = simulate_drive("stop_and_go", seed=2, duration_s=150.0)
+    drive = copy.deepcopy(sim.drive)
+    g = drive.gnss
+    keep = g.t_ns >= g.t_ns[0] + int(60.0 * NS_PER_S)
+    drive.gnss = dataclasses.replace(g, **{f.name: getattr(g, f.name)[keep]
+                                            for f in dataclasses.fields(g)
+                                            if isinstance(getattr(g, f.name), np.ndarray)
+                                            and len(getattr(g, f.name)) == len(keep)})
+    err, lead, res = _errors(sim, drive, "aekf", False, lead_s=60.0)
+    assert float(np.max(err[lead])) < 300.0          # the car's farthest from where it parked
+    sd = np.maximum(res.track["sigma_e"].to_numpy(), res.track["sigma_n"].to_numpy())
+    assert np.all(err[lead] < 3.0 * np.sqrt(2.0) * sd[lead])
 
 
 def test_no_split_when_the_fix_comes_first() -> None:
