@@ -84,14 +84,20 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 info["pdop_r_factors"] = "off: no odometer measures the speed"
             # fixes screened out at the start leave epochs before the first kept fix: dead-
             # reckoned back from it, as a cold start's are (a filter started there began at
-            # that fix's position 140 s early: 800 m off on a simulated city drive)
+            # that fix's position 140 s early: 800 m off on a simulated city drive), with the
+            # screen's gyro bias and odometer scale, fitted over the whole drive (the minute
+            # of track after a first fix at a stop read a gyro bias of 0.11 rad/s)
             from .. import lead_in
 
             k_lead, tail = (lead_in.split(model_epochs) if info.get("nlos_screened")
                             else (0, model_epochs))
             result = fn(tail, model_params)
             if k_lead:
-                result = lead_in.backfill(model_epochs, k_lead, result)
+                scale = info.get("nlos_screen_odo_scale")
+                result = lead_in.backfill(
+                    model_epochs, k_lead, result,
+                    gyro_bias=info.get("nlos_screen_gyro_bias_radps"),
+                    odo_scale=1.0 / scale if scale else None)
             result.info.update(info)
             result.info["nlos_drive"] = bool(model_epochs.nlos_drive)
             return result

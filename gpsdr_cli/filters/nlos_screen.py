@@ -95,7 +95,8 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
     """``(epochs, info)``: the epochs with the outvoted fixes' ``has_gnss`` cleared, and
     what was done (``info["nlos_screened"]``: fixes left out; absent when not applied;
     ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
-    lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale).  ``judge``: the
+    lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale, true speed over
+    the odometer's; ``info["nlos_screen_gyro_bias_radps"]``: its gyro bias).  ``judge``: the
     bare ekf (:func:`gpsdr_cli.filters.bare`), whichever filter runs after the screen."""
     if not nlos_drive:
         return epochs, {}
@@ -177,6 +178,8 @@ def _screen(epochs: Epochs, params: Params,
     info = {"nlos_screened": int(out.sum())}
     if math.isfinite(outcome.odo_scale):
         info["nlos_screen_odo_scale"] = outcome.odo_scale
+    if math.isfinite(outcome.gyro_bias_radps):
+        info["nlos_screen_gyro_bias_radps"] = outcome.gyro_bias_radps
     return dataclasses.replace(epochs, has_gnss=fix & ~out), info
 
 
