@@ -122,18 +122,23 @@ def test_clean_drives_untouched(scenario):
     assert ep2 is ep and p2 is p
 
 
+def _nlos_by_default_not_with(sim, key: str, value: float) -> None:
+    """The drive is an NLOS drive with the defaults, and not with ``[gnss] key = value``."""
+    p = config.defaults()
+    ep = build_epochs(sim.drive, sim.frame, p)
+    assert gnss_error_model(ep, p)[0].nlos_drive
+    other = config.defaults()
+    other["gnss"][key] = value
+    assert not gnss_error_model(ep, other)[0].nlos_drive
+
+
 def test_vector_chord_calls_a_drive_with_sideways_reflections_nlos():
     """A 283-s city drive (urban_nlos seed 17, gyro and odometer at 5 Hz) whose fixes are
     36.8 m RMS off, most of it across the street: the distance check marked no run of 3 s,
     the drive was not an NLOS drive, nothing screened the fixes, and aekf ended at 35.8 m
     and the graph smoother at 18.5 m.  The chords compared as vectors call it NLOS."""
     sim = simulate.simulate_drive("urban_nlos", 17, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    p = config.defaults()
-    ep = build_epochs(sim.drive, sim.frame, p)
-    assert gnss_error_model(ep, p)[0].nlos_drive
-    off = config.defaults()
-    off["gnss"]["nlos_vector_share"] = 0.0
-    assert not gnss_error_model(ep, off)[0].nlos_drive
+    _nlos_by_default_not_with(sim, "nlos_vector_share", 0.0)
     run = run_filter(sim, sim.drive, "aekf", pipeline=True)
     assert run.result.info.get("nlos_screened", 0) > 500
     assert run.rmse_m < 0.2 * run.gnss_rmse_m
@@ -147,12 +152,7 @@ def test_vector_chord_sees_reflections_that_ramp_in_slowly(monkeypatch):
     RTS followed the fixes to 16.4 m.  Over 10 s, 27 %: the screen runs, 0.9 m."""
     monkeypatch.setattr(simulate, "NLOS_RAMP_S", (10.0, 30.0))
     sim = simulate.simulate_drive("urban_nlos", 38, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    p = config.defaults()
-    ep = build_epochs(sim.drive, sim.frame, p)
-    assert gnss_error_model(ep, p)[0].nlos_drive
-    short = config.defaults()
-    short["gnss"]["nlos_vector_lag_s"] = 5.0
-    assert not gnss_error_model(ep, short)[0].nlos_drive
+    _nlos_by_default_not_with(sim, "nlos_vector_lag_s", 5.0)
     run = run_filter(sim, sim.drive, "aekf", smooth=True, pipeline=True)
     assert run.rmse_m < 0.2 * run.gnss_rmse_m
 
