@@ -158,7 +158,7 @@ def chord_vector_mismatch_m(epochs: Epochs, lag_s: float) -> np.ndarray:
     not judged, and everywhere on a drive without a gyro or without any speed.
 
     Without an odometer the Doppler speed stands in: a reflected Doppler is about 1 m/s off,
-    10 m over a 10-s chord, while reflected fixes move tens of metres across the street, which
+    8 m over an 8-s chord, while reflected fixes move tens of metres across the street, which
     the chord's length barely shows (7 of 40 simulated city drives went uncalled;
     decisions/0040)."""
     f = np.flatnonzero(epochs.has_gnss)
