@@ -94,10 +94,11 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             result = fn(tail, model_params)
             if k_lead:
                 scale = info.get("nlos_screen_odo_scale")
-                result = lead_in.backfill(
-                    model_epochs, k_lead, result,
-                    gyro_bias=info.get("nlos_screen_gyro_bias_radps"),
-                    odo_scale=1.0 / scale if scale else None)
+                bias = info.get("nlos_screen_gyro_bias_radps")
+                if bias is not None and model_epochs.time_reversed:
+                    bias = -bias  # the drive run backwards reads its yaw rates negated
+                result = lead_in.backfill(model_epochs, k_lead, result, gyro_bias=bias,
+                                          odo_scale=1.0 / scale if scale else None)
             result.info.update(info)
             result.info["nlos_drive"] = bool(model_epochs.nlos_drive)
             return result
