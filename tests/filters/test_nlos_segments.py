@@ -101,13 +101,15 @@ def test_far_segments_do_not_add_up_to_a_pull() -> None:
     """urban_nlos seed 6 (283 s, 5-Hz gyro and odometer): under a Cauchy vote every
     reflected segment 20-70 m off still pulls (its pull falls only as 1 / distance), and
     together they moved the fit's first minute 15 m off its clean fixes, which the screen
-    then left out: ekf ran 138 m from the truth against fixes at 40 m.  Under the bounded
-    Geman-McClure vote a far segment does not pull: 1.7 m.  (Judged once: the screen's
-    second judgement, against the ekf's track, rescues even the Cauchy vote, to 4.0 m.)"""
+    then left out: ekf ran 138 m from the truth against fixes at 40 m (16 m since the epochs
+    before the first fix kept are dead-reckoned back from it, decisions/0057).  Under the
+    bounded Geman-McClure vote a far segment does not pull: 1.7 m.  (Judged once: the
+    screen's second judgement, against the ekf's track, rescues even the Cauchy vote, to
+    4.0 m.)"""
     sim = simulate_drive("urban_nlos", 6, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
     r = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True)
     assert r.rmse_m < 0.1 * r.gnss_rmse_m
     cauchy = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True,
                         overrides={"graph": {"nlos_segment_kernel": "cauchy"},
                                    "gnss": {"nlos_screen_passes": 1}})
-    assert cauchy.rmse_m > r.gnss_rmse_m
+    assert cauchy.rmse_m > 5.0 * r.rmse_m and cauchy.result.info["lead_in_s"] > 30.0
