@@ -146,10 +146,9 @@ def backfill(epochs: Epochs, k: int, result: FilterResult, *, gyro_bias: float |
         own_bias, own_scale = calibration(epochs, k, result)
         gyro_bias = own_bias if gyro_bias is None else gyro_bias
         odo_scale = own_scale if odo_scale is None else odo_scale
-    yaw_bias = gyro_bias
     n_all = len(epochs)
     has_gyro = epochs.has_gyro & np.isfinite(epochs.yaw_rate_radps)
-    yaw = _held(has_gyro, epochs.yaw_rate_radps) - yaw_bias if has_gyro.any() else np.zeros(n_all)
+    yaw = _held(has_gyro, epochs.yaw_rate_radps) - gyro_bias if has_gyro.any() else np.zeros(n_all)
     yaw = np.nan_to_num(yaw)
     t_all = (epochs.t_ns - epochs.t_ns[k]) / NS_PER_S
     # psi(t) = psi(t_j) + int_t^{t_j} yaw dt  (d(psi)/dt = -yaw_rate), trapezoid over epochs
@@ -159,8 +158,9 @@ def backfill(epochs: Epochs, k: int, result: FilterResult, *, gyro_bias: float |
     # the track never moves after the fix (a log that ends parked): the odometer says how
     # far the car went before it, nothing says which way (heading 0 put a simulated lead-in
     # 535 m off, its sigma 9 m); the first fix held, the distance as its sigma
-    lost = has_odo[: k + 1].any() and not len(moving)
-    if has_odo[: k + 1].any():
+    odo_lead = bool(has_odo[: k + 1].any())
+    lost = odo_lead and not len(moving)
+    if odo_lead:
         speed = np.abs(_held(has_odo, epochs.odo_speed_mps)[: k + 1]) / odo_scale
         time_sd = 0.0
     else:

@@ -540,7 +540,7 @@ def run_cs(epochs: Epochs, params: Params, *, adaptive: bool, name: str) -> Filt
         # GNSS only: the motion model alone judges the fixes, and fixes gated for seconds
         # mean the state ran off (with a gyro the turn is measured, and on simulated city
         # drives a shorter reset let reflected runs in)
-        prm[kn.PAR_GATE_RESET] = min(prm[kn.PAR_GATE_RESET], gnss_only_gate_reset_s(params))
+        prm[kn.PAR_GATE_RESET] = gnss_only_gate_reset_s(params)  # at most gate_reset_s
     prm[kn.PAR_UNKNOWN_W_VAR] = unknown_rate_var(params)
     prm[kn.PAR_OFF_VVAR], prm[kn.PAR_OFF_AVAR] = drive_off_var(params)
     st = np.zeros(kn.N_ST)
