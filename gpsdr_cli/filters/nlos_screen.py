@@ -154,15 +154,16 @@ def _screen(epochs: Epochs, params: Params,
         seg = None
         for n_pass in range(max(int(g["nlos_screen_passes"]), 1)):
             if n_pass:
-                track = run(dataclasses.replace(epochs, has_gnss=fix & ~out), probe)
+                track = judge_kept(epochs, fix & ~out, run, probe, outcome)
             seg_out, seg_pass, near = solve_by_segments(epochs, track, fit, sigmas=False)
             if seg_out.result is None:
                 break
             outcome, out, seg = seg_out, fix & ~near, seg_pass
         # ... the last run of the drive once more, against the fixes before it (decisions/0048)
         if seg is not None:
-            out |= last_run_drift(epochs, fix & ~out, seg, run, probe,
-                                  float(g["nlos_screen_last_sigmas"]),
+            out |= last_run_drift(epochs, fix & ~out, seg,
+                                  lambda ep, p: judge_kept(ep, ep.has_gnss, run, p, outcome),
+                                  probe, float(g["nlos_screen_last_sigmas"]),
                                   float(fit["graph"]["nlos_segment_keep_m"]))
     # ... and so is a fix of a kept run that lies far from the fit's track: the edge of a
     # reflection the receiver's own filter ramps in and out (decisions/0045)
@@ -181,6 +182,26 @@ def _screen(epochs: Epochs, params: Params,
     if math.isfinite(outcome.gyro_bias_radps):
         info["nlos_screen_gyro_bias_radps"] = outcome.gyro_bias_radps
     return dataclasses.replace(epochs, has_gnss=fix & ~out), info
+
+
+def judge_kept(epochs: Epochs, kept: np.ndarray, run: Callable[[Epochs, Params], FilterResult],
+               probe: Params, fit) -> FilterResult:
+    """The judge's track of the ``kept`` fixes (a mask over the epochs), the epochs before
+    the first of them dead-reckoned back from it with the batch ``fit``'s gyro bias and
+    odometer scale (:func:`gpsdr_cli.lead_in.backfill`), as the filters are after the
+    screen.  Started at epoch 0, the judge began at that fix's position with no heading: with
+    the first 100 s of a simulated city drive left out, its track lay 800 m off there and
+    the runs cut against it held no fix that agreed."""
+    from .. import lead_in
+
+    sub = dataclasses.replace(epochs, has_gnss=kept)
+    k_lead, tail = lead_in.split(sub)
+    track = run(tail, probe)
+    if not k_lead:
+        return track
+    bias = fit.gyro_bias_radps if math.isfinite(fit.gyro_bias_radps) else None
+    scale = 1.0 / fit.odo_scale if math.isfinite(fit.odo_scale) and fit.odo_scale > 0 else None
+    return lead_in.backfill(sub, k_lead, track, gyro_bias=bias, odo_scale=scale)
 
 
 def last_run_drift(epochs: Epochs, kept: np.ndarray, seg: np.ndarray,
@@ -293,4 +314,4 @@ def edge_fixes(epochs: Epochs, track: FilterResult, kept: np.ndarray, out: np.nd
     return drop
 
 
-__all__ = ["edge_fixes", "far_fixes", "last_run_drift", "screen"]
+__all__ = ["edge_fixes", "far_fixes", "judge_kept", "last_run_drift", "screen"]
