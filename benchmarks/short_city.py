@@ -12,6 +12,8 @@ city-centre drive that issue 14 reports (283 s, 5 Hz CAN).  RMSE in metres.
 ``--no-odometer``: the same drives with the gyro alone, where nothing screens the fixes.
 ``--nlos-ramp LO,HI``: the reflections ramp in and out over LO-HI seconds instead of the
 simulator's 1-4 s (a receiver whose own filter blends a reflection in slowly).
+``--nlos-duration LO,HI``: each reflection lasts LO-HI seconds instead of the simulator's
+5-60 s (a street where the direct signal stays blocked for minutes).
 ``--set SECTION.KEY=VALUE`` (repeatable, VALUE as in the TOML config) changes a default for
 every run, e.g. ``--set gnss.nlos_fkf_velocity_sd_mps=0.2``.  The last lines give the
 median, mean and worst of track RMSE over the fixes' RMSE per column.
@@ -49,6 +51,8 @@ def main() -> int:
                     help="drop the odometer (gyro only: nothing screens the fixes)")
     ap.add_argument("--nlos-ramp", default="", metavar="LO,HI",
                     help="the reflections' on and off ramps, s (default: the simulator's)")
+    ap.add_argument("--nlos-duration", default="", metavar="LO,HI",
+                    help="how long each reflection lasts, s (default: the simulator's)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="change a default for every run (repeatable)")
     args = ap.parse_args()
@@ -60,6 +64,9 @@ def main() -> int:
     if args.nlos_ramp:
         lo, hi = (float(v) for v in args.nlos_ramp.split(","))
         simulate.NLOS_RAMP_S = (lo, hi)  # read by simulate_drive at each call
+    if args.nlos_duration:
+        lo, hi = (float(v) for v in args.nlos_duration.split(","))
+        simulate.NLOS_DURATION_S = (lo, hi)
     warnings.filterwarnings("ignore")
     t0 = time.perf_counter()
     head = " | ".join(f"{f} / +RTS" for f in FILTERS)
