@@ -25,7 +25,9 @@ The runs are cut against a track the reflections still pull where no clean fix a
 (a reflected run at the end of a drive was kept whole).  So ``[gnss] nlos_screen_passes``
 = 2 judges them a second time, against the ekf's smoothed track of the fixes the first
 pass kept: its gate and the dead reckoning hold that track off a reflected run which the
-fit over every fix had followed (docs/decisions/0046).  The screen's judge is the ekf
+fit over every fix had followed (docs/decisions/0046); before the first fix kept, that track
+is dead-reckoned back from it with the fit's calibration (:func:`judge_kept`,
+docs/decisions/0059).  The screen's judge is the ekf
 whatever filter runs after it, so every filter is given the same fixes.  No clean fix
 follows the drive's last run to hold a track off a reflection that ramps in there, so the
 later segments of that run are judged once more, against the ekf's track of the fixes
