@@ -471,6 +471,8 @@ def _main_pass(epochs: Epochs, fparams: Params, params: Params,
         epochs, result = lever_arm.apply(epochs, fparams, arm, run_filter)
     else:
         result = run_filter(epochs, fparams)
+    if result.info.get("gyro_steady"):
+        _warn(work, str(result.info["gyro_steady"]))
     n_screened = int(result.info.get("nlos_screened") or 0)
     if n_screened:
         _warn(work, f"reflected signals (NLOS): {n_screened} of {int(epochs.has_gnss.sum())} "

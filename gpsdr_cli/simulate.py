@@ -688,6 +688,9 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
 #: at most a third of the step: the receiver's own filter smooths the jump), drift (random
 #: walk, m per sqrt(s) per axis), share of steps across the street (toward a facade) and
 #: their spread about the perpendicular (deg)
+#: the gyro bias's Gauss-Markov correlation time (s); inf holds it at its first draw (an
+#: automotive yaw-rate sensor's; ``benchmarks/short_city.py --steady-gyro``)
+GYRO_BIAS_TAU_S = 3600.0
 NLOS_STEP_M = (10.0, 80.0)
 NLOS_DURATION_S = (5.0, 60.0)
 NLOS_CHAIN_P = 0.5
@@ -1092,7 +1095,7 @@ def _gyro(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tupl
     dt = step * DT_S
     noise_sd = math.radians(0.1)       # white noise per sample, rad/s
     bias_sd = math.radians(0.3)        # stationary sigma of the Gauss-Markov bias
-    bias_tau = 3600.0  # with bias_sd: a rate random walk of 1500 deg/h/sqrt(h) (module docstring)
+    bias_tau = GYRO_BIAS_TAU_S  # with bias_sd: a rate random walk of 1500 deg/h/sqrt(h) (module docstring)
     scale_sd = 0.005
     scale = float(rng.normal(0.0, scale_sd))
     bias = _gauss_markov(rng, m, dt, bias_tau, bias_sd)

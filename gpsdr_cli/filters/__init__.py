@@ -41,8 +41,11 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
 
         @functools.wraps(fn)
         def run(epochs, params):  # every filter sees the same GNSS error model
+            from ..gyro_stops import steady_params
             from .nlos_screen import screen
 
+            # ... and the same gyro: a bias that the stops show steady walks less
+            params, steady_note = steady_params(epochs, params)
             model_epochs, model_params = gnss_error_model(epochs, params)
             # the batch fit weighs each fix by its own sigma, not the chord-scaled one
             # ... and only with healthy dead reckoning: a clipped gyro or an odometer that reads
@@ -100,6 +103,8 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 result = lead_in.backfill(model_epochs, k_lead, result, gyro_bias=bias,
                                           odo_scale=1.0 / scale if scale else None)
             result.info.update(info)
+            if steady_note:
+                result.info["gyro_steady"] = steady_note
             result.info["nlos_drive"] = bool(model_epochs.nlos_drive)
             return result
 

@@ -1,0 +1,115 @@
+"""Is this drive's gyro bias steady?  Read from what the gyro says at the stops.
+
+The filters' default gyro model lets the bias wander (``[gyro] bias_sd_radps`` over
+``bias_tau_s``: a cheap MEMS gyro's, whose scale error and temperature drift also read as
+wander).  An automotive yaw-rate sensor on a CAN bus holds one bias over a drive: issue 14's
+real city drive dead-reckons its 283 s within 1.4 m with one bias and one speed scale.  A
+loose bias walk then only lets a run of reflected fixes bend the dead reckoning.  Which of
+the two a drive has is measured where the truth is known: standing still, the gyro reads
+its bias (and its noise).
+
+At every stop (odometer below ``[standstill] speed_mps`` for ``STOP_MIN_S`` or more, its
+first and last ``STOP_TRIM_S`` left out: a CAN speed reads zero while the car still
+creeps), the mean yaw rate and its standard error (the readings' scatter over the root of
+their number).  Between consecutive stops the bias moves by N(0, se_a^2 + se_b^2 + q dt)
+with q = 2 sd^2 / tau.  The drive's gyro is steady when, over at least ``MIN_STOPS`` stops,
+the steady model's q (``[gyro] steady_bias_sd_radps``) explains the moves (their
+chi-square below its 95 % point) and is likelier than the default's.  Then every filter and
+the graph smoother take that tighter bias walk for this drive.  A drive without an odometer,
+or with fewer stops, keeps the default.
+
+On simulated 283-s city drives (5-Hz CAN rates), with the simulator's wandering gyro every
+drive with three or more stops is judged wandering; with its bias held constant, 8 of 9
+are judged steady (docs/decisions/0060).  Units: rad/s, seconds.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+
+from .config import Params
+from .conventions import NS_PER_S
+from .epochs import Epochs, true_runs
+
+#: a stop counts when the odometer reads still for at least this long (s), after the trim
+STOP_MIN_S = 3.0
+#: the first and last seconds of a stop are left out (s)
+STOP_TRIM_S = 1.0
+#: a stop's mean needs at least this many gyro readings
+STOP_MIN_READINGS = 10
+#: at least this many stops (so two moves between them) to judge
+MIN_STOPS = 3
+#: chi-square 95 % points for 1..8 degrees of freedom (scipy.stats.chi2.ppf(0.95, k))
+_CHI2_95 = (3.841, 5.991, 7.815, 9.488, 11.070, 12.592, 14.067, 15.507)
+
+
+def stop_biases(epochs: Epochs, params: Params) -> list[tuple[float, float, float]]:
+    """Per stop, in time order: (middle time s, mean yaw rate rad/s, its standard error rad/s)."""
+    if not (epochs.has_odo.any() and epochs.has_gyro.any()):
+        return []
+    t_s = (np.asarray(epochs.t_ns, np.int64) - int(epochs.t_ns[0])) / NS_PER_S
+    has_odo = epochs.has_odo & np.isfinite(epochs.odo_speed_mps)
+    last = np.maximum.accumulate(np.where(has_odo, np.arange(len(t_s)), -1))
+    speed = np.where(last >= 0, epochs.odo_speed_mps[np.maximum(last, 0)], np.nan)
+    with np.errstate(invalid="ignore"):
+        still = np.abs(speed) < float(params["standstill"]["speed_mps"])
+    gyro = epochs.has_gyro & np.isfinite(epochs.yaw_rate_radps)
+    out = []
+    for a, b in zip(*true_runs(still), strict=True):
+        t0, t1 = t_s[a] + STOP_TRIM_S, t_s[b] - STOP_TRIM_S
+        if t1 - t0 < STOP_MIN_S:
+            continue
+        i0, i1 = np.searchsorted(t_s, [t0, t1])
+        y = epochs.yaw_rate_radps[i0:i1 + 1][gyro[i0:i1 + 1]]
+        if len(y) < STOP_MIN_READINGS:
+            continue
+        out.append((0.5 * (t0 + t1), float(np.mean(y)), float(np.std(y, ddof=1) / math.sqrt(len(y)))))
+    return out
+
+
+def judge(stops: list[tuple[float, float, float]], q_steady: float, q_default: float
+          ) -> tuple[bool, float, float]:
+    """``(steady, chi-square under the steady model, its 95 % point)`` for the bias moves
+    between consecutive ``stops`` (:func:`stop_biases`); q: bias random-walk intensity,
+    rad^2/s^3."""
+    if len(stops) < MIN_STOPS:
+        return False, math.nan, math.nan
+    x2 = ll_steady = ll_default = 0.0
+    for (ta, ba, sa), (tb, bb, sb) in zip(stops[:-1], stops[1:], strict=True):
+        z2 = (bb - ba) ** 2
+        dt = tb - ta
+        v_s = sa * sa + sb * sb + q_steady * dt
+        v_d = sa * sa + sb * sb + q_default * dt
+        x2 += z2 / v_s
+        ll_steady -= 0.5 * (z2 / v_s + math.log(v_s))
+        ll_default -= 0.5 * (z2 / v_d + math.log(v_d))
+    k = len(stops) - 1
+    limit = _CHI2_95[min(k, len(_CHI2_95)) - 1] if k <= len(_CHI2_95) else k + 2.0 * math.sqrt(2.0 * k)
+    return bool(x2 <= limit and ll_steady > ll_default), x2, limit
+
+
+def steady_params(epochs: Epochs, params: Params) -> tuple[Params, str]:
+    """``(params, note)``: with ``[gyro] steady_from_stops`` and a gyro the stops judge steady,
+    a copy with ``bias_sd_radps`` at ``steady_bias_sd_radps`` and a line saying so; else
+    ``params`` unchanged and ""."""
+    gy = params["gyro"]
+    sd_steady = float(gy["steady_bias_sd_radps"])
+    sd = float(gy["bias_sd_radps"])
+    if not (bool(gy["steady_from_stops"]) and 0.0 < sd_steady < sd):
+        return params, ""
+    tau = float(gy["bias_tau_s"])
+    stops = stop_biases(epochs, params)
+    ok, _, _ = judge(stops, 2.0 * sd_steady ** 2 / tau, 2.0 * sd ** 2 / tau)
+    if not ok:
+        return params, ""
+    out = copy.deepcopy(params)
+    out["gyro"]["bias_sd_radps"] = sd_steady
+    spread = max(s[1] for s in stops) - min(s[1] for s in stops)
+    return out, (f"gyro bias steady across {len(stops)} stops (within {spread:.1e} rad/s): "
+                 f"its drift sigma is {sd_steady:g} rad/s ([gyro] steady_from_stops)")
+
+
+__all__ = ["judge", "steady_params", "stop_biases"]
