@@ -42,8 +42,14 @@ STOP_TRIM_S = 1.0
 STOP_MIN_READINGS = 10
 #: at least this many stops (so two moves between them) to judge
 MIN_STOPS = 3
-#: chi-square 95 % points for 1..8 degrees of freedom (scipy.stats.chi2.ppf(0.95, k))
-_CHI2_95 = (3.841, 5.991, 7.815, 9.488, 11.070, 12.592, 14.067, 15.507)
+
+
+def _chi2_95(k: int) -> float:
+    """The chi-square distribution's 95 % point at ``k`` degrees of freedom (Wilson and
+    Hilferty's cube-root normal approximation: 7.78 for 3 against scipy.stats.chi2.ppf's
+    7.815, within 1 % from 2 degrees on)."""
+    c = 2.0 / (9.0 * k)
+    return k * (1.0 - c + 1.6449 * math.sqrt(c)) ** 3
 
 
 def stop_biases(epochs: Epochs, params: Params) -> list[tuple[float, float, float]]:
@@ -86,8 +92,7 @@ def judge(stops: list[tuple[float, float, float]], q_steady: float, q_default: f
         x2 += z2 / v_s
         ll_steady -= 0.5 * (z2 / v_s + math.log(v_s))
         ll_default -= 0.5 * (z2 / v_d + math.log(v_d))
-    k = len(stops) - 1
-    limit = _CHI2_95[min(k, len(_CHI2_95)) - 1] if k <= len(_CHI2_95) else k + 2.0 * math.sqrt(2.0 * k)
+    limit = _chi2_95(len(stops) - 1)
     return bool(x2 <= limit and ll_steady > ll_default), x2, limit
 
 
@@ -105,11 +110,18 @@ def steady_params(epochs: Epochs, params: Params) -> tuple[Params, str]:
     ok, _, _ = judge(stops, 2.0 * sd_steady ** 2 / tau, 2.0 * sd ** 2 / tau)
     if not ok:
         return params, ""
-    out = copy.deepcopy(params)
-    out["gyro"]["bias_sd_radps"] = sd_steady
+    out = steady_walk(params)
     spread = max(s[1] for s in stops) - min(s[1] for s in stops)
     return out, (f"gyro bias steady across {len(stops)} stops (within {spread:.1e} rad/s): "
                  f"its drift sigma is {sd_steady:g} rad/s ([gyro] steady_from_stops)")
 
 
-__all__ = ["judge", "steady_params", "stop_biases"]
+def steady_walk(params: Params) -> Params:
+    """A copy of ``params`` with the steady gyro's drift sigma (``[gyro] bias_sd_radps`` at
+    ``steady_bias_sd_radps``)."""
+    out = copy.deepcopy(params)
+    out["gyro"]["bias_sd_radps"] = float(out["gyro"]["steady_bias_sd_radps"])
+    return out
+
+
+__all__ = ["judge", "steady_params", "steady_walk", "stop_biases"]

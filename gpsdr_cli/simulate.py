@@ -679,6 +679,11 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
     return fixes, gerr, noise
 
 
+#: the gyro bias's Gauss-Markov correlation time (s); inf holds it at its first draw (an
+#: automotive yaw-rate sensor's; ``benchmarks/short_city.py --steady-gyro``)
+GYRO_BIAS_TAU_S = 3600.0
+
+
 # --------------------------------------------------------------------------- error models of
 # the newer scenarios (urban_nlos, rtk, no_odometer), applied to the fixes of :func:`_gnss`
 
@@ -688,9 +693,6 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
 #: at most a third of the step: the receiver's own filter smooths the jump), drift (random
 #: walk, m per sqrt(s) per axis), share of steps across the street (toward a facade) and
 #: their spread about the perpendicular (deg)
-#: the gyro bias's Gauss-Markov correlation time (s); inf holds it at its first draw (an
-#: automotive yaw-rate sensor's; ``benchmarks/short_city.py --steady-gyro``)
-GYRO_BIAS_TAU_S = 3600.0
 NLOS_STEP_M = (10.0, 80.0)
 NLOS_DURATION_S = (5.0, 60.0)
 NLOS_CHAIN_P = 0.5

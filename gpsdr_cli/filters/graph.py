@@ -301,9 +301,10 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
     ``sigmas`` False: the track's variances (and the calibration's sds) are left NaN, for a
     caller that only weighs the fixes against the track (:mod:`.nlos_screen`): the band of
     H^-1 costs a factorisation and a recursion over the whole drive."""
-    from ..gyro_stops import steady_params
+    if init.info.get("gyro_steady"):  # the gyro model the filter took (gyro_stops)
+        from ..gyro_stops import steady_walk
 
-    params, _ = steady_params(epochs, params)  # the filters' gyro model, as they took it
+        params = steady_walk(params)
     if (segments is None and len(epochs) and "nlos_screened" in init.info
             and bool(params["graph"]["nlos_segments"])):
         return _by_segments(epochs, init, params)
