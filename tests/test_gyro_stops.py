@@ -50,12 +50,14 @@ def test_the_stops_of_a_city_drive_tell_the_two_gyros_apart(steady_gyro: bool, m
     from 0.0047 to 0.0019 rad/s between the first two."""
     sim = _city(17, monkeypatch, steady_gyro)
     p = config.defaults()
+    p["gyro"]["steady_from_stops"] = True
     ep = build_epochs(copy.deepcopy(sim.drive), sim.frame, p)
     stops = stop_biases(ep, p)
     assert len(stops) >= 3
     bias = sim.noise["gyro_bias_initial_radps"]
     if steady_gyro:
         assert np.allclose([s[1] for s in stops], bias, atol=5e-4)
+    assert steady_params(ep, config.defaults())[1] == ""  # off by default
     out, note = steady_params(ep, p)
     assert bool(note) == steady_gyro
     assert out["gyro"]["bias_sd_radps"] == (0.0005 if steady_gyro else 0.005)
@@ -63,15 +65,18 @@ def test_the_stops_of_a_city_drive_tell_the_two_gyros_apart(steady_gyro: bool, m
 
 def test_a_steady_gyro_holds_the_track_off_reflected_fixes(monkeypatch) -> None:
     """The same drive with the bias held constant: the default walk let a reflected run bend
-    the dead reckoning, aekf + RTS 1.93 m from the truth (fixes 36.8 m); judged steady at
-    its stops, 0.72 m, and the summary says so."""
+    the dead reckoning, aekf + RTS 1.93 m from the truth (fixes 36.8 m); with
+    ``[gyro] steady_from_stops`` (off by default) it is judged steady at its stops: 0.72 m,
+    and the summary says so."""
     from gpsdr_cli.pipeline import fuse
 
     sim = _city(17, monkeypatch, True)
-    off = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True,
-                     overrides={"gyro": {"steady_from_stops": False}})
-    on = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
+    off = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
+    on = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True,
+                    overrides={"gyro": {"steady_from_stops": True}})
     assert "gyro_steady" in on.result.info and "gyro_steady" not in off.result.info
     assert off.rmse_m > 1.5 and on.rmse_m < 1.0
-    res = fuse(copy.deepcopy(sim.drive), config.defaults())
+    p = config.defaults()
+    p["gyro"]["steady_from_stops"] = True
+    res = fuse(copy.deepcopy(sim.drive), p)
     assert any("gyro bias steady across" in w for w in res.drive_warnings)
