@@ -45,6 +45,12 @@ from gpsdr_cli.testing.sim import run_filter  # noqa: E402
 FILTERS = ("ekf", "aekf", "fkf", "fafkf")
 
 
+def _pair(text: str) -> tuple[float, float]:
+    """"LO,HI" as two floats."""
+    lo, hi = (float(v) for v in text.split(","))
+    return lo, hi
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="1,2,3,4,5,6")
@@ -66,12 +72,11 @@ def main() -> int:
         key, _, value = item.partition("=")
         section, _, name = key.partition(".")
         overrides.setdefault(section, {})[name] = tomllib.loads(f"v = {value}")["v"]
+    # read by simulate_drive at each call
     if args.nlos_ramp:
-        lo, hi = (float(v) for v in args.nlos_ramp.split(","))
-        simulate.NLOS_RAMP_S = (lo, hi)  # read by simulate_drive at each call
+        simulate.NLOS_RAMP_S = _pair(args.nlos_ramp)
     if args.nlos_duration:
-        lo, hi = (float(v) for v in args.nlos_duration.split(","))
-        simulate.NLOS_DURATION_S = (lo, hi)
+        simulate.NLOS_DURATION_S = _pair(args.nlos_duration)
     if args.steady_gyro:
         simulate.GYRO_BIAS_TAU_S = math.inf
     warnings.filterwarnings("ignore")

@@ -28,9 +28,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
+from .config import Params
 from .conventions import NS_PER_S
 from .epochs import Epochs
 from .filters.base import MAX_SPEED_MPS, FilterResult
@@ -73,6 +75,21 @@ def split(epochs: Epochs) -> tuple[int, Epochs]:
         fields[f.name] = value[k:].copy() if isinstance(value, np.ndarray) else value
     fields["dt_s"][0] = 0.0
     return k, Epochs(**fields)
+
+
+def run_from_first_fix(epochs: Epochs, run: Callable[[Epochs, Params], FilterResult],
+                       params: Params, *, gyro_bias: float | None = None,
+                       true_scale: float | None = None) -> FilterResult:
+    """``run`` from the first usable fix (:func:`split`), the epochs before it dead-reckoned
+    back from there (:func:`backfill`).  ``gyro_bias`` (rad/s) and ``true_scale`` (true speed
+    over the odometer's), fitted over the whole drive, stand for the lead-in's own
+    calibration when given."""
+    k, tail = split(epochs)
+    result = run(tail, params)
+    if not k:
+        return result
+    return backfill(epochs, k, result, gyro_bias=gyro_bias,
+                    odo_scale=1.0 / true_scale if true_scale else None)
 
 
 def _held(has: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -520,17 +520,16 @@ def run_filter(epochs: Epochs, params: Params) -> FilterResult:
     dead-reckoned back from it (:mod:`gpsdr_cli.lead_in`).  On a drive without an
     odometer, the forward accelerometer's speed (without one, the last fixes' speed) carries
     the track through the GNSS outages along the gyro's heading (:mod:`gpsdr_cli.filters.accel_speed`)."""
-    from . import filters, lead_in
-
-    k_fix, from_fix = lead_in.split(epochs)
-    result = filters.get(params["filter"]["name"])(from_fix, params)
-    # no odometer: the speed through the GNSS outages
+    from . import filters
     from .filters.accel_speed import bridge_outages
+    from .lead_in import run_from_first_fix
 
-    result = bridge_outages(from_fix, result, params, smoothed=bool(params["filter"]["smooth"]))
-    if k_fix:
-        result = lead_in.backfill(epochs, k_fix, result)
-    return result
+    def run(from_fix: Epochs, p: Params) -> FilterResult:
+        # no odometer: the speed through the GNSS outages
+        return bridge_outages(from_fix, filters.get(p["filter"]["name"])(from_fix, p), p,
+                              smoothed=bool(p["filter"]["smooth"]))
+
+    return run_from_first_fix(epochs, run, params)
 
 
 def add_qc_columns(track: pd.DataFrame, epochs: Epochs, result: FilterResult,

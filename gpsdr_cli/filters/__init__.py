@@ -90,18 +90,16 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             # that fix's position 140 s early: 800 m off on a simulated city drive), with the
             # screen's gyro bias and odometer scale, fitted over the whole drive (the minute
             # of track after a first fix at a stop read a gyro bias of 0.11 rad/s)
-            from .. import lead_in
+            if info.get("nlos_screened"):
+                from ..lead_in import run_from_first_fix
 
-            k_lead, tail = (lead_in.split(model_epochs) if info.get("nlos_screened")
-                            else (0, model_epochs))
-            result = fn(tail, model_params)
-            if k_lead:
-                scale = info.get("nlos_screen_odo_scale")
                 bias = info.get("nlos_screen_gyro_bias_radps")
                 if bias is not None and model_epochs.time_reversed:
                     bias = -bias  # the drive run backwards reads its yaw rates negated
-                result = lead_in.backfill(model_epochs, k_lead, result, gyro_bias=bias,
-                                          odo_scale=1.0 / scale if scale else None)
+                result = run_from_first_fix(model_epochs, fn, model_params, gyro_bias=bias,
+                                            true_scale=info.get("nlos_screen_odo_scale"))
+            else:
+                result = fn(model_epochs, model_params)
             result.info.update(info)
             if steady_note:
                 result.info["gyro_steady"] = steady_note

@@ -190,20 +190,16 @@ def judge_kept(epochs: Epochs, kept: np.ndarray, run: Callable[[Epochs, Params],
                probe: Params, fit) -> FilterResult:
     """The judge's track of the ``kept`` fixes (a mask over the epochs), the epochs before
     the first of them dead-reckoned back from it with the batch ``fit``'s gyro bias and
-    odometer scale (:func:`gpsdr_cli.lead_in.backfill`), as the filters are after the
+    odometer scale (:func:`gpsdr_cli.lead_in.run_from_first_fix`), as the filters are after the
     screen.  Started at epoch 0, the judge began at that fix's position with no heading: with
     the first 100 s of a simulated city drive left out, its track lay 800 m off there and
     the runs cut against it held no fix that agreed."""
-    from .. import lead_in
+    from ..lead_in import run_from_first_fix
 
-    sub = dataclasses.replace(epochs, has_gnss=kept)
-    k_lead, tail = lead_in.split(sub)
-    track = run(tail, probe)
-    if not k_lead:
-        return track
-    bias = fit.gyro_bias_radps if math.isfinite(fit.gyro_bias_radps) else None
-    scale = 1.0 / fit.odo_scale if math.isfinite(fit.odo_scale) and fit.odo_scale > 0 else None
-    return lead_in.backfill(sub, k_lead, track, gyro_bias=bias, odo_scale=scale)
+    return run_from_first_fix(
+        dataclasses.replace(epochs, has_gnss=kept), run, probe,
+        gyro_bias=fit.gyro_bias_radps if math.isfinite(fit.gyro_bias_radps) else None,
+        true_scale=fit.odo_scale if math.isfinite(fit.odo_scale) and fit.odo_scale > 0 else None)
 
 
 def last_run_drift(epochs: Epochs, kept: np.ndarray, seg: np.ndarray,
