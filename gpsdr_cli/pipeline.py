@@ -479,7 +479,11 @@ def _main_pass(epochs: Epochs, fparams: Params, params: Params,
                     "fixes disagree with the whole drive's dead reckoning and were not used "
                     "([gnss] nlos_screen)")
     skipped = result.info.get("nlos_screen_skipped")
-    if skipped in ("no odometer", "no gyro"):
+    if result.info.get("nlos_screen_not_applied"):
+        _warn(work, "reflected signals (NLOS) suspected, but the whole drive's dead reckoning "
+                    f"cannot judge the fixes ({str(result.info.get('nlos_screen', ''))[13:]}): "
+                    "the track follows the fixes")
+    elif skipped in ("no odometer", "no gyro"):
         # simulated city drives without an odometer, seeds 1-7: aekf forward 0.49-1.3 x the
         # fixes, fafkf up to 1.9 x, the graph smoother 0.17-0.80 x (docs/benchmarks.md)
         _warn(work, f"reflected signals (NLOS) suspected, and with {skipped} nothing outvotes "

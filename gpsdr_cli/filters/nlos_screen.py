@@ -36,8 +36,14 @@ The screen is a judgement over the whole drive: the quality check's backward pas
 time-reversed drive, is given the forward judgement read backwards.
 
 Only on NLOS drives with a gyro and an odometer (the batch fit needs a dead reckoning
-that holds the shape on its own), and only when the fit converges and keeps at least
-``nlos_screen_min_kept`` of the fixes; otherwise the epochs pass unchanged.  Units:
+that holds the shape on its own), and only when the fit converges, keeps at least
+``nlos_screen_min_kept`` of the fixes, and the judge's track of the fixes it keeps stays
+within ``nlos_screen_max_offset_m`` of all the fixes (its forward pass, median over any
+``OFFSET_WINDOW_S``):
+reflections put fixes tens of metres off, so a track farther from all of them is the dead
+reckoning's own error (a gyro whose scale is 3 % off had the fit keep a few fixes in 200 s,
+and the track of those ran 1.9 km away; decisions/0061).  Otherwise the epochs pass
+unchanged, and the filters follow the fixes (:func:`gpsdr_cli.filters.register`).  Units:
 metres, seconds.
 """
 
@@ -59,6 +65,10 @@ from .base import FilterResult
 #: A smoothed run's quality check runs the forward filter again, and every filter of a
 #: comparison is given the same screen
 _LAST: list[tuple[tuple, np.ndarray, dict]] = []
+#: the track of the fixes kept is compared with every fix over windows this long (s), each
+#: with at least this many fixes (a median over a few seconds of fixes, not one outlier)
+OFFSET_WINDOW_S = 30.0
+OFFSET_MIN_FIXES = 10
 
 
 def _fingerprint(epochs: Epochs, params: Params) -> tuple:
@@ -95,7 +105,8 @@ def _cached(epochs: Epochs, fp: tuple) -> tuple[Epochs, dict] | None:
 def screen(epochs: Epochs, params: Params, nlos_drive: bool,
            judge: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
     """``(epochs, info)``: the epochs with the outvoted fixes' ``has_gnss`` cleared, and
-    what was done (``info["nlos_screened"]``: fixes left out; absent when not applied;
+    what was done (``info["nlos_screened"]``: fixes left out; absent when not applied, where
+    ``info["nlos_screen"]`` says why and ``info["nlos_screen_not_applied"]`` is set;
     ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
     lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale, true speed over
     the odometer's; ``info["nlos_screen_gyro_bias_radps"]``: its gyro bias).  ``judge``: the
@@ -144,7 +155,7 @@ def _screen(epochs: Epochs, params: Params,
     fit["graph"]["nlos_last_kernel"] = ""
     outcome = smooth_graph(epochs, init, fit, sigmas=False)  # the fixes weighed, not the track
     if outcome.result is None or len(outcome.gnss_weight) != len(epochs):
-        return epochs, {"nlos_screen": f"not applied: {outcome.message}"}
+        return epochs, _not_applied(outcome.message)
     w = outcome.gnss_weight
     fix = epochs.has_gnss
     out = fix & np.isfinite(w) & (w < float(g["nlos_screen_min_weight"]))
@@ -175,15 +186,30 @@ def _screen(epochs: Epochs, params: Params,
                       float(fit["graph"]["nlos_segment_keep_m"]))
     kept = int(np.count_nonzero(fix & ~out))
     if kept < float(g["nlos_screen_min_kept"]) * max(int(fix.sum()), 1):
-        return epochs, {"nlos_screen": f"not applied: only {kept} of {int(fix.sum())} fixes agree"}
+        return epochs, _not_applied(f"only {kept} of {int(fix.sum())} fixes agree")
     if not out.any():
         return epochs, {"nlos_screened": 0}
+    # ... and only if the forward track of the fixes kept (the default output) stays within a
+    # reflection's reach of the fixes: a gyro whose scale is 3 % off left a few fixes in
+    # 200 s, and the ekf's track of them ran 1.9 km from every fix (decisions/0061)
+    forward = {**probe, "filter": {**probe["filter"], "smooth": False}}
+    far_m, at_s = farthest_window(epochs, judge_kept(epochs, fix & ~out, run, forward, outcome),
+                                  fix)
+    if far_m > float(g["nlos_screen_max_offset_m"]):
+        return epochs, _not_applied(f"the track of the {kept} fixes it keeps lies {far_m:.0f} m "
+                                    f"from the fixes around {at_s:.0f} s")
     info = {"nlos_screened": int(out.sum())}
     if math.isfinite(outcome.odo_scale):
         info["nlos_screen_odo_scale"] = outcome.odo_scale
     if math.isfinite(outcome.gyro_bias_radps):
         info["nlos_screen_gyro_bias_radps"] = outcome.gyro_bias_radps
     return dataclasses.replace(epochs, has_gnss=fix & ~out), info
+
+
+def _not_applied(why: str) -> dict:
+    """The screen's info when it could not judge the fixes: ``nlos_screen`` says why and
+    ``nlos_screen_not_applied`` is set (the filters then follow the fixes)."""
+    return {"nlos_screen": f"not applied: {why}", "nlos_screen_not_applied": True}
 
 
 def judge_kept(epochs: Epochs, kept: np.ndarray, run: Callable[[Epochs, Params], FilterResult],
@@ -200,6 +226,29 @@ def judge_kept(epochs: Epochs, kept: np.ndarray, run: Callable[[Epochs, Params],
         dataclasses.replace(epochs, has_gnss=kept), run, probe,
         gyro_bias=fit.gyro_bias_radps if math.isfinite(fit.gyro_bias_radps) else None,
         true_scale=fit.odo_scale if math.isfinite(fit.odo_scale) and fit.odo_scale > 0 else None)
+
+
+def farthest_window(epochs: Epochs, track: FilterResult, fixes: np.ndarray,
+                    window_s: float = OFFSET_WINDOW_S) -> tuple[float, float]:
+    """``(distance m, time s)``: the largest median distance from ``track`` to the ``fixes``
+    (a mask over the epochs) over windows of ``window_s`` seconds (stepped by half a
+    window), and the middle of that window in seconds since the first epoch; (0, NaN) with
+    no window of ``OFFSET_MIN_FIXES`` fixes."""
+    f = np.flatnonzero(fixes)
+    t_s = (np.asarray(epochs.t_ns, np.int64)[f] - int(epochs.t_ns[0])) / NS_PER_S
+    d = np.hypot(epochs.gnss_e[f] - track.e[f], epochs.gnss_n[f] - track.n[f])
+    ok = np.isfinite(d)
+    t_s, d = t_s[ok], d[ok]
+    best, at = 0.0, math.nan
+    if not len(t_s):
+        return best, at
+    for t0 in np.arange(t_s[0], t_s[-1] + 0.5 * window_s, 0.5 * window_s):
+        lo, hi = np.searchsorted(t_s, [t0, t0 + window_s])
+        if hi - lo >= OFFSET_MIN_FIXES:
+            m = float(np.median(d[lo:hi]))
+            if m > best:
+                best, at = m, t0 + 0.5 * window_s
+    return best, at
 
 
 def last_run_drift(epochs: Epochs, kept: np.ndarray, seg: np.ndarray,
@@ -312,4 +361,4 @@ def edge_fixes(epochs: Epochs, track: FilterResult, kept: np.ndarray, out: np.nd
     return drop
 
 
-__all__ = ["edge_fixes", "far_fixes", "judge_kept", "last_run_drift", "screen"]
+__all__ = ["edge_fixes", "far_fixes", "farthest_window", "judge_kept", "last_run_drift", "screen"]

@@ -359,3 +359,49 @@ def test_the_judge_of_the_kept_fixes_dead_reckons_back_from_the_first() -> None:
 
     assert lead_rms(judge(dataclasses.replace(ep, has_gnss=kept), probe)) > 100.0
     assert lead_rms(judge_kept(ep, kept, judge, probe, fit)) < 10.0
+
+
+def test_farthest_window_is_a_median_over_seconds_of_fixes() -> None:
+    """Fixes at 5 Hz scattered by 1 m about a track at zero, 40 s of them 300 m east and one
+    fix 2 km north: the farthest 30-s window is the 300-m stretch; the lone fix moves no
+    window's median."""
+    from types import SimpleNamespace
+
+    from gpsdr_cli.filters.nlos_screen import farthest_window
+
+    n = 2000
+    rng = np.random.default_rng(3)
+    e, nn = rng.normal(0.0, 1.0, n), rng.normal(0.0, 1.0, n)
+    e[1000:1200] += 300.0
+    nn[500] += 2000.0
+    ep = SimpleNamespace(t_ns=np.arange(n, dtype=np.int64) * 200_000_000, gnss_e=e, gnss_n=nn)
+    track = SimpleNamespace(e=np.zeros(n), n=np.zeros(n))
+    fixes = np.ones(n, bool)
+    far_m, at_s = farthest_window(ep, track, fixes)
+    assert 295.0 < far_m < 305.0 and 200.0 <= at_s <= 240.0
+    fixes[1000:1200] = False
+    far_m, _ = farthest_window(ep, track, fixes)
+    assert far_m < 3.0
+
+
+def test_a_screen_whose_kept_track_runs_off_is_not_applied() -> None:
+    """A 283-s city drive (5-Hz CAN rates) whose gyro reads 3 % too much turn (a phone's
+    scale error): the batch fit keeps a handful of fixes in the first 200 s, and the ekf's
+    track of them ran 1.9 km from every fix (46 x the fixes' RMSE).  The screen now sees a
+    track farther from all the fixes than reflections reach and is not applied; with white
+    fixes the ekf follows them (17.2 m -> 13.8 m), and the summary says so."""
+    from gpsdr_cli import config
+    from gpsdr_cli.io.drive import YawRates
+    from gpsdr_cli.pipeline import fuse
+
+    sim = simulate_drive("urban_nlos", 28, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
+    g = sim.drive.gyro
+    true_rate = np.interp(g.t_ns, sim.truth["t_ns"], sim.truth["yaw_rate"])
+    sim.drive.gyro = YawRates(t_ns=g.t_ns, yaw_rate_radps=g.yaw_rate_radps + 0.03 * true_rate)
+    r = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True)
+    info = r.result.info
+    assert info.get("nlos_screen_not_applied") and "m from the fixes" in info["nlos_screen"]
+    assert "nlos_screened" not in info and info["gnss_err_states_off"]
+    assert r.rmse_m < 0.9 * r.gnss_rmse_m
+    res = fuse(copy.deepcopy(sim.drive), config.defaults())
+    assert any("cannot judge the fixes" in w for w in res.drive_warnings)
