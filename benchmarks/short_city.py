@@ -16,6 +16,11 @@ simulator's 1-4 s (a receiver whose own filter blends a reflection in slowly).
 5-60 s (a street where the direct signal stays blocked for minutes).
 ``--steady-gyro``: the gyro's bias held at its first draw for the whole drive (an automotive
 yaw-rate sensor's) instead of the simulator's wandering MEMS bias.
+``--gyro-scale-error K``: the gyro reads K more of the true yaw rate than the simulator's own
+scale error (0.03: a phone gyro's 3 %).
+``--nlos-wander SD,DIST``: the canyon's reflected-signal errors wander instead of holding
+steps: a Gauss-Markov error of SD metres per axis that decorrelates over DIST metres driven
+(``simulate.NLOS_SHAPE = "wander"``).
 ``--set SECTION.KEY=VALUE`` (repeatable, VALUE as in the TOML config) changes a default for
 every run, e.g. ``--set gnss.nlos_fkf_velocity_sd_mps=0.2``.  The last lines give the
 median, mean and worst of track RMSE over the fixes' RMSE per column.
@@ -64,6 +69,10 @@ def main() -> int:
                     help="how long each reflection lasts, s (default: the simulator's)")
     ap.add_argument("--steady-gyro", action="store_true",
                     help="the gyro's bias constant over the drive (default: it wanders)")
+    ap.add_argument("--gyro-scale-error", type=float, default=0.0, metavar="K",
+                    help="extra gyro scale error, e.g. 0.03 (default: the simulator's own)")
+    ap.add_argument("--nlos-wander", default="", metavar="SD,DIST",
+                    help="wandering reflection errors, m per axis and m driven (default: steps)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="change a default for every run (repeatable)")
     args = ap.parse_args()
@@ -79,6 +88,10 @@ def main() -> int:
         simulate.NLOS_DURATION_S = _pair(args.nlos_duration)
     if args.steady_gyro:
         simulate.GYRO_BIAS_TAU_S = math.inf
+    simulate.GYRO_EXTRA_SCALE = args.gyro_scale_error
+    if args.nlos_wander:
+        simulate.NLOS_SHAPE = "wander"
+        simulate.NLOS_WANDER_SD_M, simulate.NLOS_WANDER_DIST_M = _pair(args.nlos_wander)
     warnings.filterwarnings("ignore")
     t0 = time.perf_counter()
     head = " | ".join(f"{f} / +RTS" for f in FILTERS)

@@ -682,6 +682,9 @@ def _gnss(rng: np.random.Generator, truth: pd.DataFrame, frame: LocalFrame, env_
 #: the gyro bias's Gauss-Markov correlation time (s); inf holds it at its first draw (an
 #: automotive yaw-rate sensor's; ``benchmarks/short_city.py --steady-gyro``)
 GYRO_BIAS_TAU_S = 3600.0
+#: a gyro scale error added to the drawn one (``(1 + scale + this) x`` the true rate; a phone
+#: gyro's 3 %: ``benchmarks/short_city.py --gyro-scale-error``)
+GYRO_EXTRA_SCALE = 0.0
 
 
 # --------------------------------------------------------------------------- error models of
@@ -701,6 +704,16 @@ NLOS_RAMP_S = (1.0, 4.0)
 NLOS_DRIFT_M_PER_SQRT_S = 0.25
 NLOS_ACROSS_SHARE = 0.7
 NLOS_ACROSS_SPREAD_DEG = 20.0
+#: the shape of the canyon's position errors: "steps" (the plateaus above) or "wander"
+#: (``benchmarks/short_city.py --nlos-wander``): a Gauss-Markov error per axis of
+#: ``NLOS_WANDER_SD_M`` that decorrelates over ``NLOS_WANDER_DIST_M`` driven (other
+#: reflectors) and ``NLOS_WANDER_TAU_S`` parked (the satellites move), blended in and out over
+#: ``NLOS_WANDER_EDGE_S`` at the canyon's ends; the receiver velocity keeps the steps' errors
+NLOS_SHAPE = "steps"
+NLOS_WANDER_SD_M = 20.0
+NLOS_WANDER_DIST_M = 100.0
+NLOS_WANDER_TAU_S = 600.0
+NLOS_WANDER_EDGE_S = 5.0
 #: the receiver's Doppler velocity in a step: reflected signals shift it too, a bias per step
 #: and axis (m/s, 1 sigma) plus white noise (m/s per axis)
 NLOS_VEL_BIAS_SD_MPS = 1.0
@@ -858,6 +871,11 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
     e_fix, n_fix = frame.forward(fixes.lat_deg, fixes.lon_deg)
     nlos_e = bias[:, 0] + drift[:, 0]
     nlos_n = bias[:, 1] + drift[:, 1]
+    wander = None
+    if NLOS_SHAPE == "wander":
+        wander = _nlos_wander(np.random.default_rng(int(rng.integers(1 << 31))), rel, s_fix,
+                              canyon)
+        nlos_e, nlos_n = wander[:, 0], wander[:, 1]
     hdop = np.clip(fixes.hdop, *NLOS_HDOP)
     vdop = np.sqrt(np.maximum(fixes.pdop**2 - hdop**2, 0.01))
     sigma = np.clip(gerr["reported_sd_m"].to_numpy() * gst_factor, *NLOS_GST_M)
@@ -877,7 +895,7 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
     gerr["hdop"] = hdop
     gerr["reported_sd_m"] = sigma
     gerr["canyon"] = canyon
-    gerr["nlos"] = (step_id >= 0) & valid
+    gerr["nlos"] = ((step_id >= 0) if wander is None else np.hypot(nlos_e, nlos_n) > 0) & valid
     gerr["nlos_step"] = step_id
     gerr["nlos_e"], gerr["nlos_n"] = nlos_e, nlos_n
     gerr["nlos_bias_e"], gerr["nlos_bias_n"] = bias[:, 0], bias[:, 1]
@@ -901,7 +919,32 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
         "nlos_steps_per_canyon_min": 60.0 * len(steps) / canyon_s if canyon_s > 0 else 0.0,
         "nlos_fix_share": float(np.mean(gerr["nlos"][valid])) if valid.any() else 0.0,
     }
+    if wander is not None:
+        noise.update({"nlos_shape": "wander", "nlos_wander_sd_m": NLOS_WANDER_SD_M,
+                      "nlos_wander_dist_m": NLOS_WANDER_DIST_M,
+                      "nlos_wander_tau_s": NLOS_WANDER_TAU_S})
     return out, gerr, noise
+
+
+def _nlos_wander(rng: np.random.Generator, t_s: np.ndarray, s_m: np.ndarray,
+                 canyon: np.ndarray) -> np.ndarray:
+    """(m, 2) east/north error (m) of ``NLOS_SHAPE = "wander"`` at fixes stamped ``t_s`` (s),
+    ``s_m`` along the route (m): inside the ``canyon`` mask a Gauss-Markov process per axis
+    (sigma ``NLOS_WANDER_SD_M``, 1/correlation = 1/``NLOS_WANDER_TAU_S`` s + speed /
+    ``NLOS_WANDER_DIST_M`` m), blended in and out over ``NLOS_WANDER_EDGE_S``."""
+    m = len(t_s)
+    err = np.zeros((m, 2))
+    if not m:
+        return err
+    z = rng.standard_normal((m, 2))
+    err[0] = NLOS_WANDER_SD_M * z[0]
+    decay = np.exp(-(np.diff(t_s) / NLOS_WANDER_TAU_S + np.abs(np.diff(s_m)) / NLOS_WANDER_DIST_M))
+    for k in range(1, m):
+        a = decay[k - 1]
+        err[k] = a * err[k - 1] + math.sqrt(1.0 - a * a) * NLOS_WANDER_SD_M * z[k]
+    width = max(1, round(NLOS_WANDER_EDGE_S * _fixes_rate(t_s * NS_PER_S)))
+    blend = np.convolve(canyon.astype(float), np.ones(width) / width, mode="same")
+    return err * blend[:, None]
 
 
 def _fixes_rate(t_ns: np.ndarray) -> float:
@@ -1101,10 +1144,10 @@ def _gyro(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tupl
     scale_sd = 0.005
     scale = float(rng.normal(0.0, scale_sd))
     bias = _gauss_markov(rng, m, dt, bias_tau, bias_sd)
-    meas = (1.0 + scale) * omega + bias + rng.standard_normal(m) * noise_sd
+    meas = (1.0 + scale + GYRO_EXTRA_SCALE) * omega + bias + rng.standard_normal(m) * noise_sd
     noise = {"gyro_rate_hz": float(rate_hz), "gyro_noise_sd_radps": noise_sd,
              "gyro_bias_sd_radps": bias_sd, "gyro_bias_tau_s": bias_tau,
-             "gyro_bias_initial_radps": float(bias[0]), "gyro_scale_error": scale,
+             "gyro_bias_initial_radps": float(bias[0]), "gyro_scale_error": scale + GYRO_EXTRA_SCALE,
              "gyro_scale_sd": scale_sd}
     return YawRates(t_ns=t, yaw_rate_radps=meas), noise
 
