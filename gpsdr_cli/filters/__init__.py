@@ -76,14 +76,13 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                     if name in ("ekf", "aekf"):
                         info["gnss_err_states_off"] = ("the NLOS screen kept only fixes that "
                                                        "agree with the dead reckoning")
-            elif info.get("nlos_screen_not_applied") and model_params["aekf"]["gnss_err_states"]:
+            elif info.get("nlos_screen_not_applied"):
                 # ... and where the screen could not judge the fixes, no dead reckoning outvotes
-                # them: ekf/aekf's 20-m error states let it carry the track 70 m from fixes at
-                # 25 m, white fixes follow them (decisions/0061)
+                # them: ekf/aekf's error states keep their clear-sky sigma (the NLOS drive's
+                # 20 m let the dead reckoning carry the track 70 m from fixes at 25 m; white
+                # fixes thrashed the gate; decisions/0061)
                 model_params = copy.deepcopy(model_params)
-                model_params["aekf"]["gnss_err_states"] = False
-                if name in ("ekf", "aekf"):
-                    info["gnss_err_states_off"] = "the NLOS screen could not judge the fixes"
+                model_params["aekf"]["gnss_err_sd_m"] = float(params["aekf"]["gnss_err_sd_m"])
             if epochs.dr_unhealthy:
                 model_params = follow_the_fixes(model_params)
                 info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"

@@ -43,7 +43,8 @@ within ``nlos_screen_max_offset_m`` of all the fixes (its forward pass, median o
 reflections put fixes tens of metres off, so a track farther from all of them is the dead
 reckoning's own error (a gyro whose scale is 3 % off had the fit keep a few fixes in 200 s,
 and the track of those ran 1.9 km away; decisions/0061).  Otherwise the epochs pass
-unchanged, and the filters follow the fixes (:func:`gpsdr_cli.filters.register`).  Units:
+unchanged, and ekf/aekf take their clear-sky error states, which follow the fixes
+(:func:`gpsdr_cli.filters.register`).  Units:
 metres, seconds.
 """
 

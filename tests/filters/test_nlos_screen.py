@@ -388,8 +388,8 @@ def test_a_screen_whose_kept_track_runs_off_is_not_applied() -> None:
     """A 283-s city drive (5-Hz CAN rates) whose gyro reads 3 % too much turn (a phone's
     scale error): the batch fit keeps a handful of fixes in the first 200 s, and the ekf's
     track of them ran 1.9 km from every fix (46 x the fixes' RMSE).  The screen now sees a
-    track farther from all the fixes than reflections reach and is not applied; with white
-    fixes the ekf follows them (17.2 m -> 13.8 m), and the summary says so."""
+    track farther from all the fixes than reflections reach and is not applied; with the
+    clear-sky error states the ekf follows them (17.2 m -> 12.1 m), and the summary says so."""
     from gpsdr_cli import config
     from gpsdr_cli.io.drive import YawRates
     from gpsdr_cli.pipeline import fuse
@@ -401,7 +401,7 @@ def test_a_screen_whose_kept_track_runs_off_is_not_applied() -> None:
     r = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True)
     info = r.result.info
     assert info.get("nlos_screen_not_applied") and "m from the fixes" in info["nlos_screen"]
-    assert "nlos_screened" not in info and info["gnss_err_states_off"]
-    assert r.rmse_m < 0.9 * r.gnss_rmse_m
+    assert "nlos_screened" not in info
+    assert r.rmse_m < 0.8 * r.gnss_rmse_m
     res = fuse(copy.deepcopy(sim.drive), config.defaults())
     assert any("cannot judge the fixes" in w for w in res.drive_warnings)
