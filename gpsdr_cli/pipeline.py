@@ -479,10 +479,10 @@ def _main_pass(epochs: Epochs, fparams: Params, params: Params,
                     "fixes disagree with the whole drive's dead reckoning and were not used "
                     "([gnss] nlos_screen)")
     skipped = result.info.get("nlos_screen_skipped")
-    if result.info.get("nlos_screen_not_applied"):
+    not_applied = result.info.get("nlos_screen_not_applied")
+    if not_applied:
         _warn(work, "reflected signals (NLOS) suspected, but the whole drive's dead reckoning "
-                    f"cannot judge the fixes ({str(result.info.get('nlos_screen', ''))[13:]}): "
-                    "the track follows the fixes")
+                    f"cannot judge the fixes ({not_applied}): the track follows the fixes")
     elif skipped in ("no odometer", "no gyro"):
         # simulated city drives without an odometer, seeds 1-7: aekf forward 0.49-1.3 x the
         # fixes, fafkf up to 1.9 x, the graph smoother 0.17-0.80 x (docs/benchmarks.md)

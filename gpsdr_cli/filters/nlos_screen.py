@@ -39,13 +39,11 @@ Only on NLOS drives with a gyro and an odometer (the batch fit needs a dead reck
 that holds the shape on its own), and only when the fit converges, keeps at least
 ``nlos_screen_min_kept`` of the fixes, and the judge's track of the fixes it keeps stays
 within ``nlos_screen_max_offset_m`` of all the fixes (its forward pass, median over any
-``OFFSET_WINDOW_S``):
-reflections put fixes tens of metres off, so a track farther from all of them is the dead
-reckoning's own error (a gyro whose scale is 3 % off had the fit keep a few fixes in 200 s,
-and the track of those ran 1.9 km away; decisions/0061).  Otherwise the epochs pass
-unchanged, and ekf/aekf take their clear-sky error states, which follow the fixes
-(:func:`gpsdr_cli.filters.register`).  Units:
-metres, seconds.
+``OFFSET_WINDOW_S``): reflections put fixes tens of metres off, so a track farther from all
+of them is the dead reckoning's own error (a gyro whose scale is 3 % off had the fit keep a
+few fixes in 200 s, and the track of those ran 1.9 km away; decisions/0061).  Otherwise the
+epochs pass unchanged, and ekf/aekf take their clear-sky error states, which follow the
+fixes (:func:`gpsdr_cli.filters.register`).  Units: metres, seconds.
 """
 
 from __future__ import annotations
@@ -107,7 +105,7 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
            judge: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
     """``(epochs, info)``: the epochs with the outvoted fixes' ``has_gnss`` cleared, and
     what was done (``info["nlos_screened"]``: fixes left out; absent when not applied, where
-    ``info["nlos_screen"]`` says why and ``info["nlos_screen_not_applied"]`` is set;
+    ``info["nlos_screen_not_applied"]`` says why (and ``info["nlos_screen"]`` "not applied: why");
     ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
     lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale, true speed over
     the odometer's; ``info["nlos_screen_gyro_bias_radps"]``: its gyro bias).  ``judge``: the
@@ -197,7 +195,7 @@ def _screen(epochs: Epochs, params: Params,
     far_m, at_s = farthest_window(epochs, judge_kept(epochs, fix & ~out, run, forward, outcome),
                                   fix)
     if far_m > float(g["nlos_screen_max_offset_m"]):
-        return epochs, _not_applied(f"the track of the {kept} fixes it keeps lies {far_m:.0f} m "
+        return epochs, _not_applied(f"the track of the {kept} fixes it would keep lies {far_m:.0f} m "
                                     f"from the fixes around {at_s:.0f} s")
     info = {"nlos_screened": int(out.sum())}
     if math.isfinite(outcome.odo_scale):
@@ -208,9 +206,9 @@ def _screen(epochs: Epochs, params: Params,
 
 
 def _not_applied(why: str) -> dict:
-    """The screen's info when it could not judge the fixes: ``nlos_screen`` says why and
-    ``nlos_screen_not_applied`` is set (the filters then follow the fixes)."""
-    return {"nlos_screen": f"not applied: {why}", "nlos_screen_not_applied": True}
+    """The screen's info when it could not judge the fixes (the filters then follow them):
+    ``nlos_screen_not_applied`` is ``why``, ``nlos_screen`` "not applied: ``why``"."""
+    return {"nlos_screen": f"not applied: {why}", "nlos_screen_not_applied": why}
 
 
 def judge_kept(epochs: Epochs, kept: np.ndarray, run: Callable[[Epochs, Params], FilterResult],
