@@ -933,15 +933,13 @@ def _nlos_wander(rng: np.random.Generator, t_s: np.ndarray, s_m: np.ndarray,
     (sigma ``NLOS_WANDER_SD_M``, 1/correlation = 1/``NLOS_WANDER_TAU_S`` s + speed /
     ``NLOS_WANDER_DIST_M`` m), blended in and out over ``NLOS_WANDER_EDGE_S``."""
     m = len(t_s)
-    err = np.zeros((m, 2))
     if not m:
-        return err
-    z = rng.standard_normal((m, 2))
-    err[0] = NLOS_WANDER_SD_M * z[0]
-    decay = np.exp(-(np.diff(t_s) / NLOS_WANDER_TAU_S + np.abs(np.diff(s_m)) / NLOS_WANDER_DIST_M))
-    for k in range(1, m):
-        a = decay[k - 1]
-        err[k] = a * err[k - 1] + math.sqrt(1.0 - a * a) * NLOS_WANDER_SD_M * z[k]
+        return np.zeros((0, 2))
+    # per step, the decorrelation in units of one correlation time (as 1/tau at dt = 1)
+    x = np.concatenate(([1.0], np.diff(t_s) / NLOS_WANDER_TAU_S
+                        + np.abs(np.diff(s_m)) / NLOS_WANDER_DIST_M))
+    with np.errstate(divide="ignore"):
+        err = _gauss_markov(rng, m, 1.0, 1.0 / x, NLOS_WANDER_SD_M, (2,))
     width = max(1, round(NLOS_WANDER_EDGE_S * _fixes_rate(t_s * NS_PER_S)))
     blend = np.convolve(canyon.astype(float), np.ones(width) / width, mode="same")
     return err * blend[:, None]
