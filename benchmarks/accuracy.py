@@ -30,7 +30,8 @@ urban_canyon and one_hour (forward and RTS, no oracle), through config overrides
   white-noise R; no multipath states);
 * ``fkf (seed 002 plain)``, ``fafkf (seed 002 plain)``: filter fkf / fafkf with
   ``[fkf] gnss_velocity = false, gnss_err_pdop = inf`` (one regime), ``gnss_err_dist_m = 0,
-  gnss_err_sd_m = 1, gnss_err_tau_s = 60`` (the seed's one time-only error state) and
+  gnss_err_sd_m = 1, gnss_err_tau_s = 60, eps_gate = false`` (the seed's one time-only
+  error state, never moved into the position) and
   ``[fafkf] remove_residual_mean = false`` (the paper's covariance matching).
 
 comma2k19: the u-blox fixes sit ~0.1 s ahead of the reference.  Four runs of every
@@ -120,7 +121,7 @@ COMMA = ROOT / "sample_logs" / "comma2k19"
 AEKF_PLAIN = {"aekf": {"gnss_err_states": False, "gnss_velocity": False}}
 #: Tang et al.'s baseline: GNSS positions only, one time-only error state (1 m, 60 s)
 FKF_PLAIN = {"fkf": {"gnss_velocity": False, "gnss_err_pdop": math.inf, "gnss_err_dist_m": 0.0,
-                     "gnss_err_sd_m": 1.0, "gnss_err_tau_s": 60.0},
+                     "gnss_err_sd_m": 1.0, "gnss_err_tau_s": 60.0, "eps_gate": False},
              "fafkf": {"remove_residual_mean": False}}
 #: method -> (registered filter, config overrides)
 PAPER = {

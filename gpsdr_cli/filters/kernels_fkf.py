@@ -149,7 +149,14 @@ from numba import njit, types
 from numba.extending import overload
 
 from .adaptive import nis_2d
-from .core.gate import GATE_FAIL, GATE_PASS, GATE_RESET, RESET_AFTER_LAST_ACCEPT, chi2_gate
+from .core.gate import (
+    GATE_FAIL,
+    GATE_PASS,
+    GATE_RESET,
+    RESET_AFTER_FIRST_REJECT,
+    RESET_AFTER_LAST_ACCEPT,
+    chi2_gate,
+)
 from .core.linalg import cholesky, is_spd
 from .core.packing import pack, unpack
 from .core.rts import rts_step
@@ -209,7 +216,8 @@ PAR_RES_DEMEAN = 33  # 1: covariance matching on the residuals' scatter about th
 PAR_NO_DR = 34       # 1: a GNSS-only drive (no gyro, no odometer): its no-fix epochs are held
 PAR_NO_DR_VEL_Q = 35  # m^2/s^3, per axis: velocity random walk of a step into a held epoch
 PAR_NO_DR_HEAD_Q = 36  # rad^2/s: heading random walk of that step (cross-track, x speed^2)
-N_PAR = 37
+PAR_EPS_GATE_S = 37  # s: an eps outside its gate this long goes into the position (0: off)
+N_PAR = 38
 #: added to a regime share w in ``eps_w``: the step into that epoch starts a new eps
 #: (an RTK drive's fix kind changed: fkf_inputs.multipath_regime)
 EPS_RESET = 10.0
@@ -275,6 +283,10 @@ FkfInputs = namedtuple("FkfInputs", "dt has_gnss gnss_e gnss_n gnss_var_e gnss_v
 FkfStart = namedtuple("FkfStart", "x0 P0 psi0")
 
 NPACK = NX * (NX + 1) // 2
+#: stored per epoch for the smoother: the fused x, then the eps the eps gate moved into the
+#: position at the step into the epoch (m, e and n; :func:`shift_prior`)
+JUMP_E, JUMP_N = NX, NX + 1
+NXS = NX + 2
 
 # ---- the filter state (init_state): rows of vec, mats, aux; scalars of sc --------------
 V_X1, V_X2, V_XG, V_D1, V_D2 = range(5)         # local states, fused state, reset scalings
@@ -290,7 +302,8 @@ ST_N_ACC = 6        # GNSS fixes accepted so far
 ST_REJ_SHARE = 7    # recent share of gated fixes (EWMA)
 ST_T_LAST_FIX = 8   # s, last fix seen
 ST_T_LAST_VACC = 9  # s, last accepted receiver velocity
-N_SCALARS = 10
+ST_EPS_SINCE = 10   # s, first epoch of the current run of eps outside its gate (< 0: none)
+N_SCALARS = 11
 
 #: Ceiling on each state's sigma after a prediction (m, m/s, m/s^2, m, m/s, m/s^2, m, m,
 #: rad, m): a logger pause of 50 min grows the white-jerk position variance to ~1e16 m^2,
@@ -448,6 +461,20 @@ def predict_uncapped(x: np.ndarray, P: np.ndarray, T: float, static: bool, par: 
     P[IEPS_N, IEPS_N] += qe * d[IEPS_N] ** 2
     P[IQW, IQW] += par[PAR_QW_RW] ** 2 * T * d[IQW] ** 2   # random walks q_w, q_s
     P[IQS, IQS] += par[PAR_QS_RW] ** 2 * T * d[IQS] ** 2
+
+
+@njit(cache=True)
+def shift_prior(x: np.ndarray, P: np.ndarray, jump_e: float, jump_n: float) -> None:
+    """Move ``jump_e, jump_n`` (m) from the GNSS error states eps into the position, whose
+    variance grows by its square: a known input of the step (ekf/aekf's bias gate does the
+    same), so the RTS pass, which rebuilds the prior with it (:func:`smooth_range`), does not
+    spread the correction back over the drive before it.  The forward eps gate calls it too."""
+    x[IE] += jump_e
+    x[IN] += jump_n
+    x[IEPS_E] -= jump_e
+    x[IEPS_N] -= jump_n
+    P[IE, IE] += jump_e * jump_e
+    P[IN, IN] += jump_n * jump_n
 
 
 @njit(cache=True)
@@ -985,6 +1012,7 @@ def init_state(x0: np.ndarray, P0: np.ndarray, psi0: float, par: np.ndarray,
     pc = np.zeros((2, 4), np.int64)
     sc = np.zeros(N_SCALARS)
     sc[ST_PSI_HINT] = psi0
+    sc[ST_EPS_SINCE] = -1.0
     return vec, mats, aux, ring, pc, sc
 
 
@@ -1084,7 +1112,7 @@ def _load_checkpoint(segment: int | None, row: np.ndarray, vec: np.ndarray, mats
 def _smooth_segment(segment: int | None, xs: np.ndarray, Ps: np.ndarray, off: int, k_hi: int,
                     k_lo: int, n: int, dt: np.ndarray, static: np.ndarray, has_gnss: np.ndarray,
                     eps_w: np.ndarray, par: np.ndarray,
-                    x_sn: np.ndarray, P_sn: np.ndarray, out: np.ndarray,
+                    x_sn: np.ndarray, P_sn: np.ndarray, u_next: np.ndarray, out: np.ndarray,
                     stats: np.ndarray) -> None:  # pragma: no cover
     """:func:`smooth_range`, or nothing when ``segment`` is None."""
 
@@ -1112,10 +1140,10 @@ def _ol_load_checkpoint(segment, row, vec, mats, aux, ring, pc, sc):
 
 @overload(_smooth_segment)
 def _ol_smooth_segment(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, has_gnss, eps_w, par,
-                       x_sn, P_sn, out, stats):
+                       x_sn, P_sn, u_next, out, stats):
     if isinstance(segment, types.NoneType):
         return (lambda segment, xs, Ps, off, k_hi, k_lo, n, dt, static, has_gnss, eps_w, par,
-                x_sn, P_sn, out, stats: None)
+                x_sn, P_sn, u_next, out, stats: None)
     return smooth_range
 
 
@@ -1204,7 +1232,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
     seg_len = _segment_length(segment)
     full = store and seg_len <= 0
     ns = n if full else 1
-    xs = np.zeros((ns, NX))
+    xs = np.zeros((ns, NXS))
     Ps = np.zeros((ns, NPACK))
     checkpoints = store and seg_len > 0
     seg = seg_len if checkpoints else max(n, 1)
@@ -1220,7 +1248,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
     o_beta = np.zeros((2, sg))
     o_rfac = np.zeros((4, sg if adaptive else 0))   # scratch: the re-runs write it first
     o_counters = np.zeros(N_COUNTERS, np.int64)
-    xs_seg = np.zeros((sg, NX))
+    xs_seg = np.zeros((sg, NXS))
+    u_next = np.zeros(2)                            # the smoother's jump into a segment's end + 1
     Ps_seg = np.zeros((sg, NPACK))
     x_sn = np.zeros(NX)
     P_sn = np.zeros((NX, NX))
@@ -1315,6 +1344,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
         rej_share = sc[ST_REJ_SHARE]                     # recent share of gated fixes (EWMA)
         t_last_fix = sc[ST_T_LAST_FIX]
         t_last_vacc = sc[ST_T_LAST_VACC]
+        eps_since = sc[ST_EPS_SINCE]
         zupt_sd = par[PAR_ZUPT_SD]
         omin2 = par[PAR_OMEGA_MIN] ** 2
         chi2 = par[PAR_GATE_CHI2]
@@ -1324,6 +1354,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
         for kx in range(k0, k1):
             ko = kx - p_off
             T = dt[kx] if kx > 0 else 0.0
+            jump_e = 0.0
+            jump_n = 0.0
             t_now += T
             st = static[kx]
             if eps_w[kx] != w_eps:                      # the eps model of the step into kx
@@ -1336,6 +1368,24 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                 # one prediction of the fused state serves both (then each capped)
                 if T > 0.0:
                     predict_uncapped(xg, Pg, T, st, par, ones)
+                if (has_gnss[kx] and not st and chi2 > 0.0 and n_acc >= par[PAR_GATE_WARMUP]
+                        and par[PAR_EPS_GATE_S] > 0.0):
+                    # eps gate (as ekf/aekf's bias gate; shared FR only, where the fused
+                    # state is the local filters' start): multipath decorrelates as the car
+                    # moves; an eps outside the gate of its stationary distribution for
+                    # gate_reset_s is not multipath but a position the fixes left (a
+                    # reflection that ended): it goes into the position.  Without it a 160-s
+                    # reflection left 22 m in eps and the track 22 m from clean fixes for
+                    # 80 s (docs/decisions/0062)
+                    b2 = xg[IEPS_E] * xg[IEPS_E] + xg[IEPS_N] * xg[IEPS_N]
+                    verdict, eps_since = chi2_gate(b2, chi2 * par[PAR_EPS_SD] ** 2, t_now,
+                                                   eps_since, par[PAR_EPS_GATE_S],
+                                                   RESET_AFTER_FIRST_REJECT, False)
+                    if verdict == GATE_RESET:
+                        jump_e = xg[IEPS_E]
+                        jump_n = xg[IEPS_N]
+                        shift_prior(xg, Pg, jump_e, jump_n)
+                        p_counters[C_GATE_RESETS] += 1
                 s1 = d1[0] * d1[0]
                 s2 = d2[0] * d2[0]
                 for i in range(NX):
@@ -1655,6 +1705,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
             if p_store:
                 for i in range(NX):
                     p_xs[kx - k0, i] = xg[i]
+                p_xs[kx - k0, JUMP_E] = jump_e
+                p_xs[kx - k0, JUMP_N] = jump_n
                 pack(Pg, p_Ps[kx - k0])
         sc[ST_T_NOW] = t_now
         sc[ST_T_LAST_ACC] = t_last_acc
@@ -1666,9 +1718,10 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
         sc[ST_REJ_SHARE] = rej_share
         sc[ST_T_LAST_FIX] = t_last_fix
         sc[ST_T_LAST_VACC] = t_last_vacc
+        sc[ST_EPS_SINCE] = eps_since
         if job >= n_fwd:                            # RTS backward over the segment
             _smooth_segment(segment, xs_seg, Ps_seg, k0, k1 - 1, k0, n, dt, static, has_gnss,
-                            eps_w, par, x_sn, P_sn, out, stats)
+                            eps_w, par, x_sn, P_sn, u_next, out, stats)
     return out, gnss_used, gnss_rej, nis_out, beta_out, rfac_out, counters, xs, Ps, stats
 
 
@@ -1707,18 +1760,20 @@ def smooth_fused(xs: np.ndarray, Ps: np.ndarray, dt: np.ndarray, static: np.ndar
     P_sn = np.zeros((NX, NX))
     stats = np.zeros(2, np.int64)
     _smooth_segment(n, xs, Ps, 0, n - 1, 0, n, dt, static, has_gnss, eps_w, par, x_sn, P_sn,
-                    out, stats)
+                    np.zeros(2), out, stats)
     return out, stats[0], stats[1]
 
 
 def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, has_gnss, eps_w, par, x_sn,
-                 P_sn, out, stats):  # hints: _smooth_segment
+                 P_sn, u_next, out, stats):  # hints: _smooth_segment
     """Backward RTS steps k = k_hi, k_hi - 1, .., k_lo over the fused posteriors
     ``xs[k - off]``, ``Ps[k - off]`` (packed) of an n-epoch pass.
 
     ``x_sn, P_sn`` enter as the smoothed estimate at k_hi + 1 (ignored when
     k_hi = n - 1: the smoothed estimate there is the filtered one) and leave as
-    the one at k_lo; ``out[:, k]`` receives it (rows as the forward ``out``);
+    the one at k_lo; ``u_next`` (2,) likewise: the eps gate's jump at the step into
+    k_hi + 1 (columns ``JUMP_E, JUMP_N`` of ``xs``, :func:`shift_prior`), left as the
+    one into k_lo; ``out[:, k]`` receives it (rows as the forward ``out``);
     ``stats[0]`` counts epochs whose smoothed position block is not SPD,
     ``stats[1]`` the restarts of the guard below.  Compiled through
     :func:`_smooth_segment` (``segment``, unused here, selects it at compile time).
@@ -1750,6 +1805,10 @@ def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, has_gnss, eps_
             predict(x_prior, P_prior, dt[k + 1], static[k + 1], par, ones)
             if held_step(k + 1, dt, static, has_gnss, par):
                 held_noise(x_prior, P_prior, dt[k + 1], par)
+            if k == k_hi:
+                shift_prior(x_prior, P_prior, u_next[0], u_next[1])
+            else:
+                shift_prior(x_prior, P_prior, xs[k + 1 - off, JUMP_E], xs[k + 1 - off, JUMP_N])
             rts_step_fused(x_post, P_post, x_prior, P_prior, dt[k + 1], static[k + 1],
                            eps_decay(x_post, dt[k + 1], par), x_sn, P_sn, x_s, P_s, wL, wB,
                            dx)
@@ -1772,6 +1831,8 @@ def smooth_range(segment, xs, Ps, off, k_hi, k_lo, n, dt, static, has_gnss, eps_
         if not (P_sn[IE, IE] > 0.0 and P_sn[IN, IN] > 0.0
                 and P_sn[IE, IN] ** 2 < P_sn[IE, IE] * P_sn[IN, IN]):
             stats[0] += 1
+    u_next[0] = xs[k_lo - off, JUMP_E]
+    u_next[1] = xs[k_lo - off, JUMP_N]
 
 
 @njit(cache=True)

@@ -73,7 +73,7 @@ def test_smoothed_pass_stores_no_per_epoch_covariance(urban) -> None:
     for a, b in zip(smoothed[1:7], plain[1:7], strict=True):
         np.testing.assert_array_equal(a, b)
     full = fkf.forward("fkf", prep, True, 0)
-    assert full[7].shape == (n, kf.NX) and full[8].shape == (n, kf.NPACK)
+    assert full[7].shape == (n, kf.NXS) and full[8].shape == (n, kf.NPACK)
     np.testing.assert_array_equal(full[0], plain[0])
 
 
