@@ -154,7 +154,7 @@ def _screen(epochs: Epochs, params: Params,
     fit["graph"]["nlos_last_kernel"] = ""
     outcome = smooth_graph(epochs, init, fit, sigmas=False)  # the fixes weighed, not the track
     if outcome.result is None or len(outcome.gnss_weight) != len(epochs):
-        return epochs, _not_applied(outcome.message)
+        return epochs, not_applied(outcome.message)
     w = outcome.gnss_weight
     fix = epochs.has_gnss
     out = fix & np.isfinite(w) & (w < float(g["nlos_screen_min_weight"]))
@@ -185,7 +185,7 @@ def _screen(epochs: Epochs, params: Params,
                       float(fit["graph"]["nlos_segment_keep_m"]))
     kept = int(np.count_nonzero(fix & ~out))
     if kept < float(g["nlos_screen_min_kept"]) * max(int(fix.sum()), 1):
-        return epochs, _not_applied(f"only {kept} of {int(fix.sum())} fixes agree")
+        return epochs, not_applied(f"only {kept} of {int(fix.sum())} fixes agree")
     if not out.any():
         return epochs, {"nlos_screened": 0}
     # ... and only if the forward track of the fixes kept (the default output) stays within a
@@ -195,7 +195,7 @@ def _screen(epochs: Epochs, params: Params,
     far_m, at_s = farthest_window(epochs, judge_kept(epochs, fix & ~out, run, forward, outcome),
                                   fix)
     if far_m > float(g["nlos_screen_max_offset_m"]):
-        return epochs, _not_applied(f"the track of the {kept} fixes it would keep lies {far_m:.0f} m "
+        return epochs, not_applied(f"the track of the {kept} fixes it would keep lies {far_m:.0f} m "
                                     f"from the fixes around {at_s:.0f} s")
     info = {"nlos_screened": int(out.sum())}
     if math.isfinite(outcome.odo_scale):
@@ -205,7 +205,7 @@ def _screen(epochs: Epochs, params: Params,
     return dataclasses.replace(epochs, has_gnss=fix & ~out), info
 
 
-def _not_applied(why: str) -> dict:
+def not_applied(why: str) -> dict:
     """The screen's info when it could not judge the fixes (the filters then follow them):
     ``nlos_screen_not_applied`` is ``why``, ``nlos_screen`` "not applied: ``why``"."""
     return {"nlos_screen": f"not applied: {why}", "nlos_screen_not_applied": why}
@@ -360,4 +360,5 @@ def edge_fixes(epochs: Epochs, track: FilterResult, kept: np.ndarray, out: np.nd
     return drop
 
 
-__all__ = ["edge_fixes", "far_fixes", "farthest_window", "judge_kept", "last_run_drift", "screen"]
+__all__ = ["edge_fixes", "far_fixes", "farthest_window", "judge_kept", "last_run_drift",
+           "not_applied", "screen"]
