@@ -691,23 +691,29 @@ def heading_row(x: np.ndarray, h: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def distance_row(x: np.ndarray, h: np.ndarray, t_m: float, v_lin: float, psi_hint: float) -> float:
+def distance_row(x: np.ndarray, h: np.ndarray, t_m: float, v_lin: float, psi_hint: float,
+                 heading: bool) -> float:
     """Fill h with the odometer-distance row; return the prediction T_m |v| + q_s (m).
 
     Tang et al. eqs. (13)-(14) with the erratum (divide by v, not v2).  Below
-    ``v_lin`` the speed is linearised along the heading ``psi_hint`` instead.
+    ``v_lin`` the speed is linearised along the heading ``psi_hint`` instead, and so it is
+    where the velocity points away from that heading (``heading``: the gyro gave it this
+    epoch): the odometer measures travel along the vehicle's heading, and |v| cannot tell a
+    velocity that the constant-acceleration model carried through a stop into reverse
+    (which then grew backwards, and the heading rows near pi threw the track 70 m off after
+    a stop without fixes; docs/decisions/0064).
     """
     ve = x[IVE]
     vn = x[IVN]
     v = math.sqrt(ve * ve + vn * vn)
     h[:] = 0.0
     h[IQS] = 1.0
-    if v >= v_lin:
+    ue = math.sin(psi_hint)
+    un = math.cos(psi_hint)
+    if v >= v_lin and not (heading and ue * ve + un * vn < 0.0):
         h[IVE] = t_m * ve / v
         h[IVN] = t_m * vn / v
         return t_m * v + x[IQS]
-    ue = math.sin(psi_hint)
-    un = math.cos(psi_hint)
     h[IVE] = t_m * ue
     h[IVN] = t_m * un
     return t_m * (ue * ve + un * vn) + x[IQS]
@@ -1548,7 +1554,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                                        par, r_table, rfac, u_last):
                                 p_counters[C_R_ADAPT] += 1
                         if do_dist:
-                            pred = distance_row(x2, h, t_m[kx], par[PAR_V_LIN], psi_hint)
+                            pred = distance_row(x2, h, t_m[kx], par[PAR_V_LIN], psi_hint,
+                                                not math.isnan(theta[kx]))
                             y_dist = dist[kx] - pred
                             hph_dist = hph(P2, h)
                             y = y_dist
@@ -1581,7 +1588,8 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                             p_counters[C_HEADING] += 1
                     if do_dist:
                         if not (adaptive and not do_head):  # else h, y, hPh of the window's row
-                            pred = distance_row(x2, h, t_m[kx], par[PAR_V_LIN], psi_hint)
+                            pred = distance_row(x2, h, t_m[kx], par[PAR_V_LIN], psi_hint,
+                                                not math.isnan(theta[kx]))
                             y_dist = dist[kx] - pred
                             hph_dist = hph(P2, h)
                         y = y_dist

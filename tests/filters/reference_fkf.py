@@ -109,7 +109,7 @@ def wrap(a: float) -> float:
 
 
 def row(name: str, x: np.ndarray, t_m: float = 0.0, v_lin: float = 0.0,
-        psi_hint: float = 0.0) -> tuple[np.ndarray, float]:
+        psi_hint: float = 0.0, heading: bool = False) -> tuple[np.ndarray, float]:
     """Measurement row H and prediction h(x) (Tang et al. eqs. (6), (8), (10)-(14) with errata)."""
     H = np.zeros(NX)
     ve, vn = x[1], x[4]
@@ -125,10 +125,10 @@ def row(name: str, x: np.ndarray, t_m: float = 0.0, v_lin: float = 0.0,
         return H, math.atan2(ve, vn) + x[8]
     v = math.hypot(ve, vn)
     H[9] = 1
-    if v >= v_lin:
+    ue, un = math.sin(psi_hint), math.cos(psi_hint)
+    if v >= v_lin and not (heading and ue * ve + un * vn < 0):   # not reversed against it
         H[1], H[4] = t_m * ve / v, t_m * vn / v
         return H, t_m * v + x[9]
-    ue, un = math.sin(psi_hint), math.cos(psi_hint)
     H[1], H[4] = t_m * ue, t_m * un
     return H, t_m * (ue * ve + un * vn) + x[9]
 
@@ -308,7 +308,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                         H, h = row("heading", x2)
                         win[2].push(wrap(th - h), H @ P2 @ H + win[2].factor * R_head, par)
                     if do_dist:
-                        H, h = row("dist", x2, t_m, par[kf.PAR_V_LIN], psi_hint)
+                        H, h = row("dist", x2, t_m, par[kf.PAR_V_LIN], psi_hint, not math.isnan(th))
                         win[3].push(dist - h, H @ P2 @ H + win[3].factor * R_dist, par)
                 if do_head:
                     H, h = row("heading", x2)
@@ -325,7 +325,7 @@ def run_reference(prep: Prepared, kind: str, smooth: bool = False) -> dict[str, 
                         x2, P2 = kf_update(x2, P2, H, y, R)
                         t_head = t_dr = t
                 if do_dist:
-                    H, h = row("dist", x2, t_m, par[kf.PAR_V_LIN], psi_hint)
+                    H, h = row("dist", x2, t_m, par[kf.PAR_V_LIN], psi_hint, not math.isnan(th))
                     y, R = dist - h, win[3].factor * R_dist
                     chi2 = par[kf.PAR_HEAD_CHI2]
                     if not (chi2 > 0 and y * y > chi2 * (H @ P2 @ H + R)):
