@@ -86,7 +86,11 @@ stop without an odometer left a GNSS-noise velocity pointing backwards, and the
 heading residual near pi threw v off, fault case no_odo); below ``v_lin`` the
 distance row is linearised
 along the latest heading instead of ``v/|v|``: no division by a speed that
-can be zero.  Heading residuals are wrapped to (-pi, pi] and gated
+can be zero; so it is where the velocity points against the gyro's heading (the
+constant-acceleration model carried it through a stop into reverse, which |v| cannot
+see: decisions/0064).  fkf/fafkf's eps gate: an eps outside the fix gate's bound on its
+stationary distribution for ``[gnss] gate_reset_s`` while moving goes into the position
+(:func:`shift_prior`; decisions/0062).  Heading residuals are wrapped to (-pi, pi] and gated
 (chi-square(1) at ``[gnss] gate_prob``); after ``gate_reset_s`` of rejected
 headings q_w is re-aligned (``q_w += y``, its variance raised by ``y^2``), so
 a heading that outran the q_w random walk cannot lock the DR filter out.
