@@ -185,10 +185,11 @@ def _kept(sim, r) -> tuple[int, int, int]:
 def test_the_far_fixes_of_kept_runs_are_left_out_too() -> None:
     """A 283-s city drive with 5-Hz gyro and odometer (seed 19, fixes 27 m RMS): a few of the
     fixes the screen kept sat metres off the fit's track, the edges of reflections.  Left
-    out at 3 of their sigmas, fkf + RTS 3.32 -> 1.41 m, with 4 reflected fixes fewer and 3
-    clean ones of 342 lost."""
+    out at 3 of their sigmas, fkf + RTS 1.31 -> 1.05 m, with a reflected fix fewer and 3
+    clean ones of 342 lost.  (3.28 -> 1.36 m before fkf's velocity stopped reversing at a
+    stop, decisions/0064: most of what those fixes cost went with it.)"""
     on, off, k_on, k_off = _fkf_rts_with_and_without(19, "nlos_screen_fix_sigmas")
-    assert off.rmse_m > 3.0 and on.rmse_m < 1.7
+    assert on.rmse_m < 1.2 and off.rmse_m > 1.2 * on.rmse_m
     assert k_on[0] < k_off[0]
     assert k_on[1] > 0.97 * k_on[2]
 
