@@ -81,8 +81,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 # them: ekf/aekf's error states keep their clear-sky sigma (the NLOS drive's
                 # 20 m let the dead reckoning carry the track 70 m from fixes at 25 m; white
                 # fixes thrashed the gate; decisions/0061)
-                model_params = copy.deepcopy(model_params)
-                model_params["aekf"]["gnss_err_sd_m"] = float(params["aekf"]["gnss_err_sd_m"])
+                model_params = clear_sky_errors(model_params, params)
             if epochs.dr_unhealthy:
                 model_params = follow_the_fixes(model_params)
                 info["pdop_r_factors"] = "off: the dead reckoning is unhealthy"
@@ -113,9 +112,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                     info = not_applied(f"the {name} track of the fixes it kept lies {far_m:.0f} m "
                                        f"from the fixes around {at_s:.0f} s")
                     model_epochs, model_params = gnss_error_model(epochs, params)
-                    model_params = copy.deepcopy(model_params)
-                    model_params["aekf"]["gnss_err_sd_m"] = float(params["aekf"]["gnss_err_sd_m"])
-                    result = fn(model_epochs, model_params)
+                    result = fn(model_epochs, clear_sky_errors(model_params, params))
             else:
                 result = fn(model_epochs, model_params)
             result.info.update(info)
@@ -128,6 +125,15 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
         _BARE[name] = fn
         return fn
     return deco
+
+
+def clear_sky_errors(model_params: Params, params: Params) -> Params:
+    """``model_params`` (the GNSS model's) with ekf/aekf's error states at the clear-sky sigma
+    of ``params`` instead of an NLOS drive's: where the NLOS screen is not applied, no dead
+    reckoning outvotes the fixes (decisions/0061)."""
+    out = copy.deepcopy(model_params)
+    out["aekf"]["gnss_err_sd_m"] = float(params["aekf"]["gnss_err_sd_m"])
+    return out
 
 
 def follow_the_fixes(params: Params) -> Params:
