@@ -18,6 +18,8 @@ simulator's 1-4 s (a receiver whose own filter blends a reflection in slowly).
 yaw-rate sensor's) instead of the simulator's wandering MEMS bias.
 ``--gyro-scale-error K``: the gyro reads K more of the true yaw rate than the simulator's own
 scale error (0.03: a phone gyro's 3 %).
+``--gyro-phase S``: the gyro sampled S seconds after the odometer instead of at the same
+instants (two CAN messages; 0.1 at 5 Hz: half a period apart).
 ``--nlos-wander SD,DIST``: the canyon's reflected-signal errors wander instead of holding
 steps: a Gauss-Markov error of SD metres per axis that decorrelates over DIST metres driven
 (``simulate.NLOS_SHAPE = "wander"``).
@@ -71,6 +73,8 @@ def main() -> int:
                     help="the gyro's bias constant over the drive (default: it wanders)")
     ap.add_argument("--gyro-scale-error", type=float, default=0.0, metavar="K",
                     help="extra gyro scale error, e.g. 0.03 (default: the simulator's own)")
+    ap.add_argument("--gyro-phase", type=float, default=0.0, metavar="S",
+                    help="the gyro sampled S s after the odometer (default: the same instants)")
     ap.add_argument("--nlos-wander", default="", metavar="SD,DIST",
                     help="wandering reflection errors, m per axis and m driven (default: steps)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
@@ -89,6 +93,7 @@ def main() -> int:
     if args.steady_gyro:
         simulate.GYRO_BIAS_TAU_S = math.inf
     simulate.GYRO_EXTRA_SCALE = args.gyro_scale_error
+    simulate.GYRO_PHASE_S = args.gyro_phase
     if args.nlos_wander:
         simulate.NLOS_SHAPE = "wander"
         simulate.NLOS_WANDER_SD_M, simulate.NLOS_WANDER_DIST_M = _pair(args.nlos_wander)

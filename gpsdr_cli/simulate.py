@@ -685,6 +685,10 @@ GYRO_BIAS_TAU_S = 3600.0
 #: a gyro scale error added to the drawn one (``(1 + scale + this) x`` the true rate; a phone
 #: gyro's 3 %: ``benchmarks/short_city.py --gyro-scale-error``)
 GYRO_EXTRA_SCALE = 0.0
+#: the gyro sampled this many seconds after the odometer (rounded to the 10-ms truth grid,
+#: less than one gyro period): real logs stamp a CAN yaw rate and wheel speed apart
+#: (``benchmarks/short_city.py --gyro-phase``); 0 stamps both at the same instants
+GYRO_PHASE_S = 0.0
 
 
 # --------------------------------------------------------------------------- error models of
@@ -1132,8 +1136,9 @@ def _accel(rng: np.random.Generator, truth: pd.DataFrame, pitch: np.ndarray, rat
 
 def _gyro(rng: np.random.Generator, truth: pd.DataFrame, rate_hz: float) -> tuple[YawRates, dict]:
     step = round(TRUTH_RATE_HZ / rate_hz)
-    t = truth["t_ns"].to_numpy()[::step]
-    omega = truth["yaw_rate"].to_numpy()[::step]
+    phase = round(GYRO_PHASE_S * TRUTH_RATE_HZ) % step
+    t = truth["t_ns"].to_numpy()[phase::step]
+    omega = truth["yaw_rate"].to_numpy()[phase::step]
     m = len(t)
     dt = step * DT_S
     noise_sd = math.radians(0.1)       # white noise per sample, rad/s
