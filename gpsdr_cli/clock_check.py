@@ -20,7 +20,9 @@ when the user set either offset.  Units: seconds, m/s, rad/s; stamps in ns.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -185,6 +187,112 @@ def _course_rate(t_s: np.ndarray, course_deg: np.ndarray, speed: np.ndarray
     return 0.5 * (t[1:] + t[:-1])[use], -(dc[use] / dt[use])
 
 
+#: a receiver clock step: the fixes' stamps go back by more than ``[time] dr_clock_min_s`` from
+#: one fix to the next (in the log's order); at most this many are judged (more: a log whose
+#: stamps are scrambled, which the alignment's ordering handles record by record)
+MAX_GNSS_STEPS = 4
+#: a stretch of fixes between two steps is timed only when it has this many fixes
+MIN_STRETCH_FIXES = 50
+
+
+def _stretch_misfit(t_fix: np.ndarray, speed: np.ndarray, course: np.ndarray, drive,
+                    t_base: int) -> Callable[[float], float] | None:
+    """For one stretch of fixes: the misfit of the dead reckoning against it (odometer speed
+    to Doppler speed, else yaw rate to course rate; :func:`_misfit`) at its best lag within
+    ``FINE_HALF_S`` of a given lag (s); None when the stretch cannot be timed."""
+    if drive.odo is not None and len(drive.odo) >= 50:
+        t_r, v_r = t_fix, speed
+        t_x = (drive.odo.t_ns - t_base) / NS_PER_S
+        v_x = np.asarray(drive.odo.speed_mps, float)
+        min_sd = MIN_SD["odo"]
+    elif drive.gyro is not None and len(drive.gyro) >= 50:
+        t_r, v_r = _course_rate(t_fix, course, speed)
+        t_x = (drive.gyro.t_ns - t_base) / NS_PER_S
+        v_x = np.asarray(drive.gyro.yaw_rate_radps, float)
+        min_sd = MIN_SD["gyro"]
+    else:
+        return None
+    ok = np.isfinite(t_x) & np.isfinite(v_x)
+    t_x, v_x = t_x[ok], v_x[ok]
+    fine = np.isfinite(t_r) & np.isfinite(v_r)
+    t_r, v_r = t_r[fine], v_r[fine]
+    if len(t_r) < MIN_STRETCH_FIXES or len(t_x) < 50 or float(np.std(v_r)) < min_sd:
+        return None
+    near = np.arange(-FINE_HALF_S, FINE_HALF_S + 0.5 * FINE_STEP_S, FINE_STEP_S)
+    return lambda lag: float(np.min(_misfits(t_r, v_r, t_x, v_x, lag + near)))
+
+
+def gnss_clock_steps(drive, params: Params):
+    """``(drive, notes)``: the drive with the fixes after a receiver clock step re-stamped
+    onto the dead reckoning's clock, where the dead reckoning says so.
+
+    A receiver (or the logger stamping its sentences) whose clock steps back by seconds in
+    mid-drive leaves the fixes after the step seconds early: ordering the stamps drops the
+    overlap, and every later fix then met the dead reckoning of another moment (a 2-s step
+    took every filter from 0.4 m to 10 m on a simulated drive).  The log itself says by how
+    much: the stamps go back by the step less one fix period.  So the hypotheses are few: the
+    dead reckoning runs on the clock of one stretch between steps, and the others are off it by
+    the steps between.  Each hypothesis is scored by the misfit of the odometer's speed to the
+    Doppler speed (else the gyro's rate to the course rate; :func:`_misfit`) over every
+    stretch, each within ``FINE_HALF_S`` of its hypothesised lag, and the best is taken when its
+    misfit is under :data:`CLEAR_RATIO` of the stamps' as logged.  (Searched freely, a
+    city's repeating turns matched a 200-s stretch of course rates 108 s off.)  A dead
+    reckoning seconds off every stretch is :func:`check`'s to find.  Not run with ``[time]
+    dr_clock_check = false``."""
+    tp = params["time"]
+    g = drive.gnss
+    if not tp["dr_clock_check"] or g is None or len(g) < 2 * MIN_STRETCH_FIXES:
+        return drive, []
+    min_s = float(tp["dr_clock_min_s"])
+    t = np.asarray(g.t_ns, np.int64)
+    dt = np.diff(t)
+    steps = np.flatnonzero(dt < -round(min_s * NS_PER_S)) + 1
+    if not 0 < len(steps) <= MAX_GNSS_STEPS or not (dt > 0).any():
+        return drive, []
+    period = int(np.median(dt[dt > 0]))
+    bounds = np.concatenate(([0], steps, [len(t)]))
+    # clock of stretch k relative to stretch 0 (s; the stamps after a step back are early)
+    clock = np.concatenate(([0.0], -np.cumsum((t[steps - 1] - t[steps] + period) / NS_PER_S)))
+    usable = g.valid & (g.fix_quality >= 1)
+    t_base = int(t[usable][0]) if usable.any() else int(t[0])
+    speed = np.asarray(g.speed_mps, float)
+    course = np.asarray(g.course_deg, float)
+    fits, sizes = [], []
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        u = np.flatnonzero(usable[a:b]) + a
+        fits.append(_stretch_misfit((t[u] - t_base) / NS_PER_S, speed[u], course[u], drive, t_base)
+                    if len(u) >= MIN_STRETCH_FIXES else None)
+        sizes.append(len(u))
+    timed = [k for k, f in enumerate(fits) if f is not None]
+    if len(timed) < 2:
+        return drive, []
+
+    def score(shifts: np.ndarray) -> float:
+        """Fix-weighted mean square misfit with stretch k moved by shifts[k] (s)."""
+        return sum(sizes[k] * fits[k](-shifts[k]) ** 2 for k in timed) / sum(sizes[k] for k in timed)
+
+    as_logged = score(np.zeros(len(fits)))
+    best = min((score(clock[r] - clock), r) for r in timed)
+    if not (best[0] < CLEAR_RATIO ** 2 * as_logged):
+        return drive, []
+    shifts = clock[best[1]] - clock
+    new_t, notes = t.copy(), []
+    for k, shift in enumerate(shifts):
+        if shift == 0.0:
+            continue
+        a, b = int(bounds[k]), int(bounds[k + 1])
+        new_t[a:b] += round(shift * NS_PER_S)
+        where = (f"from fix {a + 1}, where their time stamps go back "
+                 f"{(t[a - 1] - t[a]) / NS_PER_S:.2f} s," if a > 0 else "from the first")
+        upto = "the end" if b == len(t) else f"fix {b}, where they go back " \
+            f"{(t[b - 1] - t[b]) / NS_PER_S:.2f} s"
+        notes.append(f"GNSS: the receiver's clock steps: the {b - a} fixes {where} to {upto} "
+                     f"match the dead reckoning {shift:+.2f} s later and were re-stamped so "
+                     f"(misfit {math.sqrt(best[0]):.3g} against {math.sqrt(as_logged):.3g} as "
+                     "logged; [time] dr_clock_check = false keeps them)")
+    return dataclasses.replace(drive, gnss=dataclasses.replace(g, t_ns=new_t)), notes
+
+
 def check(drive, params: Params) -> tuple[Params, list[str]]:
     """``params`` with ``[time] odo_offset_s`` / ``gyro_offset_s`` set where the stream's
     clock is clearly seconds off the receiver's, and the warning lines saying so."""
@@ -236,4 +344,4 @@ def check(drive, params: Params) -> tuple[Params, list[str]]:
     return out, notes
 
 
-__all__ = ["ClockOffset", "check", "find_offset"]
+__all__ = ["ClockOffset", "check", "find_offset", "gnss_clock_steps"]

@@ -694,7 +694,9 @@ def fuse(drive: Drive, params: Params, reference: Reference | None = None, *,
     frame = choose_frame(drive, params)
     from . import clock_check
 
+    drive, step_notes = clock_check.gnss_clock_steps(drive, params)
     params, clock_notes = clock_check.check(drive, params)
+    clock_notes = step_notes + clock_notes
     for note in clock_notes:
         _warn(drive, note)
     from . import rtk_odo_lag

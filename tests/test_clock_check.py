@@ -88,3 +88,51 @@ def test_the_real_drive_is_not_moved() -> None:
                        params=config.defaults())
     p, notes = clock_check.check(drive, config.defaults())
     assert notes == [] and p["time"]["odo_offset_s"] == 0.0
+
+
+def _gnss_step_back(drive, at_s: float, step_s: float):
+    """The receiver's stamps from ``at_s`` on ``step_s`` seconds early (a clock step back)."""
+    d = copy.deepcopy(drive)
+    t = d.gnss.t_ns.copy()
+    after = t >= t[0] + round(at_s * 1e9)
+    t[after] -= round(step_s * 1e9)
+    d.gnss = dataclasses.replace(d.gnss, t_ns=t)
+    return d, after
+
+
+@pytest.mark.parametrize(("with_odo", "at_s"), [(True, 200.0), (False, 200.0), (True, 450.0)])
+def test_a_receiver_clock_that_steps_back_is_restamped(with_odo: bool, at_s: float) -> None:
+    """The fixes' stamps step back 2 s at 200 s (or 450 s: the stretch before the step is the
+    shorter one) and stay so: the stretch off the dead reckoning's clock (the odometer's speed,
+    else the gyro against the course rate) is re-stamped by 2 s to 0.05 s, the other kept as
+    logged.  Fused, the track is back within 1.5 x the clean drive's error; as logged (the
+    check off) every fix after the step sits 2 s of travel off (about 20 m)."""
+    sim = simulate_drive("urban_canyon", 2, duration_s=600.0)
+    d, after = _gnss_step_back(sim.drive, at_s, 2.0)
+    if not with_odo:
+        d.odo = None
+    out, notes = clock_check.gnss_clock_steps(d, config.defaults())
+    assert len(notes) == 1 and "re-stamped" in notes[0] and "go back 1.80 s" in notes[0]
+    moved = (out.gnss.t_ns - d.gnss.t_ns) / 1e9
+    assert np.all(moved[~after] == 0.0)
+    np.testing.assert_allclose(moved[after], 2.0, atol=0.05)
+    truth = sim.truth[["t_ns", "lat", "lon"]]
+    p = config.defaults()
+    clean = fuse(sim.drive if with_odo else dataclasses.replace(sim.drive, odo=None), p, truth)
+    res = fuse(d, p, truth)
+    off = fuse(d, p | {"time": p["time"] | {"dr_clock_check": False}}, truth)
+    assert any("receiver's clock steps" in w for w in res.drive_warnings)
+    assert res.summary()["rmse_m"] < 1.5 * clean.summary()["rmse_m"]
+    assert off.summary()["rmse_m"] > 3.0 * res.summary()["rmse_m"]
+
+
+def test_no_restamping_without_a_step_or_a_judge() -> None:
+    """No step: nothing moves.  A step with no gyro and no odometer: nothing to judge it by,
+    the fixes stay as logged."""
+    sim = simulate_drive("urban_canyon", 2, duration_s=300.0)
+    out, notes = clock_check.gnss_clock_steps(sim.drive, config.defaults())
+    assert notes == [] and out is sim.drive
+    d, _ = _gnss_step_back(sim.drive, 150.0, 2.0)
+    d.odo = d.gyro = None
+    out, notes = clock_check.gnss_clock_steps(d, config.defaults())
+    assert notes == [] and out is d
