@@ -478,6 +478,11 @@ def _main_pass(epochs: Epochs, fparams: Params, params: Params,
         _warn(work, f"reflected signals (NLOS): {n_screened} of {int(epochs.has_gnss.sum())} "
                     "fixes disagree with the whole drive's dead reckoning and were not used "
                     "([gnss] nlos_screen)")
+    n_doppler = int(result.info.get("nlos_doppler_dropped") or 0)
+    if n_doppler:
+        _warn(work, f"reflected signals (NLOS): {n_doppler} receiver velocities more than "
+                    f"{float(fparams['gnss']['nlos_doppler_odo_max_mps']):g} m/s off the "
+                    "odometer's speed were not used ([gnss] nlos_doppler_odo_max_mps)")
     skipped = result.info.get("nlos_screen_skipped")
     not_applied = result.info.get("nlos_screen_not_applied")
     if not_applied:

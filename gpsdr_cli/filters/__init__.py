@@ -37,7 +37,7 @@ NAMES: tuple[str, ...] = tuple(MODULES)
 
 def register(name: str) -> Callable[[RunFn], RunFn]:
     def deco(fn: RunFn) -> RunFn:
-        from .gnss_model import gnss_error_model, reflected_doppler
+        from .gnss_model import doppler_against_odometer, gnss_error_model, reflected_doppler
 
         @functools.wraps(fn)
         def run(epochs, params):  # every filter sees the same GNSS error model
@@ -51,7 +51,18 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             # ... and only with healthy dead reckoning: a clipped gyro or an odometer that reads
             # wrong or falls silent cannot outvote fixes (it drove city tracks 250 m off)
             nlos = model_epochs.nlos_drive and not epochs.dr_unhealthy
+            # ... whose receiver velocities, where reflected, the odometer shows: one more than
+            # a wheel's error off its speed is not the car's (decisions/0068)
+            n_doppler = 0
+            if nlos and epochs.has_odo.any():
+                epochs, n_doppler = doppler_against_odometer(
+                    epochs, float(params["gnss"]["nlos_doppler_odo_max_mps"]),
+                    float(params["gnss"]["nlos_velocity_min_mps"]))
+                if n_doppler:
+                    model_epochs, model_params = gnss_error_model(epochs, params)
             screened, info = screen(epochs, params, nlos, bare("ekf"))
+            if n_doppler:
+                info["nlos_doppler_dropped"] = n_doppler
             if model_epochs.nlos_drive and epochs.dr_unhealthy:
                 info["nlos_screen_skipped"] = "the dead reckoning is unhealthy"
             if info.get("nlos_screened"):  # the fixes left are judged afresh

@@ -338,6 +338,38 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     return out
 
 
+def doppler_against_odometer(epochs: Epochs, max_mps: float, min_speed_mps: float = 4.0
+                             ) -> tuple[Epochs, int]:
+    """``(epochs, n)``: the receiver's speed and course cleared at the ``n`` fixes whose Doppler
+    speed differs from the odometer's (linear between its records, scaled by the drive's median
+    ratio of the two above ``min_speed_mps``) by more than ``max_mps`` (m/s; ``[gnss]
+    nlos_doppler_odo_max_mps``).  A clean Doppler speed and a wheel's agree to a few tenths
+    (the wheel's noise and its lag in a 3-m/s^2 braking: 0.1-0.2 m/s); a reflected signal's
+    Doppler is off by about 1 m/s (decisions/0029), and on the drive's few kept fixes such a
+    velocity at 0.2 m/s turned the screen's judge, then the filters, tens of metres off
+    (decisions/0067, 0068).  The position of such a fix stays: the screen judges it."""
+    f = np.flatnonzero(epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps))
+    o = np.flatnonzero(epochs.has_odo & np.isfinite(epochs.odo_speed_mps))
+    if len(f) < 10 or len(o) < 10 or max_mps <= 0:
+        return epochs, 0
+    t = np.asarray(epochs.t_ns, np.int64)
+    odo = np.interp((t[f] - t[o[0]]).astype(float), (t[o] - t[o[0]]).astype(float),
+                    epochs.odo_speed_mps[o])
+    inside = (t[f] >= t[o[0]]) & (t[f] <= t[o[-1]])
+    dop = epochs.gnss_speed_mps[f]
+    moving = inside & (odo > min_speed_mps) & (dop > min_speed_mps)
+    if moving.sum() < 10:
+        return epochs, 0
+    scale = float(np.median(dop[moving] / odo[moving]))
+    bad = inside & (np.abs(dop - scale * odo) > max_mps)
+    if not bad.any():
+        return epochs, 0
+    speed, course = epochs.gnss_speed_mps.copy(), epochs.gnss_course_rad.copy()
+    speed[f[bad]] = np.nan
+    course[f[bad]] = np.nan
+    return dataclasses.replace(epochs, gnss_speed_mps=speed, gnss_course_rad=course), int(bad.sum())
+
+
 def rtk_drive(epochs: Epochs, params: Params) -> bool:
     """At least ``[gnss] rtk_share`` of the drive's usable fixes are RTK fixed."""
     return epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])

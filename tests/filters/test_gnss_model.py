@@ -4,6 +4,8 @@ fix quality decides the noise, and fixes whose chords disagree with the dead rec
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,7 @@ from gpsdr_cli.align import base_sigma, build_epochs
 from gpsdr_cli.filters.gnss_model import (
     chord_mismatch_m,
     chord_vector_mismatch_m,
+    doppler_against_odometer,
     gnss_error_model,
 )
 from gpsdr_cli.testing.faults import drop_streams, with_drive
@@ -311,3 +314,28 @@ def test_false_fix_check_needs_the_receivers_velocity():
     nan = np.full(len(ep), np.nan)
     blind = dataclasses.replace(ep, gnss_speed_mps=nan, gnss_course_rad=nan)
     assert not false_fixes(blind, p, cm).any()
+
+
+def test_doppler_off_the_odometer_is_left_out():
+    """An open-sky drive (100-Hz odometer, its speed 2 % off the truth) with 40 fixes' Doppler
+    speeds 1.5 m/s high and 40 more 1.5 m/s low, as reflected signals put them: exactly those
+    lose their speed and course; the clean ones (within a few tenths of the scaled odometer,
+    braking included) keep theirs, and their positions stay."""
+    sim = simulate.simulate_drive("open_sky", seed=2, duration_s=300.0)
+    ep = build_epochs(sim.drive, sim.frame, config.defaults())
+    f = np.flatnonzero(ep.has_gnss & np.isfinite(ep.gnss_speed_mps) & (ep.gnss_speed_mps > 3.0))
+    rng = np.random.default_rng(5)
+    hit = rng.choice(f, 80, replace=False)
+    speed = ep.gnss_speed_mps.copy()
+    speed[hit[:40]] += 1.5
+    speed[hit[40:]] -= 1.5
+    biased = dataclasses.replace(ep, gnss_speed_mps=speed)
+    out, n = doppler_against_odometer(biased, 1.0)
+    assert n == 80
+    gone = np.flatnonzero(ep.has_gnss & np.isfinite(ep.gnss_speed_mps) & ~np.isfinite(out.gnss_speed_mps))
+    np.testing.assert_array_equal(np.sort(gone), np.sort(hit))
+    assert np.all(np.isnan(out.gnss_course_rad[hit]))
+    np.testing.assert_array_equal(out.has_gnss, ep.has_gnss)
+    np.testing.assert_array_equal(out.gnss_e, ep.gnss_e)
+    assert doppler_against_odometer(ep, 1.0)[1] == 0
+    assert doppler_against_odometer(biased, 0.0)[1] == 0
