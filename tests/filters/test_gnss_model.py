@@ -317,7 +317,7 @@ def test_false_fix_check_needs_the_receivers_velocity():
 
 
 def test_doppler_off_the_odometer_is_left_out():
-    """An open-sky drive (100-Hz odometer, its speed 2 % off the truth) with 40 fixes' Doppler
+    """An open-sky drive (100-Hz odometer, its scale a few % off) with 40 fixes' Doppler
     speeds 1.5 m/s high and 40 more 1.5 m/s low, as reflected signals put them: exactly those
     lose their speed and course; the clean ones (within a few tenths of the scaled odometer,
     braking included) keep theirs, and their positions stay."""
