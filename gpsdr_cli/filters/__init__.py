@@ -37,7 +37,7 @@ NAMES: tuple[str, ...] = tuple(MODULES)
 
 def register(name: str) -> Callable[[RunFn], RunFn]:
     def deco(fn: RunFn) -> RunFn:
-        from .gnss_model import doppler_against_odometer, gnss_error_model, reflected_doppler
+        from .gnss_model import drop_reflected_doppler, gnss_error_model, reflected_doppler
 
         @functools.wraps(fn)
         def run(epochs, params):  # every filter sees the same GNSS error model
@@ -55,9 +55,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             # a wheel's error off its speed is not the car's (decisions/0068)
             n_doppler = 0
             if nlos and epochs.has_odo.any():
-                epochs, n_doppler = doppler_against_odometer(
-                    epochs, float(params["gnss"]["nlos_doppler_odo_max_mps"]),
-                    float(params["gnss"]["nlos_velocity_min_mps"]))
+                epochs, n_doppler = drop_reflected_doppler(epochs, params)
                 if n_doppler:
                     model_epochs, model_params = gnss_error_model(epochs, params)
             screened, info = screen(epochs, params, nlos, bare("ekf"))

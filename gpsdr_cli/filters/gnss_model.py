@@ -370,6 +370,15 @@ def doppler_against_odometer(epochs: Epochs, max_mps: float, min_speed_mps: floa
     return dataclasses.replace(epochs, gnss_speed_mps=speed, gnss_course_rad=course), int(bad.sum())
 
 
+def drop_reflected_doppler(epochs: Epochs, params: Params) -> tuple[Epochs, int]:
+    """:func:`doppler_against_odometer` at ``[gnss] nlos_doppler_odo_max_mps``, the scale from
+    speeds above ``nlos_velocity_min_mps``: the filters' registry and the graph smoother
+    leave out the same velocities."""
+    g = params["gnss"]
+    return doppler_against_odometer(epochs, float(g["nlos_doppler_odo_max_mps"]),
+                                    float(g["nlos_velocity_min_mps"]))
+
+
 def rtk_drive(epochs: Epochs, params: Params) -> bool:
     """At least ``[gnss] rtk_share`` of the drive's usable fixes are RTK fixed."""
     return epochs.rtk_fixed_share >= float(params["gnss"]["rtk_share"])

@@ -306,11 +306,9 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
 
         params = steady_walk(params)
     if init.info.get("nlos_doppler_dropped"):  # the receiver velocities the filter left out
-        from .gnss_model import doppler_against_odometer
+        from .gnss_model import drop_reflected_doppler
 
-        epochs, _ = doppler_against_odometer(
-            epochs, float(params["gnss"]["nlos_doppler_odo_max_mps"]),
-            float(params["gnss"]["nlos_velocity_min_mps"]))
+        epochs, _ = drop_reflected_doppler(epochs, params)
     if (segments is None and len(epochs) and "nlos_screened" in init.info
             and bool(params["graph"]["nlos_segments"])):
         return _by_segments(epochs, init, params)
