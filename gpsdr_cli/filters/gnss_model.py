@@ -338,20 +338,16 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     return out
 
 
-def doppler_against_odometer(epochs: Epochs, max_mps: float, min_speed_mps: float = 4.0
-                             ) -> tuple[Epochs, int]:
-    """``(epochs, n)``: the receiver's speed and course cleared at the ``n`` fixes whose Doppler
-    speed differs from the odometer's (linear between its records, scaled by the drive's median
-    ratio of the two above ``min_speed_mps``) by more than ``max_mps`` (m/s; ``[gnss]
-    nlos_doppler_odo_max_mps``).  A clean Doppler speed and a wheel's agree to a few tenths
-    (the wheel's noise and its lag in a 3-m/s^2 braking: 0.1-0.2 m/s); a reflected signal's
-    Doppler is off by about 1 m/s (decisions/0029), and on the drive's few kept fixes such a
-    velocity at 0.2 m/s turned the screen's judge, then the filters, tens of metres off
-    (decisions/0067, 0068).  The position of such a fix stays: the screen judges it."""
+def doppler_misfit(epochs: Epochs, min_speed_mps: float = 4.0) -> np.ndarray:
+    """Per epoch: the receiver's Doppler speed minus the odometer's (m/s; linear between its
+    records, scaled by the drive's median ratio of the two above ``min_speed_mps``); NaN
+    without a fix, a Doppler speed or the odometer around it, and everywhere when fewer
+    than ten fixes are both moving and measured."""
+    out = np.full(len(epochs), np.nan)
     f = np.flatnonzero(epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps))
     o = np.flatnonzero(epochs.has_odo & np.isfinite(epochs.odo_speed_mps))
-    if len(f) < 10 or len(o) < 10 or max_mps <= 0:
-        return epochs, 0
+    if len(f) < 10 or len(o) < 10:
+        return out
     t = np.asarray(epochs.t_ns, np.int64)
     odo = np.interp((t[f] - t[o[0]]).astype(float), (t[o] - t[o[0]]).astype(float),
                     epochs.odo_speed_mps[o])
@@ -359,14 +355,50 @@ def doppler_against_odometer(epochs: Epochs, max_mps: float, min_speed_mps: floa
     dop = epochs.gnss_speed_mps[f]
     moving = inside & (odo > min_speed_mps) & (dop > min_speed_mps)
     if moving.sum() < 10:
+        return out
+    scale = densest_ratio(dop[moving], odo[moving], SCALE_AGREE_MPS)
+    out[f[inside]] = (dop - scale * odo)[inside]
+    return out
+
+
+#: the Doppler and odometer speeds of clean fixes agree within this (m/s) at the right scale
+SCALE_AGREE_MPS = 0.2
+
+
+def densest_ratio(num: np.ndarray, den: np.ndarray, tol: float) -> float:
+    """The scale s for which the most pairs agree, |num - s den| <= ``tol`` (``den`` > 0),
+    refined to the median ratio of those pairs.  The Doppler speeds of a run of reflected
+    fixes are off together, and on a drive that is mostly reflected the median ratio of
+    all of them read a wheel 4.5 % off, where its clean fixes agree at 1.00 (decisions/0069)."""
+    lo, hi = (num - tol) / den, (num + tol) / den
+    # the most intervals [lo, hi] over one point: a sweep over their ends
+    ends = np.concatenate((lo, hi))
+    step = np.concatenate((np.ones(len(lo)), -np.ones(len(hi))))
+    order = np.lexsort((-step, ends))
+    depth = np.cumsum(step[order])
+    at = float(ends[order][int(np.argmax(depth))])
+    agree = (lo <= at) & (hi >= at)
+    return float(np.median(num[agree] / den[agree]))
+
+
+def doppler_against_odometer(epochs: Epochs, max_mps: float, min_speed_mps: float = 4.0
+                             ) -> tuple[Epochs, int]:
+    """``(epochs, n)``: the receiver's speed and course cleared at the ``n`` fixes whose Doppler
+    speed differs from the odometer's by more than ``max_mps`` (m/s; ``[gnss]
+    nlos_doppler_odo_max_mps``; :func:`doppler_misfit`).  A clean Doppler speed and a wheel's agree
+    to a few tenths (the wheel's noise and its lag in a 3-m/s^2 braking: 0.1-0.2 m/s); a
+    reflected signal's Doppler is off by about 1 m/s (decisions/0029), and on the drive's few
+    kept fixes such a velocity at 0.2 m/s turned the screen's judge, then the filters, tens of
+    metres off (decisions/0067, 0068).  The position of such a fix stays: the screen judges it."""
+    if max_mps <= 0:
         return epochs, 0
-    scale = float(np.median(dop[moving] / odo[moving]))
-    bad = inside & (np.abs(dop - scale * odo) > max_mps)
+    with np.errstate(invalid="ignore"):
+        bad = np.abs(doppler_misfit(epochs, min_speed_mps)) > max_mps
     if not bad.any():
         return epochs, 0
     speed, course = epochs.gnss_speed_mps.copy(), epochs.gnss_course_rad.copy()
-    speed[f[bad]] = np.nan
-    course[f[bad]] = np.nan
+    speed[bad] = np.nan
+    course[bad] = np.nan
     return dataclasses.replace(epochs, gnss_speed_mps=speed, gnss_course_rad=course), int(bad.sum())
 
 
