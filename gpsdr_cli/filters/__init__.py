@@ -37,7 +37,12 @@ NAMES: tuple[str, ...] = tuple(MODULES)
 
 def register(name: str) -> Callable[[RunFn], RunFn]:
     def deco(fn: RunFn) -> RunFn:
-        from .gnss_model import drop_reflected_doppler, gnss_error_model, reflected_doppler
+        from .gnss_model import (
+            doppler_misfit,
+            drop_reflected_doppler,
+            gnss_error_model,
+            reflected_doppler,
+        )
 
         @functools.wraps(fn)
         def run(epochs, params):  # every filter sees the same GNSS error model
@@ -54,11 +59,13 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             # ... whose receiver velocities, where reflected, the odometer shows: one more than
             # a wheel's error off its speed is not the car's (decisions/0068)
             n_doppler = 0
+            doppler = None
             if nlos and epochs.has_odo.any():
+                doppler = doppler_misfit(epochs, float(params["gnss"]["nlos_velocity_min_mps"]))
                 epochs, n_doppler = drop_reflected_doppler(epochs, params)
                 if n_doppler:
                     model_epochs, model_params = gnss_error_model(epochs, params)
-            screened, info = screen(epochs, params, nlos, bare("ekf"))
+            screened, info = screen(epochs, params, nlos, bare("ekf"), doppler)
             if n_doppler:
                 info["nlos_doppler_dropped"] = n_doppler
             if model_epochs.nlos_drive and epochs.dr_unhealthy:

@@ -190,11 +190,13 @@ SEGMENT_FREE_SD_M = 1e3
 
 
 def _segment_states(seg: np.ndarray, run: np.ndarray, fix: np.ndarray, tk_s: np.ndarray,
-                    gp: Params):
+                    gp: Params, trust: np.ndarray | None = None):
     """Per keyframe: segment id (keyframes between two fixes of one segment belong to it,
     others -1), the error states' chain (phi, sd of w per interval: held in a segment,
     free at its start, pinned at zero outside), and each segment's zero prior (sd, vote)
-    at its middle fix: its run's vote shared among the run's segments by length."""
+    at its middle fix: its run's vote shared among the run's segments by length, each share
+    times the segment's ``trust`` (per keyframe: :func:`.nlos_segments.segment_trust`) where
+    given."""
     n = len(seg)
     seg_k = np.where(fix, seg, -1)
     fix_i = np.flatnonzero(fix & (seg >= 0))
@@ -226,6 +228,8 @@ def _segment_states(seg: np.ndarray, run: np.ndarray, fix: np.ndarray, tk_s: np.
                 seg_sd[mid] = max(float(gp["nlos_segment_sd_m"]), 1e-3)
                 dur = tk_s[grp[-1]] - tk_s[grp[0]] + step
                 vote[mid] = math.sqrt(run_dur / vote_s) * dur / max(run_dur, 1e-9)
+                if trust is not None:
+                    vote[mid] *= float(trust[mid])
     return seg_k, phi, wsd, seg_sd, vote
 
 
@@ -305,30 +309,38 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
         from ..gyro_stops import steady_walk
 
         params = steady_walk(params)
+    doppler = None
+    if "nlos_screened" in init.info and epochs.has_odo.any():
+        from .gnss_model import doppler_misfit
+
+        doppler = doppler_misfit(epochs, float(params["gnss"]["nlos_velocity_min_mps"]))
     if init.info.get("nlos_doppler_dropped"):  # the receiver velocities the filter left out
         from .gnss_model import drop_reflected_doppler
 
         epochs, _ = drop_reflected_doppler(epochs, params)
     if (segments is None and len(epochs) and "nlos_screened" in init.info
             and bool(params["graph"]["nlos_segments"])):
-        return _by_segments(epochs, init, params)
+        return _by_segments(epochs, init, params, doppler)
     return _solve(epochs, init, params, segments, sigmas)
 
 
 def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
-                      sigmas: bool = True) -> tuple[GraphOutcome, np.ndarray, np.ndarray]:
+                      sigmas: bool = True, doppler: np.ndarray | None = None
+                      ) -> tuple[GraphOutcome, np.ndarray, np.ndarray]:
     """The NLOS judgement the screen and the graph smoother share: the fixes cut into
     segments and runs against ``init``'s track (:mod:`.nlos_segments`), the drive solved
     with one bias per segment and one vote per run, each fix at its own sigma (the
     segment's bias replaces the quality model's scaled sigmas).  Returns the outcome, the
     segments (:func:`.nlos_segments.fix_segments`) and, per epoch, whether its fix's segment
     lies within ``[graph] nlos_segment_keep_m`` of the solution (all False if it failed).
-    ``sigmas``: as :func:`smooth_graph`'s."""
+    ``sigmas``: as :func:`smooth_graph`'s.  ``doppler``: per epoch, the receiver's Doppler
+    speed minus the odometer's (m/s, :func:`.gnss_model.doppler_misfit`): each segment's vote
+    times its agreement (:func:`.nlos_segments.segment_trust`, ``[gnss] nlos_doppler_trust_mps``)."""
     from .nlos_segments import fix_segments, segments_near
 
     own = own_sigmas(params)
     seg = fix_segments(epochs, init, params["graph"])
-    out = _solve(epochs, init, own, seg, sigmas)
+    out = _solve(epochs, init, own, seg, sigmas, doppler)
     if out.result is None:
         return out, seg, np.zeros(len(epochs), bool)
     return out, seg, segments_near(epochs, out.result, seg,
@@ -345,9 +357,11 @@ def own_sigmas(params: Params) -> Params:
     return own
 
 
-def _by_segments(epochs: Epochs, init: FilterResult, params: Params) -> GraphOutcome:
-    """:func:`smooth_graph` of a screened NLOS drive: segment votes, then the kept fixes."""
-    by_seg, seg, near = solve_by_segments(epochs, init, params)
+def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
+                 doppler: np.ndarray | None = None) -> GraphOutcome:
+    """:func:`smooth_graph` of a screened NLOS drive: segment votes (each segment's weighed by
+    its ``doppler`` agreement, as :func:`solve_by_segments`), then the kept fixes."""
+    by_seg, seg, near = solve_by_segments(epochs, init, params, doppler=doppler)
     if by_seg.result is None:
         return _solve(epochs, init, params, None)
     fix = np.asarray(epochs.has_gnss, bool)
@@ -471,7 +485,8 @@ def _dr_inputs(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray, 
 
 
 def _solve(epochs: Epochs, init: FilterResult, params: Params,
-           segments: np.ndarray | None, sigmas: bool = True) -> GraphOutcome:
+           segments: np.ndarray | None, sigmas: bool = True,
+           doppler: np.ndarray | None = None) -> GraphOutcome:
     """:func:`smooth_graph` proper."""
     from . import graph_kernels as gk
 
@@ -584,8 +599,15 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     seg_k = None
     if segments is not None:
         seg_rows = np.asarray(segments, np.int64)
+        trust = None
+        if doppler is not None:
+            from .nlos_segments import segment_trust
+
+            trust = segment_trust(np.where(has_fix[key_ep], seg_rows[0][key_ep], -1),
+                                  np.asarray(doppler, float)[key_ep],
+                                  float(params["gnss"]["nlos_doppler_trust_mps"]))
         seg_k, err_phi, err_wsd, seg_sd, seg_vote = _segment_states(
-            seg_rows[0][key_ep], seg_rows[1][key_ep], has_fix[key_ep], tk_s, gp)
+            seg_rows[0][key_ep], seg_rows[1][key_ep], has_fix[key_ep], tk_s, gp, trust)
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval;
     # without an odometer the receiver's speed, as the filters take it

@@ -87,8 +87,9 @@ def _fingerprint(epochs: Epochs, params: Params) -> tuple:
 
 def _same(a: tuple, b: tuple) -> bool:
     """Two fingerprints agree (arrays element by element, NaN equal to NaN)."""
-    return all(np.array_equal(x, y, equal_nan=True) if isinstance(x, np.ndarray) else x == y
-               for x, y in zip(a, b, strict=True))
+    return len(a) == len(b) and all(
+        np.array_equal(x, y, equal_nan=True) if isinstance(x, np.ndarray) or
+        isinstance(y, np.ndarray) else x == y for x, y in zip(a, b, strict=True))
 
 
 def _cached(epochs: Epochs, fp: tuple) -> tuple[Epochs, dict] | None:
@@ -102,14 +103,18 @@ def _cached(epochs: Epochs, fp: tuple) -> tuple[Epochs, dict] | None:
 
 
 def screen(epochs: Epochs, params: Params, nlos_drive: bool,
-           judge: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
+           judge: Callable[[Epochs, Params], FilterResult],
+           doppler: np.ndarray | None = None) -> tuple[Epochs, dict]:
     """``(epochs, info)``: the epochs with the outvoted fixes' ``has_gnss`` cleared, and
     what was done (``info["nlos_screened"]``: fixes left out; absent when not applied, where
     ``info["nlos_screen_not_applied"]`` says why (and ``info["nlos_screen"]`` "not applied: why");
     ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
     lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale, true speed over
     the odometer's; ``info["nlos_screen_gyro_bias_radps"]``: its gyro bias).  ``judge``: the
-    bare ekf (:func:`gpsdr_cli.filters.bare`), whichever filter runs after the screen."""
+    bare ekf (:func:`gpsdr_cli.filters.bare`), whichever filter runs after the screen.
+    ``doppler``: per epoch, the receiver's Doppler speed minus the odometer's before any was
+    left out (m/s, :func:`.gnss_model.doppler_misfit`; NaN where not measured): a segment
+    of fixes whose velocities disagree weighs less (:func:`.nlos_segments.segment_trust`)."""
     if not nlos_drive:
         return epochs, {}
     if not (epochs.has_gyro.any() and epochs.has_odo.any()):
@@ -123,19 +128,20 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
         # on whether the check ran first)
         from ..qc import reverse_epochs
 
-        fwd, info = screen(reverse_epochs(epochs), params, nlos_drive, judge)
+        fwd, info = screen(reverse_epochs(epochs), params, nlos_drive, judge,
+                           None if doppler is None else np.asarray(doppler)[::-1])
         return dataclasses.replace(epochs, has_gnss=fwd.has_gnss[::-1].copy()), info
-    fp = _fingerprint(epochs, params)
+    fp = _fingerprint(epochs, params) + (None if doppler is None else np.asarray(doppler, float),)
     hit = _cached(epochs, fp)
     if hit is not None:
         return hit
-    out, info = _screen(epochs, params, judge)
+    out, info = _screen(epochs, params, judge, doppler)
     _LAST[:] = [(fp, ~out.has_gnss[epochs.has_gnss], dict(info))]
     return out, info
 
 
-def _screen(epochs: Epochs, params: Params,
-            run: Callable[[Epochs, Params], FilterResult]) -> tuple[Epochs, dict]:
+def _screen(epochs: Epochs, params: Params, run: Callable[[Epochs, Params], FilterResult],
+            doppler: np.ndarray | None = None) -> tuple[Epochs, dict]:
     g = params["gnss"]
     from .gnss_model import reflected_doppler
     from .graph import own_sigmas, smooth_graph, solve_by_segments
@@ -152,7 +158,19 @@ def _screen(epochs: Epochs, params: Params,
     # Cauchy only: with the bounded last stage the screen left seed 14 of the 283-s city
     # drives a forward track of 46 m against fixes at 35 m (decisions/0035)
     fit["graph"]["nlos_last_kernel"] = ""
-    outcome = smooth_graph(epochs, init, fit, sigmas=False)  # the fixes weighed, not the track
+    # ... and a segment of fixes whose receiver velocities disagree with the odometer weighs
+    # less (its fixes' information times its trust): a reflected plateau of minutes had the
+    # most fixes, and the fit kept it (decisions/0059, 0069)
+    fit_epochs = epochs
+    if doppler is not None:
+        from .nlos_segments import fix_segments, segment_trust
+
+        trust = segment_trust(fix_segments(epochs, init, fit["graph"])[0], doppler,
+                              float(g["nlos_doppler_trust_mps"]))
+        if (trust < 1.0).any():
+            fit_epochs = dataclasses.replace(epochs, gnss_sd_e=epochs.gnss_sd_e / np.sqrt(trust),
+                                             gnss_sd_n=epochs.gnss_sd_n / np.sqrt(trust))
+    outcome = smooth_graph(fit_epochs, init, fit, sigmas=False)  # the fixes weighed, not the track
     if outcome.result is None or len(outcome.gnss_weight) != len(epochs):
         return epochs, not_applied(outcome.message)
     w = outcome.gnss_weight
@@ -167,7 +185,8 @@ def _screen(epochs: Epochs, params: Params,
         for n_pass in range(max(int(g["nlos_screen_passes"]), 1)):
             if n_pass:
                 track = judge_kept(epochs, fix & ~out, run, probe, outcome)
-            seg_out, seg_pass, near = solve_by_segments(epochs, track, fit, sigmas=False)
+            seg_out, seg_pass, near = solve_by_segments(epochs, track, fit, sigmas=False,
+                                                        doppler=doppler)
             if seg_out.result is None:
                 break
             outcome, out, seg = seg_out, fix & ~near, seg_pass

@@ -201,9 +201,12 @@ def test_a_second_judgement_drops_a_reflected_run_at_the_end(name: str, after: f
     against the fit over every fix, a 35-s run 23 m off was kept (163 reflected fixes used) and
     every smoothed track ended 20-26 m off (11.9 m RMSE).  Judged again against the ekf's track
     of the fixes the first judgement kept, 10 reflected fixes are used: ekf + RTS 1.62 m (2.89
-    with its GNSS error states), fkf + RTS 4.97 m, and 272 of the 274 clean fixes are kept."""
+    with its GNSS error states), fkf + RTS 4.97 m, and 272 of the 274 clean fixes are kept.
+    (The segments' Doppler weights off: with them one judgement keeps none of that run, ekf +
+    RTS 2.24 m.)"""
     sim = simulate_drive("urban_nlos", 15, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    alone = {"nlos_screen_last_sigmas": 0.0}  # the last run's own check (decisions/0048) aside
+    # the last run's own check (decisions/0048) and the Doppler weights (0069) aside
+    alone = {"nlos_screen_last_sigmas": 0.0, "nlos_doppler_trust_mps": 0.0}
     twice = run_filter(sim, copy.deepcopy(sim.drive), name, smooth=True, pipeline=True,
                        overrides={"gnss": alone})
     once = run_filter(sim, copy.deepcopy(sim.drive), name, smooth=True, pipeline=True,
@@ -265,11 +268,14 @@ def test_a_reflection_ramping_in_at_the_end_is_left_out() -> None:
     """A 283-s city drive (seed 20) whose last run of fixes starts clean at 240 s and then
     ramps 14 m off (no jump, so no new run), with no clean fix after it: the judges' tracks
     follow the ramp and it was kept (ekf + RTS 4.99 m, 15 m off at the end).  Judged against
-    the ekf's track of the fixes before it, its later segments go: 2.18 m."""
+    the ekf's track of the fixes before it, its later segments go: 2.18 m.  (The segments'
+    Doppler weights off: with them the ramp's segments weigh less, 1.71 m either way.)"""
     sim = simulate_drive("urban_nlos", 20, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    now = run_filter(sim, copy.deepcopy(sim.drive), "ekf", smooth=True, pipeline=True)
+    no_trust = {"nlos_doppler_trust_mps": 0.0}
+    now = run_filter(sim, copy.deepcopy(sim.drive), "ekf", smooth=True, pipeline=True,
+                     overrides={"gnss": no_trust})
     off = run_filter(sim, copy.deepcopy(sim.drive), "ekf", smooth=True, pipeline=True,
-                     overrides={"gnss": {"nlos_screen_last_sigmas": 0.0}})
+                     overrides={"gnss": {**no_trust, "nlos_screen_last_sigmas": 0.0}})
     assert off.rmse_m > 4.0 and now.rmse_m < 2.7
     end = now.epochs.t_ns >= now.epochs.t_ns[-1] - 20 * 10**9  # the last 20 s
     assert np.mean(now.err_m[end]) < 0.5 * np.mean(off.err_m[end])
@@ -282,14 +288,15 @@ def test_fixes_screened_out_at_the_start_leave_a_lead_in(name: str, monkeypatch)
     at that fix's position 140 s early, and dead-reckoned from there: aekf 392 m, fkf 237 m
     forward.  The epochs before it are now dead-reckoned back from it, as a cold start's are:
     aekf 13.1 m, fkf 14.5 m.  (With the receiver velocities the odometer shows reflected
-    left out, the screen keeps fixes before 140 s on this drive, aekf 8.9 m: the check is off
-    here so that the lead-in is what is tested.)"""
+    left out, the screen keeps fixes before 140 s on this drive, aekf 8.9 m: that check and
+    the segments' Doppler weights are off here so that the lead-in is what is tested.)"""
     from gpsdr_cli import simulate
 
     monkeypatch.setattr(simulate, "NLOS_RAMP_S", (10.0, 30.0))
     sim = simulate.simulate_drive("urban_nlos", 15, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
     r = run_filter(sim, copy.deepcopy(sim.drive), name, pipeline=True,
-                   overrides={"gnss": {"nlos_doppler_odo_max_mps": 0.0}})
+                   overrides={"gnss": {"nlos_doppler_odo_max_mps": 0.0,
+                                       "nlos_doppler_trust_mps": 0.0}})
     assert r.result.info["nlos_screened"] > 0.8 * r.epochs.has_gnss.sum()
     assert r.rmse_m < 0.65 * r.gnss_rmse_m
     assert r.result.info["lead_in_s"] > 100.0
@@ -301,12 +308,14 @@ def test_the_screened_lead_in_takes_the_screens_calibration(monkeypatch) -> None
     that fix read a gyro bias of 0.113 rad/s (the drive's: 0.0006) and a course 114 deg off,
     taken at 1.1 m/s: aekf + RTS 1335 m off at worst in the lead-in.  With the screen's gyro
     bias and odometer scale, and the course where the track is fastest: 62 m.  (The fixes
-    the screen kept are a reflected plateau 60 m off: the drive stays above its fixes.)"""
+    the screen kept are a reflected plateau 60 m off: the drive stays above its fixes.  With
+    the segments' Doppler weights, off here, the screen keeps the clean fixes: 0.72 m.)"""
     from gpsdr_cli import simulate
 
     monkeypatch.setattr(simulate, "NLOS_DURATION_S", (20.0, 180.0))
     sim = simulate.simulate_drive("urban_nlos", 21, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    r = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
+    r = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True,
+                   overrides={"gnss": {"nlos_doppler_trust_mps": 0.0}})
     lead = ~np.cumsum(r.result.gnss_used).astype(bool)
     assert r.result.info["lead_in_s"] > 150.0 and lead.sum() > 500
     assert float(np.max(r.err_m[lead])) < 100.0
@@ -316,13 +325,15 @@ def test_the_backward_pass_dead_reckons_back_from_its_first_kept_fix() -> None:
     """The quality check's backward pass over a 283-s city drive (seed 15) whose last 56 s of
     fixes are screened out: run backwards, those are its first.  It started at the last kept
     fix's position 56 s early (127 m RMS against the truth); with a lead-in, 3-5 m.  Its gyro
-    bias is the screen's negated, as the reversed drive's yaw rates are (77 m without)."""
+    bias is the screen's negated, as the reversed drive's yaw rates are (77 m without).  The
+    segments' Doppler weights off: with them the screen keeps the end of this drive."""
     from gpsdr_cli import config, qc
     from gpsdr_cli.align import build_epochs
     from gpsdr_cli.pipeline import run_filter as run_pipeline_filter
 
     sim = simulate_drive("urban_nlos", 15, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
     p = config.defaults()
+    p["gnss"]["nlos_doppler_trust_mps"] = 0.0
     ep = build_epochs(copy.deepcopy(sim.drive), sim.frame, p)
     back = run_pipeline_filter(qc.reverse_epochs(ep), p)
     assert back.info["lead_in_s"] > 50.0
@@ -453,3 +464,21 @@ def test_reflected_doppler_the_odometer_shows_is_left_out(monkeypatch) -> None:
     assert "nlos_doppler_dropped" not in off.result.info
     assert on.rmse_m < 3.0 < 6.0 < off.rmse_m
     assert on.rmse_m < 0.15 * on.gnss_rmse_m
+
+
+@pytest.mark.parametrize("seed", [6, 21])
+def test_a_reflected_plateau_of_minutes_is_told_by_its_doppler(seed: int, monkeypatch) -> None:
+    """283-s city drives (5-Hz CAN rates) whose reflections last 20-180 s: a plateau of
+    reflected fixes held for minutes outnumbers the clean ones, and without their Doppler the
+    screen kept it (ekf + RTS 70 m and 57 m against fixes at 48 m and 43 m).  Its receiver
+    velocities disagree with the odometer (0.6-1.8 m/s RMS, clean runs 0.1), so its runs
+    weigh less: under 1.5 m."""
+    from gpsdr_cli import simulate
+
+    monkeypatch.setattr(simulate, "NLOS_DURATION_S", (20.0, 180.0))
+    sim = simulate_drive("urban_nlos", seed, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
+    on = run_filter(sim, copy.deepcopy(sim.drive), "ekf", smooth=True, pipeline=True)
+    off = run_filter(sim, copy.deepcopy(sim.drive), "ekf", smooth=True, pipeline=True,
+                     overrides={"gnss": {"nlos_doppler_trust_mps": 0.0}})
+    assert on.rmse_m < 1.5 < 0.5 * on.gnss_rmse_m
+    assert off.rmse_m > on.gnss_rmse_m

@@ -11,7 +11,7 @@ import pytest
 
 from gpsdr_cli import config
 from gpsdr_cli.filters.graph import smooth_graph
-from gpsdr_cli.filters.nlos_segments import segments
+from gpsdr_cli.filters.nlos_segments import segment_trust, segments
 from gpsdr_cli.simulate import simulate_drive
 from gpsdr_cli.testing.sim import run_filter
 
@@ -105,11 +105,31 @@ def test_far_segments_do_not_add_up_to_a_pull() -> None:
     before the first fix kept are dead-reckoned back from it, decisions/0057).  Under the
     bounded Geman-McClure vote a far segment does not pull: 1.7 m.  (Judged once: the
     screen's second judgement, against the ekf's track, rescues even the Cauchy vote, to
-    4.0 m.)"""
+    4.0 m; and so do the reflected runs' Doppler speeds, which weigh them less: both runs
+    here without them.)"""
     sim = simulate_drive("urban_nlos", 6, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    r = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True)
+    r = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True,
+                   overrides={"gnss": {"nlos_doppler_trust_mps": 0.0}})
     assert r.rmse_m < 0.1 * r.gnss_rmse_m
     cauchy = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True,
                         overrides={"graph": {"nlos_segment_kernel": "cauchy"},
-                                   "gnss": {"nlos_screen_passes": 1}})
+                                   "gnss": {"nlos_screen_passes": 1,
+                                            "nlos_doppler_trust_mps": 0.0}})
     assert cauchy.rmse_m > 5.0 * r.rmse_m and cauchy.result.info["lead_in_s"] > 30.0
+
+
+def test_a_run_whose_doppler_disagrees_votes_less() -> None:
+    """Each run's trust is 1 / (1 + (r / scale)^2), r its RMS Doppler-minus-odometer speed:
+    a clean run (0.1 m/s) keeps nearly all of its vote, a reflected one (1 m/s) a fifth at a
+    scale of 0.5 m/s; a run with too few measured speeds, or a fix in no run, keeps all of it."""
+    rng = np.random.default_rng(7)
+    runs = np.repeat([0, 1, 2, -1], [50, 40, 30, 5])
+    mis = np.concatenate([rng.choice([-0.1, 0.1], 50), rng.choice([-1.0, 1.0], 40),
+                          np.full(30, np.nan), np.full(5, 3.0)])
+    mis[50:55] = np.nan            # a few unmeasured fixes do not change the run's RMS
+    mis[90] = 2.0                  # the unmeasured run: 1 of 30 measured, below the minimum
+    trust = segment_trust(runs, mis, 0.5)
+    np.testing.assert_allclose(trust[:50], 1.0 / 1.04)
+    np.testing.assert_allclose(trust[50:90], 0.2)
+    np.testing.assert_array_equal(trust[90:], 1.0)
+    np.testing.assert_array_equal(segment_trust(runs, mis, 0.0), 1.0)
