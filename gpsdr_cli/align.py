@@ -377,9 +377,10 @@ def build_epochs(drive: Drive, frame: LocalFrame | None, params: Params) -> Epoc
                                   or health.odo_bad_s >= float(params["health"]["odo_silent_s"])
                                   or _silent(odo_t, float(params["health"]["odo_silent_s"]),
                                              t[has_gnss], gspeed[has_gnss])))
-    from .filters.gnss_model import clamped_speeds
+    from .filters.gnss_model import clamped_speeds, doppler_off_share
 
     epochs = clamped_speeds(epochs, params)  # once, before any filter or check reads them
+    epochs.doppler_off_share = doppler_off_share(epochs, params)
     epochs, claim = mark_false_fixes(epochs, params)
     if claim:
         warnings = drive.meta.setdefault("warnings", [])

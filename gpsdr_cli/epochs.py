@@ -63,6 +63,11 @@ class Epochs:
     dr_unhealthy: bool = False
     #: the drive with time running backwards (:func:`gpsdr_cli.qc.reverse_epochs`)
     time_reversed: bool = False
+    #: share of the fixes with a Doppler speed and the odometer's (both above ``[gnss]
+    #: nlos_velocity_min_mps``) whose two speeds differ by more than ``nlos_doppler_odo_max_mps``,
+    #: read as the epochs are built, before any velocity is left out
+    #: (:func:`gpsdr_cli.filters.gnss_model.doppler_off_share`); 0 without both
+    doppler_off_share: float = 0.0
 
     def __post_init__(self) -> None:
         n = len(self.t_ns)

@@ -243,6 +243,11 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
         nlos = bool(vknown.any()) and _run_share(
             t_fix, vknown & (vec > float(g["nlos_vector_mismatch_m"])), vknown,
             float(g["nlos_vector_run_s"])) >= float(g["nlos_vector_share"])
+    # ... and where the receiver's Doppler speeds disagree with the odometer's often enough:
+    # a step whose plateau the chords never see still shifts the Doppler (decisions/0070)
+    if (vector and not nlos and not epochs.dr_unhealthy and float(g["nlos_doppler_share"]) > 0.0
+            and epochs.doppler_off_share >= float(g["nlos_doppler_share"])):
+        nlos = True
     if not (bad.any() or nlos):
         return epochs, params
     f = np.flatnonzero(epochs.has_gnss)
@@ -338,11 +343,13 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
     return out
 
 
-def doppler_misfit(epochs: Epochs, min_speed_mps: float = 4.0) -> np.ndarray:
-    """Per epoch: the receiver's Doppler speed minus the odometer's (m/s; linear between its
-    records, scaled by the drive's median ratio of the two above ``min_speed_mps``); NaN
-    without a fix, a Doppler speed or the odometer around it, and everywhere when fewer
-    than ten fixes are both moving and measured."""
+def doppler_misfit(epochs: Epochs, min_speed_mps: float = 4.0, *,
+                   moving_only: bool = False) -> np.ndarray:
+    """Per epoch: the receiver's Doppler speed minus the odometer's (m/s; linear between two
+    of its records at most ``ODO_GAP_S`` apart, scaled by :func:`densest_ratio` of the two
+    above ``min_speed_mps``); NaN without a fix, a Doppler speed or the odometer around it,
+    with ``moving_only`` also where either speed is ``min_speed_mps`` or less, and
+    everywhere when fewer than ten fixes are both moving and measured."""
     out = np.full(len(epochs), np.nan)
     f = np.flatnonzero(epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps))
     o = np.flatnonzero(epochs.has_odo & np.isfinite(epochs.odo_speed_mps))
@@ -352,15 +359,22 @@ def doppler_misfit(epochs: Epochs, min_speed_mps: float = 4.0) -> np.ndarray:
     odo = np.interp((t[f] - t[o[0]]).astype(float), (t[o] - t[o[0]]).astype(float),
                     epochs.odo_speed_mps[o])
     inside = (t[f] >= t[o[0]]) & (t[f] <= t[o[-1]])
+    # ... and not across a pause in the odometer's records (a 30-s dropout read as a line)
+    j = np.clip(np.searchsorted(t[o], t[f]), 1, len(o) - 1)
+    inside &= (t[o][j] - t[o][j - 1]) <= ODO_GAP_S * NS_PER_S
     dop = epochs.gnss_speed_mps[f]
     moving = inside & (odo > min_speed_mps) & (dop > min_speed_mps)
     if moving.sum() < 10:
         return out
     scale = densest_ratio(dop[moving], odo[moving], SCALE_AGREE_MPS)
-    out[f[inside]] = (dop - scale * odo)[inside]
+    use = moving if moving_only else inside
+    out[f[use]] = (dop - scale * odo)[use]
     return out
 
 
+#: the odometer is read at a fix only between two of its records at most this far apart (s;
+#: a 1-Hz logger with jitter passes)
+ODO_GAP_S = 2.0
 #: the Doppler and odometer speeds of clean fixes agree within this (m/s) at the right scale
 SCALE_AGREE_MPS = 0.2
 
@@ -400,6 +414,26 @@ def doppler_against_odometer(epochs: Epochs, max_mps: float, min_speed_mps: floa
     speed[bad] = np.nan
     course[bad] = np.nan
     return dataclasses.replace(epochs, gnss_speed_mps=speed, gnss_course_rad=course), int(bad.sum())
+
+
+def doppler_off_share(epochs: Epochs, params: Params) -> float:
+    """Share of the fixes measured by :func:`doppler_misfit` (``[gnss] nlos_velocity_min_mps``)
+    whose Doppler speed is more than ``nlos_doppler_odo_max_mps`` off the odometer's, both
+    speeds above the minimum (an odometer that reads nothing while the car drives is the
+    health check's); 0 with fewer than ``DOPPLER_SHARE_MIN_N`` measured.  On the simulator's
+    clear-sky and multipath drives and on comma2k19's real highway: none; on its
+    reflected-signal drives 6-24 % (decisions/0070)."""
+    g = params["gnss"]
+    thr = float(g["nlos_doppler_odo_max_mps"])
+    m = doppler_misfit(epochs, float(g["nlos_velocity_min_mps"]), moving_only=True)
+    ok = np.isfinite(m)
+    if not thr > 0.0 or ok.sum() < DOPPLER_SHARE_MIN_N:
+        return 0.0
+    return float(np.mean(np.abs(m[ok]) > thr))
+
+
+#: the Doppler share needs this many fixes measured against the odometer (10 s at 5 Hz)
+DOPPLER_SHARE_MIN_N = 50
 
 
 def drop_reflected_doppler(epochs: Epochs, params: Params) -> tuple[Epochs, int]:

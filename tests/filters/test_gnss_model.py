@@ -16,6 +16,7 @@ from gpsdr_cli.filters.gnss_model import (
     chord_vector_mismatch_m,
     densest_ratio,
     doppler_against_odometer,
+    doppler_off_share,
     gnss_error_model,
 )
 from gpsdr_cli.testing.faults import drop_streams, with_drive
@@ -127,12 +128,14 @@ def test_clean_drives_untouched(scenario):
 
 
 def _nlos_by_default_not_with(sim, key: str, value: float) -> None:
-    """The drive is an NLOS drive with the defaults, and not with ``[gnss] key = value``."""
+    """The drive is an NLOS drive with the defaults, and not with ``[gnss] key = value``
+    (and the Doppler speeds' own call, ``nlos_doppler_share``, off: the chords are tested)."""
     p = config.defaults()
     ep = build_epochs(sim.drive, sim.frame, p)
     assert gnss_error_model(ep, p)[0].nlos_drive
     other = config.defaults()
     other["gnss"][key] = value
+    other["gnss"]["nlos_doppler_share"] = 0.0
     assert not gnss_error_model(ep, other)[0].nlos_drive
 
 
@@ -352,3 +355,30 @@ def test_the_odometer_scale_from_the_speeds_that_agree():
     dop[:600] += rng.uniform(0.3, 1.5, 600)
     assert abs(float(np.median(dop / odo)) - 1.02) > 0.03
     assert abs(densest_ratio(dop, odo, 0.2) - 1.02) < 0.002
+
+
+def test_the_share_of_doppler_speeds_off_the_odometer():
+    """An open-sky drive (100-Hz odometer): no Doppler speed is 1 m/s off the wheel's, and
+    the drive is not called NLOS.  With a tenth of them 1.5 m/s high (reflected) the share
+    reads a tenth and the drive is an NLOS drive; a 30-s odometer dropout is not read as a
+    line across it (no share), and without an odometer there is none."""
+    sim = simulate.simulate_drive("open_sky", seed=2, duration_s=300.0)
+    p = config.defaults()
+    ep = build_epochs(sim.drive, sim.frame, p)
+    assert ep.doppler_off_share == 0.0
+    assert not gnss_error_model(ep, p)[0].nlos_drive
+    f = np.flatnonzero(ep.has_gnss & (np.nan_to_num(ep.gnss_speed_mps) > 5.0))
+    hit = np.random.default_rng(3).choice(f, len(f) // 10, replace=False)
+    speed = ep.gnss_speed_mps.copy()
+    speed[hit] += 1.5
+    biased = dataclasses.replace(ep, gnss_speed_mps=speed)
+    share = doppler_off_share(biased, p)
+    assert 0.08 < share < 0.12
+    assert gnss_error_model(dataclasses.replace(biased, doppler_off_share=share), p)[0].nlos_drive
+    t_s = (ep.t_ns - ep.t_ns[0]) / 1e9
+    gap = ep.has_odo & (t_s > 100.0) & (t_s < 130.0)
+    dropout = dataclasses.replace(ep, has_odo=ep.has_odo & ~gap,
+                                  odo_speed_mps=np.where(gap, np.nan, ep.odo_speed_mps))
+    assert doppler_off_share(dropout, p) == 0.0
+    no_odo = dataclasses.replace(ep, has_odo=np.zeros(len(ep), bool))
+    assert doppler_off_share(no_odo, p) == 0.0
