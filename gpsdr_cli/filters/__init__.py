@@ -61,6 +61,8 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
             n_doppler = 0
             doppler = None
             if nlos and epochs.has_odo.any():
+                # (the misfits before any velocity is left out: the screen weighs each segment
+                # of fixes by them, decisions/0069)
                 doppler = doppler_misfit(epochs, float(params["gnss"]["nlos_velocity_min_mps"]))
                 epochs, n_doppler = drop_reflected_doppler(epochs, params)
                 if n_doppler:
