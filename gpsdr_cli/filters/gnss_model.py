@@ -420,20 +420,36 @@ def doppler_off_share(epochs: Epochs, params: Params) -> float:
     """Share of the fixes measured by :func:`doppler_misfit` (``[gnss] nlos_velocity_min_mps``)
     whose Doppler speed is more than ``nlos_doppler_odo_max_mps`` off the odometer's, both
     speeds above the minimum (an odometer that reads nothing while the car drives is the
-    health check's); 0 with fewer than ``DOPPLER_SHARE_MIN_N`` measured.  On the simulator's
+    health check's) and the speed steady (``STEADY_MPS2``); 0 with fewer than
+    ``DOPPLER_SHARE_MIN_N`` measured.  On the simulator's
     clear-sky and multipath drives and on comma2k19's real highway: none; on its
     reflected-signal drives 6-24 % (decisions/0070)."""
     g = params["gnss"]
     thr = float(g["nlos_doppler_odo_max_mps"])
     m = doppler_misfit(epochs, float(g["nlos_velocity_min_mps"]), moving_only=True)
     ok = np.isfinite(m)
+    if ok.any():
+        # ... at a steady speed only: a GNSS clock 0.5 s off puts a 2-m/s^2 braking's
+        # Doppler 1 m/s off the wheel's, and `--gnss-offset auto` had run to -0.52 s on a
+        # simulated 150-s canyon drive
+        o = np.flatnonzero(epochs.has_odo & np.isfinite(epochs.odo_speed_mps))
+        t = np.asarray(epochs.t_ns, np.int64)
+        to = (t[o] - t[o[0]]).astype(float)
+        tf = (t[ok] - t[o[0]]).astype(float)
+        h = 0.5 * STEADY_SPAN_S * NS_PER_S
+        acc = (np.interp(tf + h, to, epochs.odo_speed_mps[o])
+               - np.interp(tf - h, to, epochs.odo_speed_mps[o])) / STEADY_SPAN_S
+        ok[np.flatnonzero(ok)[np.abs(acc) > STEADY_MPS2]] = False
     if not thr > 0.0 or ok.sum() < DOPPLER_SHARE_MIN_N:
         return 0.0
     return float(np.mean(np.abs(m[ok]) > thr))
 
 
-#: the Doppler share needs this many fixes measured against the odometer (10 s at 5 Hz)
+#: the Doppler share needs this many fixes measured against the odometer (10 s at 5 Hz) ...
 DOPPLER_SHARE_MIN_N = 50
+#: ... at a steady speed: the odometer's speed changing by at most this (m/s^2) over this (s)
+STEADY_MPS2 = 0.5
+STEADY_SPAN_S = 1.0
 
 
 def drop_reflected_doppler(epochs: Epochs, params: Params) -> tuple[Epochs, int]:
