@@ -423,7 +423,7 @@ def doppler_off_share(epochs: Epochs, params: Params) -> float:
     health check's) and the speed steady (``STEADY_MPS2``); 0 with fewer than
     ``DOPPLER_SHARE_MIN_N`` measured.  On the simulator's
     clear-sky and multipath drives and on comma2k19's real highway: none; on its
-    reflected-signal drives 6-24 % (decisions/0070)."""
+    reflected-signal drives 7-27 % (decisions/0070)."""
     g = params["gnss"]
     thr = float(g["nlos_doppler_odo_max_mps"])
     m = doppler_misfit(epochs, float(g["nlos_velocity_min_mps"]), moving_only=True)
