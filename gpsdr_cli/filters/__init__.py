@@ -64,7 +64,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 # (the misfits before any velocity is left out: the screen weighs each segment
                 # of fixes by them, decisions/0069)
                 doppler = doppler_misfit(epochs, float(params["gnss"]["nlos_velocity_min_mps"]))
-                epochs, n_doppler = drop_reflected_doppler(epochs, params)
+                epochs, n_doppler = drop_reflected_doppler(epochs, params, doppler)
                 if n_doppler:
                     model_epochs, model_params = gnss_error_model(epochs, params)
             screened, info = screen(epochs, params, nlos, bare("ekf"), doppler)

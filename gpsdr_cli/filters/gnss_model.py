@@ -344,20 +344,21 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
 
 
 def doppler_misfit(epochs: Epochs, min_speed_mps: float = 4.0, *,
-                   moving_only: bool = False) -> np.ndarray:
+                   steady_only: bool = False) -> np.ndarray:
     """Per epoch: the receiver's Doppler speed minus the odometer's (m/s; linear between two
     of its records at most ``ODO_GAP_S`` apart, scaled by :func:`densest_ratio` of the two
     above ``min_speed_mps``); NaN without a fix, a Doppler speed or the odometer around it,
-    with ``moving_only`` also where either speed is ``min_speed_mps`` or less, and
-    everywhere when fewer than ten fixes are both moving and measured."""
+    with ``steady_only`` also where either speed is ``min_speed_mps`` or less or the
+    odometer's changes by more than ``STEADY_MPS2`` over ``STEADY_SPAN_S``, and everywhere
+    when fewer than ten fixes are both moving and measured."""
     out = np.full(len(epochs), np.nan)
     f = np.flatnonzero(epochs.has_gnss & np.isfinite(epochs.gnss_speed_mps))
     o = np.flatnonzero(epochs.has_odo & np.isfinite(epochs.odo_speed_mps))
     if len(f) < 10 or len(o) < 10:
         return out
     t = np.asarray(epochs.t_ns, np.int64)
-    odo = np.interp((t[f] - t[o[0]]).astype(float), (t[o] - t[o[0]]).astype(float),
-                    epochs.odo_speed_mps[o])
+    t_f, t_o = (t[f] - t[o[0]]).astype(float), (t[o] - t[o[0]]).astype(float)
+    odo = np.interp(t_f, t_o, epochs.odo_speed_mps[o])
     inside = (t[f] >= t[o[0]]) & (t[f] <= t[o[-1]])
     # ... and not across a pause in the odometer's records (a 30-s dropout read as a line)
     j = np.clip(np.searchsorted(t[o], t[f]), 1, len(o) - 1)
@@ -367,7 +368,14 @@ def doppler_misfit(epochs: Epochs, min_speed_mps: float = 4.0, *,
     if moving.sum() < 10:
         return out
     scale = densest_ratio(dop[moving], odo[moving], SCALE_AGREE_MPS)
-    use = moving if moving_only else inside
+    use = inside
+    if steady_only:
+        # a GNSS clock 0.5 s off puts a 2-m/s^2 braking's Doppler 1 m/s off the wheel's, and
+        # `--gnss-offset auto` had run to -0.52 s on a simulated 150-s canyon drive
+        h = 0.5 * STEADY_SPAN_S * NS_PER_S
+        acc = (np.interp(t_f + h, t_o, epochs.odo_speed_mps[o])
+               - np.interp(t_f - h, t_o, epochs.odo_speed_mps[o])) / STEADY_SPAN_S
+        use = moving & (np.abs(acc) <= STEADY_MPS2)
     out[f[use]] = (dop - scale * odo)[use]
     return out
 
@@ -395,19 +403,23 @@ def densest_ratio(num: np.ndarray, den: np.ndarray, tol: float) -> float:
     return float(np.median(num[agree] / den[agree]))
 
 
-def doppler_against_odometer(epochs: Epochs, max_mps: float, min_speed_mps: float = 4.0
-                             ) -> tuple[Epochs, int]:
+def doppler_against_odometer(epochs: Epochs, max_mps: float, min_speed_mps: float = 4.0,
+                             misfit: np.ndarray | None = None) -> tuple[Epochs, int]:
     """``(epochs, n)``: the receiver's speed and course cleared at the ``n`` fixes whose Doppler
     speed differs from the odometer's by more than ``max_mps`` (m/s; ``[gnss]
     nlos_doppler_odo_max_mps``; :func:`doppler_misfit`).  A clean Doppler speed and a wheel's agree
     to a few tenths (the wheel's noise and its lag in a 3-m/s^2 braking: 0.1-0.2 m/s); a
     reflected signal's Doppler is off by about 1 m/s (decisions/0029), and on the drive's few
     kept fixes such a velocity at 0.2 m/s turned the screen's judge, then the filters, tens of
-    metres off (decisions/0067, 0068).  The position of such a fix stays: the screen judges it."""
+    metres off (decisions/0067, 0068).  The position of such a fix stays: the screen judges it.
+    ``misfit``: :func:`doppler_misfit` of these epochs at ``min_speed_mps``, when the caller
+    has it already."""
     if max_mps <= 0:
         return epochs, 0
+    if misfit is None:
+        misfit = doppler_misfit(epochs, min_speed_mps)
     with np.errstate(invalid="ignore"):
-        bad = np.abs(doppler_misfit(epochs, min_speed_mps)) > max_mps
+        bad = np.abs(misfit) > max_mps
     if not bad.any():
         return epochs, 0
     speed, course = epochs.gnss_speed_mps.copy(), epochs.gnss_course_rad.copy()
@@ -426,20 +438,8 @@ def doppler_off_share(epochs: Epochs, params: Params) -> float:
     reflected-signal drives 7-27 % (decisions/0070)."""
     g = params["gnss"]
     thr = float(g["nlos_doppler_odo_max_mps"])
-    m = doppler_misfit(epochs, float(g["nlos_velocity_min_mps"]), moving_only=True)
+    m = doppler_misfit(epochs, float(g["nlos_velocity_min_mps"]), steady_only=True)
     ok = np.isfinite(m)
-    if ok.any():
-        # ... at a steady speed only: a GNSS clock 0.5 s off puts a 2-m/s^2 braking's
-        # Doppler 1 m/s off the wheel's, and `--gnss-offset auto` had run to -0.52 s on a
-        # simulated 150-s canyon drive
-        o = np.flatnonzero(epochs.has_odo & np.isfinite(epochs.odo_speed_mps))
-        t = np.asarray(epochs.t_ns, np.int64)
-        to = (t[o] - t[o[0]]).astype(float)
-        tf = (t[ok] - t[o[0]]).astype(float)
-        h = 0.5 * STEADY_SPAN_S * NS_PER_S
-        acc = (np.interp(tf + h, to, epochs.odo_speed_mps[o])
-               - np.interp(tf - h, to, epochs.odo_speed_mps[o])) / STEADY_SPAN_S
-        ok[np.flatnonzero(ok)[np.abs(acc) > STEADY_MPS2]] = False
     if not thr > 0.0 or ok.sum() < DOPPLER_SHARE_MIN_N:
         return 0.0
     return float(np.mean(np.abs(m[ok]) > thr))
@@ -452,13 +452,15 @@ STEADY_MPS2 = 0.5
 STEADY_SPAN_S = 1.0
 
 
-def drop_reflected_doppler(epochs: Epochs, params: Params) -> tuple[Epochs, int]:
+def drop_reflected_doppler(epochs: Epochs, params: Params, misfit: np.ndarray | None = None
+                           ) -> tuple[Epochs, int]:
     """:func:`doppler_against_odometer` at ``[gnss] nlos_doppler_odo_max_mps``, the scale from
     speeds above ``nlos_velocity_min_mps``: the filters' registry and the graph smoother
-    leave out the same velocities."""
+    leave out the same velocities.  ``misfit``: :func:`doppler_misfit` at that speed, when
+    the caller has it already."""
     g = params["gnss"]
     return doppler_against_odometer(epochs, float(g["nlos_doppler_odo_max_mps"]),
-                                    float(g["nlos_velocity_min_mps"]))
+                                    float(g["nlos_velocity_min_mps"]), misfit)
 
 
 def rtk_drive(epochs: Epochs, params: Params) -> bool:

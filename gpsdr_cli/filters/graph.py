@@ -317,7 +317,7 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
     if init.info.get("nlos_doppler_dropped"):  # the receiver velocities the filter left out
         from .gnss_model import drop_reflected_doppler
 
-        epochs, _ = drop_reflected_doppler(epochs, params)
+        epochs, _ = drop_reflected_doppler(epochs, params, doppler)
     if (segments is None and len(epochs) and "nlos_screened" in init.info
             and bool(params["graph"]["nlos_segments"])):
         return _by_segments(epochs, init, params, doppler)
