@@ -355,6 +355,39 @@ def test_odometer_lag_is_fitted() -> None:
     assert odo_lag_s(t, np.zeros(len(t), bool), odo, fix, v, 0.3) == 0.0
 
 
+def test_odometer_lag_is_not_read_across_left_out_samples() -> None:
+    """The odometer 0.2 s late, and 36 s of its samples left out (the health check's verdict
+    on a dropout to 0 m/s): read as a line between the gap's ends, the fixes inside it fitted
+    0.275 s on a simulated open-sky drive whose lag was 0.05 s, and the graph's track went
+    from 0.42 to 2.72 m against fixes at 1.41 m.  Fixes inside the gap are not compared."""
+    from gpsdr_cli.filters.graph import odo_lag_s
+
+    t = np.arange(0.0, 300.0, 0.01)
+    v = 10.0 + 5.0 * np.sin(2 * np.pi * t / 20.0)
+    odo = np.interp(t - 0.2, t, v)
+    good = ~((t >= 100.0) & (t < 136.0))
+    fix = np.zeros(len(t), bool)
+    fix[::20] = True
+    lag = odo_lag_s(t, good, odo, fix, np.where(fix, v, np.nan), 0.3)
+    assert abs(lag - 0.2) <= 0.006
+
+
+def test_odometer_dropout_leaves_the_graph_below_the_fixes() -> None:
+    """The same on the simulated drive: open sky, the odometer reading 0 m/s for 60 s while
+    the car drives (the health check leaves 36 s of it out)."""
+    from gpsdr_cli.pipeline import fuse
+    from gpsdr_cli.testing.faults import odo_dropout
+
+    sim = simulate_drive("open_sky", 1, 300.0)
+    p = config.defaults()
+    p["filter"]["smoother"] = "graph"
+    res = fuse(odo_dropout(copy.deepcopy(sim.drive), 100.0, 60.0, mode="zero"), p,
+               sim.reference())
+    assert abs(res.result.info["graph_odo_lag_s"] - 0.05) <= 0.03  # the simulator's 0.05 s
+    fixes = res.gnss_only_summary()["rmse_m"]
+    assert res.summary()["rmse_m"] < 0.5 * fixes  # 0.42 m against 1.41 m
+
+
 def test_odometer_lag_is_never_negative() -> None:
     """The receiver's Doppler speed 0.08 s late (u-blox's velocity filter) and the odometer
     on time: the best fit would read the odometer 0.08 s early; the lag stays 0."""
