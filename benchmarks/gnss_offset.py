@@ -100,6 +100,7 @@ def _params(name: str, smooth: bool, offset: float = 0.0, odo_lag_auto: bool = T
     p = config.defaults()
     p["filter"]["name"] = name
     p["filter"]["smooth"] = smooth
+    p["filter"]["smoother"] = "rts" if smooth else "none"
     p["time"]["gnss_offset_s"] = offset
     p["time"]["odo_lag_auto"] = odo_lag_auto
     return p

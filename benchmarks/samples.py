@@ -48,6 +48,7 @@ def main() -> int:
                 params = config.defaults()
                 params["filter"]["name"] = name
                 params["filter"]["smooth"] = smooth
+                params["filter"]["smoother"] = "rts" if smooth else "none"
                 drive = read_drive(params=params, **files)
                 t0 = time.perf_counter()
                 result = fuse(drive, params, reference, auto_gnss_offset=auto_offset)

@@ -11,10 +11,11 @@ the way other tools write their logs rather than as ``gpsdr simulate`` does:
 - ``gps.nmea``: GGA, GSA and RMC at 5 Hz (no GST).
 
 Each revision runs ``python -m gpsdr_cli.cli.main fuse --gps .. --gyro .. --odo ..``
-(the defaults: aekf, no smoother) once to fill the numba cache, then ``--runs``
-times under ``/usr/bin/time -v``, the two revisions interleaved so both see the same
-load; the table gives the median, min and max of the wall time, the CPU time (user +
-system: on a shared machine it moves less than the wall time) and the peak RSS.
+(the defaults: aekf, then the graph smoother since docs/decisions/0071, before it no
+smoother) once to fill the numba cache, then ``--runs`` times under ``/usr/bin/time
+-v``, the two revisions interleaved so both see the same load; the table gives the
+median, min and max of the wall time, the CPU time (user + system: on a shared machine
+it moves less than the wall time) and the peak RSS.
 ``--before REV`` (default ``main``) is exported with ``git archive`` into a temporary
 folder; the "after" is this checkout.  ``--cold`` also times one cold start per
 revision (an empty ``NUMBA_CACHE_DIR``).  ``PYTHONDONTWRITEBYTECODE`` is dropped from the

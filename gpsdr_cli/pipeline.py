@@ -56,17 +56,25 @@ TRACK_UNITS: dict[str, str] = {**BASE_TRACK_UNITS, **QC_COLUMNS}
 GRAPH_TRACK_UNITS: dict[str, str] = dict(GRAPH_TRACK_COLUMNS)
 #: What the writers label: every column a track may carry.
 WRITTEN_TRACK_UNITS: dict[str, str] = {**TRACK_UNITS, **GRAPH_TRACK_UNITS}
-SMOOTHERS = ("rts", "graph", "none")
+SMOOTHERS = ("auto", "rts", "graph", "none")
 
 
-def smoother_of(params: Params) -> str:
+def smoother_of(params: Params, epochs: Epochs | None = None) -> str:
     """The stage after the filter: ``[filter] smoother`` when set, else ``rts`` if the older
-    boolean ``[filter] smooth`` is true, else ``none``."""
+    boolean ``[filter] smooth`` is true, else ``none``.  ``auto`` (the default) is ``graph``
+    on a drive with fixes and a gyro or an odometer (the whole drive's dead reckoning weighs
+    every fix: docs/decisions/0071), ``rts`` on one with fixes alone (nothing to weigh them
+    against) and ``none`` on dead reckoning alone (no fix to smooth towards); without
+    ``epochs`` it stays ``auto``."""
     name = str(params["filter"].get("smoother", "")).strip().lower()
     if name:
         if name not in SMOOTHERS:
             raise UsageError(f"[filter] smoother = {name!r}: expected one of "
                              f"{', '.join(SMOOTHERS)}")
+        if name == "auto" and epochs is not None:
+            if not np.any(epochs.has_gnss):
+                return "none"
+            return "graph" if np.any(epochs.has_gyro) or np.any(epochs.has_odo) else "rts"
         return name
     return "rts" if params["filter"]["smooth"] else "none"
 
@@ -278,10 +286,10 @@ def build_metadata(drive: Drive, params: Params, frame: LocalFrame, epochs: Epoc
         "gpsdr.version": __version__,
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "filter": str(params["filter"]["name"]),
-        "smoothed": "true" if smoother_of(params) != "none" else "false",
+        "smoothed": "true" if smoother_of(params, epochs) != "none" else "false",
         # what ran: a graph solve that failed leaves the RTS track
         "smoother": "graph" if result.info.get("smoothing") == "graph" else
-        ("none" if smoother_of(params) == "none" else "rts"),
+        ("none" if smoother_of(params, epochs) == "none" else "rts"),
         "params_toml": config.to_toml(params),
     }
     meta.update({f"param.{k}": v for k, v in config.flat(params).items()})
@@ -425,7 +433,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     if len(epochs) == 0:
         where = drive.sources[0].path if drive.sources else None
         raise NoDataError(where, "no GNSS, gyro or odometer record to process")
-    smoother = smoother_of(params)
+    smoother = smoother_of(params, epochs)
     if ready is not None:
         ready()  # e.g. a background compile of the kernels (gpsdr_cli.warmup) has finished
     # the filters read the boolean; the graph starts from the RTS solution
@@ -575,7 +583,7 @@ def _qc_passes(epochs: Epochs, params: Params, progress: Progress | None
     # copies: a result's e and n are views of its whole state array
     e_b, n_b, _, _ = qc.reverse_result_positions(run_filter(qc.reverse_epochs(epochs), raw))
     e_b, n_b = e_b.copy(), n_b.copy()
-    if smoother_of(params) == "none":
+    if smoother_of(params, epochs) == "none":
         return None, None, e_b, n_b
     fwd = run_filter(epochs, raw)
     return np.array(fwd.e, float), np.array(fwd.n, float), e_b, n_b

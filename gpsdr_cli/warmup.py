@@ -117,7 +117,8 @@ def tiny_epochs(duration_s: float = 40.0, rate_hz: float = 100.0, gnss_hz: float
 def warm_up(params: Params, *, auto_gnss_offset: bool = False) -> None:
     """Compile (or load from numba's cache) the kernels a fuse with ``params`` calls.
 
-    ``params["filter"]["name"]`` and ``["smooth"]`` choose the kernels; with
+    ``params["filter"]["name"]`` and its smoother choose the kernels (``auto``: the graph's
+    too, since the drive decides); with
     ``auto_gnss_offset`` the smoothed probe pass's kernels too.
     """
     from . import filters
@@ -125,12 +126,12 @@ def warm_up(params: Params, *, auto_gnss_offset: bool = False) -> None:
     name = params["filter"]["name"]
     run = filters.get(name)
     epochs = tiny_epochs()
-    smooths = {bool(params["filter"]["smooth"])}
-    if auto_gnss_offset:
-        smooths.add(True)
     from .pipeline import smoother_of
 
-    graph = smoother_of(params) == "graph"
+    smooths = {smoother_of(params) != "none"}
+    if auto_gnss_offset:
+        smooths.add(True)
+    graph = smoother_of(params) in ("graph", "auto")
     if graph:
         smooths.add(True)
     from .qc import qc_enabled
@@ -156,9 +157,12 @@ def cache_is_fresh(params: Params, *, auto_gnss_offset: bool = False) -> bool:
     """
     name = params["filter"]["name"]
     mods = list(KERNEL_MODULES.get(name, ()))
-    if params["filter"]["smooth"] or auto_gnss_offset:
+    from .pipeline import smoother_of
+
+    smoother = smoother_of(params)
+    if smoother != "none" or auto_gnss_offset:
         mods += SMOOTHING_MODULES.get(name, ())
-    if str(params["filter"].get("smoother", "")) == "graph":
+    if smoother in ("graph", "auto"):
         mods.append("filters/graph_kernels.py")
     root = Path(__file__).resolve().parent
     user_dir = os.environ.get("NUMBA_CACHE_DIR")

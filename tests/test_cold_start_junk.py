@@ -89,6 +89,7 @@ def test_filters_finite_across_44_years(tmp_path, name, smooth):
     log.write_text(junk_log(12, seed=1))
     params = config.defaults()
     params["filter"]["smooth"] = smooth
+    params["filter"]["smoother"] = "rts" if smooth else "none"
     drive = read_drive(gps=str(log), params=params)
     epochs = build_epochs(drive, pipeline.choose_frame(drive, params), params)
     assert (np.diff(epochs.t_ns) > 40 * 365 * 86400 * 10**9).any()

@@ -106,7 +106,7 @@ def test_bad_lists_are_usage_errors(gpsdr, drive_dir, args, needle) -> None:
 
 def test_smoothers_follow_the_parameter_type() -> None:
     p = config.defaults()
-    assert set(smoother_names(p)) == {"none", "rts", "graph"}
+    assert set(smoother_names(p)) == {"auto", "none", "rts", "graph"}
     assert with_smoother(p, "rts")["filter"]["smooth"] is True
     assert with_smoother(p, "none")["filter"]["smooth"] is False
     assert with_smoother(p, "graph")["filter"]["smoother"] == "graph"

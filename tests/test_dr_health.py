@@ -209,16 +209,18 @@ def test_aekf_follows_the_fixes_when_the_gyro_clips(city) -> None:
 
 def test_reflected_signals_without_an_odometer_are_said_and_graph_suggested() -> None:
     """A city drive with reflected signals, gyro but no odometer: nothing can screen the
-    fixes, and the default aekf ended 41.7 m off against the fixes' 20.7 m without a word
+    fixes, and the forward aekf ended 41.7 m off against the fixes' 20.7 m without a word
     (26.6 m with the Doppler sigma of [gnss] nlos_velocity_sd_mps).  The summary now says so
-    and names --smooth graph (16.6 m there); with the odometer the screen runs and the
-    warning is the screen's own."""
+    and names --smooth graph (16.6 m there), which is the default since decisions/0071; with
+    the odometer the screen runs and the warning is the screen's own."""
     from gpsdr_cli.pipeline import fuse
 
     sim = simulate_drive("urban_nlos", 5, 300.0)
     ref = sim.reference()
     no_odo = F.drop_streams(sim.drive, "odo")
-    res = fuse(copy.deepcopy(no_odo), config.defaults(), ref)
+    forward = config.defaults()
+    forward["filter"]["smoother"] = "none"
+    res = fuse(copy.deepcopy(no_odo), forward, ref)
     said = [w for w in res.drive_warnings if "nothing outvotes" in w]
     assert len(said) == 1 and "no odometer" in said[0] and "--smooth graph" in said[0]
     # reflected signals read as a 0.7-s offset of the fixes' stamps: no such hint here
@@ -227,9 +229,8 @@ def test_reflected_signals_without_an_odometer_are_said_and_graph_suggested() ->
     # the case the warning is for: 41.7 m, then 20.9 m with the Doppler sigma; 19.3 m since a
     # stop's ZUPT keeps the position (decisions/0039): at the fixes, not below them
     assert 0.8 * fixes < res.summary()["rmse_m"] < 1.1 * fixes
-    p = config.defaults()
-    p["filter"]["smoother"] = "graph"
-    graph = fuse(copy.deepcopy(no_odo), p, ref)
+    graph = fuse(copy.deepcopy(no_odo), config.defaults(), ref)
+    assert graph.metadata["smoother"] == "graph"
     assert graph.summary()["rmse_m"] < 0.9 * fixes
     assert not any("--smooth graph" in w for w in graph.drive_warnings)
     with_odo = fuse(copy.deepcopy(sim.drive), config.defaults(), ref)

@@ -192,6 +192,16 @@ def test_fault_track_follows_the_truth(case: str, filter_name: str, runs) -> Non
     assert F.accuracy_problems(F.CASES[case], inputs, out) == []
 
 
+@pytest.mark.parametrize("case", [c.name for c in F.CATALOGUE if c.expect == "track"])
+def test_fault_forward_track_follows_the_truth(case: str, runs) -> None:
+    """The same bounds for the forward filter alone (``--no-smooth``): the default smooths
+    (decisions/0071), and the forward track is still an output."""
+    inputs, out = runs(case, "aekf", "none")
+    if out.status != 0:
+        pytest.skip(f"no track: {out.stderr.strip()}")
+    assert F.accuracy_problems(F.CASES[case], inputs, out) == []
+
+
 @pytest.mark.parametrize("case", [c.name for c in F.CATALOGUE])
 def test_fault_through_the_graph_gives_a_track_or_one_clear_error(case: str, runs) -> None:
     """Issue 15: the fault suite passes with ``--smooth graph`` as with RTS (a solve that does

@@ -37,6 +37,7 @@ def _errors(sim, drive, name: str, smooth: bool, lead_s: float = LEAD_IN_S):
     p = config.defaults()
     p["filter"]["name"] = name
     p["filter"]["smooth"] = smooth
+    p["filter"]["smoother"] = "rts" if smooth else "none"
     res = pipeline.fuse(drive, p)
     t = res.epochs.t_ns
     tr = sim.truth
@@ -121,6 +122,7 @@ def test_a_gnss_only_log_holds_its_first_fix_before_it(smooth: bool) -> None:
         fix_quality=np.where(cold, 0, g.fix_quality).astype(g.fix_quality.dtype))
     p = config.defaults()
     p["filter"]["smooth"] = smooth
+    p["filter"]["smoother"] = "rts" if smooth else "none"
     res = pipeline.fuse(drive, p)
     k = res.result.info["lead_in_epochs"]
     assert abs(res.result.info["lead_in_s"] - 165.0) < 0.25

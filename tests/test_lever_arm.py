@@ -73,6 +73,7 @@ def test_lever_arm_brings_the_track_to_the_reference_point(antenna_drive) -> Non
     sim, antenna = antenna_drive
     p = config.defaults()
     p["qc"]["backward_pass"] = False
+    p["filter"]["smoother"] = "none"  # the forward filter: the graph's track hides the arm less
     floor = _errors(sim, pipeline.fuse(sim.drive, p).track)       # fixes at the reference point
     plain = pipeline.fuse(antenna, p).track
     err_plain = _errors(sim, plain)
@@ -133,7 +134,9 @@ def test_an_antenna_ahead_is_not_a_late_odometer(antenna_drive) -> None:
     from gpsdr_cli.latency import estimate_gnss_offset
 
     _, antenna = antenna_drive
-    res = pipeline.fuse(antenna, config.defaults())
+    p = config.defaults()
+    p["filter"]["smoother"] = "none"  # the forward track the lag is read on
+    res = pipeline.fuse(antenna, p)
     assert res.params["time"]["odo_offset_s"] == 0.0
     assert not any("odometer's speed reads" in w for w in res.drive_warnings)
     vector = estimate_gnss_offset(res.track)

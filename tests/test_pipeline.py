@@ -45,6 +45,7 @@ def reference(sample_dir: Path):
 def result(drive: Drive, reference):
     params = config.defaults()
     params["filter"]["smooth"] = True
+    params["filter"]["smoother"] = "rts"
     return fuse(drive, params, reference)
 
 
@@ -126,6 +127,7 @@ def test_fused_error_on_the_real_drive(drive: Drive, reference) -> None:
     the smoothed fusion must be sub-metre everywhere and at least as good as the fixes."""
     params = config.defaults()
     params["filter"]["smooth"] = True
+    params["filter"]["smoother"] = "rts"
     params["time"]["gnss_offset_s"] = LATENCY_S
     res = fuse(drive, params, reference)
     fused = res.summary()
@@ -153,6 +155,7 @@ def test_fusion_beats_noisy_gnss(drive: Drive, reference, name: str) -> None:
     params = config.defaults()
     params["filter"]["name"] = name
     params["filter"]["smooth"] = True
+    params["filter"]["smoother"] = "rts"
     params["time"]["gnss_offset_s"] = LATENCY_S
     res = fuse(noisy, params, reference)
     fused, alone = res.summary()["rmse_m"], res.gnss_only_summary()["rmse_m"]
@@ -214,6 +217,7 @@ def test_auto_gnss_offset(drive: Drive, reference) -> None:
         pytest.skip("gpsdr_cli.latency not in this tree yet")
     params = config.defaults()
     params["filter"]["smooth"] = True
+    params["filter"]["smoother"] = "rts"
     res = fuse(drive, params, reference, auto_gnss_offset=True)
     assert res.gnss_offset_s == pytest.approx(LATENCY_S, abs=0.04)  # s
     assert float(res.metadata["gnss_offset_auto_s"]) == res.gnss_offset_s

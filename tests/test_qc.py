@@ -187,6 +187,7 @@ def test_every_filter_with_a_lead_in_and_a_tail(name: str, smooth: bool) -> None
     p = config.defaults()
     p["filter"]["name"] = name
     p["filter"]["smooth"] = smooth
+    p["filter"]["smoother"] = "rts" if smooth else "none"
     tr = pipeline.fuse(drive, p).track
     sep = tr["separation_m"].to_numpy(float)
     assert np.all(np.isfinite(sep))
@@ -207,6 +208,7 @@ def test_fused_separation_is_that_of_independent_passes(open_sky: simulate.SimDr
     # a plain forward pass and the reversed pass, whatever the main pass is
     p = config.defaults()
     p["filter"]["smooth"] = smooth
+    p["filter"]["smoother"] = "rts" if smooth else "none"
     res = pipeline.fuse(open_sky.drive, p)
     raw = copy.deepcopy(res.params)
     raw["filter"]["smooth"] = False

@@ -257,7 +257,7 @@ def test_gpsdr_plot_html_with_and_without_a_reference(gpsdr, tmp_path, fused) ->
     data = json.loads(re.search(r'id="gpsdr-data">(.*?)</script>', text, re.DOTALL).group(1))
     rmse = float(fused.stats.loc[fused.stats["segment"] == "all", "rmse_m"].iloc[0])
     assert f"RMSE {rmse:.2f} m" in data["stats_text"]  # the same figure as gpsdr fuse's
-    assert data["title"] == "aekf"  # from the track's metadata
+    assert data["title"] == "aekf + graph"  # from the track's metadata (the default smoother)
     noref = gpsdr(["plot", track, "--html", tmp_path / "noref.html", "-q"])
     assert noref.exit_code == 0 and noref.stderr == ""
     assert "no reference" in (tmp_path / "noref.html").read_text(encoding="utf-8")

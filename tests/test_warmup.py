@@ -66,6 +66,7 @@ PARTS = textwrap.dedent("""
     from gpsdr_cli import warmup
     p = defaults()
     p["filter"]["name"] = sys.argv[1]
+    p["filter"]["smoother"] = "none"  # the filter's kernel alone (the graph's compile after it)
     for sec, kv in json.loads(sys.argv[2]).items():
         p[sec].update(kv)
     parts = warmup.compile_parts(p)

@@ -123,14 +123,16 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
     LOG is an MCAP file (or an NMEA file; - reads NMEA from stdin).  Or give the
     streams as --gps/--gyro/--odo.  Writes the track (one row per filter epoch:
     time, lat, lon, e, n, v_e, v_n, speed, heading_deg, sigma_e, sigma_n,
-    gnss_used, pdop, ...) and the statistics table.
+    gnss_used, pdop, ...) and the statistics table.  By default the filter's track is
+    finished by the robust graph smoother where a gyro or odometer logs the motion (RTS
+    on fixes alone); --smooth is RTS, --no-smooth the forward filter alone.
 
     \b
     Examples:
-      gpsdr fuse drive.mcap
+      gpsdr fuse drive.mcap                          # aekf + graph
       gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --filter fafkf --smooth \\
                  --reference truth.csv -o track.parquet
-      gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --smooth graph \\
+      gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv \\
                  --odo-scale 1.012+-0.005
       cat gps.nmea | gpsdr fuse - -o - --format csv > track.csv
       gpsdr fuse drive.mcap --lever-arm 1.5,0.3     # antenna 1.5 m ahead, 0.3 m left

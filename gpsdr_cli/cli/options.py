@@ -51,7 +51,7 @@ def config_option(fn: F) -> F:
                              "(see `gpsdr fuse --print-config`).")(fn)
 
 
-SMOOTH_CHOICES = ("rts", "graph", "none")
+SMOOTH_CHOICES = ("auto", "rts", "graph", "none")
 
 
 class SmoothCommand(click.Command):
@@ -97,8 +97,9 @@ def filter_options(fn: F) -> F:
     fn = click.option("--smooth", type=click.Choice(SMOOTH_CHOICES), is_flag=False,
                       flag_value="rts", default=None, callback=_keep_no_smooth,
                       help="After the forward filter: rts (the default of a bare --smooth), "
-                           "graph (robust batch smoother: down-weights NLOS fixes) or none "
-                           "(default: [filter] smoother).")(fn)
+                           "graph (robust batch smoother: down-weights NLOS fixes), none, or "
+                           "auto (graph with a gyro or odometer, rts on fixes alone; the "
+                           "default, [filter] smoother).")(fn)
     fn = click.option("--filter", "filter_name", type=click.Choice(FILTER_NAMES),
                       default=None, help="Filter to run (default: [filter] name, aekf).")(fn)
     return fn
