@@ -79,7 +79,7 @@ QC_COLUMNS: dict[str, str] = {
                "GNSS state (docs/qc.md)",
 }
 
-#: Track Parquet: columns only the graph smoother (``--smooth graph``) writes.
+#: Track Parquet: columns only the graph smoother writes (the default with a gyro or odometer).
 GRAPH_TRACK_COLUMNS: dict[str, str] = {
     "gnss_weight": "dimensionless, robust weight of the GNSS fix in the graph smoother (1: full "
                    "weight; null where no fix)",
