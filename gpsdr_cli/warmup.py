@@ -128,10 +128,11 @@ def warm_up(params: Params, *, auto_gnss_offset: bool = False) -> None:
     epochs = tiny_epochs()
     from .pipeline import smoother_of
 
-    smooths = {smoother_of(params) != "none"}
+    smoother = smoother_of(params)
+    smooths = {smoother != "none"}
     if auto_gnss_offset:
         smooths.add(True)
-    graph = smoother_of(params) in ("graph", "auto")
+    graph = smoother in ("graph", "auto")
     if graph:
         smooths.add(True)
     from .qc import qc_enabled

@@ -361,8 +361,7 @@ def doppler_misfit(epochs: Epochs, min_speed_mps: float = 4.0, *,
     odo = np.interp(t_f, t_o, epochs.odo_speed_mps[o])
     inside = (t[f] >= t[o[0]]) & (t[f] <= t[o[-1]])
     # ... and not across a pause in the odometer's records (a 30-s dropout read as a line)
-    j = np.clip(np.searchsorted(t[o], t[f]), 1, len(o) - 1)
-    inside &= (t[o][j] - t[o][j - 1]) <= ODO_GAP_S * NS_PER_S
+    inside &= between_close_records(t[o], t[f], ODO_GAP_S * NS_PER_S)
     dop = epochs.gnss_speed_mps[f]
     moving = inside & (odo > min_speed_mps) & (dop > min_speed_mps)
     if moving.sum() < 10:
@@ -383,6 +382,15 @@ def doppler_misfit(epochs: Epochs, min_speed_mps: float = 4.0, *,
 #: the odometer is read at a fix only between two of its records at most this far apart (s;
 #: a 1-Hz logger with jitter passes)
 ODO_GAP_S = 2.0
+
+
+def between_close_records(t_rec: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
+    """Per time in ``t``: whether the two records of ``t_rec`` (sorted, at least two) around it
+    are at most ``max_gap`` apart (the units of the times), so that a value interpolated there
+    is not a line across a pause.  Times outside ``t_rec`` are judged by its first or last
+    interval; the caller bounds them."""
+    j = np.clip(np.searchsorted(t_rec, t), 1, len(t_rec) - 1)
+    return (t_rec[j] - t_rec[j - 1]) <= max_gap
 #: the Doppler and odometer speeds of clean fixes agree within this (m/s) at the right scale
 SCALE_AGREE_MPS = 0.2
 

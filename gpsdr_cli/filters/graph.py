@@ -173,11 +173,10 @@ def odo_lag_s(t_s: np.ndarray, odo_good: np.ndarray, odo: np.ndarray, has_fix: n
     inside = (tf >= to[0] + max_lag_s) & (tf <= to[-1] - max_lag_s)
     # ... and not across a pause in the odometer's good samples: a 36-s stretch the health
     # check left out, read as a line between its ends, fitted a lag of 0.275 s for 0.05 s
-    from .gnss_model import ODO_GAP_S
+    from .gnss_model import ODO_GAP_S, between_close_records
 
     for shift in (0.0, max_lag_s):
-        j = np.clip(np.searchsorted(to, tf + shift), 1, len(to) - 1)
-        inside &= (to[j] - to[j - 1]) <= ODO_GAP_S
+        inside &= between_close_records(to, tf + shift, ODO_GAP_S)
     tf, vf = tf[inside], vf[inside]
     best, best_lag = math.inf, 0.0
     for lag in np.arange(0.0, max_lag_s + 0.5 * step_s, step_s):
