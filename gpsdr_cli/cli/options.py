@@ -85,11 +85,13 @@ def filter_options(fn: F) -> F:
     """--filter, --smooth [rts|graph|none], --no-smooth and the calibration priors
     --odo-scale / --gyro-bias (default: from the parameters)."""
     fn = click.option("--gyro-bias", "gyro_bias", type=str, default=None, metavar="RADPS[+-SD]",
-                      help="Graph smoother: known gyro bias (rad/s, in the yaw rate's sign), "
+                      help="Known gyro bias (rad/s, in the yaw rate's sign): the graph's prior and "
+                           "ekf/aekf's starting drift, "
                            "optionally with its sigma (default SD: [graph] gyro_bias_sd_radps), "
                            "e.g. 0.002+-0.0005.")(fn)
     fn = click.option("--odo-scale", "odo_scale", type=str, default=None, metavar="SCALE[+-SD]",
-                      help="Graph smoother: known odometer scale (true speed = SCALE x reading), "
+                      help="Known odometer scale (true speed = SCALE x reading): the graph's prior "
+                           "and ekf/aekf's starting scale, "
                            "optionally with its sigma (default SD: [graph] odo_scale_sd), "
                            "e.g. 1.012+-0.005.")(fn)
     fn = click.option("--no-smooth", is_flag=True, expose_value=False, callback=_no_smooth,

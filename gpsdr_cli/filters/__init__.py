@@ -12,6 +12,7 @@ import copy
 import dataclasses
 import functools
 import importlib
+import math
 from collections.abc import Callable
 
 from ..config import Params
@@ -84,6 +85,15 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 fkf_p = model_params["fkf"]
                 if "nlos_screen_odo_scale" in info and not float(fkf_p["known_odo_scale"]) > 0:
                     fkf_p["known_odo_scale"] = info["nlos_screen_odo_scale"]
+                # ... and ekf/aekf start from the fit's calibration, unless the user gave one:
+                # across minutes of fixes left out, a drift learnt from a few fixes turned the
+                # track 175 m off (decisions/0072)
+                gp = model_params["graph"]
+                if "nlos_screen_gyro_bias_radps" in info and not math.isfinite(
+                        float(gp["gyro_bias_radps"])):
+                    gp["gyro_bias_radps"] = info["nlos_screen_gyro_bias_radps"]
+                if "nlos_screen_odo_scale" in info and not math.isfinite(float(gp["odo_scale"])):
+                    gp["odo_scale"] = info["nlos_screen_odo_scale"]
                 # ... and white about the dead reckoning (ekf/aekf): what was correlated in them
                 # was the reflections; a 2-m bias state took the dead reckoning's drift across a
                 # screened gap for a fix bias and the smoother carried it back over clean

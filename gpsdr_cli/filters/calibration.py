@@ -1,0 +1,31 @@
+"""The dead reckoning's known calibration, as the filters start from it.
+
+``[graph] gyro_bias_radps`` and ``odo_scale`` are calibration priors: the user's
+(``--gyro-bias``, ``--odo-scale``, ``gpsdr batch --calibrate-per-vehicle``) or, on a drive the
+NLOS screen judged, its whole-drive batch fit (:mod:`.nlos_screen`), which sees every fix and
+every reading while a forward filter learns a drift from the fixes it has met so far.
+Conventions: ``yaw_measured = yaw_true + bias`` (rad/s, counter-clockwise positive) and
+``true speed = scale x odometer reading``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..config import Params
+from ..epochs import Epochs
+
+
+def known_gyro_bias(epochs: Epochs, params: Params) -> float | None:
+    """The known gyro bias (rad/s) in ``epochs``' own sense (a drive run backwards reads its
+    yaw rates negated, and its bias with them), or None."""
+    bias = float(params["graph"]["gyro_bias_radps"])
+    if not math.isfinite(bias):
+        return None
+    return -bias if epochs.time_reversed else bias
+
+
+def known_odo_scale(params: Params) -> float | None:
+    """The known odometer scale (true speed over the reading), or None."""
+    scale = float(params["graph"]["odo_scale"])
+    return scale if math.isfinite(scale) and scale > 0.0 else None
