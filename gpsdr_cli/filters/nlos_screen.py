@@ -27,7 +27,9 @@ The runs are cut against a track the reflections still pull where no clean fix a
 pass kept: its gate and the dead reckoning hold that track off a reflected run which the
 fit over every fix had followed (docs/decisions/0046); before the first fix kept, that track
 is dead-reckoned back from it with the fit's calibration (:func:`judge_kept`,
-docs/decisions/0059).  The screen's judge is the ekf
+docs/decisions/0059).  Not where that track lies farther from the fixes than
+``nlos_screen_max_offset_m`` (the last check below): its ekf crossed minutes without a kept
+fix on a drift learnt from a few, and the first judgement stands (decisions/0072).  The screen's judge is the ekf
 whatever filter runs after it, so every filter is given the same fixes.  No clean fix
 follows the drive's last run to hold a track off a reflection that ramps in there, so the
 later segments of that run are judged once more, against the ekf's track of the fixes
@@ -143,6 +145,7 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
 def _screen(epochs: Epochs, params: Params, run: Callable[[Epochs, Params], FilterResult],
             doppler: np.ndarray | None = None) -> tuple[Epochs, dict]:
     g = params["gnss"]
+    max_offset_m = float(g["nlos_screen_max_offset_m"])
     from .gnss_model import reflected_doppler
     from .graph import own_sigmas, smooth_graph, solve_by_segments
 
@@ -185,6 +188,10 @@ def _screen(epochs: Epochs, params: Params, run: Callable[[Epochs, Params], Filt
         for n_pass in range(max(int(g["nlos_screen_passes"]), 1)):
             if n_pass:
                 track = judge_kept(epochs, fix & ~out, run, probe, outcome)
+                # a judge farther from every fix than a reflection reaches has dead-reckoned
+                # across a long gap in the fixes kept: runs cut against it would be noise
+                if farthest_window(epochs, track, fix)[0] > max_offset_m:
+                    break
             seg_out, seg_pass, near = solve_by_segments(epochs, track, fit, sigmas=False,
                                                         doppler=doppler)
             if seg_out.result is None:
@@ -213,7 +220,7 @@ def _screen(epochs: Epochs, params: Params, run: Callable[[Epochs, Params], Filt
     forward = {**probe, "filter": {**probe["filter"], "smooth": False}}
     far_m, at_s = farthest_window(epochs, judge_kept(epochs, fix & ~out, run, forward, outcome),
                                   fix)
-    if far_m > float(g["nlos_screen_max_offset_m"]):
+    if far_m > max_offset_m:
         return epochs, not_applied(f"the track of the {kept} fixes it would keep lies {far_m:.0f} m "
                                     f"from the fixes around {at_s:.0f} s")
     info = {"nlos_screened": int(out.sum())}
