@@ -11,8 +11,10 @@ Columns of the table: ``filter``, ``smoother``, ``epochs``; against a reference
 forward/backward ``separation_m`` column when the track has it; ``gnss_used`` and
 ``gnss_rejected`` fix counts and ``run_s`` (wall time of the run).
 
-Smoothers: ``none`` and ``rts`` while ``[filter] smooth`` is a boolean; when it names a
-smoother (a string), the value is passed through and the pipeline judges it.
+Smoothers: ``none``, ``rts``, ``graph`` and ``auto``, the pipeline's choice for the drive
+(:func:`gpsdr_cli.pipeline.smoother_of`, what ``gpsdr fuse`` runs by default).  An ``auto``
+row is labelled with the smoother that ran, and left out where that filter already has a
+row of it (a drive without gyro or odometer: ``rts``).
 
 Conventions: :mod:`gpsdr_cli.conventions` (metres, int64 ns UTC).
 """
@@ -140,6 +142,11 @@ def compare(drive: Drive, params: Params, reference: Reference | None, filters: 
             run_s = time.perf_counter() - t0
             s = _all_row(res.stats)
             track = res.track
+            if smoother == "auto":
+                # labelled with what ran (a graph that failed to converge leaves RTS)
+                smoother = res.metadata.get("smoother", smoother)
+            if any(r.filter == name and r.smoother == smoother for r in runs):
+                continue                         # auto's choice, run under its name too
             row: dict[str, Any] = {"filter": name, "smoother": smoother, "epochs": len(track)}
             row.update({k: s[k] for k in _FIGURES})
             sep = (pd.to_numeric(track["separation_m"], errors="coerce").to_numpy(float)

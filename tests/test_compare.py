@@ -93,6 +93,29 @@ def test_without_a_reference_the_health_figures(gpsdr, drive_dir, tmp_path) -> N
     assert schema.metadata[b"compare.filters"] == b"aekf,ekf"
 
 
+def test_the_default_adds_what_fuse_runs_by_default(gpsdr, drive_dir, tmp_path) -> None:
+    """``--smooth`` defaults to none,rts,auto; auto's row is named by what ran (the graph on a
+    drive with a gyro and an odometer) and equals ``gpsdr fuse``'s default; on fixes alone
+    auto is RTS, already a row, and is not repeated."""
+    out = tmp_path / "table.csv"
+    res = gpsdr(["compare", *_streams(drive_dir), "--reference", drive_dir / "truth.csv",
+                 "--filters", "aekf", "-o", out, "-q"])
+    assert res.exit_code == 0, res.stderr
+    table = pd.read_csv(out)
+    assert list(table["smoother"]) == ["none", "rts", "graph"]
+    track, stats = tmp_path / "d.parquet", tmp_path / "d.stats.parquet"
+    fused = gpsdr(["fuse", *_streams(drive_dir), "--filter", "aekf", "-o", track, "--stats",
+                   stats, "--reference", drive_dir / "truth.csv", "-q"])
+    assert fused.exit_code == 0, fused.stderr
+    s = pd.read_parquet(stats)
+    ref = s[s["segment"] == "all"].iloc[0]
+    assert abs(table["rmse_m"].iloc[2] - float(ref["rmse_m"])) <= SAME_M
+    assert table["rmse_m"].iloc[2] < table["rmse_m"].iloc[0]      # below the forward filter
+    res = gpsdr(["compare", "--gps", drive_dir / "gps.nmea", "--filters", "ekf", "-o", out, "-q"])
+    assert res.exit_code == 0, res.stderr
+    assert list(pd.read_csv(out)["smoother"]) == ["none", "rts"]
+
+
 @pytest.mark.parametrize(("args", "needle"), [
     (["--filters", "ekf,kalman"], "--filters kalman: unknown"),
     (["--smooth", "none,spline"], "--smooth spline: unknown"),

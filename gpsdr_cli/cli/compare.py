@@ -28,8 +28,11 @@ from .options import (
                    "the table gets RMSE, CEP95 and max against it.")
 @click.option("--filters", "filters_text", default=",".join(FILTER_NAMES), show_default=True,
               metavar="LIST", help="Comma-separated filters to run.")
-@click.option("--smooth", "smooth_text", default="none,rts", show_default=True, metavar="LIST",
-              help="Comma-separated smoothers to run after each filter (none = forward only).")
+@click.option("--smooth", "smooth_text", default="none,rts,auto", show_default=True,
+              metavar="LIST",
+              help="Comma-separated smoothers to run after each filter: none (forward only), "
+                   "rts, graph, auto (what `gpsdr fuse` runs by default: graph where a gyro "
+                   "or odometer logs the motion; its row is labelled with what ran).")
 @click.option("-o", "--output", type=str, metavar="TABLE.csv|.parquet",
               help="Also write the table (format by suffix).")
 @click.option("--plot", "plot_path", type=str, metavar="overlay.png",
