@@ -29,11 +29,12 @@ fit over every fix had followed (docs/decisions/0046); before the first fix kept
 is dead-reckoned back from it with the fit's calibration (:func:`judge_kept`,
 docs/decisions/0059).  Not where that track lies farther from the fixes than
 ``nlos_screen_max_offset_m`` (the last check below): its ekf crossed minutes without a kept
-fix on a drift learnt from a few, and the first judgement stands (decisions/0072).  The screen's judge is the ekf
-whatever filter runs after it, so every filter is given the same fixes.  No clean fix
-follows the drive's last run to hold a track off a reflection that ramps in there, so the
-later segments of that run are judged once more, against the ekf's track of the fixes
-before them (:func:`last_run_drift`, ``[gnss] nlos_screen_last_sigmas``; decisions/0048).
+fix on a drift learnt from a few, and the first judgement stands (decisions/0072).  The
+screen's judge is the ekf whatever filter runs after it, so every filter is given the same
+fixes.  No clean fix follows the drive's last run to hold a track off a reflection that
+ramps in there, so the later segments of that run are judged once more, against the ekf's
+track of the fixes before them (:func:`last_run_drift`, ``[gnss] nlos_screen_last_sigmas``;
+decisions/0048).
 The screen is a judgement over the whole drive: the quality check's backward pass, over the
 time-reversed drive, is given the forward judgement read backwards.
 
