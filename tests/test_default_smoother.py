@@ -58,9 +58,10 @@ def test_fixes_alone_get_rts_and_say_so() -> None:
 def test_the_default_weighs_reflected_fixes_against_the_whole_drive(monkeypatch) -> None:
     """A simulated 283-s city drive (5-Hz CAN speed and yaw rate) whose reflections wander with
     the distance driven (20 m per axis, over 100 m): fixes at 20 m RMS.  The forward aekf of
-    the fixes the NLOS screen keeps ran 48 m RMS from the truth, more than the fixes: a few
-    kept fixes 3-8 m off turned its heading before a minute and a half without one.  The
-    default (aekf, then the graph) stays within 2 m."""
+    the fixes the NLOS screen keeps ran 48 m RMS from the truth, more than the fixes: a kept
+    fix's reflected course turned its heading before a minute and a half without one (16 m
+    since decisions/0073, still the most of any finish).  The default (aekf, then the graph)
+    stays within 2 m."""
     monkeypatch.setattr(simulate, "NLOS_SHAPE", "wander")
     monkeypatch.setattr(simulate, "NLOS_WANDER_SD_M", 20.0)
     monkeypatch.setattr(simulate, "NLOS_WANDER_DIST_M", 100.0)
@@ -75,7 +76,7 @@ def test_the_default_weighs_reflected_fixes_against_the_whole_drive(monkeypatch)
     forward = config.defaults()
     forward["filter"]["smoother"] = "none"
     fwd_m, _ = _rmse(sim, fuse(copy.deepcopy(sim.drive), forward))
-    assert fwd_m > fixes_m                   # what the default is for
+    assert fwd_m > 4.0 * track_m             # what the default is for
 
 
 @pytest.mark.parametrize("args", [[], ["--smooth"], ["--no-smooth"], ["--smooth", "auto"]])

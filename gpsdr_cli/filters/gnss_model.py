@@ -259,7 +259,8 @@ def gnss_error_model(epochs: Epochs, params: Params, *,
     sd_n[f] *= scale
     epochs = dataclasses.replace(epochs, gnss_sd_e=sd_e, gnss_sd_n=sd_n, nlos_drive=nlos)
     if nlos:
-        params = reflected_doppler(params, bool(epochs.has_odo.any()))  # a copy
+        params = reflected_doppler(params, bool(epochs.has_odo.any()),  # a copy
+                                   not epochs.dr_unhealthy)
         params["aekf"]["gnss_err_sd_m"] = float(g["nlos_err_sd_m"])
     return epochs, params
 
@@ -298,14 +299,15 @@ def _at_least(section: dict, key: str, floor: float) -> None:
     section[key] = max(float(section[key]), float(floor))
 
 
-def reflected_doppler(params: Params, has_odo: bool) -> Params:
+def reflected_doppler(params: Params, has_odo: bool, dr_healthy: bool = True) -> Params:
     """``params`` with the receiver's velocity sigmas of an NLOS drive: reflected signals
     put the Doppler velocity metres per second off too.  fkf/fafkf: at least ``[gnss]
     nlos_fkf_velocity_sd_mps``; ekf/aekf without an odometer (the Doppler speed then carries
     their speed; 0.2 m/s drove aekf up to 2x the fixes): at least ``nlos_velocity_sd_mps``;
-    with one, the receiver's velocity (ekf/aekf) and course (fkf/fafkf's steering) only at
-    ``nlos_velocity_min_mps`` or faster, and fkf's odometer scale over
-    ``nlos_odo_scale_window_s``.
+    with one, the receiver's velocity (ekf/aekf, at least ``nlos_odo_velocity_sd_mps`` while
+    the dead reckoning is healthy: where the odometer falls silent the Doppler is the speed)
+    and course (fkf/fafkf's steering) only at ``nlos_velocity_min_mps`` or faster, and fkf's
+    odometer scale over ``nlos_odo_scale_window_s``.
     Without an odometer the receiver velocity's gate also resets after ``[fkf]
     no_odo_gate_reset_s`` (as the fixes'), not ``[gnss] velocity_gate_reset_s``, and
     ekf/aekf's zero-velocity update never moves the position (``[gnss]
@@ -321,6 +323,11 @@ def reflected_doppler(params: Params, has_odo: bool) -> Params:
         # the odometer measures the speed; at walking pace a reflected Doppler's course is off
         # by tens of degrees and turned ekf's heading 9.5 deg just after a stop (decisions/0037)
         _at_least(a, "gnss_velocity_min_mps", g["nlos_velocity_min_mps"])
+        # ... and faster, a Doppler the screen kept can still be reflected: one 20 deg off the
+        # course ended a run of kept fixes and turned aekf's heading 11 deg for 90 s
+        # (decisions/0073)
+        if dr_healthy:
+            _at_least(a, "gnss_velocity_sd_mps", g["nlos_odo_velocity_sd_mps"])
         # ... and fkf's course steering: twelve courses 14 deg off at 3-5 m/s ended a 90-s
         # gap and turned its gyro heading 15 deg across it (decisions/0038)
         _at_least(k, "course_min_speed_mps", g["nlos_velocity_min_mps"])
