@@ -282,14 +282,15 @@ def build_metadata(drive: Drive, params: Params, frame: LocalFrame, epochs: Epoc
                    gnss_offset_auto_s: float | None) -> dict[str, str]:
     """File metadata: tool version, filter and every parameter, frame, inputs with SHA-256,
     skipped records by reason."""
+    smoother = smoother_of(params, epochs)
     meta: dict[str, str] = {
         "gpsdr.version": __version__,
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "filter": str(params["filter"]["name"]),
-        "smoothed": "true" if smoother_of(params, epochs) != "none" else "false",
+        "smoothed": "true" if smoother != "none" else "false",
         # what ran: a graph solve that failed leaves the RTS track
         "smoother": "graph" if result.info.get("smoothing") == "graph" else
-        ("none" if smoother_of(params, epochs) == "none" else "rts"),
+        ("none" if smoother == "none" else "rts"),
         "params_toml": config.to_toml(params),
     }
     meta.update({f"param.{k}": v for k, v in config.flat(params).items()})

@@ -125,22 +125,21 @@ def gnss_noise(epochs: Epochs, params: Params, adaptive: bool) -> tuple[np.ndarr
     return r_e, r_n, ka, sigma_const
 
 
-def known_calibration(epochs: Epochs, params: Params, eps: float, k_s: float, var_eps: float,
-                      var_k: float) -> tuple[float, float, float, float]:
-    """The drift state ``eps`` (rad/s, ``yaw_true = yaw + eps``) and odometer scale ``k_s``
-    (reading = ``k_s`` x true speed) to start from, with their variances: the known
-    calibration (:mod:`.calibration`) where there is one, else as passed in."""
+def start_from_known_calibration(epochs: Epochs, params: Params, x0: np.ndarray,
+                                 P0: np.ndarray) -> None:
+    """Set the drift state (``x0[6]``, rad/s, ``yaw_true = yaw + eps``) and the odometer scale
+    (``x0[7]``, reading = scale x true speed), with their variances in ``P0``, from the known
+    calibration (:mod:`.calibration`) where there is one; else leave them."""
     gp = params["graph"]
     bias = known_gyro_bias(epochs, params)
     if bias is not None:
-        eps = -bias
+        x0[6] = -bias
         # the drift wanders about its drive's mean by its own stationary sigma
-        var_eps = max(float(gp["gyro_bias_sd_radps"]), float(params["gyro"]["bias_sd_radps"])) ** 2
+        P0[6, 6] = max(float(gp["gyro_bias_sd_radps"]), float(params["gyro"]["bias_sd_radps"])) ** 2
     scale = known_odo_scale(params)
     if scale is not None:
-        k_s = 1.0 / scale
-        var_k = (float(gp["odo_scale_sd"]) / scale ** 2) ** 2
-    return eps, k_s, var_eps, var_k
+        x0[7] = 1.0 / scale
+        P0[7, 7] = (float(gp["odo_scale_sd"]) / scale ** 2) ** 2
 
 
 def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray, float, bool]:
@@ -170,8 +169,7 @@ def initial_state(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarra
     P0[2, 2] = P0[5, 5] = a["init_acc_sd_mps2"] ** 2
     P0[6, 6] = params["gyro"]["bias_init_sd_radps"] ** 2
     P0[7, 7] = params["odo"]["scale_init_sd"] ** 2
-    x0[6], x0[7], P0[6, 6], P0[7, 7] = known_calibration(epochs, params, x0[6], x0[7], P0[6, 6],
-                                                         P0[7, 7])
+    start_from_known_calibration(epochs, params, x0, P0)
     odo_idx = np.flatnonzero(sensor_masks(epochs, params)[1])
     u0 = float(epochs.odo_speed_mps[odo_idx[0]]) if len(odo_idx) else 0.0
     fixes = np.flatnonzero(epochs.has_gnss)
