@@ -142,8 +142,9 @@ def compare(drive: Drive, params: Params, reference: Reference | None, filters: 
             run_s = time.perf_counter() - t0
             s = _all_row(res.stats)
             track = res.track
-            if smoother == "auto":
-                # labelled with what ran (a graph that failed to converge leaves RTS)
+            if smoother == "auto" or res.metadata.get("smoother") == "none":
+                # labelled with what ran (a graph that failed to converge leaves RTS; dead
+                # reckoning alone is not smoothed)
                 smoother = res.metadata.get("smoother", smoother)
             if any(r.filter == name and r.smoother == smoother for r in runs):
                 continue                         # auto's choice, run under its name too

@@ -193,6 +193,27 @@ def test_dead_reckoning_needs_an_origin(drive: Drive, reference) -> None:
     assert res.summary()["max_m"] < 0.05 * 1012
 
 
+
+def test_dead_reckoning_alone_is_not_smoothed_even_when_asked(drive: Drive, reference) -> None:
+    """Nothing observes the position without a fix: an RTS pass over this dead reckoning moved
+    the origin the user gave 4.9 m north (the forward pass's odometer rows are consider
+    updates).  Asked for, the smoother is not run, and a warning says why."""
+    dr = Drive(gyro=drive.gyro, odo=drive.odo, sources=drive.sources)
+    params = config.defaults()
+    params["frame"].update(origin_lat_deg=float(reference.lat_deg[0]),
+                           origin_lon_deg=float(reference.lon_deg[0]), initial_heading_deg=1.4)
+    forward = fuse(dr, params, reference)
+    for smoother in ("rts", "graph"):
+        asked = copy.deepcopy(params)
+        asked["filter"].update(smooth=True, smoother=smoother)
+        res = fuse(dr, asked, reference)
+        assert res.track["e"].iloc[0] == pytest.approx(0.0, abs=1e-6)
+        assert res.track["n"].iloc[0] == pytest.approx(0.0, abs=1e-6)
+        np.testing.assert_allclose(res.track["n"], forward.track["n"], atol=1e-9)
+        assert res.metadata["smoother"] == "none" and res.metadata["smoothed"] == "false"
+        assert any(w.startswith(f"{smoother} smoother not run: no GNSS fix")
+                   for w in res.drive_warnings), res.drive_warnings
+
 def test_epsg_frame(drive: Drive) -> None:
     params = config.defaults()
     params["frame"]["epsg"] = 32610  # UTM 10N: San Francisco
