@@ -455,6 +455,7 @@ def test_bounded_last_stage_lets_the_dead_reckoning_outvote_reflected_runs() -> 
     assert _graph_from(sim, rts)[1] < 0.05 * rts.gnss_rmse_m
 
 
+
 def test_graduated_stages_before_the_last_need_not_converge_tightly() -> None:
     """A stage of the graduated kernel before the last only leads into the next one: ended
     at ``gnc_stage_tolerance`` instead of ``tolerance``, the fix-by-fix solve of a
@@ -506,8 +507,11 @@ def test_preintegrated_dead_reckoning_matches_the_step_by_step_integral() -> Non
     """The sums taken once per interval at one gyro bias, expanded to another, give the
     displacement, heading change and Jacobians of integrating every step at that bias:
     within 1e-9 of the displacement for a bias 0.01 rad/s off over 1.2 s, and exactly
-    again (re-taken) for one 0.5 rad/s off.  Steps: a 100 Hz gyro, an odometer with a gap
-    (the speed state interpolated there), a missing gyro stretch and a zero-length step."""
+    again (re-taken) for one 0.5 rad/s off.  The gyro's scale correction likewise: 1 % off
+    the one they were taken at, to first order (within 1e-5 m of the step-by-step
+    displacement, which moved 1 cm), its Jacobian as the integral's finite difference, and
+    re-taken 5 % off.  Steps: a 100 Hz gyro, an odometer with a gap (the speed state
+    interpolated there), a missing gyro stretch and a zero-length step."""
     import gpsdr_cli.filters.graph_kernels as gk
 
     rng = np.random.default_rng(3)
@@ -524,20 +528,45 @@ def test_preintegrated_dead_reckoning_matches_the_step_by_step_integral() -> Non
     x = np.zeros(2 * gk.N_X)
     x[gk.PSI], x[gk.V], x[gk.N_X + gk.V], x[gk.S] = 0.7, 7.5, 8.5, 1.02
     pre = np.full((1, gk.N_PRE), np.nan)
+
+    def integral(x):
+        return np.array(gk._integrate(x, 0, 0, n - 1, t_s, yaw, odo, gyro_ok, odo_ok, prm)[:14])
+
+    def preintegrated(x, jac=True):
+        return np.array(gk._integrate_pre(x, 0, 0, n - 1, t_s, yaw, odo, gyro_ok, odo_ok, prm,
+                                          pre, jac))
+
     for bias, tol in ((0.002, 0.0), (0.012, 1e-9), (0.512, 0.0)):
         x[gk.B] = bias
-        ref = np.array(gk._integrate(x, 0, 0, n - 1, t_s, yaw, odo, gyro_ok, odo_ok, prm)[:14])
-        got = np.array(gk._integrate_pre(x, 0, 0, n - 1, t_s, yaw, odo, gyro_ok, odo_ok, prm,
-                                         pre, True))
+        ref = integral(x)
+        got = preintegrated(x)
         assert abs(ref[0]) > 5.0 and abs(ref[3]) > 1.0  # metres moved, turned
-        np.testing.assert_allclose(got, ref, rtol=1e-12 + tol, atol=1e-12 + 10 * tol)
-        # the cost alone: the same displacement, the bias Jacobian (results 5, 6) not taken
-        cost_only = np.array(gk._integrate_pre(x, 0, 0, n - 1, t_s, yaw, odo, gyro_ok, odo_ok,
-                                               prm, pre, False))
-        keep = np.r_[0:5, 7:14]
+        np.testing.assert_allclose(got[:14], ref, rtol=1e-12 + tol, atol=1e-12 + 10 * tol)
+        # the cost alone: the same displacement, the bias and scale Jacobians not taken
+        cost_only = preintegrated(x, False)
+        keep = np.r_[0:5, 7:14, 16]
         np.testing.assert_array_equal(cost_only[keep], got[keep])
-        assert cost_only[5] == cost_only[6] == 0.0 and abs(got[5]) + abs(got[6]) > 0.1
+        assert not np.any(cost_only[[5, 6, 14, 15]]) and abs(got[5]) + abs(got[6]) > 0.1
         assert pre[0, gk.PRE_B] == (0.002 if bias < 0.1 else bias)  # re-taken only far off
+    x[gk.B] = 0.002
+    pre[:] = np.nan
+    base = preintegrated(x)
+    x[gk.G] = 0.01
+    ref = integral(x)
+    got = preintegrated(x)
+    assert pre[0, gk.PRE_G] == 0.0  # expanded, not re-taken
+    assert np.hypot(*(ref[:2] - base[:2])) > 0.009
+    np.testing.assert_allclose(got[:2], ref[:2], atol=1e-5)
+    assert got[2] == pytest.approx(ref[2], abs=1e-12)  # the heading change: exact
+    h = 1e-6
+    fd = [(integral(x + h * np.eye(2 * gk.N_X)[gk.G])[k] - integral(x - h * np.eye(2 * gk.N_X)[gk.G])[k])
+          / (2 * h) for k in (0, 1)]
+    np.testing.assert_allclose(got[14:16], fd, rtol=1e-2)
+    assert abs(fd[0]) + abs(fd[1]) > 1.0
+    x[gk.G] = 0.05
+    got = preintegrated(x)
+    assert pre[0, gk.PRE_G] == 0.05
+    np.testing.assert_allclose(got[:14], integral(x), rtol=1e-12, atol=1e-12)
 
 
 def test_banded_cholesky_solves_as_lapack_does() -> None:

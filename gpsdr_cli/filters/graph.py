@@ -6,13 +6,17 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
 ``d(psi)/dt = -(yaw_rate - b)``):
 
 * States at keyframes (every fix epoch, and at least every ``[graph] keyframe_s`` between):
-  e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), odometer scale s, GNSS error
-  eps_e, eps_n (m); b and s are
-  random walks from keyframe to keyframe (``[gyro] bias_sd_radps`` over its correlation
-  time, ``[odo] scale_rw_sd``), so every factor links neighbours only.
+  e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), gyro scale correction g
+  (``d(psi)/dt = -((1 + g) yaw_rate - b)``), odometer scale s, GNSS error eps_e, eps_n
+  (m); b, g and s are random walks from keyframe to keyframe (``[gyro] bias_sd_radps``
+  over its correlation time, ``[graph] gyro_scale_rw_sd``, ``[odo] scale_rw_sd``), so every
+  factor links neighbours only.  g starts at 0 within ``[graph] gyro_scale_prior_sd``: a
+  gyro that reads 3 % too much turn put every turn's heading 2.7 deg off, which the
+  per-radian heading noise below let the fixes bend back only where they were clean.
 * Dead reckoning between keyframes: preintegrated from the raw epochs once per interval
-  (exact in psi and s; in b through moments of the gyro time, taken again when b moves
-  far: :func:`.graph_kernels._preintegrate`; Jacobians alongside), with the
+  (exact in psi and s; in b through moments of the gyro time, in g to first order through
+  moments of the raw heading, taken again when b or g moves far:
+  :func:`.graph_kernels._preintegrate`; Jacobians alongside), with the
   covariance of the displacement from the sensors' declared noise (``[gyro]``, ``[odo]``;
   the gyro's scale error is ``[graph] gyro_scale_sd`` per radian turned, or the filters'
   ``[gyro] scale_sd`` on an NLOS drive: docs/decisions/0056)
@@ -46,7 +50,7 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   user's calibration (``--gyro-bias``, ``--odo-scale``) or loosely at 0 and 1.
 
 Engine: Levenberg-Marquardt over iteratively reweighted least squares on the banded normal
-equations (10 sub-diagonals), solved by a banded Cholesky factorisation compiled with the
+equations (11 sub-diagonals), solved by a banded Cholesky factorisation compiled with the
 factors (:func:`.graph_kernels.band_cholesky`; LAPACK's ``dpbsv`` took twice as long on a
 band this narrow): O(keyframes) per iteration; an accepted step is doubled
 while the robust cost keeps falling (:data:`EXTRAPOLATE_MAX`), which halves the iterations
@@ -109,6 +113,8 @@ class GraphOutcome:
     odo_scale_sd: float = math.nan
     gyro_bias_radps: float = math.nan
     gyro_bias_sd_radps: float = math.nan
+    #: the gyro's scale correction: true rate = (1 + this) x reading - bias
+    gyro_scale: float = math.nan
 
 
 def kernel_id(params: Params, key: str) -> int:
@@ -670,6 +676,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     prm[gk.P_GYRO_SD] = float(params["gyro"]["noise_sd_radps"]) * math.sqrt(gyro_dt)
     prm[gk.P_STOP_SPEED] = stop_v
     prm[gk.P_ZUPT_SD] = float(params["standstill"]["zupt_sd_mps"])
+    prm[gk.P_GSCALE_RW] = max(float(gp["gyro_scale_rw_sd"]), 1e-9)
 
     # ---- the speed state: a random walk, or on a drive without an odometer the forward
     # accelerometer's integral (its offset, bias + g sin(pitch), in the S slot the odometer
@@ -722,8 +729,10 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     s_given = math.isfinite(s_mean)
     if not s_given:
         s_mean, s_sd = 1.0, float(params["odo"]["scale_init_sd"])
+    g_sd = max(float(gp["gyro_scale_prior_sd"]), 1e-6)
     if not have_gyro:
         b_mean, b_sd = 0.0, 1e-6
+        g_sd = 1e-6
     if not have_odo:
         s_mean, s_sd = 1.0, 1e-6
     if acc_on:
@@ -745,10 +754,12 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     if seg_k is not None:
         # started from a batch fit: its gyro bias and odometer scale too (at the priors'
         # means the first step's dead reckoning disagreed with the start track by metres)
-        for slot, name in ((gk.B, "gyro_bias_radps"), (gk.S, "odo_scale")):
+        for slot, name in ((gk.B, "gyro_bias_radps"), (gk.S, "odo_scale"),
+                           (gk.G, "gyro_scale")):
             val = np.asarray(init.extras.get(name, np.zeros(0)), float)
             if len(val) == n_ep and np.all(np.isfinite(val[key_ep])) and (
-                    slot == gk.B and have_gyro or slot == gk.S and have_odo and not acc_on):
+                    slot in (gk.B, gk.G) and have_gyro
+                    or slot == gk.S and have_odo and not acc_on):
                 x[slot::gk.N_X] = val[key_ep]
         # each segment's error starts at its fixes' median offset from the start track
         # (at zero, the first step pulled the track to the mean of every segment's fixes)
@@ -761,12 +772,13 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         x[gk.N_X * ks + gk.GN] = mn[ks]
         del me, mn, ks
     prior_mean = x[:gk.N_X].copy()
-    prior_mean[[gk.B, gk.S, gk.GE, gk.GN]] = b_mean, s_mean, 0.0, 0.0
+    prior_mean[[gk.B, gk.S, gk.G, gk.GE, gk.GN]] = b_mean, s_mean, 0.0, 0.0, 0.0
     prior_sd = np.zeros(gk.N_X)
     prior_sd[[gk.E, gk.N]] = float(gp["init_pos_sd_m"])
     prior_sd[gk.PSI] = float(gp["init_heading_sd_rad"])
     prior_sd[gk.V] = float(gp["init_speed_sd_mps"])
     prior_sd[[gk.B, gk.S, gk.GE, gk.GN]] = b_sd, s_sd, err_sd[0], err_sd[0]
+    prior_sd[gk.G] = g_sd
     if seg_k is not None and seg_k[0] >= 0:
         prior_sd[[gk.GE, gk.GN]] = SEGMENT_FREE_SD_M
 
@@ -915,11 +927,12 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         static[key_ep[i]:key_ep[i + 1] + 1] = True
     s_k = x[gk.S::gk.N_X]
     b_k = x[gk.B::gk.N_X]
+    g_k = x[gk.G::gk.N_X]
     if not (np.all(np.isfinite(e)) and np.all(np.isfinite(nn)) and np.all(np.isfinite(ve))
             and np.all(np.isfinite(vn))):
         return GraphOutcome(None, False, its, "track not finite")
     extras = {"gyro_bias_radps": np.interp(t_s, tk, b_k), "odo_scale": np.interp(t_s, tk, s_k),
-              "gnss_weight": weight}
+              "gyro_scale": np.interp(t_s, tk, g_k), "gnss_weight": weight}
     n_down = int(np.count_nonzero(has_fix & (np.nan_to_num(weight, nan=1.0) < 0.5)))
     info = dict(init.info)
     info.update({"smoothing": "graph", "smoothed": True, "graph_iterations": its,
@@ -929,6 +942,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
                  "graph_fixes_downweighted": n_down,
                  "graph_odo_scale": float(np.mean(s_k)) if have_odo else math.nan,
                  "graph_gyro_bias_radps": float(np.mean(b_k)) if have_gyro else math.nan,
+                 "graph_gyro_scale": float(np.mean(g_k)) if have_gyro else math.nan,
                  "graph_odo_scale_sd": float(math.sqrt(max(s_var[-1], 0.0)))
                  if have_odo else math.nan,
                  "graph_gyro_bias_sd_radps": float(math.sqrt(max(b_var[-1], 0.0)))
@@ -944,4 +958,5 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
                         odo_scale_sd=float(math.sqrt(max(s_var[-1], 0.0))) if have_odo else math.nan,
                         gyro_bias_radps=float(np.mean(b_k)) if have_gyro else math.nan,
                         gyro_bias_sd_radps=float(math.sqrt(max(b_var[-1], 0.0)))
-                        if have_gyro else math.nan)
+                        if have_gyro else math.nan,
+                        gyro_scale=float(np.mean(g_k)) if have_gyro else math.nan)

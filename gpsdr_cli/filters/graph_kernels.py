@@ -2,16 +2,17 @@
 Jacobians of every factor assembled into the banded normal equations, the selected
 inversion of the banded Cholesky factor, and the interpolation from keyframes to epochs.
 
-Layout: keyframe ``i`` owns the eight unknowns ``8 i + (E, N, V, PSI, B, S, GE, GN)``: east
-and north (m, local frame), speed v (m/s), heading psi (rad, clockwise from north,
-unwrapped), gyro bias b (rad/s, in the yaw rate's sign: ``d(psi)/dt = -(yaw_rate - b)``),
-odometer scale s (true speed = s x odometer speed; on a drive without an odometer, the
-forward accelerometer's offset in m/s^2: dv/dt = reading - s) and the GNSS error per axis
-(m: fix = position + error + white noise).  Every factor links keyframe i to i + 1 at most,
-and only the displacement reaches past keyframe i + 1's own slot of an unknown (from
-keyframe i's east to i + 1's speed), so in this order the information matrix is banded
-with ``BAND = 10`` sub-diagonals (the band of two whole keyframes, 15, carried four
-that stay zero through every factorisation), stored in LAPACK's lower form
+Layout: keyframe ``i`` owns the nine unknowns ``9 i + (E, N, V, PSI, B, S, G, GE, GN)``:
+east and north (m, local frame), speed v (m/s), heading psi (rad, clockwise from north,
+unwrapped), gyro bias b (rad/s) and gyro scale correction g (the yaw rate's sign:
+``d(psi)/dt = -((1 + g) yaw_rate - b)``, so a gyro reading ``(1 + k)`` times the true rate
+has g = 1 / (1 + k) - 1), odometer scale s (true speed = s x odometer speed; on a drive
+without an odometer, the forward accelerometer's offset in m/s^2: dv/dt = reading - s) and
+the GNSS error per axis (m: fix = position + error + white noise).  Every factor links
+keyframe i to i + 1 at most, and only the displacement reaches past keyframe i + 1's own
+slot of an unknown (from keyframe i's east to i + 1's speed), so in this order the
+information matrix is banded with ``BAND = 11`` sub-diagonals (the band of two whole
+keyframes, 17, carried six that stay zero through every factorisation), stored in LAPACK's lower form
 (``ab[r - c, c] = H[r, c]`` for r >= c; Fortran order, so each column's band is
 contiguous) and factored here (:func:`band_cholesky`): LAPACK's ``dpbtrf`` factors a band
 this narrow column by column with two BLAS calls each, and took 22 ms an NLOS hour where
@@ -19,7 +20,7 @@ the compiled loop takes 9.5 ms (one core, OpenBLAS 0.3.30).
 
 Per epoch step (epoch j-1 -> j, length dt): the speed is ``s_i x odo[j-1]`` where the
 odometer is fresh (``odo_ok``), else the speed state interpolated linearly between the
-keyframes; the heading turns by ``-(yaw_rate[j-1] - b_i) dt`` where the gyro is fresh
+keyframes; the heading turns by ``-((1 + g_i) yaw_rate[j-1] - b_i) dt`` where the gyro is fresh
 (``gyro_ok``), else not at all (a heading random walk covers it).  Position uses the
 heading at the middle of the step.  Written by hand (numba): the factors are specific to
 our epoch layout, and a generic factor-graph library with Python-side custom factors costs
@@ -33,10 +34,10 @@ import math
 import numpy as np
 from numba import njit
 
-N_X = 8
-E, N, V, PSI, B, S, GE, GN = 0, 1, 2, 3, 4, 5, 6, 7
+N_X = 9
+E, N, V, PSI, B, S, G, GE, GN = 0, 1, 2, 3, 4, 5, 6, 7, 8
 # the widest coupling: keyframe i's east with i + 1's speed, through the displacement
-# (15 -> 10 super-diagonals: an NLOS hour's banded Cholesky 25 -> 21 ms)
+# (17 -> 11 super-diagonals)
 BAND = N_X + V - E
 N_2 = 2 * N_X
 
@@ -53,7 +54,8 @@ N_Q = 4
 P_SD_ODO, P_Q_DIST, P_POS_FLOOR, P_HEAD_RW, P_GYRO_SCALE, P_NOGYRO_RW, P_ACC_SD = range(7)
 P_BIAS_RW, P_SCALE_RW, P_ZARU_SD, P_VTIE_SD, P_GSPEED_SD, P_GCOURSE_MIN, P_MAX_STEP = range(7, 14)
 P_GYRO_SD, P_STOP_SPEED, P_ZUPT_SD = 14, 15, 16  # P_GYRO_SD: rad/s x sqrt(sample interval), per sqrt(s)
-N_P = 17
+P_GSCALE_RW = 17  # the gyro scale correction's random walk, per sqrt(s)
+N_P = 18
 
 
 @njit(cache=True)
@@ -127,11 +129,12 @@ def _add_block(ab, g, base, J, r, m, ncol, w, nz):
 
 
 @njit(cache=True)
-def _turn(yaw_k, bias, dt, gyro_ok_k, t_gyro):
-    """One step's heading change (rad) with the gyro's reading, 0 without one, and the gyro
-    time (s) to the step's middle and to its end, from ``t_gyro`` at its start."""
+def _turn(yaw_k, bias, gsc, dt, gyro_ok_k, t_gyro):
+    """One step's heading change (rad) with the gyro's reading (scale correction ``gsc``),
+    0 without one, and the gyro time (s) to the step's middle and to its end, from
+    ``t_gyro`` at its start."""
     if gyro_ok_k:
-        return -(yaw_k - bias) * dt, t_gyro + 0.5 * dt, t_gyro + dt
+        return -((1.0 + gsc) * yaw_k - bias) * dt, t_gyro + 0.5 * dt, t_gyro + dt
     return 0.0, t_gyro, t_gyro
 
 
@@ -146,6 +149,7 @@ def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
     v0 = x[b0 + V]
     v1 = x[b0 + N_X + V]
     bias = x[b0 + B]
+    gsc = x[b0 + G]
     scale = x[b0 + S]
     T = t_s[j1] - t_s[j0]
     de = dn = 0.0
@@ -167,7 +171,7 @@ def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
             t_free += dt
             continue
         k = j - 1
-        step, tg_mid, t_gyro = _turn(yaw[k], bias, dt, gyro_ok[k], t_gyro)
+        step, tg_mid, t_gyro = _turn(yaw[k], bias, gsc, dt, gyro_ok[k], t_gyro)
         if not gyro_ok[k]:
             t_nogyro += dt
         turned += abs(step)
@@ -198,58 +202,75 @@ def _integrate(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm):
             var_sp, t_free, t_nogyro, turned)
 
 
-# per-interval preintegrated sums (:func:`_preintegrate`): the bias they were taken at
-# (rad/s), the raw heading change (rad, bias aside), the gyro time (s), then per speed source
-# (odometer; speed state's start, end) the moments sum(w tau^n e^(i a)), n = 0..N_MOM-1, as
-# (re, im) pairs
-PRE_B, PRE_PHI, PRE_TG = 0, 1, 2
+# per-interval preintegrated sums (:func:`_preintegrate`): the bias and the scale correction
+# they were taken at (rad/s; 1), the raw heading change (rad: -sum(yaw dt), bias and scale
+# aside), the gyro time (s), the largest |raw heading| inside the interval (rad), then per
+# speed source (odometer; speed state's start, end) the moments sum(w tau^n e^(i a)),
+# n = 0..N_MOM-1, as (re, im) pairs, and after them the same with w x phi (phi: the raw
+# heading to the step's middle), for the scale correction's first order
+PRE_B, PRE_PHI, PRE_TG, PRE_G, PRE_PHIMAX = 0, 1, 2, 3, 4
 N_MOM = 5
-PRE_M = 3
-N_PRE = PRE_M + 3 * 2 * N_MOM
+PRE_M = 5
+PRE_F = PRE_M + 3 * 2 * N_MOM
+N_PRE = PRE_F + 3 * 2 * N_MOM
 #: largest bias change x gyro time (rad) the moments are expanded over before they are taken
 #: again: the expansion's error is below (0.02)^4 / 24 (the bias Jacobian's sum, one order
 #: short of the displacement's) relative
 PRE_REFRESH_RAD = 0.02
+#: largest scale change x raw heading (rad) taken to first order before the sums are taken
+#: again: the displacement's error is below (0.003)^2 / 2 relative
+PRE_REFRESH_G_RAD = 0.003
 
 
 @njit(cache=True)
-def _preintegrate(pre, i, j0, j1, bias, t_s, yaw, odo, gyro_ok, odo_ok, prm):
-    """Fill ``pre[i]`` for the interval j0 -> j1 at the gyro bias ``bias`` (rad/s).
+def _preintegrate(pre, i, j0, j1, bias, gsc, t_s, yaw, odo, gyro_ok, odo_ok, prm):
+    """Fill ``pre[i]`` for the interval j0 -> j1 at the gyro bias ``bias`` (rad/s) and scale
+    correction ``gsc``.
 
-    The step from epoch j-1 heads at ``psi0 + a``, a = phi + b tau (phi: the raw yaw
+    The step from epoch j-1 heads at ``psi0 + a``, a = (1 + g) phi + b tau (phi: the raw yaw
     integral to the step's middle, tau: the gyro time to it), so every displacement sum of
     :func:`_integrate` is the keyframe's heading rotation of sum(w e^(i a)) with w the step's
     speed weight: odometer x dt, or the speed state's linear share (1 - tau', tau') x dt.
     Taken at one bias, the sums at another follow from the moments in tau (the bias only
-    turns e^(i a) by e^(i db tau)): :func:`_integrate_pre`."""
+    turns e^(i a) by e^(i db tau)), and at another scale, to first order, from the moments
+    with w phi (e^(i dg phi) ~ 1 + i dg phi): :func:`_integrate_pre`."""
     T = t_s[j1] - t_s[j0]
     for c in range(N_PRE):
         pre[i, c] = 0.0
     dpsi = 0.0
     t_gyro = 0.0
     phi = 0.0
+    phi_max = 0.0
     max_step = prm[P_MAX_STEP]
     for j in range(j0 + 1, j1 + 1):
         dt = t_s[j] - t_s[j - 1]
         if dt <= 0.0 or dt > max_step:
             continue
         k = j - 1
-        step, tg_mid, t_gyro = _turn(yaw[k], bias, dt, gyro_ok[k], t_gyro)
+        step, tg_mid, t_gyro = _turn(yaw[k], bias, gsc, dt, gyro_ok[k], t_gyro)
+        phi_mid = phi
         if gyro_ok[k]:
+            phi_mid = phi - 0.5 * yaw[k] * dt
             phi -= yaw[k] * dt
+        phi_max = max(phi_max, abs(phi))
         a = dpsi + 0.5 * step
         dpsi += step
         ca = math.cos(a)
         sa = math.sin(a)
         if odo_ok[k]:
             _moments(pre, i, PRE_M, odo[k] * dt, tg_mid, ca, sa)
+            _moments(pre, i, PRE_F, odo[k] * dt * phi_mid, tg_mid, ca, sa)
         else:
             tau = (t_s[j - 1] + 0.5 * dt - t_s[j0]) / T if T > 0.0 else 0.0
             _moments(pre, i, PRE_M + 2 * N_MOM, (1.0 - tau) * dt, tg_mid, ca, sa)
             _moments(pre, i, PRE_M + 4 * N_MOM, tau * dt, tg_mid, ca, sa)
+            _moments(pre, i, PRE_F + 2 * N_MOM, (1.0 - tau) * dt * phi_mid, tg_mid, ca, sa)
+            _moments(pre, i, PRE_F + 4 * N_MOM, tau * dt * phi_mid, tg_mid, ca, sa)
     pre[i, PRE_B] = bias
+    pre[i, PRE_G] = gsc
     pre[i, PRE_PHI] = phi
     pre[i, PRE_TG] = t_gyro
+    pre[i, PRE_PHIMAX] = phi_max
 
 
 @njit(cache=True)
@@ -282,25 +303,37 @@ def _expand(pre, i, col, d, first):
 @njit(cache=True)
 def _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre, jac):
     """:func:`_integrate`'s first 14 results from the preintegrated sums ``pre`` (taken again
-    for interval i when the bias has moved too far from the one they were taken at).
-    Without ``jac`` the bias Jacobian (results 5 and 6) is left at zero: the cost alone
-    needs the displacement, and its expansion is half the work."""
+    for interval i when the bias or the scale correction has moved too far from the one they
+    were taken at), then the displacement's Jacobian in the scale correction (east, north)
+    and the raw heading change (rad).  Without ``jac`` the bias and scale Jacobians are left
+    at zero: the cost alone needs the displacement, and its expansion is half the work."""
     b0 = N_X * i
     psi0 = x[b0 + PSI]
     bias = x[b0 + B]
+    gsc = x[b0 + G]
     d = bias - pre[i, PRE_B]
-    if not abs(d) * pre[i, PRE_TG] <= PRE_REFRESH_RAD:  # also NaN: not yet taken
-        _preintegrate(pre, i, j0, j1, bias, t_s, yaw, odo, gyro_ok, odo_ok, prm)
+    dg = gsc - pre[i, PRE_G]
+    # (also NaN: not yet taken)
+    if not (abs(d) * pre[i, PRE_TG] <= PRE_REFRESH_RAD
+            and abs(dg) * pre[i, PRE_PHIMAX] <= PRE_REFRESH_G_RAD):
+        _preintegrate(pre, i, j0, j1, bias, gsc, t_s, yaw, odo, gyro_ok, odo_ok, prm)
         d = 0.0
+        dg = 0.0
     c0 = math.cos(psi0)
     s0 = math.sin(psi0)
     # per speed source (odometer x s, the speed state's start v0 and end v1): the sums of
-    # w sin and w cos at the keyframe's heading, and of w tau cos, w tau sin for the bias
-    de = dn = jbe = jbn = 0.0
+    # w sin and w cos at the keyframe's heading, of w tau cos, w tau sin for the bias, and
+    # of w phi cos, w phi sin for the scale (e^(i dg phi) to first order)
+    de = dn = jbe = jbn = jge = jgn = 0.0
+    fr = fi = 0.0
     se = sn_ = v0e = v0n = v1e = v1n = 0.0
     for f in range(3):
         col = PRE_M + 2 * N_MOM * f
         zr, zi = _expand(pre, i, col, d, 0)
+        if dg != 0.0 or jac:
+            fr, fi = _expand(pre, i, PRE_F + 2 * N_MOM * f, d, 0)
+            zr -= dg * fi
+            zi += dg * fr
         ws = s0 * zr + c0 * zi
         wc = c0 * zr - s0 * zi
         u = x[b0 + S] if f == 0 else (x[b0 + V] if f == 1 else x[b0 + N_X + V])
@@ -310,6 +343,8 @@ def _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre, jac):
             tr, ti = _expand(pre, i, col, d, 1)
             jbe += u * (c0 * tr - s0 * ti)
             jbn -= u * (s0 * tr + c0 * ti)
+            jge += u * (c0 * fr - s0 * fi)
+            jgn -= u * (s0 * fr + c0 * fi)
         if f == 0:
             se, sn_ = ws, wc
         elif f == 1:
@@ -317,8 +352,9 @@ def _integrate_pre(x, i, j0, j1, t_s, yaw, odo, gyro_ok, odo_ok, prm, pre, jac):
         else:
             v1e, v1n = ws, wc
     t_gyro = pre[i, PRE_TG]
-    dpsi = pre[i, PRE_PHI] + bias * t_gyro
-    return (de, dn, dpsi, dn, -de, jbe, jbn, se, sn_, v0e, v0n, v1e, v1n, t_gyro)
+    phi = pre[i, PRE_PHI]
+    dpsi = (1.0 + gsc) * phi + bias * t_gyro
+    return (de, dn, dpsi, dn, -de, jbe, jbn, se, sn_, v0e, v0n, v1e, v1n, t_gyro, jge, jgn, phi)
 
 
 @njit(cache=True)
@@ -405,8 +441,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 ab[row, col] = 0.0
         g[:] = 0.0
     cost = 0.0
-    J = np.zeros((11, N_2))
-    r = np.zeros(11)  # as many as J has rows (a stopped interval with every factor: 10)
+    J = np.zeros((12, N_2))
+    r = np.zeros(12)  # as many as J has rows (a stopped interval with every factor: 12)
     je = np.zeros(N_2)
     jn = np.zeros(N_2)
     nz = np.empty(N_2, np.int64)
@@ -446,6 +482,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             jn[PSI] = -res[4]
             je[B] = -res[5]
             jn[B] = -res[6]
+            je[G] = -res[14]
+            jn[G] = -res[15]
             je[S] = -res[7]
             jn[S] = -res[8]
             je[V] = -res[9]
@@ -466,6 +504,7 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             J[2, N_X + PSI] = 1.0 / sd_psi
             J[2, PSI] = -1.0 / sd_psi
             J[2, B] = -t_gyro / sd_psi
+            J[2, G] = -res[16] / sd_psi
             r[2] = rp
         # ---- random walks of b and s; the speed state driven by the accelerometer
         sq = math.sqrt(max(T, 1e-6))
@@ -487,7 +526,15 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             J[5, V] = -1.0 / sdv
             J[5, S] = acc_t[i] / sdv
             r[5] = rv
-        m = 6
+        # ... and of the gyro's scale correction
+        sdg = prm[P_GSCALE_RW] * sq
+        rgs = (x[b0 + N_X + G] - x[b0 + G]) / sdg
+        cost += rgs * rgs
+        if want:
+            J[6, N_X + G] = 1.0 / sdg
+            J[6, G] = -1.0 / sdg
+            r[6] = rgs
+        m = 7
         # ---- the speed state tied to the odometer at keyframe i+1
         k1 = key_ep[i + 1]
         if odo_ok[k1]:
@@ -736,6 +783,7 @@ def to_epochs(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, n_ep,
         cp = wrap(x[N_X * i + N_X + PSI] - x[N_X * i + PSI] - res[2])
         psi0 = x[N_X * i + PSI]
         bias = x[N_X * i + B]
+        gsc = x[N_X * i + G]
         scale = x[N_X * i + S]
         v0 = x[N_X * i + V]
         v1 = x[N_X * i + N_X + V]
@@ -746,7 +794,7 @@ def to_epochs(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, n_ep,
             dt = t_s[j] - t_s[j - 1]
             kk = j - 1
             if dt > 0.0 and dt <= prm[P_MAX_STEP]:
-                step = -(yaw[kk] - bias) * dt if gyro_ok[kk] else 0.0
+                step = -((1.0 + gsc) * yaw[kk] - bias) * dt if gyro_ok[kk] else 0.0
                 psi_mid = psi0 + dpsi + 0.5 * step
                 tau = (t_s[j - 1] + 0.5 * dt - t_s[j0]) / T if T > 0.0 else 0.0
                 u = scale * odo[kk] if odo_ok[kk] else v0 + (v1 - v0) * tau
