@@ -113,7 +113,8 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
     ``info["nlos_screen_not_applied"]`` says why (and ``info["nlos_screen"]`` "not applied: why");
     ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
     lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale, true speed over
-    the odometer's; ``info["nlos_screen_gyro_bias_radps"]``: its gyro bias).  ``judge``: the
+    the odometer's; ``info["nlos_screen_gyro_bias_radps"]``: its gyro bias, in the readings
+    corrected by ``info["nlos_screen_gyro_scale"]``, g: true rate = (1 + g) x reading - bias).  ``judge``: the
     bare ekf (:func:`gpsdr_cli.filters.bare`), whichever filter runs after the screen.
     ``doppler``: per epoch, the receiver's Doppler speed minus the odometer's before any was
     left out (m/s, :func:`.gnss_model.doppler_misfit`; NaN where not measured): a segment
@@ -229,6 +230,8 @@ def _screen(epochs: Epochs, params: Params, run: Callable[[Epochs, Params], Filt
         info["nlos_screen_odo_scale"] = outcome.odo_scale
     if math.isfinite(outcome.gyro_bias_radps):
         info["nlos_screen_gyro_bias_radps"] = outcome.gyro_bias_radps
+    if math.isfinite(outcome.gyro_scale):
+        info["nlos_screen_gyro_scale"] = outcome.gyro_scale
     return dataclasses.replace(epochs, has_gnss=fix & ~out), info
 
 
