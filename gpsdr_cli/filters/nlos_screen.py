@@ -243,16 +243,19 @@ def not_applied(why: str) -> dict:
 
 def judge_kept(epochs: Epochs, kept: np.ndarray, run: Callable[[Epochs, Params], FilterResult],
                probe: Params, fit) -> FilterResult:
-    """The judge's track of the ``kept`` fixes (a mask over the epochs), the epochs before
-    the first of them dead-reckoned back from it with the batch ``fit``'s gyro bias and
-    odometer scale (:func:`gpsdr_cli.lead_in.run_from_first_fix`), as the filters are after the
-    screen.  Started at epoch 0, the judge began at that fix's position with no heading: with
-    the first 100 s of a simulated city drive left out, its track lay 800 m off there and
-    the runs cut against it held no fix that agreed."""
+    """The judge's track of the ``kept`` fixes (a mask over the epochs), its gyro read with the
+    batch ``fit``'s scale correction and the epochs before the first of them dead-reckoned back
+    from it with the fit's gyro bias and odometer scale
+    (:func:`gpsdr_cli.lead_in.run_from_first_fix`), as the filters are after the screen.
+    Started at epoch 0, the judge began at that fix's position with no heading: with the
+    first 100 s of a simulated city drive left out, its track lay 800 m off there and the
+    runs cut against it held no fix that agreed."""
     from ..lead_in import run_from_first_fix
 
+    scale = 1.0 + fit.gyro_scale if math.isfinite(fit.gyro_scale) else 1.0
     return run_from_first_fix(
-        dataclasses.replace(epochs, has_gnss=kept), run, probe,
+        dataclasses.replace(epochs, has_gnss=kept, yaw_rate_radps=epochs.yaw_rate_radps * scale),
+        run, probe,
         gyro_bias=fit.gyro_bias_radps if math.isfinite(fit.gyro_bias_radps) else None,
         true_scale=fit.odo_scale if math.isfinite(fit.odo_scale) and fit.odo_scale > 0 else None)
 
