@@ -68,15 +68,18 @@ def test_a_steady_gyro_holds_the_track_off_reflected_fixes(monkeypatch) -> None:
     the dead reckoning, aekf + RTS 1.93 m from the truth (fixes 36.8 m); with
     ``[gyro] steady_from_stops`` (off by default) it is judged steady at its stops: 0.72 m,
     and the summary says so.  (The NLOS segments' Doppler weights off: with them the reflected
-    run weighs less and the default walk reaches 0.74 m too.)"""
+    run weighs less and the default walk reaches 0.74 m too.  The gyro's scale held at 0:
+    estimated, decisions/0074, the run bends it instead, 2.0 m either way.)"""
     from gpsdr_cli.pipeline import fuse
 
     sim = _city(17, monkeypatch, True)
     no_trust = {"nlos_doppler_trust_mps": 0.0}
+    held = {"gyro_scale_prior_sd": 1e-6}
     off = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True,
-                     overrides={"gnss": no_trust})
+                     overrides={"gnss": no_trust, "graph": held})
     on = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True,
-                    overrides={"gyro": {"steady_from_stops": True}, "gnss": no_trust})
+                    overrides={"gyro": {"steady_from_stops": True}, "gnss": no_trust,
+                               "graph": held})
     assert "gyro_steady" in on.result.info and "gyro_steady" not in off.result.info
     assert off.rmse_m > 1.5 and on.rmse_m < 1.0
     p = config.defaults()
