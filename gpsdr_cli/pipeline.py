@@ -435,7 +435,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     """(epochs, result, track, the drive as processed: its ``skipped`` and ``meta["warnings"]``
     say what aligning it dropped).  ``with_qc``: the track gets the QC columns
     (:func:`add_qc_columns`)."""
-    from . import lever_arm, qc
+    from . import gyro_sign, lever_arm, qc
     from .align import build_epochs
 
     # build_epochs counts what it drops into the drive's SkipReport: work on a copy so
@@ -447,6 +447,10 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     if len(epochs) == 0:
         where = drive.sources[0].path if drive.sources else None
         raise NoDataError(where, "no GNSS, gyro or odometer record to process")
+    # a yaw rate logged with the other sign convention mirrors every turn (gyro_sign.py)
+    epochs, sign_note = gyro_sign.check(epochs)
+    if sign_note:
+        _warn(work, sign_note)
     smoother = smoother_of(params, epochs)
     asked = smoother_of(params)
     if smoother == "none" and asked not in ("none", "auto"):
@@ -538,7 +542,25 @@ def _main_pass(epochs: Epochs, fparams: Params, params: Params,
             result.info["graph_failed"] = outcome.message
             work.meta.setdefault("warnings", []).append(
                 f"graph smoother: {outcome.message}; the track is the RTS smoother's")
+    _gyro_scale_note(work, result.info)
     return epochs, result, weight
+
+
+#: a gyro scale correction beyond this (the graph's or the NLOS screen's fit) is not a sensor's
+#: scale error (0.5-3 %) but a configuration's: the sign, the units
+GYRO_SCALE_WARN = 0.1
+
+
+def _gyro_scale_note(work: Drive, info: dict) -> None:
+    """Warn where the fitted gyro scale correction g (true rate = (1 + g) x reading - bias)
+    says the readings' sign or units are wrong: the track uses the corrected rate."""
+    g = info.get("graph_gyro_scale", info.get("nlos_screen_gyro_scale"))
+    if g is None or not math.isfinite(float(g)) or abs(float(g)) <= GYRO_SCALE_WARN:
+        return
+    factor = 1.0 / (1.0 + float(g)) if abs(1.0 + float(g)) > 1e-9 else math.inf
+    _warn(work, f"the gyro reads {factor:+.3g} times the turn the fixes and the "
+                "odometer show (a wrong [gyro] sign or units?); the track uses the rate corrected "
+                "by that factor")
 
 
 def _warn(work, note: str) -> None:
