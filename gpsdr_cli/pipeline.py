@@ -558,9 +558,8 @@ def _gyro_scale_note(work: Drive, info: dict) -> None:
     if g is None or not math.isfinite(float(g)) or abs(float(g)) <= GYRO_SCALE_WARN:
         return
     factor = 1.0 / (1.0 + float(g)) if abs(1.0 + float(g)) > 1e-9 else math.inf
-    _warn(work, f"the gyro reads {factor:+.3g} times the turn the fixes and the "
-                "odometer show (a wrong [gyro] sign or units?); the track uses the rate corrected "
-                "by that factor")
+    _warn(work, f"the gyro reads {factor:+.3g} times the turn the fixes show (a wrong [gyro] "
+                "sign or units?); the track uses the rate corrected by that factor")
 
 
 def _warn(work, note: str) -> None:

@@ -114,8 +114,9 @@ def screen(epochs: Epochs, params: Params, nlos_drive: bool,
     ``info["nlos_screen_skipped"]``: "no odometer" or "no gyro" on an NLOS drive that
     lacks one; ``info["nlos_screen_odo_scale"]``: the fit's odometer scale, true speed over
     the odometer's; ``info["nlos_screen_gyro_bias_radps"]``: its gyro bias, in the readings
-    corrected by ``info["nlos_screen_gyro_scale"]``, g: true rate = (1 + g) x reading - bias).  ``judge``: the
-    bare ekf (:func:`gpsdr_cli.filters.bare`), whichever filter runs after the screen.
+    corrected by ``info["nlos_screen_gyro_scale"]``, g: true rate = (1 + g) x reading - bias).
+    ``judge``: the bare ekf (:func:`gpsdr_cli.filters.bare`), whichever filter runs after the
+    screen.
     ``doppler``: per epoch, the receiver's Doppler speed minus the odometer's before any was
     left out (m/s, :func:`.gnss_model.doppler_misfit`; NaN where not measured): a segment
     of fixes whose velocities disagree weighs less (:func:`.nlos_segments.segment_trust`)."""
