@@ -322,6 +322,28 @@ class _Stages:
             self._status.__exit__(*exc)
 
 
+def _calibration_line(info: dict) -> str | None:
+    """What the graph smoother found of the sensors over the whole drive (the values
+    ``--odo-scale`` and ``--gyro-bias`` take for the next drive of the same vehicle), or None
+    where it did not run."""
+    if info.get("smoothing") != "graph":
+        return None
+
+    def num(key: str) -> float:
+        v = info.get(key)
+        return float(v) if isinstance(v, int | float) and math.isfinite(v) else math.nan
+
+    parts = []
+    if math.isfinite(num("graph_odo_scale")):
+        parts.append(f"odometer scale {num('graph_odo_scale'):.4f} +- {num('graph_odo_scale_sd'):.4f}")
+    if math.isfinite(num("graph_gyro_bias_radps")):
+        parts.append(f"gyro bias {num('graph_gyro_bias_radps'):+.5f} +- "
+                     f"{num('graph_gyro_bias_sd_radps'):.5f} rad/s")
+    if math.isfinite(num("graph_gyro_scale")):
+        parts.append(f"gyro scale correction {100.0 * num('graph_gyro_scale'):+.2f} %")
+    return "calibration (graph smoother): " + ", ".join(parts) if parts else None
+
+
 def _report(res: Any, track_path: str, stats_out: str | None, reference: str | None,
             auto: bool) -> None:
     """Summary on stderr (stdout stays clean for -o -)."""
@@ -339,6 +361,9 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
     if auto:
         click.echo(f"GNSS time offset (auto): {res.gnss_offset_s:+.3f} s ({res.gnss_offset_note})",
                    file=err)
+    cal = _calibration_line(json.loads(info.get("filter_info", "{}")))
+    if cal:
+        click.echo(cal, file=err)
     for note in res.drive_warnings:
         click.echo(f"warning: {note}", file=err)
     every = res.stats[res.stats["segment"] == "all"]
