@@ -1,20 +1,22 @@
-"""The gyro's sign against the receiver's course: is a mirrored gyro caught, and a right one left?
+"""The gyro's sign and units against the receiver's course: is a misread gyro caught, a right one left?
 
     python benchmarks/gyro_sign.py
 
 Every simulated drive below, as logged and with its yaw rates negated (a logger that writes
-them clockwise-positive), through :func:`gpsdr_cli.gyro_sign.course_slope` and
-:func:`gpsdr_cli.gyro_sign.check`: the 40 283-s city drives of ``benchmarks/short_city.py``
-(5-Hz CAN rates), 10 of them with a 3 % gyro scale error, and seeds 1-3 of the other
-scenarios at 300 s.  A row: slope of the course change on the gyro's heading change, its
-standard error, robust cost as read over mirrored, windows, and whether the sign was called
-wrong.  The last lines count false calls and mirrored drives caught.
+them clockwise-positive), then in deg/s read as rad/s and in rad/s read as deg/s, through
+:func:`gpsdr_cli.gyro_sign.course_slope` and :func:`gpsdr_cli.gyro_sign.check`: the 40 283-s
+city drives of ``benchmarks/short_city.py`` (5-Hz CAN rates), 10 of them with a 3 % gyro
+scale error, and seeds 1-3 of the other scenarios at 300 s.  A row, as logged and mirrored:
+slope of the course change on the gyro's heading change, its standard error, robust cost as
+read over read as the nearest misreading, windows, and whether it was called misread.  The
+last lines count false calls and misread drives caught.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -46,7 +48,8 @@ def main() -> int:
     print("| drive | as logged: slope | se | cost ratio | windows | called wrong "
           "| mirrored: slope | se | cost ratio | windows | called wrong |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    false_calls = caught = 0
+    false_calls = 0
+    caught = {"mirrored": 0, "deg/s as rad/s": 0, "rad/s as deg/s": 0}
     for label, extra, scenario, seed, dur in drives:
         simulate.GYRO_EXTRA_SCALE = extra
         rates = {"gyro_rate_hz": 5.0, "odo_rate_hz": 5.0} if label.startswith("city") else {}
@@ -54,11 +57,14 @@ def main() -> int:
         ep = build_epochs(copy.deepcopy(sim.drive), sim.frame, params)
         mirrored = dataclasses.replace(ep, yaw_rate_radps=-ep.yaw_rate_radps)
         false_calls += check(ep)[1] is not None
-        caught += check(mirrored)[1] is not None
+        caught["mirrored"] += check(mirrored)[1] is not None
+        for name, f in (("deg/s as rad/s", 180.0 / math.pi), ("rad/s as deg/s", math.pi / 180.0)):
+            misread = dataclasses.replace(ep, yaw_rate_radps=f * ep.yaw_rate_radps)
+            caught[name] += check(misread)[1] is not None
         print(f"| {label} | {_cells(ep)} | {_cells(mirrored)} |", flush=True)
     simulate.GYRO_EXTRA_SCALE = 0.0
-    print(f"\n{false_calls} of {len(drives)} drives as logged called wrong; "
-          f"{caught} of {len(drives)} mirrored drives caught")
+    print(f"\n{false_calls} of {len(drives)} drives as logged called misread; caught: "
+          + ", ".join(f"{k} {v} of {len(drives)}" for k, v in caught.items()))
     return 0
 
 

@@ -1,18 +1,22 @@
-"""The gyro's sign against the receiver's course: a yaw rate logged clockwise-positive and read
-as counter-clockwise (``[gyro] sign``) turns every turn the wrong way.
+"""The gyro's sign and units against the receiver's course: a yaw rate logged clockwise-positive
+and read as counter-clockwise (``[gyro] sign``) turns every turn the wrong way, and one logged
+in deg/s and read as rad/s (``[gyro] units``), or the other way round, 57 times too far or too
+little.
 
-Loggers differ: ROS (REP-103) and most IMUs give yaw rate counter-clockwise positive, some CAN
-buses clockwise.  Read with the wrong sign, the dead reckoning mirrors each turn, and the
-filters and the graph smoother, which trust it between fixes, end hundreds of metres off
-(a simulated 300-s canyon drive: the graph 444 m against fixes at 7.6 m).  The receiver's
-course (RMC/VTG, NAV-PVT) changes with every turn: over windows of ``WINDOW_S`` at speed,
-the course change against the gyro's heading change (``-integral(yaw_rate)``, heading
-clockwise from north) has slope +1 when the sign is right and -1 when it is not.  The fit is
-a Huber M-estimate with a constant gyro bias (reflected Dopplers and manoeuvres at low
-speed are its outliers); the sign is called wrong only when the slope is near -1, many
-standard errors from 0, and the mirrored gyro explains the course changes far better than
-the gyro as read.  Then the yaw rates are negated and the summary says so.  Hand-written:
-a few lines of IRLS, as in :mod:`gpsdr_cli.latency`.  Units: rad, rad/s, s.
+Loggers differ: ROS (REP-103) and most IMUs give yaw rate counter-clockwise positive in rad/s,
+some CAN buses clockwise or in deg/s.  Misread, the dead reckoning mirrors or scales each turn,
+and the filters and the graph smoother, which trust it between fixes, end hundreds of metres
+off (a simulated 300-s canyon drive: the graph 444 m against fixes at 7.6 m with the sign
+wrong, 104 m with rad/s read as deg/s).  The receiver's course (RMC/VTG, NAV-PVT) changes with
+every turn: over windows of ``WINDOW_S`` at speed, the course change against the gyro's
+heading change (``-integral(yaw_rate)``, heading clockwise from north) has slope +1 when sign
+and units are right, -1 when the sign is not, 180/pi or pi/180 (either sign) when the units
+are not.  The fit is a Huber M-estimate with a constant gyro bias (reflected Dopplers and
+manoeuvres at low speed are its outliers); the gyro is called misread only when the slope is
+within a factor ``SLOPE_FACTOR`` of one of those (:data:`MISREADINGS`), many standard errors
+from 0, and the gyro read that way explains the course changes far better than as read.
+Then the yaw rates are multiplied by that factor and the summary says so.  Hand-written: a
+few lines of IRLS, as in :mod:`gpsdr_cli.latency`.  Units: rad, rad/s, s.
 """
 
 from __future__ import annotations
@@ -32,17 +36,28 @@ MIN_SPEED_MPS = 5.0
 MIN_WINDOWS = 30
 MIN_TURNS = 5
 TURN_RAD = 0.3
-#: the slope called mirrored: within this of -1, and this many standard errors below 0 ...
-SLOPE_TOL = 0.5
+#: the slope called a misreading: within this factor of one of MISREADINGS, and this many
+#: standard errors from 0 ...
+SLOPE_FACTOR = 1.5
 MIN_T = 10.0
 #: ... with the robust residual cost of the gyro as read at least this many times that of
-#: the mirrored one
+#: the gyro read that way
 COST_RATIO = 3.0
+DEG = math.pi / 180.0
+#: true rate / reading, and what the user's configuration then has wrong
+MISREADINGS = ((-1.0, "its yaw rates have the other sign; set [gyro] sign to the other value"),
+               (DEG, 'its yaw rates are deg/s, read as rad/s; set [gyro] units = "deg/s"'),
+               (1.0 / DEG, 'its yaw rates are rad/s, read as deg/s; set [gyro] units = "rad/s"'),
+               (-DEG, "its yaw rates have the other sign and are deg/s; set [gyro] sign to the "
+                      'other value and units = "deg/s"'),
+               (-1.0 / DEG, "its yaw rates have the other sign and are rad/s; set [gyro] sign to "
+                            'the other value and units = "rad/s"'))
 
 
 def course_slope(epochs: Epochs) -> tuple[float, float, float, int] | None:
-    """(slope, its standard error, robust cost as read / mirrored, windows) of the course change
-    on the gyro's heading change, or None where the drive cannot tell."""
+    """(slope, its standard error, robust cost as read / read as the nearest misreading,
+    windows) of the course change on the gyro's heading change, or None where the drive
+    cannot tell."""
     g = np.asarray(epochs.has_gyro, bool) & np.isfinite(epochs.yaw_rate_radps)
     if g.sum() < 10 or epochs.gnss_course_rad is None:
         return None
@@ -75,25 +90,36 @@ def course_slope(epochs: Epochs) -> tuple[float, float, float, int] | None:
     se = math.sqrt(max(float(cov[0, 0]), 0.0))
 
     def cost(m: float) -> float:
-        # the bias refitted for each sign; the residuals' sum of absolute values
+        # the bias refitted for each factor; the residuals' sum of absolute values
         r = dc - m * dg
         b = float(np.median(r / np.maximum(span, 1e-9)))
         return float(np.sum(np.abs(r - b * span)))
 
-    return float(beta[0]), se, cost(1.0) / max(cost(-1.0), 1e-12), len(i)
+    slope = float(beta[0])
+    nearest = min((f for f, _ in MISREADINGS), key=lambda f: _log_gap(slope, f))
+    return slope, se, cost(1.0) / max(cost(nearest), 1e-12), len(i)
+
+
+def _log_gap(slope: float, factor: float) -> float:
+    """How far ``slope`` is from ``factor`` as a ratio (inf: opposite signs)."""
+    if slope * factor <= 0.0:
+        return math.inf
+    return abs(math.log(slope / factor))
 
 
 def check(epochs: Epochs) -> tuple[Epochs, str | None]:
-    """``epochs`` with the yaw rates negated where their sign is wrong, and the note why."""
+    """``epochs`` with the yaw rates corrected where their sign or units are misread, and the
+    note why."""
     fit = course_slope(epochs)
     if fit is None:
         return epochs, None
     slope, se, ratio, n = fit
-    if not (abs(slope + 1.0) < SLOPE_TOL and slope < -MIN_T * se and ratio > COST_RATIO):
+    factor, what = min(MISREADINGS, key=lambda m: _log_gap(slope, m[0]))
+    if not (_log_gap(slope, factor) < math.log(SLOPE_FACTOR) and abs(slope) > MIN_T * se
+            and ratio > COST_RATIO):
         return epochs, None
     import dataclasses
 
-    flipped = dataclasses.replace(epochs, yaw_rate_radps=-np.asarray(epochs.yaw_rate_radps))
-    return flipped, (f"the gyro turns against the receiver's course (slope {slope:+.2f} over {n} "
-                     "windows): its yaw rates are read negated; set [gyro] sign to the other "
-                     "value for this logger")
+    fixed = dataclasses.replace(epochs, yaw_rate_radps=factor * np.asarray(epochs.yaw_rate_radps))
+    return fixed, (f"the gyro turns {slope:+.3g} times as the receiver's course does (over {n} "
+                   f"windows): {what} for this logger; the track uses them corrected")

@@ -1,10 +1,11 @@
-"""The gyro's sign against the receiver's course (gpsdr_cli/gyro_sign.py)."""
+"""The gyro's sign and units against the receiver's course (gpsdr_cli/gyro_sign.py)."""
 
 from __future__ import annotations
 
 import copy
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
@@ -39,9 +40,23 @@ def test_the_course_follows_the_gyro_with_slope_one(canyon) -> None:
     assert slope_m == pytest.approx(-slope) and ratio_m > 10.0
     assert check(ep)[1] is None
     out, note = check(mirrored)
-    assert "against the receiver's course" in note
+    assert "turns -0.992 times as the receiver's course" in note and "other sign" in note
     np.testing.assert_array_equal(out.yaw_rate_radps, ep.yaw_rate_radps)
 
+
+
+@pytest.mark.parametrize("factor,config", [(180.0 / math.pi, 'units = "deg/s"'),
+                                           (math.pi / 180.0, 'units = "rad/s"'),
+                                           (-180.0 / math.pi, "sign to the other value")])
+def test_yaw_rates_in_the_other_units_are_read_right(canyon, factor: float, config: str) -> None:
+    """deg/s read as rad/s turn 57 times too far, rad/s read as deg/s 57 times too little: the
+    slope says which, the rates are scaled back (to 1e-9 of the rad/s readings) and the note
+    names the setting."""
+    ep = _epochs(canyon)
+    misread = dataclasses.replace(ep, yaw_rate_radps=factor * ep.yaw_rate_radps)
+    out, note = check(misread)
+    assert note is not None and config in note
+    np.testing.assert_allclose(out.yaw_rate_radps, ep.yaw_rate_radps, rtol=1e-9, atol=1e-12)
 
 def test_a_drive_that_cannot_tell_is_left_alone(canyon) -> None:
     """Without the receiver's course (GGA only), or without turns at speed, nothing is said."""
@@ -62,8 +77,8 @@ def test_fuse_reads_a_mirrored_gyro_the_right_way(canyon) -> None:
     flipped.gyro = YawRates(t_ns=flipped.gyro.t_ns, yaw_rate_radps=-flipped.gyro.yaw_rate_radps)
     right = fuse(copy.deepcopy(canyon.drive), config.defaults())
     mirrored = fuse(flipped, config.defaults())
-    assert not any("gyro turns against" in w for w in right.drive_warnings)
-    assert any("gyro turns against" in w for w in mirrored.drive_warnings)
+    assert not any("the gyro turns" in w for w in right.drive_warnings)
+    assert any("the gyro turns" in w for w in mirrored.drive_warnings)
     np.testing.assert_allclose(mirrored.track["e"], right.track["e"], atol=1e-9)
     np.testing.assert_allclose(mirrored.track["n"], right.track["n"], atol=1e-9)
 
