@@ -415,3 +415,16 @@ def test_info_on_a_log_with_nothing_usable_does_not_say_nothing_was_skipped(
     assert result.exit_code == 0, result.output
     assert "nothing usable" in result.output and "5 not used: GSV" in result.output
     assert "skipped records: 0" not in result.output
+
+
+def test_the_calibration_line_leaves_out_what_the_drive_did_not_tell(gpsdr, tmp_path: Path) -> None:
+    """Two seconds of gyro under one used fix (tests/data/mcap/small_drive.mcap) say nothing of
+    the gyro's bias: its sigma stays the prior's 0.1 rad/s, and the calibration line leaves
+    it out rather than print the prior back."""
+    from tests.conftest import REPO
+
+    result = gpsdr(["fuse", str(REPO / "tests" / "data" / "mcap" / "small_drive.mcap"),
+                    "-o", str(tmp_path / "t.parquet")])
+    assert result.exit_code == 0, result.output
+    cal = [ln for ln in result.stderr.splitlines() if ln.startswith("calibration (graph")]
+    assert len(cal) == 1 and "gyro bias" not in cal[0] and "odometer scale" in cal[0]

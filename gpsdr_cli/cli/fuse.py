@@ -322,10 +322,11 @@ class _Stages:
             self._status.__exit__(*exc)
 
 
-def _calibration_line(info: dict) -> str | None:
+def _calibration_line(info: dict, meta: dict) -> str | None:
     """What the graph smoother found of the sensors over the whole drive (the values
     ``--odo-scale`` and ``--gyro-bias`` take for the next drive of the same vehicle), or None
-    where it did not run."""
+    where it did not run.  A value whose sigma is still half its prior's or more is one the
+    drive did not tell, and is left out."""
     if info.get("smoothing") != "graph":
         return None
 
@@ -333,10 +334,19 @@ def _calibration_line(info: dict) -> str | None:
         v = info.get(key)
         return float(v) if isinstance(v, int | float) and math.isfinite(v) else math.nan
 
+    def told(sd_key: str, prior_key: str) -> bool:
+        try:
+            prior = float(meta.get(prior_key, "nan"))
+        except ValueError:
+            prior = math.nan
+        return not num(sd_key) >= 0.5 * prior  # also where the prior is unknown
+
     parts = []
-    if math.isfinite(num("graph_odo_scale")):
+    if math.isfinite(num("graph_odo_scale")) and told("graph_odo_scale_sd",
+                                                      "param.odo.scale_init_sd"):
         parts.append(f"odometer scale {num('graph_odo_scale'):.4f} +- {num('graph_odo_scale_sd'):.4f}")
-    if math.isfinite(num("graph_gyro_bias_radps")):
+    if math.isfinite(num("graph_gyro_bias_radps")) and told("graph_gyro_bias_sd_radps",
+                                                            "param.gyro.bias_init_sd_radps"):
         parts.append(f"gyro bias {num('graph_gyro_bias_radps'):+.5f} +- "
                      f"{num('graph_gyro_bias_sd_radps'):.5f} rad/s")
     if math.isfinite(num("graph_gyro_scale")):
@@ -361,7 +371,7 @@ def _report(res: Any, track_path: str, stats_out: str | None, reference: str | N
     if auto:
         click.echo(f"GNSS time offset (auto): {res.gnss_offset_s:+.3f} s ({res.gnss_offset_note})",
                    file=err)
-    cal = _calibration_line(json.loads(info.get("filter_info", "{}")))
+    cal = _calibration_line(json.loads(info.get("filter_info", "{}")), info)
     if cal:
         click.echo(cal, file=err)
     for note in res.drive_warnings:
