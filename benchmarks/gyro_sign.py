@@ -28,13 +28,14 @@ from gpsdr_cli.align import build_epochs  # noqa: E402
 from gpsdr_cli.gyro_sign import check, course_slope  # noqa: E402
 
 
-def _cells(ep) -> str:
+def _row(ep) -> tuple[str, bool]:
+    """The table cells of ``ep`` and whether its gyro was called misread."""
     fit = course_slope(ep)
     called = check(ep)[1] is not None
     if fit is None:
-        return "- | - | - | - | no"
+        return "- | - | - | - | no", called
     slope, se, ratio, n = fit
-    return f"{slope:+.3f} | {se:.3f} | {ratio:.3f} | {n} | {'yes' if called else 'no'}"
+    return f"{slope:+.3f} | {se:.3f} | {ratio:.3f} | {n} | {'yes' if called else 'no'}", called
 
 
 def main() -> int:
@@ -56,12 +57,14 @@ def main() -> int:
         sim = simulate.simulate_drive(scenario, seed, dur, **rates)
         ep = build_epochs(copy.deepcopy(sim.drive), sim.frame, params)
         mirrored = dataclasses.replace(ep, yaw_rate_radps=-ep.yaw_rate_radps)
-        false_calls += check(ep)[1] is not None
-        caught["mirrored"] += check(mirrored)[1] is not None
+        cells, called = _row(ep)
+        cells_m, called_m = _row(mirrored)
+        false_calls += called
+        caught["mirrored"] += called_m
         for name, f in (("deg/s as rad/s", 180.0 / math.pi), ("rad/s as deg/s", math.pi / 180.0)):
             misread = dataclasses.replace(ep, yaw_rate_radps=f * ep.yaw_rate_radps)
             caught[name] += check(misread)[1] is not None
-        print(f"| {label} | {_cells(ep)} | {_cells(mirrored)} |", flush=True)
+        print(f"| {label} | {cells} | {cells_m} |", flush=True)
     simulate.GYRO_EXTRA_SCALE = 0.0
     print(f"\n{false_calls} of {len(drives)} drives as logged called misread; caught: "
           + ", ".join(f"{k} {v} of {len(drives)}" for k, v in caught.items()))

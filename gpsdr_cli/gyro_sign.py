@@ -27,6 +27,7 @@ import numpy as np
 
 from .conventions import NS_PER_S
 from .epochs import Epochs
+from .filters.calibration import scaled_yaw
 from .latency import huber_fit
 
 #: window over which the course change is compared (s), and the speed at both ends (m/s)
@@ -96,8 +97,12 @@ def course_slope(epochs: Epochs) -> tuple[float, float, float, int] | None:
         return float(np.sum(np.abs(r - b * span)))
 
     slope = float(beta[0])
-    nearest = min((f for f, _ in MISREADINGS), key=lambda f: _log_gap(slope, f))
-    return slope, se, cost(1.0) / max(cost(nearest), 1e-12), len(i)
+    return slope, se, cost(1.0) / max(cost(_nearest(slope)[0]), 1e-12), len(i)
+
+
+def _nearest(slope: float) -> tuple[float, str]:
+    """The misreading (factor, what the configuration has wrong) nearest to ``slope``."""
+    return min(MISREADINGS, key=lambda m: _log_gap(slope, m[0]))
 
 
 def _log_gap(slope: float, factor: float) -> float:
@@ -114,12 +119,10 @@ def check(epochs: Epochs) -> tuple[Epochs, str | None]:
     if fit is None:
         return epochs, None
     slope, se, ratio, n = fit
-    factor, what = min(MISREADINGS, key=lambda m: _log_gap(slope, m[0]))
+    factor, what = _nearest(slope)
     if not (_log_gap(slope, factor) < math.log(SLOPE_FACTOR) and abs(slope) > MIN_T * se
             and ratio > COST_RATIO):
         return epochs, None
-    import dataclasses
-
-    fixed = dataclasses.replace(epochs, yaw_rate_radps=factor * np.asarray(epochs.yaw_rate_radps))
-    return fixed, (f"the gyro turns {slope:+.3g} times as the receiver's course does (over {n} "
-                   f"windows): {what} for this logger; the track uses them corrected")
+    return scaled_yaw(epochs, factor), (
+        f"the gyro turns {slope:+.3g} times as the receiver's course does (over {n} windows): "
+        f"{what} for this logger; the track uses them corrected")

@@ -48,6 +48,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
         @functools.wraps(fn)
         def run(epochs, params):  # every filter sees the same GNSS error model
             from ..gyro_stops import steady_params
+            from .calibration import scaled_yaw
             from .nlos_screen import farthest_window, not_applied, screen
 
             # ... and the same gyro: a bias that the stops show steady walks less
@@ -98,8 +99,7 @@ def register(name: str) -> Callable[[RunFn], RunFn]:
                 # state for (a gyro 3 % off turned each turn's heading 2.7 deg; decisions/0074)
                 g_fit = info.get("nlos_screen_gyro_scale")
                 if g_fit is not None:
-                    model_epochs = dataclasses.replace(
-                        model_epochs, yaw_rate_radps=model_epochs.yaw_rate_radps * (1.0 + g_fit))
+                    model_epochs = scaled_yaw(model_epochs, 1.0 + g_fit)
                 # ... and white about the dead reckoning (ekf/aekf): what was correlated in them
                 # was the reflections; a 2-m bias state took the dead reckoning's drift across a
                 # screened gap for a fix bias and the smoother carried it back over clean

@@ -10,7 +10,10 @@ Conventions: ``yaw_measured = yaw_true + bias`` (rad/s, counter-clockwise positi
 
 from __future__ import annotations
 
+import dataclasses
 import math
+
+import numpy as np
 
 from ..config import Params
 from ..epochs import Epochs
@@ -23,6 +26,12 @@ def known_gyro_bias(epochs: Epochs, params: Params) -> float | None:
     if not math.isfinite(bias):
         return None
     return -bias if epochs.time_reversed else bias
+
+
+def scaled_yaw(epochs: Epochs, factor: float) -> Epochs:
+    """``epochs`` with the yaw rates multiplied by ``factor`` (a gyro scale correction 1 + g,
+    or a sign or units the readings were misread by)."""
+    return dataclasses.replace(epochs, yaw_rate_radps=factor * np.asarray(epochs.yaw_rate_radps))
 
 
 def known_odo_scale(params: Params) -> float | None:

@@ -252,11 +252,13 @@ def judge_kept(epochs: Epochs, kept: np.ndarray, run: Callable[[Epochs, Params],
     first 100 s of a simulated city drive left out, its track lay 800 m off there and the
     runs cut against it held no fix that agreed."""
     from ..lead_in import run_from_first_fix
+    from .calibration import scaled_yaw
 
-    scale = 1.0 + fit.gyro_scale if math.isfinite(fit.gyro_scale) else 1.0
+    judged = dataclasses.replace(epochs, has_gnss=kept)
+    if math.isfinite(fit.gyro_scale):
+        judged = scaled_yaw(judged, 1.0 + fit.gyro_scale)
     return run_from_first_fix(
-        dataclasses.replace(epochs, has_gnss=kept, yaw_rate_radps=epochs.yaw_rate_radps * scale),
-        run, probe,
+        judged, run, probe,
         gyro_bias=fit.gyro_bias_radps if math.isfinite(fit.gyro_bias_radps) else None,
         true_scale=fit.odo_scale if math.isfinite(fit.odo_scale) and fit.odo_scale > 0 else None)
 
