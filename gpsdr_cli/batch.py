@@ -594,8 +594,9 @@ def spec_dict(spec: DriveSpec) -> dict[str, Any]:
 
 @dataclass
 class VehicleCalibration:
-    """One vehicle's odometer scale and gyro bias pooled over its drives (inverse-variance
-    means of each drive's graph estimate); NaN where no drive had the sensor."""
+    """One vehicle's odometer scale, gyro bias and gyro scale (true rate / reading) pooled over
+    its drives (inverse-variance means of each drive's graph estimate); NaN where no drive had
+    the sensor."""
 
     vehicle: str
     drives: int
@@ -603,6 +604,8 @@ class VehicleCalibration:
     odo_scale_sd: float = math.nan
     gyro_bias_radps: float = math.nan
     gyro_bias_sd_radps: float = math.nan
+    gyro_scale: float = math.nan
+    gyro_scale_sd: float = math.nan
 
 
 def vehicle_key(spec: DriveSpec, manifest: dict[str, str] | None = None) -> str:
@@ -646,8 +649,8 @@ def _pool(values: list[tuple[float, float]]) -> tuple[float, float]:
 
 def calibrate_vehicles(specs: list[DriveSpec], opts: BatchOptions,
                        manifest: dict[str, str] | None = None) -> dict[str, VehicleCalibration]:
-    """Each drive through the graph smoother without calibration priors; its odometer scale
-    and gyro bias estimates pooled per vehicle.  A drive that fails is left out."""
+    """Each drive through the graph smoother without calibration priors; its odometer scale,
+    gyro bias and gyro scale estimates pooled per vehicle.  A drive that fails is left out."""
     import copy
 
     from .errors import GpsdrError
@@ -659,7 +662,8 @@ def calibrate_vehicles(specs: list[DriveSpec], opts: BatchOptions,
     params["filter"]["smooth"] = True
     params["graph"]["odo_scale"] = math.nan
     params["graph"]["gyro_bias_radps"] = math.nan
-    per: dict[str, list[tuple[tuple[float, float], tuple[float, float]]]] = {}
+    params["graph"]["gyro_scale"] = math.nan
+    per: dict[str, list[tuple[tuple[float, float], ...]]] = {}
     for spec in specs:
         try:
             drive = read_drive(spec.log, gps=spec.gps, gyro=spec.gyro, odo=spec.odo,
@@ -675,17 +679,20 @@ def calibrate_vehicles(specs: list[DriveSpec], opts: BatchOptions,
             (float(info.get("graph_odo_scale", math.nan)),
              float(info.get("graph_odo_scale_sd", math.nan))),
             (float(info.get("graph_gyro_bias_radps", math.nan)),
-             float(info.get("graph_gyro_bias_sd_radps", math.nan)))))
+             float(info.get("graph_gyro_bias_sd_radps", math.nan))),
+            (1.0 + float(info.get("graph_gyro_scale", math.nan)),
+             float(info.get("graph_gyro_scale_sd", math.nan)))))
     out: dict[str, VehicleCalibration] = {}
     for vehicle, rows in per.items():
         s, s_sd = _pool([r[0] for r in rows])
         b, b_sd = _pool([r[1] for r in rows])
-        out[vehicle] = VehicleCalibration(vehicle, len(rows), s, s_sd, b, b_sd)
+        k, k_sd = _pool([r[2] for r in rows])
+        out[vehicle] = VehicleCalibration(vehicle, len(rows), s, s_sd, b, b_sd, k, k_sd)
     return out
 
 
 def with_calibration(params: Params, cal: VehicleCalibration, min_sd_scale: float = 0.002,
-                     min_sd_bias: float = 0.0002) -> Params:
+                     min_sd_bias: float = 0.0002, min_sd_gyro_scale: float = 0.001) -> Params:
     """``params`` with the vehicle's calibration as the graph's priors (sigmas floored: the
     pooled sigma of many drives is optimistic about what varies between them)."""
     import copy
@@ -697,4 +704,7 @@ def with_calibration(params: Params, cal: VehicleCalibration, min_sd_scale: floa
     if math.isfinite(cal.gyro_bias_radps):
         p["graph"]["gyro_bias_radps"] = cal.gyro_bias_radps
         p["graph"]["gyro_bias_sd_radps"] = max(cal.gyro_bias_sd_radps, min_sd_bias)
+    if math.isfinite(cal.gyro_scale):
+        p["graph"]["gyro_scale"] = cal.gyro_scale
+        p["graph"]["gyro_scale_cal_sd"] = max(cal.gyro_scale_sd, min_sd_gyro_scale)
     return p

@@ -437,6 +437,7 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     (:func:`add_qc_columns`)."""
     from . import gyro_sign, lever_arm, qc
     from .align import build_epochs
+    from .filters.calibration import known_gyro_scale, scaled_yaw
 
     # build_epochs counts what it drops into the drive's SkipReport: work on a copy so
     # a second run (auto offset, batch retry) does not count twice.
@@ -447,6 +448,9 @@ def _run_once(drive: Drive, params: Params, frame: LocalFrame, progress: Progres
     if len(epochs) == 0:
         where = drive.sources[0].path if drive.sources else None
         raise NoDataError(where, "no GNSS, gyro or odometer record to process")
+    gyro_scale = known_gyro_scale(params)
+    if gyro_scale is not None and gyro_scale != 1.0:
+        epochs = scaled_yaw(epochs, gyro_scale)  # --gyro-scale: every filter reads true rates
     # a yaw rate logged with the other sign convention mirrors every turn (gyro_sign.py)
     epochs, sign_note = gyro_sign.check(epochs)
     if sign_note:

@@ -288,13 +288,13 @@ def test_readme_first_command_runs(gpsdr, sample_dir: Path, tmp_path: Path) -> N
     assert list(copy.rglob("*.fused.parquet")) and list(copy.rglob("*.stats.parquet"))
     assert "RMSE" in result.stderr
     # what the graph smoother found of the sensors, against the simulator's truth: the
-    # odometer reads 1.64 % long (true/reading 0.9839), the gyro 0.61 % (g = -0.60 %)
+    # odometer reads 1.64 % long (true/reading 0.9839), the gyro 0.61 % (true/reading 0.9940)
     cal = [ln for ln in result.stderr.splitlines() if ln.startswith("calibration (graph")]
     assert len(cal) == 1, result.stderr
     odo = float(cal[0].split("odometer scale ")[1].split()[0])
-    g_pct = float(cal[0].split("gyro scale correction ")[1].split()[0])
+    gyro = float(cal[0].split("gyro scale ")[1].split()[0])
     assert odo == pytest.approx(1.0 / 1.016386, abs=0.002)
-    assert g_pct == pytest.approx(100.0 * (1.0 / 1.006070 - 1.0), abs=0.2)
+    assert gyro == pytest.approx(1.0 / 1.006070, abs=0.002)
     second = readme.split("```sh\n", 2)[2].split("\n", 1)[0]
     assert second == "pytest"
     assert "pytest || status=$?" in (REPO / ".ci" / "run").read_text()

@@ -260,10 +260,11 @@ def test_cli_smooth_choices(tmp_path) -> None:
 
 def test_batch_calibrates_per_vehicle(tmp_path) -> None:
     """Two vehicles (folders), two drives each: the pooled odometer scale of each vehicle
-    within 0.005 of its truth, and the second pass fuses with it."""
+    within 0.005 of its truth, its gyro scale within 0.003 (truths 0.9967, 1.0044), and the
+    second pass fuses with them."""
     from click.testing import CliRunner
 
-    from gpsdr_cli.batch import BatchOptions, calibrate_vehicles, find_drives
+    from gpsdr_cli.batch import BatchOptions, calibrate_vehicles, find_drives, with_calibration
     from gpsdr_cli.cli.main import cli
     from gpsdr_cli.simulate import write_drive
 
@@ -272,7 +273,8 @@ def test_batch_calibrates_per_vehicle(tmp_path) -> None:
         for k, dur in enumerate((100.0, 130.0)):
             sim = simulate_drive("urban_canyon", seed=seed, duration_s=dur)
             write_drive(sim, tmp_path / "fleet" / vehicle / f"drive{k}", mcap=False)
-            truth[vehicle] = 1.0 / (1.0 + sim.noise["odo_scale_error"])
+            truth[vehicle] = (1.0 / (1.0 + sim.noise["odo_scale_error"]),
+                              1.0 / (1.0 + sim.noise["gyro_scale_error"]))
     specs = find_drives(str(tmp_path / "fleet"))
     assert len(specs) == 4
     cals = calibrate_vehicles(specs, BatchOptions(out_dir=str(tmp_path / "o"),
@@ -281,7 +283,10 @@ def test_batch_calibrates_per_vehicle(tmp_path) -> None:
     for vehicle, cal in cals.items():
         name = vehicle.rsplit("/", 1)[-1]
         assert cal.drives == 2
-        assert abs(cal.odo_scale - truth[name]) < 0.005, (name, cal)
+        assert abs(cal.odo_scale - truth[name][0]) < 0.005, (name, cal)
+        assert abs(cal.gyro_scale - truth[name][1]) < 0.003, (name, cal)
+        given = with_calibration(config.defaults(), cal)["graph"]
+        assert (given["gyro_scale"], given["odo_scale"]) == (cal.gyro_scale, cal.odo_scale)
     res = CliRunner().invoke(cli, ["batch", str(tmp_path / "fleet"), "-o", str(tmp_path / "out"),
                                    "--jobs", "1", "--calibrate-per-vehicle", "-q"])
     assert res.exit_code == 0, res.output

@@ -35,8 +35,8 @@ from .options import (
               help="Run on a dask.distributed cluster instead of local processes.")
 @click.option("--calibrate-per-vehicle", "calibrate", is_flag=False, flag_value="folder",
               default=None, metavar="folder|COLUMN",
-              help="First estimate each vehicle's odometer scale and gyro bias over all its "
-                   "drives (graph smoother, pooled by inverse variance), then fuse every drive "
+              help="First estimate each vehicle's odometer scale, gyro bias and gyro scale over "
+                   "all its drives (graph smoother, pooled by inverse variance), then fuse every drive "
                    "with the graph smoother and that calibration as its prior.  Vehicles are "
                    "told apart by folder (default) or by COLUMN of --manifest.")
 @click.option("--manifest", type=click.Path(dir_okay=False, exists=True), default=None,
@@ -48,7 +48,7 @@ from .options import (
 @common_options
 def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
           smooth: str | None, odo_scale: str | None, gyro_bias: str | None,
-          config_path: str | None, fmt: str, force: bool,
+          gyro_scale: str | None, config_path: str | None, fmt: str, force: bool,
           scheduler: str | None, calibrate: str | None, manifest: str | None,
           gnss_offset: str | float | None, epsg: int | None,
           date: Any, topics: dict[str, str] | None, log_time: bool, gyro_units: str | None,
@@ -90,7 +90,7 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
                          gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
                          gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m,
-                         odo_scale=odo_scale, gyro_bias=gyro_bias)
+                         odo_scale=odo_scale, gyro_bias=gyro_bias, gyro_scale=gyro_scale)
     specs = find_drives(target)
     if not specs:
         from ..errors import InputError
@@ -131,7 +131,8 @@ def batch(target: str, out_dir: str, jobs: int | None, filter_name: str | None,
                 click.echo(f"vehicle {vehicle}: " + (
                     f"{cal.drives} drives, odometer scale {cal.odo_scale:.5f} +- "
                     f"{cal.odo_scale_sd:.5f}, gyro bias {cal.gyro_bias_radps:+.6f} +- "
-                    f"{cal.gyro_bias_sd_radps:.6f} rad/s" if cal is not None
+                    f"{cal.gyro_bias_sd_radps:.6f} rad/s, gyro scale {cal.gyro_scale:.5f} +- "
+                    f"{cal.gyro_scale_sd:.5f}" if cal is not None
                     else "no calibration (no drive solved)"), err=True)
 
     rows = []

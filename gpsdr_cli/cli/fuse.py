@@ -111,7 +111,7 @@ def skipped_summary(counts: Mapping[str, int]) -> str:
 @common_options
 def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, accel: str | None,
          filter_name: str | None, smooth: str | None, odo_scale: str | None,
-         gyro_bias: str | None, reference: str | None,
+         gyro_bias: str | None, gyro_scale: str | None, reference: str | None,
          output: str | None, stats_path: str | None, export_path: str | None,
          config_path: str | None,
          print_config: bool, fmt: str, date: Any, gnss_offset: str | float | None,
@@ -133,7 +133,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
       gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv --filter fafkf --smooth \\
                  --reference truth.csv -o track.parquet
       gpsdr fuse --gps gps.nmea --gyro gyro.csv --odo odo.csv \\
-                 --odo-scale 1.012+-0.005
+                 --odo-scale 1.012+-0.005 --gyro-scale 0.994+-0.002
       cat gps.nmea | gpsdr fuse - -o - --format csv > track.csv
       gpsdr fuse drive.mcap --lever-arm 1.5,0.3     # antenna 1.5 m ahead, 0.3 m left
       gpsdr fuse drive.mcap --export drive.gpx
@@ -142,7 +142,7 @@ def fuse(log: str | None, gps: str | None, gyro: str | None, odo: str | None, ac
     params = make_params(config_path, filter_name=filter_name, smooth=smooth,
                          gnss_offset=gnss_offset, epsg=epsg, gyro_units=gyro_units,
                          gyro_sign=gyro_sign, odo_kind=odo_kind, ticks_per_m=ticks_per_m,
-                         odo_scale=odo_scale, gyro_bias=gyro_bias)
+                         odo_scale=odo_scale, gyro_bias=gyro_bias, gyro_scale=gyro_scale)
     if lever_arm is not None:
         from ..lever_arm import parse_lever_arm
 
@@ -324,7 +324,8 @@ class _Stages:
 
 def _calibration_line(info: dict, meta: dict) -> str | None:
     """What the graph smoother found of the sensors over the whole drive (the values
-    ``--odo-scale`` and ``--gyro-bias`` take for the next drive of the same vehicle), or None
+    ``--odo-scale``, ``--gyro-bias`` and ``--gyro-scale`` take for the next drive of the same
+    vehicle), or None
     where it did not run.  A value whose sigma is still half its prior's or more is one the
     drive did not tell, and is left out."""
     if info.get("smoothing") != "graph":
@@ -349,8 +350,16 @@ def _calibration_line(info: dict, meta: dict) -> str | None:
                                                             "param.gyro.bias_init_sd_radps"):
         parts.append(f"gyro bias {num('graph_gyro_bias_radps'):+.5f} +- "
                      f"{num('graph_gyro_bias_sd_radps'):.5f} rad/s")
-    if math.isfinite(num("graph_gyro_scale")):
-        parts.append(f"gyro scale correction {100.0 * num('graph_gyro_scale'):+.2f} %")
+    if math.isfinite(num("graph_gyro_scale")) and told("graph_gyro_scale_sd",
+                                                       "param.graph.gyro_scale_prior_sd"):
+        # the graph's g corrects the readings as the filters read them: times a known scale
+        try:
+            known = float(meta.get("param.graph.gyro_scale", "nan"))
+        except ValueError:
+            known = math.nan
+        base = known if math.isfinite(known) and known > 0 else 1.0
+        parts.append(f"gyro scale {base * (1.0 + num('graph_gyro_scale')):.4f} +- "
+                     f"{base * num('graph_gyro_scale_sd'):.4f}")
     return "calibration (graph smoother): " + ", ".join(parts) if parts else None
 
 

@@ -83,7 +83,12 @@ def _no_smooth(ctx: click.Context, param: click.Parameter, value: bool) -> None:
 
 def filter_options(fn: F) -> F:
     """--filter, --smooth [rts|graph|none], --no-smooth and the calibration priors
-    --odo-scale / --gyro-bias (default: from the parameters)."""
+    --odo-scale / --gyro-bias / --gyro-scale (default: from the parameters)."""
+    fn = click.option("--gyro-scale", "gyro_scale", type=str, default=None, metavar="SCALE[+-SD]",
+                      help="Known gyro scale (true yaw rate = SCALE x reading): every filter reads "
+                           "the yaw rate times it, the graph's correction starts from it, "
+                           "optionally with its sigma (default SD: [graph] gyro_scale_cal_sd), "
+                           "e.g. 0.994+-0.002.")(fn)
     fn = click.option("--gyro-bias", "gyro_bias", type=str, default=None, metavar="RADPS[+-SD]",
                       help="Known gyro bias (rad/s, in the yaw rate's sign): the graph's prior and "
                            "ekf/aekf's starting drift, "
@@ -183,7 +188,7 @@ def make_params(config_path: str | None = None, *, filter_name: str | None = Non
                 epsg: int | None = None, gyro_units: str | None = None,
                 gyro_sign: str | None = None, odo_kind: str | None = None,
                 ticks_per_m: float | None = None, odo_scale: str | None = None,
-                gyro_bias: str | None = None) -> Any:
+                gyro_bias: str | None = None, gyro_scale: str | None = None) -> Any:
     """Defaults, then the --config file, then the command-line options (last wins)."""
     from .. import config
 
@@ -200,7 +205,7 @@ def make_params(config_path: str | None = None, *, filter_name: str | None = Non
     if smooth is not None:
         put("filter", "smoother", smooth)
         put("filter", "smooth", smooth != "none")
-    if odo_scale is not None or gyro_bias is not None:
+    if odo_scale is not None or gyro_bias is not None or gyro_scale is not None:
         from ..filters.graph import parse_prior
 
         base = params["graph"]
@@ -212,6 +217,15 @@ def make_params(config_path: str | None = None, *, filter_name: str | None = Non
             v, sd = parse_prior(gyro_bias, base["gyro_bias_sd_radps"], "--gyro-bias")
             put("graph", "gyro_bias_radps", v)
             put("graph", "gyro_bias_sd_radps", sd)
+        if gyro_scale is not None:
+            v, sd = parse_prior(gyro_scale, base["gyro_scale_cal_sd"], "--gyro-scale")
+            if v <= 0:
+                from ..errors import UsageError
+
+                raise UsageError(f"--gyro-scale {gyro_scale!r}: a scale is positive (yaw rates "
+                                 "of the other sign are [gyro] sign = \"cw\")")
+            put("graph", "gyro_scale", v)
+            put("graph", "gyro_scale_cal_sd", sd)
     if isinstance(gnss_offset, float):
         put("time", "gnss_offset_s", gnss_offset)
     put("frame", "epsg", epsg)

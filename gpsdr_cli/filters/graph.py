@@ -10,7 +10,8 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   (``d(psi)/dt = -((1 + g) yaw_rate - b)``), odometer scale s, GNSS error eps_e, eps_n
   (m); b, g and s are random walks from keyframe to keyframe (``[gyro] bias_sd_radps``
   over its correlation time, ``[graph] gyro_scale_rw_sd``, ``[odo] scale_rw_sd``), so every
-  factor links neighbours only.  g starts at 0 within ``[graph] gyro_scale_prior_sd``: a
+  factor links neighbours only.  g starts at 0 within ``[graph] gyro_scale_prior_sd`` (or,
+  the readings multiplied by a known scale ``--gyro-scale``, within ``gyro_scale_cal_sd``): a
   gyro that reads 3 % too much turn put every turn's heading 2.7 deg off, which the
   per-radian heading noise below let the fixes bend back only where they were clean.
 * Dead reckoning between keyframes: preintegrated from the raw epochs once per interval
@@ -90,6 +91,7 @@ from ..config import Params
 from ..conventions import NS_PER_S
 from ..epochs import Epochs
 from .base import FilterResult
+from .calibration import known_gyro_scale
 from .gnss_model import rtk_drive
 
 KERNELS = {"gauss": 0, "huber": 1, "cauchy": 2, "geman": 3}
@@ -415,7 +417,7 @@ def _banded_solve(ab: np.ndarray, rhs: np.ndarray, lam: float, work: np.ndarray)
 
 def _marginals(ab: np.ndarray, n_x: int) -> tuple[np.ndarray, ...]:
     """Per keyframe, from H's lower band ``ab`` (factored in place): var(e), var(n), cov(e, n)
-    (m^2), var(s) and var(b), read from the band of H^-1."""
+    (m^2), var(s), var(b) and var(g), read from the band of H^-1."""
     from . import graph_kernels as gk
 
     info = gk.band_cholesky_damped(ab, 0.0, ab)  # the solve's 1e-12 on the diagonal
@@ -424,7 +426,8 @@ def _marginals(ab: np.ndarray, n_x: int) -> tuple[np.ndarray, ...]:
     sb = gk.banded_inverse_band(gk.upper_of_lower(ab), n_x)
     return (sb[gk.BAND, gk.E::gk.N_X].copy(), sb[gk.BAND, gk.N::gk.N_X].copy(),
             sb[gk.BAND + gk.E - gk.N, gk.N::gk.N_X].copy(),   # H^-1[E_i, N_i]
-            sb[gk.BAND, gk.S::gk.N_X].copy(), sb[gk.BAND, gk.B::gk.N_X].copy())
+            sb[gk.BAND, gk.S::gk.N_X].copy(), sb[gk.BAND, gk.B::gk.N_X].copy(),
+            sb[gk.BAND, gk.G::gk.N_X].copy())
 
 
 #: the last :func:`_dr_inputs`: (its inputs, its outputs).  The five solves of an NLOS drive
@@ -729,7 +732,9 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     s_given = math.isfinite(s_mean)
     if not s_given:
         s_mean, s_sd = 1.0, float(params["odo"]["scale_init_sd"])
-    g_sd = max(float(gp["gyro_scale_prior_sd"]), 1e-6)
+    # a known gyro scale (--gyro-scale) already multiplies the readings: g corrects what is left
+    g_sd = max(float(gp["gyro_scale_cal_sd"] if known_gyro_scale(params) is not None
+                     else gp["gyro_scale_prior_sd"]), 1e-6)
     if not have_gyro:
         b_mean, b_sd = 0.0, 1e-6
         g_sd = 1e-6
@@ -887,11 +892,11 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         return GraphOutcome(None, False, its, message or "not converged")
 
     # ---- marginal covariance inside the band (H at the solution, final weights)
-    var_e_k = var_n_k = cov_en_k = s_var = b_var = np.full(n_key, np.nan)
+    var_e_k = var_n_k = cov_en_k = s_var = b_var = g_var = np.full(n_key, np.nan)
     if sigmas:
         cost_at(x, stages[-1][0], c_final, True)
         try:
-            var_e_k, var_n_k, cov_en_k, s_var, b_var = _marginals(ab, n_x)
+            var_e_k, var_n_k, cov_en_k, s_var, b_var, g_var = _marginals(ab, n_x)
         except LinAlgError as err:
             return GraphOutcome(None, False, its,
                                 f"information matrix not positive definite: {err}")
@@ -946,6 +951,8 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
                  "graph_odo_scale_sd": float(math.sqrt(max(s_var[-1], 0.0)))
                  if have_odo else math.nan,
                  "graph_gyro_bias_sd_radps": float(math.sqrt(max(b_var[-1], 0.0)))
+                 if have_gyro else math.nan,
+                 "graph_gyro_scale_sd": float(math.sqrt(max(g_var[-1], 0.0)))
                  if have_gyro else math.nan,
                  "gnss_rejected": int(rejected.sum())})
     res = FilterResult(t_ns=np.asarray(epochs.t_ns, np.int64), e=e, n=nn, v_e=ve, v_n=vn,
