@@ -181,6 +181,23 @@ def test_gnss_only_and_a_handful_of_fixes_are_finite() -> None:
         assert np.all(np.isfinite(col))
 
 
+def test_without_a_gyro_the_start_heading_is_the_course_held_across_stops() -> None:
+    """A GNSS-only drive never at 2 m/s (1 m/s south, a stop, 1 m/s east): the start heading
+    is the forward track's course, pi then pi/2, held through the stop (it was north
+    throughout, the speed then starting the wrong way round south)."""
+    from gpsdr_cli.filters.graph import _initial_heading
+
+    t = np.arange(300) * 0.1
+    ve = np.where(t < 10.0, 0.0, np.where(t < 20.0, 0.0, 1.0))
+    vn = np.where(t < 10.0, -1.0, 0.0)
+    psi = _initial_heading(t, np.zeros(300), np.zeros(300, bool), ve, vn)
+    assert np.allclose(np.cos(psi[t < 9.9]), -1.0)
+    assert np.allclose(psi[t > 20.05] % (2 * np.pi), np.pi / 2)
+    stop = (t > 10.05) & (t < 19.95)
+    assert np.all(np.abs(np.sin(psi[stop]) - np.sin(np.interp(t[stop], [10.0, 20.0],
+                                                               [np.pi, np.pi / 2]))) < 0.02)
+
+
 @pytest.mark.parametrize("n_fix", [1, 2, 3])
 def test_a_log_of_one_to_three_fixes(tmp_path, n_fix: int) -> None:
     """A GNSS-only log of fewer unknowns than the band is wide (one fix: 8 unknowns, band

@@ -278,13 +278,19 @@ def keyframes(t_s: np.ndarray, has_fix: np.ndarray, step_s: float) -> np.ndarray
 def _initial_heading(t_s: np.ndarray, yaw: np.ndarray, gyro_ok: np.ndarray,
                      ve: np.ndarray, vn: np.ndarray) -> np.ndarray:
     """Heading at every epoch: the gyro's integrated heading turned onto the forward track's
-    course where that moves at >= 2 m/s (the offset interpolated in time between)."""
+    course where that moves at >= 2 m/s (the offset interpolated in time between); on a
+    drive never that fast (a walking-speed robot), where it moves at >= 0.5 m/s.  Without a
+    gyro the heading is that course itself, held across the stops: at a constant north,
+    every stretch driven south started with its speed the wrong way round."""
     dt = np.diff(t_s, prepend=t_s[0])
     rate = np.where(np.roll(gyro_ok, 1), -np.roll(yaw, 1), 0.0)
     rate[0] = 0.0
     psi_g = np.cumsum(rate * dt)
     course = np.arctan2(ve, vn)
-    fast = np.hypot(ve, vn) >= 2.0
+    speed = np.hypot(ve, vn)
+    fast = speed >= 2.0
+    if not fast.any():
+        fast = speed >= 0.5
     if not fast.any():
         return psi_g
     off = unwrap_across_gaps(t_s[fast], course[fast] - psi_g[fast])
