@@ -36,9 +36,9 @@ from .options import (
 @click.option("--calibrate-per-vehicle", "calibrate", is_flag=False, flag_value="folder",
               default=None, metavar="folder|COLUMN",
               help="First estimate each vehicle's odometer scale, gyro bias and gyro scale over "
-                   "all its drives (graph smoother, pooled by inverse variance), then fuse every drive "
-                   "with the graph smoother and that calibration as its prior.  Vehicles are "
-                   "told apart by folder (default) or by COLUMN of --manifest.")
+                   "all its drives (graph smoother, pooled by inverse variance), then fuse every "
+                   "drive with the graph smoother and that calibration as its prior.  Vehicles "
+                   "are told apart by folder (default) or by COLUMN of --manifest.")
 @click.option("--manifest", type=click.Path(dir_okay=False, exists=True), default=None,
               metavar="DRIVES.csv", help="CSV with a drive column (the drive names of the "
                                           "report) and the vehicle column of "

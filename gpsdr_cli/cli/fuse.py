@@ -325,9 +325,8 @@ class _Stages:
 def _calibration_line(info: dict, meta: dict) -> str | None:
     """What the graph smoother found of the sensors over the whole drive (the values
     ``--odo-scale``, ``--gyro-bias`` and ``--gyro-scale`` take for the next drive of the same
-    vehicle), or None
-    where it did not run.  A value whose sigma is still half its prior's or more is one the
-    drive did not tell, and is left out."""
+    vehicle), or None where it did not run.  A value whose sigma is still half its prior's or
+    more is one the drive did not tell, and is left out."""
     if info.get("smoothing") != "graph":
         return None
 

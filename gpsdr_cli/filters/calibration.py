@@ -4,8 +4,7 @@
 (``--gyro-bias``, ``--odo-scale``, ``--gyro-scale``, ``gpsdr batch --calibrate-per-vehicle``) or,
 on a drive the NLOS screen judged, its whole-drive batch fit (:mod:`.nlos_screen`), which sees
 every fix and every reading while a forward filter learns a drift from the fixes it has met
-so far.
-Conventions: ``yaw_measured = yaw_true + bias`` (rad/s, counter-clockwise positive),
+so far.  Conventions: ``yaw_measured = yaw_true + bias`` (rad/s, counter-clockwise positive),
 ``true speed = scale x odometer reading`` and ``true yaw rate = gyro scale x reading`` (the
 pipeline multiplies the readings by a known gyro scale before any filter sees them).
 """
