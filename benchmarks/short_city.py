@@ -23,6 +23,9 @@ instants (two CAN messages; 0.1 at 5 Hz: half a period apart).
 ``--nlos-wander SD,DIST``: the canyon's reflected-signal errors wander instead of holding
 steps: a Gauss-Markov error of SD metres per axis that decorrelates over DIST metres driven
 (``simulate.NLOS_SHAPE = "wander"``).
+``--nlos-doppler speed``: a reflection's receiver-velocity error proportional to the true
+velocity, none at a standstill (``simulate.NLOS_VEL_MODEL``; a wall mirrors the receiver's
+velocity) instead of the simulator's bias of 1 m/s per axis held through the step, stops too.
 ``--set SECTION.KEY=VALUE`` (repeatable, VALUE as in the TOML config) changes a default for
 every run, e.g. ``--set gnss.nlos_fkf_velocity_sd_mps=0.2``.  The last lines give the
 median, mean and worst of track RMSE over the fixes' RMSE per column.
@@ -77,6 +80,8 @@ def main() -> int:
                     help="the gyro sampled S s after the odometer (default: the same instants)")
     ap.add_argument("--nlos-wander", default="", metavar="SD,DIST",
                     help="wandering reflection errors, m per axis and m driven (default: steps)")
+    ap.add_argument("--nlos-doppler", choices=("bias", "speed"), default="bias",
+                    help="the reflections' receiver-velocity error model (default: bias)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="change a default for every run (repeatable)")
     args = ap.parse_args()
@@ -94,6 +99,7 @@ def main() -> int:
         simulate.GYRO_BIAS_TAU_S = math.inf
     simulate.GYRO_EXTRA_SCALE = args.gyro_scale_error
     simulate.GYRO_PHASE_S = args.gyro_phase
+    simulate.NLOS_VEL_MODEL = args.nlos_doppler
     if args.nlos_wander:
         simulate.NLOS_SHAPE = "wander"
         simulate.NLOS_WANDER_SD_M, simulate.NLOS_WANDER_DIST_M = _pair(args.nlos_wander)

@@ -722,6 +722,15 @@ NLOS_WANDER_EDGE_S = 5.0
 #: and axis (m/s, 1 sigma) plus white noise (m/s per axis)
 NLOS_VEL_BIAS_SD_MPS = 1.0
 NLOS_VEL_WHITE_SD_MPS = 0.3
+#: ... or, with ``NLOS_VEL_MODEL = "speed"``, the error a reflection makes: a signal off a wall
+#: reads the range rate of the receiver's mirror image, whose velocity has the wall-normal
+#: component reversed, so the velocity error is a linear map of the true velocity (per step,
+#: a 2x2 matrix of entries with this sigma) and vanishes at a standstill, the white noise
+#: with it (full at NLOS_VEL_WHITE_FULL_MPS and faster); ``benchmarks/short_city.py
+#: --nlos-doppler speed``
+NLOS_VEL_MODEL = "bias"
+NLOS_VEL_SPEED_SD = 0.1
+NLOS_VEL_WHITE_FULL_MPS = 5.0
 #: canyon and open-sky sections along the route (m, uniform); the drive starts in the open
 CANYON_M = (500.0, 1500.0)
 OPEN_M = (150.0, 300.0)
@@ -796,7 +805,8 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
     drift.  So the fixes of a step agree with each other to the white noise and the drift:
     a gate on one fix's innovation sees no jump after the first.  The reported velocity
     (RMC speed and course) gets a bias of ``NLOS_VEL_BIAS_SD_MPS`` per step and axis and
-    white noise of ``NLOS_VEL_WHITE_SD_MPS`` during the step.  The receiver reports HDOP
+    white noise of ``NLOS_VEL_WHITE_SD_MPS`` during the step (``NLOS_VEL_MODEL = "speed"``:
+    an error proportional to the true velocity instead, none at a standstill).  The receiver reports HDOP
     in ``NLOS_HDOP`` and GST sigmas in ``NLOS_GST_M`` whatever the error.
     """
     t_fix = fixes.t_ns
@@ -819,6 +829,8 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
     bias = np.zeros((m, 2))
     drift = np.zeros((m, 2))
     vel_err = np.zeros((m, 2))
+    v_true = np.column_stack([np.interp(rel, tt, truth["v_e"].to_numpy()),
+                              np.interp(rel, tt, truth["v_n"].to_numpy())])
     step_id = np.full(m, -1, np.int32)
     gst_factor = np.ones(m)
     steps: list[dict] = []
@@ -860,9 +872,17 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
             walk = np.cumsum(rng.standard_normal((len(tk), 2)) * NLOS_DRIFT_M_PER_SQRT_S
                              * np.sqrt(dtk)[:, None], axis=0)
             drift[sel] = walk * prof[:, None]
-            v_bias = rng.normal(0.0, NLOS_VEL_BIAS_SD_MPS, 2)
-            vel_err[sel] = (v_bias * prof[:, None]
-                            + rng.standard_normal((len(tk), 2)) * NLOS_VEL_WHITE_SD_MPS)
+            if NLOS_VEL_MODEL == "speed":
+                mirror = rng.normal(0.0, NLOS_VEL_SPEED_SD, (2, 2))
+                v_sel = v_true[sel]
+                white = NLOS_VEL_WHITE_SD_MPS * np.minimum(
+                    np.hypot(v_sel[:, 0], v_sel[:, 1]) / NLOS_VEL_WHITE_FULL_MPS, 1.0)
+                vel_err[sel] = ((v_sel @ mirror.T) * prof[:, None]
+                                + rng.standard_normal((len(tk), 2)) * white[:, None])
+            else:
+                v_bias = rng.normal(0.0, NLOS_VEL_BIAS_SD_MPS, 2)
+                vel_err[sel] = (v_bias * prof[:, None]
+                                + rng.standard_normal((len(tk), 2)) * NLOS_VEL_WHITE_SD_MPS)
             sid = len(steps)
             step_id[sel] = sid
             gst_factor[sel] = float(rng.uniform(1.0, 2.0))
@@ -916,6 +936,7 @@ def _nlos(rng: np.random.Generator, fixes: GnssFixes, gerr: pd.DataFrame, truth:
         "nlos_across_share": NLOS_ACROSS_SHARE, "nlos_hdop": list(NLOS_HDOP),
         "nlos_velocity_bias_sd_mps": NLOS_VEL_BIAS_SD_MPS,
         "nlos_velocity_white_sd_mps": NLOS_VEL_WHITE_SD_MPS,
+        "nlos_velocity_model": NLOS_VEL_MODEL,
         "nlos_gst_m": list(NLOS_GST_M),
         "canyon_sections_m": [[a, b] for a, b in sections],
         "canyon_s": canyon_s,

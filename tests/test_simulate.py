@@ -343,6 +343,29 @@ def test_urban_nlos_steps(nlos):
     assert np.sqrt(np.mean(err[open_sky] ** 2)) < 3.0
 
 
+def test_urban_nlos_doppler_error_proportional_to_speed(monkeypatch):
+    """``NLOS_VEL_MODEL = "speed"``: in a reflection the receiver's velocity error is a linear
+    map of the true velocity (a wall mirrors it), so a stop inside a step reads no speed,
+    while a step at speed reads a velocity error of about a tenth of it."""
+    from gpsdr_cli import simulate
+
+    monkeypatch.setattr(simulate, "NLOS_VEL_MODEL", "speed")
+    sim = simulate_drive("urban_nlos", seed=2)
+    g, ge = sim.drive.gnss, sim.gnss_errors
+    on = ge["nlos"].to_numpy() & g.valid
+    t = sim.truth["t_ns"].to_numpy()
+    tve, tvn = np.interp(g.t_ns, t, sim.truth["v_e"]), np.interp(g.t_ns, t, sim.truth["v_n"])
+    true_speed = np.hypot(tve, tvn)
+    err = np.hypot(ge["nlos_vel_e"].to_numpy(), ge["nlos_vel_n"].to_numpy())
+    stopped = on & (true_speed < 0.05)
+    fast = on & (true_speed > 8.0)
+    assert stopped.sum() > 20 and fast.sum() > 200
+    assert np.max(err[stopped]) < 0.05                      # m/s (a step's bias: 1 m/s)
+    share = np.sqrt(np.mean((err[fast] / true_speed[fast]) ** 2))
+    assert 0.05 < share < 0.3
+    assert sim.noise["nlos_velocity_model"] == "speed"
+
+
 def test_urban_nlos_oracle_drops_nlos_fixes(nlos):
     od = oracle_drive(nlos)
     on = nlos.gnss_errors["nlos"].to_numpy()
