@@ -334,28 +334,27 @@ def _calibration_line(info: dict, meta: dict) -> str | None:
         v = info.get(key)
         return float(v) if isinstance(v, int | float) and math.isfinite(v) else math.nan
 
-    def told(sd_key: str, prior_key: str) -> bool:
+    def param(key: str) -> float:
         try:
-            prior = float(meta.get(prior_key, "nan"))
+            return float(meta.get(f"param.{key}", "nan"))
         except ValueError:
-            prior = math.nan
-        return not num(sd_key) >= 0.5 * prior  # also where the prior is unknown
+            return math.nan
+
+    def told(sd_key: str, prior_key: str) -> bool:
+        return not num(sd_key) >= 0.5 * param(prior_key)  # also where the prior is unknown
 
     parts = []
     if math.isfinite(num("graph_odo_scale")) and told("graph_odo_scale_sd",
-                                                      "param.odo.scale_init_sd"):
+                                                      "odo.scale_init_sd"):
         parts.append(f"odometer scale {num('graph_odo_scale'):.4f} +- {num('graph_odo_scale_sd'):.4f}")
     if math.isfinite(num("graph_gyro_bias_radps")) and told("graph_gyro_bias_sd_radps",
-                                                            "param.gyro.bias_init_sd_radps"):
+                                                            "gyro.bias_init_sd_radps"):
         parts.append(f"gyro bias {num('graph_gyro_bias_radps'):+.5f} +- "
                      f"{num('graph_gyro_bias_sd_radps'):.5f} rad/s")
     if math.isfinite(num("graph_gyro_scale")) and told("graph_gyro_scale_sd",
-                                                       "param.graph.gyro_scale_prior_sd"):
+                                                       "graph.gyro_scale_prior_sd"):
         # the graph's g corrects the readings as the filters read them: times a known scale
-        try:
-            known = float(meta.get("param.graph.gyro_scale", "nan"))
-        except ValueError:
-            known = math.nan
+        known = param("graph.gyro_scale")
         base = known if math.isfinite(known) and known > 0 else 1.0
         parts.append(f"gyro scale {base * (1.0 + num('graph_gyro_scale')):.4f} +- "
                      f"{base * num('graph_gyro_scale_sd'):.4f}")

@@ -945,31 +945,32 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     extras = {"gyro_bias_radps": np.interp(t_s, tk, b_k), "odo_scale": np.interp(t_s, tk, s_k),
               "gyro_scale": np.interp(t_s, tk, g_k), "gnss_weight": weight}
     n_down = int(np.count_nonzero(has_fix & (np.nan_to_num(weight, nan=1.0) < 0.5)))
+    odo_fit, odo_fit_sd = _pooled(s_k, s_var, have_odo)
+    bias_fit, bias_fit_sd = _pooled(b_k, b_var, have_gyro)
+    gsc_fit, gsc_fit_sd = _pooled(g_k, g_var, have_gyro)
     info = dict(init.info)
     info.update({"smoothing": "graph", "smoothed": True, "graph_iterations": its,
                  "graph_keyframes": n_key, "graph_kernel": kernel_names,
                  "graph_odo_lag_s": lag, "graph_gnss_err_states": err_on,
                  "graph_accel": acc_on,
                  "graph_fixes_downweighted": n_down,
-                 "graph_odo_scale": float(np.mean(s_k)) if have_odo else math.nan,
-                 "graph_gyro_bias_radps": float(np.mean(b_k)) if have_gyro else math.nan,
-                 "graph_gyro_scale": float(np.mean(g_k)) if have_gyro else math.nan,
-                 "graph_odo_scale_sd": float(math.sqrt(max(s_var[-1], 0.0)))
-                 if have_odo else math.nan,
-                 "graph_gyro_bias_sd_radps": float(math.sqrt(max(b_var[-1], 0.0)))
-                 if have_gyro else math.nan,
-                 "graph_gyro_scale_sd": float(math.sqrt(max(g_var[-1], 0.0)))
-                 if have_gyro else math.nan,
+                 "graph_odo_scale": odo_fit, "graph_gyro_bias_radps": bias_fit,
+                 "graph_gyro_scale": gsc_fit, "graph_odo_scale_sd": odo_fit_sd,
+                 "graph_gyro_bias_sd_radps": bias_fit_sd, "graph_gyro_scale_sd": gsc_fit_sd,
                  "gnss_rejected": int(rejected.sum())})
     res = FilterResult(t_ns=np.asarray(epochs.t_ns, np.int64), e=e, n=nn, v_e=ve, v_n=vn,
                        var_e=var_e, var_n=var_n, cov_en=cov_en,
                        gnss_used=has_fix & ~rejected, gnss_rejected=rejected, nis=nis,
                        static=static, extras=extras, info=info)
-    # pooled calibration of this drive (the mean over keyframes; its sd from the last one)
-    return GraphOutcome(res, True, its, "converged", gnss_weight=weight,
-                        odo_scale=float(np.mean(s_k)) if have_odo else math.nan,
-                        odo_scale_sd=float(math.sqrt(max(s_var[-1], 0.0))) if have_odo else math.nan,
-                        gyro_bias_radps=float(np.mean(b_k)) if have_gyro else math.nan,
-                        gyro_bias_sd_radps=float(math.sqrt(max(b_var[-1], 0.0)))
-                        if have_gyro else math.nan,
-                        gyro_scale=float(np.mean(g_k)) if have_gyro else math.nan)
+    return GraphOutcome(res, True, its, "converged", gnss_weight=weight, odo_scale=odo_fit,
+                        odo_scale_sd=odo_fit_sd, gyro_bias_radps=bias_fit,
+                        gyro_bias_sd_radps=bias_fit_sd, gyro_scale=gsc_fit)
+
+
+def _pooled(per_key: np.ndarray, var: np.ndarray, have: bool) -> tuple[float, float]:
+    """A drive's calibration from the keyframes' values: their mean and the last keyframe's
+    sigma (the marginal variances ``var``; NaN where not computed), NaN for a sensor the
+    drive lacks."""
+    if not have:
+        return math.nan, math.nan
+    return float(np.mean(per_key)), float(math.sqrt(max(var[-1], 0.0)))
