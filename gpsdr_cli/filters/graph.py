@@ -618,6 +618,8 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     seg_sd = np.full(n_key, np.nan)
     seg_vote = np.zeros(n_key)
     seg_k = None
+    # each receiver velocity's information, as a multiple of [graph] gnss_speed_sd_mps's
+    gvel_w = np.ones(n_key)
     if segments is not None:
         seg_rows = np.asarray(segments, np.int64)
         trust = None
@@ -627,6 +629,10 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
             trust = segment_trust(np.where(has_fix[key_ep], seg_rows[0][key_ep], -1),
                                   np.asarray(doppler, float)[key_ep],
                                   float(params["gnss"]["nlos_doppler_trust_mps"]))
+            # ... and its velocities too: a reflected Doppler's course is off as its speed
+            # is, and a minute of them bent the heading towards a reflected plateau under
+            # Cauchy's ever-growing cost (decisions/0078)
+            gvel_w = np.maximum(trust, 1e-6)
         seg_k, err_phi, err_wsd, seg_sd, seg_vote = _segment_states(
             seg_rows[0][key_ep], seg_rows[1][key_ep], has_fix[key_ep], tk_s, gp, trust)
 
@@ -825,8 +831,8 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     its = 0
     converged = False
     message = ""
-    args_fix = (fe, fn, sde, sdn, gspd, gcrs, err_phi, err_wsd, acc_dv, acc_t, v_sd, s_rw,
-                prior_mean, prior_sd)
+    args_fix = (fe, fn, sde, sdn, gspd, gcrs, gvel_w, err_phi, err_wsd, acc_dv, acc_t, v_sd,
+                s_rw, prior_mean, prior_sd)
 
     seg_mult = float(gp["nlos_segment_c"]) / c_final
     seg_kern = kernel_id(params, "nlos_segment_kernel")

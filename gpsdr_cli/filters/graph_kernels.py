@@ -411,14 +411,16 @@ def _odo_free_share(j0, j1, t_s, odo_ok):
 
 @njit(cache=True)
 def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
-              fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs, err_phi, err_wsd,
+              fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs, gvel_w, err_phi, err_wsd,
               acc_dv, acc_t, v_sd, s_sd, prior_mean, prior_sd, kernel, c, ab, g, want,
               fix_kernel, seg_sd, seg_vote, seg_kernel, seg_c, pre):
     """Cost of the state ``x`` and, with ``want``, the normal equations H (banded, ``ab``) and
     gradient ``g`` (J^T W r) of every factor at ``x`` (IRLS weights from ``x``).
 
-    Fix arrays are per keyframe (NaN: no fix / no speed there).  The GNSS error states
-    follow ``eps[i+1] = err_phi[i] eps[i] + w``, sd(w) = ``err_wsd[i]`` (per interval, m).
+    Fix arrays are per keyframe (NaN: no fix / no speed there); ``gvel_w``: the information
+    of each receiver velocity (speed and course) as a multiple of ``P_GSPEED_SD``'s (> 0).
+    The GNSS error states follow ``eps[i+1] = err_phi[i] eps[i] + w``, sd(w) = ``err_wsd[i]``
+    (per interval, m).
     The speed state follows ``v[i+1] = v[i] + acc_dv[i] - s[i] acc_t[i] + w``, sd(w) =
     ``v_sd[i]``: the forward accelerometer's integral over the interval (m/s) less the
     offset held in the S slot (m/s^2) over the ``acc_t[i]`` seconds it covers; a drive
@@ -603,7 +605,7 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 r[1] = rn
                 _add_block(ab, g, b0, J, r, 2, N_X, w, nz)
         if not math.isnan(gspd[i]):
-            sd = prm[P_GSPEED_SD]
+            sd = prm[P_GSPEED_SD] / math.sqrt(gvel_w[i])
             rv = (x[b0 + V] - gspd[i]) / sd
             m = 1
             r[0] = rv
