@@ -8,7 +8,8 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
 * States at keyframes (every fix epoch, and at least every ``[graph] keyframe_s`` between):
   e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), gyro scale correction g
   (``d(psi)/dt = -((1 + g) yaw_rate - b)``), odometer scale s, GNSS error eps_e, eps_n
-  (m); b, g and s are random walks from keyframe to keyframe (``[gyro] bias_sd_radps``
+  (m), and in the NLOS segment fit's last solve a course bias per segment (rad; pinned at
+  zero elsewhere); b, g and s are random walks from keyframe to keyframe (``[gyro] bias_sd_radps``
   over its correlation time, ``[graph] gyro_scale_rw_sd``, ``[odo] scale_rw_sd``), so every
   factor links neighbours only.  g starts at 0 within ``[graph] gyro_scale_prior_sd`` (or,
   the readings multiplied by a known scale ``--gyro-scale``, within ``gyro_scale_cal_sd``): a
@@ -201,6 +202,8 @@ def odo_lag_s(t_s: np.ndarray, odo_good: np.ndarray, odo: np.ndarray, has_fix: n
 
 #: sd of a GNSS error state where a segment of fixes starts (m): free
 SEGMENT_FREE_SD_M = 1e3
+#: ... and of a segment's course bias there (rad): free
+SEGMENT_FREE_SD_RAD = 10.0
 
 
 def _segment_states(seg: np.ndarray, run: np.ndarray, fix: np.ndarray, tk_s: np.ndarray,
@@ -350,7 +353,9 @@ def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
     """The NLOS judgement the screen and the graph smoother share: the fixes cut into
     segments and runs against ``init``'s track (:mod:`.nlos_segments`), the drive solved
     with one bias per segment and one vote per run, each fix at its own sigma (the
-    segment's bias replaces the quality model's scaled sigmas).  Returns the outcome, the
+    segment's bias replaces the quality model's scaled sigmas), then again from that solution
+    with a course bias per segment too (``[graph] nlos_segment_course_sd_rad``; 0: not).
+    Returns the outcome, the
     segments (:func:`.nlos_segments.fix_segments`) and, per epoch, whether its fix's segment
     lies within ``[graph] nlos_segment_keep_m`` of the solution (all False if it failed).
     ``sigmas``: as :func:`smooth_graph`'s.  ``doppler``: per epoch, the receiver's Doppler
@@ -360,7 +365,19 @@ def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
 
     own = own_sigmas(params)
     seg = fix_segments(epochs, init, params["graph"])
-    out = _solve(epochs, init, own, seg, sigmas, doppler)
+    course = float(params["graph"]["nlos_segment_course_sd_rad"]) > 0.0
+    out = _solve(epochs, init, own, seg, sigmas, doppler, basin_only=course)
+    if out.result is not None and course:
+        # ... then again from there with a course bias per segment: a reflected Doppler's
+        # course is off for as long as its position is, and a minute of them turned the
+        # heading onto a reflected plateau (decisions/0079).  From the solution anchored by
+        # every course, not from the start: with the courses free from the first step the
+        # fit stayed in a wrong basin it had left before (one drive 23 m, not 2.6 m)
+        # (the screen, without sigmas, only weighs the fixes against it: the basin will do)
+        freed = _solve(epochs, out.result, own, seg, sigmas, doppler, course_bias=True,
+                       basin_only=not sigmas)
+        if freed.result is not None:
+            out = freed
     if out.result is None:
         return out, seg, np.zeros(len(epochs), bool)
     return out, seg, segments_near(epochs, out.result, seg,
@@ -507,8 +524,12 @@ def _dr_inputs(epochs: Epochs, params: Params) -> tuple[np.ndarray, np.ndarray, 
 
 def _solve(epochs: Epochs, init: FilterResult, params: Params,
            segments: np.ndarray | None, sigmas: bool = True,
-           doppler: np.ndarray | None = None) -> GraphOutcome:
-    """:func:`smooth_graph` proper."""
+           doppler: np.ndarray | None = None, *, course_bias: bool = False,
+           basin_only: bool = False) -> GraphOutcome:
+    """:func:`smooth_graph` proper.  ``course_bias`` (with ``segments``): each segment's
+    receiver courses share one bias, voted zero with its position error
+    (``[graph] nlos_segment_course_sd_rad``).  ``basin_only``: for a solve that only starts
+    another, its last stage ends at ``[graph] gnc_stage_tolerance`` as the earlier ones do."""
     from . import graph_kernels as gk
 
     gp = params["graph"]
@@ -635,6 +656,19 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
             gvel_w = np.maximum(trust, 1e-6)
         seg_k, err_phi, err_wsd, seg_sd, seg_vote = _segment_states(
             seg_rows[0][key_ep], seg_rows[1][key_ep], has_fix[key_ep], tk_s, gp, trust)
+    # ... and with ``course_bias``, each segment's course bias (rad): held in a segment as
+    # its position error is, free at its start, pinned at zero elsewhere (and everywhere
+    # without), voted zero with the position error
+    crs_phi = np.zeros(max(n_key - 1, 1))
+    crs_wsd = np.full(max(n_key - 1, 1), 1e-5)
+    seg_crs_sd = 0.0
+    if course_bias and seg_k is not None and n_key > 1:
+        crs_phi = np.where(err_phi == 1.0, 1.0, 0.0)
+        crs_wsd = np.where(crs_phi == 1.0,
+                           np.maximum(float(gp["nlos_segment_course_drift"])
+                                      * np.sqrt(np.maximum(np.diff(tk_s), 0.0)), 1e-6),
+                           np.where(err_wsd >= SEGMENT_FREE_SD_M, SEGMENT_FREE_SD_RAD, 1e-5))
+        seg_crs_sd = max(float(gp["nlos_segment_course_sd_rad"]), 1e-6)
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval;
     # without an odometer the receiver's speed, as the filters take it
@@ -788,14 +822,23 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         x[gk.N_X * ks + gk.GE] = me[ks]
         x[gk.N_X * ks + gk.GN] = mn[ks]
         del me, mn, ks
+        if seg_crs_sd > 0.0:  # ... and its course bias at its courses' median offset
+            crs_res = np.where(np.isfinite(gspd) & (gspd >= float(gp["gnss_course_min_mps"]))
+                               & np.isfinite(gcrs),
+                               (gcrs - x[gk.PSI::gk.N_X] + np.pi) % (2 * np.pi) - np.pi, np.nan)
+            mc, _ = segment_medians(seg_k, crs_res, crs_res, np.isfinite(crs_res))
+            kc = np.flatnonzero(np.isfinite(mc))
+            x[gk.N_X * kc + gk.GC] = mc[kc]
+            del crs_res, mc, kc
     prior_mean = x[:gk.N_X].copy()
-    prior_mean[[gk.B, gk.S, gk.G, gk.GE, gk.GN]] = b_mean, s_mean, 0.0, 0.0, 0.0
+    prior_mean[[gk.B, gk.S, gk.G, gk.GE, gk.GN, gk.GC]] = b_mean, s_mean, 0.0, 0.0, 0.0, 0.0
     prior_sd = np.zeros(gk.N_X)
     prior_sd[[gk.E, gk.N]] = float(gp["init_pos_sd_m"])
     prior_sd[gk.PSI] = float(gp["init_heading_sd_rad"])
     prior_sd[gk.V] = float(gp["init_speed_sd_mps"])
     prior_sd[[gk.B, gk.S, gk.GE, gk.GN]] = b_sd, s_sd, err_sd[0], err_sd[0]
     prior_sd[gk.G] = g_sd
+    prior_sd[gk.GC] = SEGMENT_FREE_SD_RAD if seg_crs_sd > 0.0 and seg_k[0] >= 0 else 1e-5
     if seg_k is not None and seg_k[0] >= 0:
         prior_sd[[gk.GE, gk.GN]] = SEGMENT_FREE_SD_M
 
@@ -831,7 +874,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     its = 0
     converged = False
     message = ""
-    args_fix = (fe, fn, sde, sdn, gspd, gcrs, gvel_w, err_phi, err_wsd, acc_dv, acc_t, v_sd,
+    args_fix = (fe, fn, sde, sdn, gspd, gcrs, gvel_w, err_phi, err_wsd, crs_phi, crs_wsd, acc_dv, acc_t, v_sd,
                 s_rw, prior_mean, prior_sd)
 
     seg_mult = float(gp["nlos_segment_c"]) / c_final
@@ -841,7 +884,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         # with segments the fixes are Gaussian about their segment's error
         fix_kern = KERNELS["gauss"] if seg_k is not None else kern
         return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
-                            *args_fix, kern, c, ab, g, want, fix_kern, seg_sd, seg_vote,
+                            *args_fix, kern, c, ab, g, want, fix_kern, seg_sd, seg_crs_sd, seg_vote,
                             seg_kern, c * seg_mult, pre)
 
     try:
@@ -849,7 +892,7 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
             gk.interval_noise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, prm, v_psd, q)
             # a graduated stage before the last only guides the next one (it needs the basin,
             # not the minimum): 43 -> 29 iterations of the screen's fit of an NLOS hour
-            tol_k = tol if n_stage == len(stages) - 1 else max(tol, stage_tol)
+            tol_k = tol if n_stage == len(stages) - 1 and not basin_only else max(tol, stage_tol)
             lam = 1e-6
             stage_done = False
             cost = cost_at(x, kern, c, True)

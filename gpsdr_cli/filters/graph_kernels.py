@@ -2,21 +2,23 @@
 Jacobians of every factor assembled into the banded normal equations, the selected
 inversion of the banded Cholesky factor, and the interpolation from keyframes to epochs.
 
-Layout: keyframe ``i`` owns the nine unknowns ``9 i + (E, N, V, PSI, B, S, G, GE, GN)``:
+Layout: keyframe ``i`` owns the ten unknowns ``10 i + (E, N, V, PSI, B, S, G, GE, GN, GC)``:
 east and north (m, local frame), speed v (m/s), heading psi (rad, clockwise from north,
 unwrapped), gyro bias b (rad/s) and gyro scale correction g (the yaw rate's sign:
 ``d(psi)/dt = -((1 + g) yaw_rate - b)``, so a gyro reading ``(1 + k)`` times the true rate
 has g = 1 / (1 + k) - 1), odometer scale s (true speed = s x odometer speed; on a drive
 without an odometer, the forward accelerometer's offset in m/s^2: dv/dt = reading - s) and
-the GNSS error per axis (m: fix = position + error + white noise).  Every factor links
-keyframe i to i + 1 at most, and only the displacement reaches past keyframe i + 1's own
-slot of an unknown (from keyframe i's east to i + 1's speed), so in this order the
-information matrix is banded with ``BAND = 11`` sub-diagonals (the band of two whole
-keyframes, 17, carried six that stay zero through every factorisation), stored in LAPACK's lower form
-(``ab[r - c, c] = H[r, c]`` for r >= c; Fortran order, so each column's band is
-contiguous) and factored here (:func:`band_cholesky`): LAPACK's ``dpbtrf`` factors a band
-this narrow column by column with two BLAS calls each, and took 22 ms an NLOS hour where
-the compiled loop takes 9.5 ms (one core, OpenBLAS 0.3.30).
+the GNSS error per axis (m: fix = position + error + white noise), and the bias of the
+receiver's course (rad: course = heading + bias + noise; pinned at zero but in the NLOS
+segment fit's last solve).  Every factor links keyframe i to i + 1 at most, and only the
+displacement reaches past keyframe i + 1's own slot of an unknown (from keyframe i's east to
+i + 1's speed), so in this order the information matrix is banded with ``BAND = 12``
+sub-diagonals (the band of two whole keyframes, 19, carried seven that stay zero through
+every factorisation), stored in LAPACK's lower form (``ab[r - c, c] = H[r, c]`` for
+r >= c; Fortran order, so each column's band is contiguous) and factored here
+(:func:`band_cholesky`): LAPACK's ``dpbtrf`` factors a band this narrow column by column
+with two BLAS calls each, and took 22 ms an NLOS hour where the compiled loop takes 9.5 ms
+(one core, OpenBLAS 0.3.30; nine unknowns a keyframe then).
 
 Per epoch step (epoch j-1 -> j, length dt): the speed is ``s_i x odo[j-1]`` where the
 odometer is fresh (``odo_ok``), else the speed state interpolated linearly between the
@@ -34,10 +36,10 @@ import math
 import numpy as np
 from numba import njit
 
-N_X = 9
-E, N, V, PSI, B, S, G, GE, GN = 0, 1, 2, 3, 4, 5, 6, 7, 8
+N_X = 10
+E, N, V, PSI, B, S, G, GE, GN, GC = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 # the widest coupling: keyframe i's east with i + 1's speed, through the displacement
-# (17 -> 11 super-diagonals)
+# (19 -> 12 super-diagonals)
 BAND = N_X + V - E
 N_2 = 2 * N_X
 
@@ -411,9 +413,9 @@ def _odo_free_share(j0, j1, t_s, odo_ok):
 
 @njit(cache=True)
 def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
-              fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs, gvel_w, err_phi, err_wsd,
-              acc_dv, acc_t, v_sd, s_sd, prior_mean, prior_sd, kernel, c, ab, g, want,
-              fix_kernel, seg_sd, seg_vote, seg_kernel, seg_c, pre):
+              fix_e, fix_n, fix_sde, fix_sdn, gspd, gcrs, gvel_w, err_phi, err_wsd, crs_phi,
+              crs_wsd, acc_dv, acc_t, v_sd, s_sd, prior_mean, prior_sd, kernel, c, ab, g, want,
+              fix_kernel, seg_sd, seg_crs_sd, seg_vote, seg_kernel, seg_c, pre):
     """Cost of the state ``x`` and, with ``want``, the normal equations H (banded, ``ab``) and
     gradient ``g`` (J^T W r) of every factor at ``x`` (IRLS weights from ``x``).
 
@@ -443,8 +445,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 ab[row, col] = 0.0
         g[:] = 0.0
     cost = 0.0
-    J = np.zeros((12, N_2))
-    r = np.zeros(12)  # as many as J has rows (a stopped interval with every factor: 12)
+    J = np.zeros((13, N_2))
+    r = np.zeros(13)  # as many as J has rows (a stopped interval with every factor: 13)
     je = np.zeros(N_2)
     jn = np.zeros(N_2)
     nz = np.empty(N_2, np.int64)
@@ -567,8 +569,11 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
         # ---- the GNSS error states: first-order Gauss-Markov per axis
         phi = err_phi[i]
         wsd = err_wsd[i]
-        for ax in range(2):
+        for ax in range(3):
             col = GE + ax
+            if col == GC:
+                phi = crs_phi[i]
+                wsd = crs_wsd[i]
             rg = (x[b0 + N_X + col] - phi * x[b0 + col]) / wsd
             cost += rg * rg
             if want:
@@ -612,7 +617,7 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             r2 = rv * rv
             if not math.isnan(gcrs[i]) and gspd[i] >= prm[P_GCOURSE_MIN]:
                 sdc = sd / gspd[i]
-                rc = wrap(x[b0 + PSI] - gcrs[i]) / sdc
+                rc = wrap(x[b0 + PSI] + x[b0 + GC] - gcrs[i]) / sdc
                 r[1] = rc
                 r2 += rc * rc
                 m = 2
@@ -621,18 +626,23 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                 J[0, V] = 1.0 / sd
                 if m == 2:
                     J[1, PSI] = 1.0 / (sd / gspd[i])
+                    J[1, GC] = 1.0 / (sd / gspd[i])
                 _add_block(ab, g, b0, J, r, m, N_X, robust_weight(r2, kernel, c), nz)
         if not math.isnan(seg_sd[i]):
             re = x[b0 + GE] / seg_sd[i]
             rn = x[b0 + GN] / seg_sd[i]
-            r2 = re * re + rn * rn
+            # (the course bias only where the caller frees it; pinned at zero otherwise)
+            rcb = x[b0 + GC] / seg_crs_sd if seg_crs_sd > 0.0 else 0.0
+            r2 = re * re + rn * rn + rcb * rcb
             cost += seg_vote[i] * robust_cost(r2, seg_kernel, seg_c)
             if want:
                 J[0, GE] = 1.0 / seg_sd[i]
                 J[1, GN] = 1.0 / seg_sd[i]
+                J[2, GC] = 1.0 / seg_crs_sd if seg_crs_sd > 0.0 else 0.0
                 r[0] = re
                 r[1] = rn
-                _add_block(ab, g, b0, J, r, 2, N_X, seg_vote[i] * robust_weight(r2, seg_kernel, seg_c), nz)
+                r[2] = rcb
+                _add_block(ab, g, b0, J, r, 3, N_X, seg_vote[i] * robust_weight(r2, seg_kernel, seg_c), nz)
     return cost
 
 
