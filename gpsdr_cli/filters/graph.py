@@ -394,6 +394,20 @@ def own_sigmas(params: Params) -> Params:
     return own
 
 
+def _farthest_apart(epochs: Epochs, a: FilterResult, b: FilterResult,
+                    window_s: float = 30.0) -> float:
+    """The largest median distance (m) between the tracks ``a`` and ``b`` over windows of
+    ``window_s`` seconds stepped by half a window (0 without epochs)."""
+    d = np.hypot(a.e - b.e, a.n - b.n)
+    t_s = (np.asarray(epochs.t_ns, np.int64) - int(epochs.t_ns[0])) / NS_PER_S
+    best = 0.0
+    for t0 in np.arange(0.0, t_s[-1] + 0.5 * window_s, 0.5 * window_s) if len(t_s) else ():
+        lo, hi = np.searchsorted(t_s, [t0, t0 + window_s])
+        if hi > lo:
+            best = max(best, float(np.median(d[lo:hi])))
+    return best
+
+
 def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
                  doppler: np.ndarray | None = None) -> GraphOutcome:
     """:func:`smooth_graph` of a screened NLOS drive: segment votes (each segment's weighed by
@@ -408,6 +422,15 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
     own["graph"]["gnc_stages"] = int(params["graph"]["nlos_kept_gnc_stages"])
     out = _solve(kept, by_seg.result, own, None)
     if out.result is None:
+        return by_seg
+    # ... a refinement: the kept fixes lie within keep_m of the segment fit's track, so a
+    # solution of them that leaves it by twice that has walked off where none is kept (174
+    # fixes kept of 1400, the gyro scale run to -8 %, a track 97 m from the segment fit's
+    # and 53 m from the truth against fixes at 29 m; decisions/0079)
+    apart = _farthest_apart(epochs, out.result, by_seg.result)
+    if apart > 2.0 * float(params["graph"]["nlos_segment_keep_m"]):
+        by_seg.result.info["graph_kept_solve"] = (
+            f"not taken: {apart:.0f} m from the segment fit's track")
         return by_seg
     # the left-out fixes: their segment's weight, rejected
     gone = fix & ~near
