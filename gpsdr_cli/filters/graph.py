@@ -9,8 +9,8 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   e, n (m), psi (rad), speed v (m/s), gyro bias b (rad/s), gyro scale correction g
   (``d(psi)/dt = -((1 + g) yaw_rate - b)``), odometer scale s, GNSS error eps_e, eps_n
   (m), and in the NLOS segment fit's last solve a course bias per segment (rad; pinned at
-  zero elsewhere); b, g and s are random walks from keyframe to keyframe (``[gyro] bias_sd_radps``
-  over its correlation time, ``[graph] gyro_scale_rw_sd``, ``[odo] scale_rw_sd``), so every
+  zero elsewhere); b, g and s are random walks from keyframe to keyframe (``[gyro]
+  bias_sd_radps`` over its correlation time, ``[graph] gyro_scale_rw_sd``, ``[odo] scale_rw_sd``), so every
   factor links neighbours only.  g starts at 0 within ``[graph] gyro_scale_prior_sd`` (or,
   the readings multiplied by a known scale ``--gyro-scale``, within ``gyro_scale_cal_sd``): a
   gyro that reads 3 % too much turn put every turn's heading 2.7 deg off, which the
@@ -355,9 +355,9 @@ def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
     with one bias per segment and one vote per run, each fix at its own sigma (the
     segment's bias replaces the quality model's scaled sigmas), then again from that solution
     with a course bias per segment too (``[graph] nlos_segment_course_sd_rad``; 0: not).
-    Returns the outcome, the
-    segments (:func:`.nlos_segments.fix_segments`) and, per epoch, whether its fix's segment
-    lies within ``[graph] nlos_segment_keep_m`` of the solution (all False if it failed).
+    Returns the outcome, the segments (:func:`.nlos_segments.fix_segments`) and, per epoch,
+    whether its fix's segment lies within ``[graph] nlos_segment_keep_m`` of the solution
+    (all False if it failed).
     ``sigmas``: as :func:`smooth_graph`'s.  ``doppler``: per epoch, the receiver's Doppler
     speed minus the odometer's (m/s, :func:`.gnss_model.doppler_misfit`): each segment's vote
     times its agreement (:func:`.nlos_segments.segment_trust`, ``[gnss] nlos_doppler_trust_mps``)."""
@@ -372,8 +372,8 @@ def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
         # course is off for as long as its position is, and a minute of them turned the
         # heading onto a reflected plateau (decisions/0079).  From the solution anchored by
         # every course, not from the start: with the courses free from the first step the
-        # fit stayed in a wrong basin it had left before (one drive 23 m, not 2.6 m)
-        # (the screen, without sigmas, only weighs the fixes against it: the basin will do)
+        # fit stayed in a wrong basin it had left before (one drive 23 m, not 2.6 m).  The
+        # screen (no sigmas) only weighs the fixes against the track: the basin will do
         freed = _solve(epochs, out.result, own, seg, sigmas, doppler, course_bias=True,
                        basin_only=not sigmas)
         if freed.result is not None:
@@ -897,8 +897,8 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     its = 0
     converged = False
     message = ""
-    args_fix = (fe, fn, sde, sdn, gspd, gcrs, gvel_w, err_phi, err_wsd, crs_phi, crs_wsd, acc_dv, acc_t, v_sd,
-                s_rw, prior_mean, prior_sd)
+    args_fix = (fe, fn, sde, sdn, gspd, gcrs, gvel_w, err_phi, err_wsd, crs_phi, crs_wsd,
+                acc_dv, acc_t, v_sd, s_rw, prior_mean, prior_sd)
 
     seg_mult = float(gp["nlos_segment_c"]) / c_final
     seg_kern = kernel_id(params, "nlos_segment_kernel")
@@ -907,8 +907,8 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
         # with segments the fixes are Gaussian about their segment's error
         fix_kern = KERNELS["gauss"] if seg_k is not None else kern
         return gk.linearise(xx, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
-                            *args_fix, kern, c, ab, g, want, fix_kern, seg_sd, seg_crs_sd, seg_vote,
-                            seg_kern, c * seg_mult, pre)
+                            *args_fix, kern, c, ab, g, want, fix_kern, seg_sd, seg_crs_sd,
+                            seg_vote, seg_kern, c * seg_mult, pre)
 
     try:
         for n_stage, (kern, c) in enumerate(stages):

@@ -422,14 +422,15 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
     Fix arrays are per keyframe (NaN: no fix / no speed there); ``gvel_w``: the information
     of each receiver velocity (speed and course) as a multiple of ``P_GSPEED_SD``'s (> 0).
     The GNSS error states follow ``eps[i+1] = err_phi[i] eps[i] + w``, sd(w) = ``err_wsd[i]``
-    (per interval, m).
+    (per interval, m); the course bias likewise with ``crs_phi``, ``crs_wsd`` (rad).
     The speed state follows ``v[i+1] = v[i] + acc_dv[i] - s[i] acc_t[i] + w``, sd(w) =
     ``v_sd[i]``: the forward accelerometer's integral over the interval (m/s) less the
     offset held in the S slot (m/s^2) over the ``acc_t[i]`` seconds it covers; a drive
     without an accelerometer has both at 0 (a random walk).  sd of S's random walk:
     ``s_sd[i]``.
     Fix positions are under ``fix_kernel``, the receiver's velocity under ``kernel``.
-    ``seg_sd`` (per keyframe, NaN: none): a zero prior on the error state there, sd in m,
+    ``seg_sd`` (per keyframe, NaN: none): a zero prior on the error state there, sd in m
+    (with the course bias, sd ``seg_crs_sd`` in rad, in the same robust vote; 0: not in it),
     under ``seg_kernel`` at scale ``seg_c``, counted ``seg_vote`` times (one per segment
     of fixes that share one reflected-signal bias, whatever the number of its fixes).
     ``pre``: per interval, the dead reckoning's preintegrated sums (:func:`_preintegrate`;
@@ -566,7 +567,7 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
                     J[m, N_X + V] = 1.0 / prm[P_ZUPT_SD]
                     r[m] = rz
                 m += 1
-        # ---- the GNSS error states: first-order Gauss-Markov per axis
+        # ---- the GNSS error states: first-order Gauss-Markov per axis; the course bias
         phi = err_phi[i]
         wsd = err_wsd[i]
         for ax in range(3):
