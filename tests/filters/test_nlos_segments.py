@@ -107,15 +107,16 @@ def test_far_segments_do_not_add_up_to_a_pull() -> None:
     bounded Geman-McClure vote a far segment does not pull: 1.7 m.  (Judged once: the
     screen's second judgement, against the ekf's track, rescues even the Cauchy vote, to
     4.0 m; and so do the reflected runs' Doppler speeds, which weigh them less: both runs
-    here without them.  So does the gyro's scale estimated, decisions/0074, 1.5 m: the
-    Cauchy run holds it at 0.)"""
+    here without them.  So does the gyro's scale estimated, decisions/0074, 1.5 m, and the
+    course bias per segment, decisions/0079, 1.7 m: the Cauchy run holds both off.)"""
     sim = simulate_drive("urban_nlos", 6, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
     r = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True,
                    overrides={"gnss": {"nlos_doppler_trust_mps": 0.0}})
     assert r.rmse_m < 0.1 * r.gnss_rmse_m
     cauchy = run_filter(sim, copy.deepcopy(sim.drive), "ekf", pipeline=True,
                         overrides={"graph": {"nlos_segment_kernel": "cauchy",
-                                             "gyro_scale_prior_sd": 1e-6},
+                                             "gyro_scale_prior_sd": 1e-6,
+                                             "nlos_segment_course_sd_rad": 0.0},
                                    "gnss": {"nlos_screen_passes": 1,
                                             "nlos_doppler_trust_mps": 0.0}})
     assert cauchy.rmse_m > 5.0 * r.rmse_m and cauchy.result.info["lead_in_s"] > 30.0
