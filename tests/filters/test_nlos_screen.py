@@ -648,12 +648,21 @@ def test_a_reflected_doppler_course_does_not_bend_the_graph(monkeypatch) -> None
     turned the graph's heading (gyro scale 1.6 % off) onto a reflected plateau: 36.6 m
     against fixes at 17.5 m.  A segment's velocities weigh as its Doppler speeds agree with
     the odometer, as its fixes do: under 0.6 x the fixes."""
-    from gpsdr_cli import config, simulate
-    from gpsdr_cli.filters.graph import smooth_graph
+    from gpsdr_cli import simulate
 
     monkeypatch.setattr(simulate, "NLOS_DURATION_S", (20.0, 180.0))
     monkeypatch.setattr(simulate, "NLOS_VEL_MODEL", "speed")
-    sim = simulate_drive("urban_nlos", 34, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
+    _, rmse, fixes = _default_graph(simulate_drive("urban_nlos", 34, 283.0, gyro_rate_hz=5.0,
+                                                   odo_rate_hz=5.0))
+    assert rmse < 0.6 * fixes
+
+
+def _default_graph(sim):
+    """The graph smoother with every default from aekf + RTS through the pipeline on ``sim``,
+    asserted converged: (outcome, its RMSE against the truth, the fixes' RMSE), m."""
+    from gpsdr_cli import config
+    from gpsdr_cli.filters.graph import smooth_graph
+
     rts = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
     p = config.defaults()
     p["filter"]["smooth"] = True
@@ -662,7 +671,7 @@ def test_a_reflected_doppler_course_does_not_bend_the_graph(monkeypatch) -> None
     t, tr = rts.epochs.t_ns, sim.truth
     err = np.hypot(out.result.e - np.interp(t, tr.t_ns, tr.e),
                    out.result.n - np.interp(t, tr.t_ns, tr.n))
-    assert float(np.sqrt(np.mean(err ** 2))) < 0.6 * rts.gnss_rmse_m
+    return out, float(np.sqrt(np.mean(err ** 2))), rts.gnss_rmse_m
 
 
 def test_a_reflected_doppler_course_does_not_turn_the_screen(monkeypatch) -> None:
@@ -702,21 +711,13 @@ def test_the_graph_keeps_its_segment_fit_when_the_kept_fixes_walk_off(monkeypatc
     and its track 97 m from the segment fit's: 53.5 m from the truth against fixes at 29.4 m.
     A solve that leaves the segment fit's track by more than twice the distance its fixes
     were kept within is not taken: the segment fit's track, under the fixes."""
-    from gpsdr_cli import config, simulate
-    from gpsdr_cli.filters.graph import smooth_graph
+    from gpsdr_cli import simulate
 
     monkeypatch.setattr(simulate, "NLOS_SHAPE", "wander")
     monkeypatch.setattr(simulate, "NLOS_WANDER_SD_M", 20.0)
     monkeypatch.setattr(simulate, "NLOS_WANDER_DIST_M", 100.0)
     monkeypatch.setattr(simulate, "NLOS_VEL_MODEL", "speed")
-    sim = simulate_drive("urban_nlos", 17, 283.0, gyro_rate_hz=5.0, odo_rate_hz=5.0)
-    rts = run_filter(sim, copy.deepcopy(sim.drive), "aekf", smooth=True, pipeline=True)
-    p = config.defaults()
-    p["filter"]["smooth"] = True
-    out = smooth_graph(rts.epochs, rts.result, p)
-    assert out.converged, out.message
+    out, rmse, fixes = _default_graph(simulate_drive("urban_nlos", 17, 283.0, gyro_rate_hz=5.0,
+                                                     odo_rate_hz=5.0))
     assert out.result.info["graph_kept_solve"].startswith("not taken")
-    t, tr = rts.epochs.t_ns, sim.truth
-    err = np.hypot(out.result.e - np.interp(t, tr.t_ns, tr.e),
-                   out.result.n - np.interp(t, tr.t_ns, tr.n))
-    assert float(np.sqrt(np.mean(err ** 2))) < 0.8 * rts.gnss_rmse_m
+    assert rmse < 0.8 * fixes
