@@ -10,11 +10,12 @@ Model (units SI, local ENU frame, heading psi clockwise from north, yaw rate CCW
   (``d(psi)/dt = -((1 + g) yaw_rate - b)``), odometer scale s, GNSS error eps_e, eps_n
   (m), and in the NLOS segment fit's last solve a course bias per segment (rad; pinned at
   zero elsewhere); b, g and s are random walks from keyframe to keyframe (``[gyro]
-  bias_sd_radps`` over its correlation time, ``[graph] gyro_scale_rw_sd``, ``[odo] scale_rw_sd``), so every
-  factor links neighbours only.  g starts at 0 within ``[graph] gyro_scale_prior_sd`` (or,
-  the readings multiplied by a known scale ``--gyro-scale``, within ``gyro_scale_cal_sd``): a
-  gyro that reads 3 % too much turn put every turn's heading 2.7 deg off, which the
-  per-radian heading noise below let the fixes bend back only where they were clean.
+  bias_sd_radps`` over its correlation time, ``[graph] gyro_scale_rw_sd``, ``[odo]
+  scale_rw_sd``), so every factor links neighbours only.  g starts at 0 within ``[graph]
+  gyro_scale_prior_sd`` (or, the readings multiplied by a known scale ``--gyro-scale``,
+  within ``gyro_scale_cal_sd``): a gyro that reads 3 % too much turn put every turn's
+  heading 2.7 deg off, which the per-radian heading noise below let the fixes bend back
+  only where they were clean.
 * Dead reckoning between keyframes: preintegrated from the raw epochs once per interval
   (exact in psi and s; in b through moments of the gyro time, in g to first order through
   moments of the raw heading, taken again when b or g moves far:
@@ -207,13 +208,16 @@ SEGMENT_FREE_SD_RAD = 10.0
 
 
 def _segment_states(seg: np.ndarray, run: np.ndarray, fix: np.ndarray, tk_s: np.ndarray,
-                    gp: Params, trust: np.ndarray | None = None):
+                    gp: Params, trust: np.ndarray | None = None,
+                    course_drift: float | None = None):
     """Per keyframe: segment id (keyframes between two fixes of one segment belong to it,
     others -1), the error states' chain (phi, sd of w per interval: held in a segment,
     free at its start, pinned at zero outside), and each segment's zero prior (sd, vote)
     at its middle fix: its run's vote shared among the run's segments by length, each share
     times the segment's ``trust`` (per keyframe: :func:`.nlos_segments.segment_trust`) where
-    given."""
+    given; then the course bias's chain (phi, sd of w), held in a segment as the error
+    states are with a walk of ``course_drift`` rad per sqrt(s), or pinned at zero
+    throughout when None."""
     n = len(seg)
     seg_k = np.where(fix, seg, -1)
     fix_i = np.flatnonzero(fix & (seg >= 0))
@@ -231,6 +235,11 @@ def _segment_states(seg: np.ndarray, run: np.ndarray, fix: np.ndarray, tk_s: np.
     phi = np.where(same, 1.0, 0.0)
     wsd = np.where(same, np.maximum(float(gp["nlos_segment_drift_sd"]) * np.sqrt(dt), 1e-4),
                    np.where(start, SEGMENT_FREE_SD_M, 1e-5))
+    crs_phi, crs_wsd = np.zeros(max(n - 1, 1)), np.full(max(n - 1, 1), 1e-5)
+    if course_drift is not None and n > 1:
+        crs_phi = phi.copy()
+        crs_wsd = np.where(same, np.maximum(course_drift * np.sqrt(dt), 1e-6),
+                           np.where(start, SEGMENT_FREE_SD_RAD, 1e-5))
     if n < 2:
         phi, wsd = np.ones(1), np.ones(1)
     seg_sd = np.full(n, np.nan)
@@ -247,7 +256,7 @@ def _segment_states(seg: np.ndarray, run: np.ndarray, fix: np.ndarray, tk_s: np.
                 vote[mid] = math.sqrt(run_dur / vote_s) * dur / max(run_dur, 1e-9)
                 if trust is not None:
                     vote[mid] *= float(trust[mid])
-    return seg_k, phi, wsd, seg_sd, vote
+    return seg_k, phi, wsd, seg_sd, vote, crs_phi, crs_wsd
 
 
 def _segment_weights(x: np.ndarray, seg_k: np.ndarray, fe: np.ndarray, fn: np.ndarray,
@@ -394,20 +403,6 @@ def own_sigmas(params: Params) -> Params:
     return own
 
 
-def _farthest_apart(epochs: Epochs, a: FilterResult, b: FilterResult,
-                    window_s: float = 30.0) -> float:
-    """The largest median distance (m) between the tracks ``a`` and ``b`` over windows of
-    ``window_s`` seconds stepped by half a window (0 without epochs)."""
-    d = np.hypot(a.e - b.e, a.n - b.n)
-    t_s = (np.asarray(epochs.t_ns, np.int64) - int(epochs.t_ns[0])) / NS_PER_S
-    best = 0.0
-    for t0 in np.arange(0.0, t_s[-1] + 0.5 * window_s, 0.5 * window_s) if len(t_s) else ():
-        lo, hi = np.searchsorted(t_s, [t0, t0 + window_s])
-        if hi > lo:
-            best = max(best, float(np.median(d[lo:hi])))
-    return best
-
-
 def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
                  doppler: np.ndarray | None = None) -> GraphOutcome:
     """:func:`smooth_graph` of a screened NLOS drive: segment votes (each segment's weighed by
@@ -427,7 +422,12 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
     # solution of them that leaves it by twice that has walked off where none is kept (174
     # fixes kept of 1400, the gyro scale run to -8 %, a track 97 m from the segment fit's
     # and 53 m from the truth against fixes at 29 m; decisions/0079)
-    apart = _farthest_apart(epochs, out.result, by_seg.result)
+    from .nlos_screen import OFFSET_WINDOW_S, largest_window_median
+
+    apart = largest_window_median(
+        (np.asarray(epochs.t_ns, np.int64) - int(epochs.t_ns[0])) / NS_PER_S,
+        np.hypot(out.result.e - by_seg.result.e, out.result.n - by_seg.result.n),
+        OFFSET_WINDOW_S)[0]
     if apart > 2.0 * float(params["graph"]["nlos_segment_keep_m"]):
         by_seg.result.info["graph_kept_solve"] = (
             f"not taken: {apart:.0f} m from the segment fit's track")
@@ -664,6 +664,12 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
     seg_k = None
     # each receiver velocity's information, as a multiple of [graph] gnss_speed_sd_mps's
     gvel_w = np.ones(n_key)
+    # ... and with ``course_bias``, each segment's course bias (rad): held in a segment as
+    # its position error is, free at its start, pinned at zero elsewhere (and everywhere
+    # without), voted zero with the position error
+    crs_phi = np.zeros(max(n_key - 1, 1))
+    crs_wsd = np.full(max(n_key - 1, 1), 1e-5)
+    seg_crs_sd = 0.0
     if segments is not None:
         seg_rows = np.asarray(segments, np.int64)
         trust = None
@@ -677,21 +683,12 @@ def _solve(epochs: Epochs, init: FilterResult, params: Params,
             # is, and a minute of them bent the heading towards a reflected plateau under
             # Cauchy's ever-growing cost (decisions/0078)
             gvel_w = np.maximum(trust, 1e-6)
-        seg_k, err_phi, err_wsd, seg_sd, seg_vote = _segment_states(
-            seg_rows[0][key_ep], seg_rows[1][key_ep], has_fix[key_ep], tk_s, gp, trust)
-    # ... and with ``course_bias``, each segment's course bias (rad): held in a segment as
-    # its position error is, free at its start, pinned at zero elsewhere (and everywhere
-    # without), voted zero with the position error
-    crs_phi = np.zeros(max(n_key - 1, 1))
-    crs_wsd = np.full(max(n_key - 1, 1), 1e-5)
-    seg_crs_sd = 0.0
-    if course_bias and seg_k is not None and n_key > 1:
-        crs_phi = np.where(err_phi == 1.0, 1.0, 0.0)
-        crs_wsd = np.where(crs_phi == 1.0,
-                           np.maximum(float(gp["nlos_segment_course_drift"])
-                                      * np.sqrt(np.maximum(np.diff(tk_s), 0.0)), 1e-6),
-                           np.where(err_wsd >= SEGMENT_FREE_SD_M, SEGMENT_FREE_SD_RAD, 1e-5))
-        seg_crs_sd = max(float(gp["nlos_segment_course_sd_rad"]), 1e-6)
+        freed = course_bias and n_key > 1
+        seg_k, err_phi, err_wsd, seg_sd, seg_vote, crs_phi, crs_wsd = _segment_states(
+            seg_rows[0][key_ep], seg_rows[1][key_ep], has_fix[key_ep], tk_s, gp, trust,
+            float(gp["nlos_segment_course_drift"]) if freed else None)
+        if freed:
+            seg_crs_sd = max(float(gp["nlos_segment_course_sd_rad"]), 1e-6)
 
     # ---- standstill intervals: the odometer below the threshold over the whole interval;
     # without an odometer the receiver's speed, as the filters take it

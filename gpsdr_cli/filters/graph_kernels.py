@@ -632,18 +632,22 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
         if not math.isnan(seg_sd[i]):
             re = x[b0 + GE] / seg_sd[i]
             rn = x[b0 + GN] / seg_sd[i]
-            # (the course bias only where the caller frees it; pinned at zero otherwise)
-            rcb = x[b0 + GC] / seg_crs_sd if seg_crs_sd > 0.0 else 0.0
-            r2 = re * re + rn * rn + rcb * rcb
+            r2 = re * re + rn * rn
+            m = 2
+            if seg_crs_sd > 0.0:  # the course bias, where the caller frees it
+                rcb = x[b0 + GC] / seg_crs_sd
+                r2 += rcb * rcb
+                m = 3
             cost += seg_vote[i] * robust_cost(r2, seg_kernel, seg_c)
             if want:
                 J[0, GE] = 1.0 / seg_sd[i]
                 J[1, GN] = 1.0 / seg_sd[i]
-                J[2, GC] = 1.0 / seg_crs_sd if seg_crs_sd > 0.0 else 0.0
                 r[0] = re
                 r[1] = rn
-                r[2] = rcb
-                _add_block(ab, g, b0, J, r, 3, N_X, seg_vote[i] * robust_weight(r2, seg_kernel, seg_c), nz)
+                if m == 3:
+                    J[2, GC] = 1.0 / seg_crs_sd
+                    r[2] = rcb
+                _add_block(ab, g, b0, J, r, m, N_X, seg_vote[i] * robust_weight(r2, seg_kernel, seg_c), nz)
     return cost
 
 
