@@ -205,6 +205,9 @@ def odo_lag_s(t_s: np.ndarray, odo_good: np.ndarray, odo: np.ndarray, has_fix: n
 SEGMENT_FREE_SD_M = 1e3
 #: ... and of a segment's course bias there (rad): free
 SEGMENT_FREE_SD_RAD = 10.0
+#: the kept-fix solve's distance from the segment fit: the largest median over windows this
+#: long (s), as the NLOS screen measures a track's distance from the fixes
+KEPT_APART_WINDOW_S = 30.0
 
 
 def _segment_states(seg: np.ndarray, run: np.ndarray, fix: np.ndarray, tk_s: np.ndarray,
@@ -422,12 +425,12 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
     # solution of them that leaves it by twice that has walked off where none is kept (174
     # fixes kept of 1400, the gyro scale run to -8 %, a track 97 m from the segment fit's
     # and 53 m from the truth against fixes at 29 m; decisions/0079)
-    from .nlos_screen import OFFSET_WINDOW_S, largest_window_median
+    from .nlos_segments import largest_window_median
 
     apart = largest_window_median(
         (np.asarray(epochs.t_ns, np.int64) - int(epochs.t_ns[0])) / NS_PER_S,
         np.hypot(out.result.e - by_seg.result.e, out.result.n - by_seg.result.n),
-        OFFSET_WINDOW_S)[0]
+        KEPT_APART_WINDOW_S)[0]
     if apart > 2.0 * float(params["graph"]["nlos_segment_keep_m"]):
         by_seg.result.info["graph_kept_solve"] = (
             f"not taken: {apart:.0f} m from the segment fit's track")

@@ -273,24 +273,9 @@ def farthest_window(epochs: Epochs, track: FilterResult, fixes: np.ndarray,
     t_s = (np.asarray(epochs.t_ns, np.int64)[f] - int(epochs.t_ns[0])) / NS_PER_S
     d = np.hypot(epochs.gnss_e[f] - track.e[f], epochs.gnss_n[f] - track.n[f])
     ok = np.isfinite(d)
+    from .nlos_segments import largest_window_median
+
     return largest_window_median(t_s[ok], d[ok], window_s, OFFSET_MIN_FIXES)
-
-
-def largest_window_median(t_s: np.ndarray, d: np.ndarray, window_s: float,
-                          min_n: int = 1) -> tuple[float, float]:
-    """``(value, time s)``: the largest median of ``d`` over windows of ``window_s`` seconds
-    of ``t_s`` (increasing, s), stepped by half a window from ``t_s[0]``, each with at least
-    ``min_n`` values, and the middle of that window; (0, NaN) with none."""
-    best, at = 0.0, math.nan
-    if not len(t_s):
-        return best, at
-    for t0 in np.arange(t_s[0], t_s[-1] + 0.5 * window_s, 0.5 * window_s):
-        lo, hi = np.searchsorted(t_s, [t0, t0 + window_s])
-        if hi - lo >= min_n:
-            m = float(np.median(d[lo:hi]))
-            if m > best:
-                best, at = m, t0 + 0.5 * window_s
-    return best, at
 
 
 def last_run_drift(epochs: Epochs, kept: np.ndarray, seg: np.ndarray,
@@ -403,5 +388,5 @@ def edge_fixes(epochs: Epochs, track: FilterResult, kept: np.ndarray, out: np.nd
     return drop
 
 
-__all__ = ["edge_fixes", "far_fixes", "farthest_window", "judge_kept", "largest_window_median",
-           "last_run_drift", "not_applied", "screen"]
+__all__ = ["edge_fixes", "far_fixes", "farthest_window", "judge_kept", "last_run_drift",
+           "not_applied", "screen"]

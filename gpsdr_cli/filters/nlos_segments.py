@@ -173,6 +173,23 @@ def segment_trust(ids: np.ndarray, misfit: np.ndarray, scale_mps: float,
     return out
 
 
+def largest_window_median(t_s: np.ndarray, d: np.ndarray, window_s: float,
+                          min_n: int = 1) -> tuple[float, float]:
+    """``(value, time s)``: the largest median of ``d`` over windows of ``window_s`` seconds
+    of ``t_s`` (increasing, s), stepped by half a window from ``t_s[0]``, each with at least
+    ``min_n`` values, and the middle of that window; (0, NaN) with none."""
+    best, at = 0.0, math.nan
+    if not len(t_s):
+        return best, at
+    for t0 in np.arange(t_s[0], t_s[-1] + 0.5 * window_s, 0.5 * window_s):
+        lo, hi = np.searchsorted(t_s, [t0, t0 + window_s])
+        if hi - lo >= min_n:
+            m = float(np.median(d[lo:hi]))
+            if m > best:
+                best, at = m, t0 + 0.5 * window_s
+    return best, at
+
+
 def fix_segments(epochs: Epochs, track: FilterResult, gp: dict) -> np.ndarray:
     """Per epoch, rows (segment id, run id) of its fix (:func:`segments` on the offsets of
     the fixes from ``track``), -1 where there is none: shape (2, epochs)."""
@@ -187,4 +204,5 @@ def fix_segments(epochs: Epochs, track: FilterResult, gp: dict) -> np.ndarray:
     return out
 
 
-__all__ = ["fix_segments", "segment_trust", "segment_offsets", "segments", "segments_near"]
+__all__ = ["fix_segments", "largest_window_median", "segment_trust", "segment_offsets",
+           "segments", "segments_near"]
