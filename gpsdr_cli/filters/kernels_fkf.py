@@ -180,6 +180,9 @@ ZUPT_KEEP_HEADING = 1 << IQW
 #: velocity is what is held (an optimal row, through P's velocity-acceleration covariance,
 #: took 2.70 -> 2.35 m/s off a real log's last fix)
 HOLD_ACC_ONLY = ((1 << NX) - 1) & ~((1 << IAE) | (1 << IAN))
+#: consider mask of a gate reset's fix: it does not correct the velocity and acceleration
+#: (a wrong heading, e.g. a gyro bias, is one reason for a run of rejected fixes: it stays in)
+RESET_CONSIDER = (1 << IVE) | (1 << IVN) | (1 << IAE) | (1 << IAN)
 
 # ---- float parameter vector (built by fkf.kernel_parameters) ---------------------------
 PAR_TAU_EPS = 0      # s, correlation time of eps_e, eps_n
@@ -602,11 +605,12 @@ def phi_matrix(T: float, static: bool, par: np.ndarray, Phi: np.ndarray, x: np.n
 
 @njit(cache=True)
 def update_row(x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, r: float,
-               s: np.ndarray, k: np.ndarray) -> None:
+               s: np.ndarray, k: np.ndarray, consider: int = 0) -> None:
     """Scalar measurement update of a dense row h with the innovation y = z - h(x) and
     variance r (:func:`~gpsdr_cli.filters.core.update.dense_update`, Joseph form);
-    ``s``, ``k`` are length-10 scratch (P h^T, the gain)."""
-    dense_update(NX, x, P, h, y, r, 1.0, k, s)
+    ``s``, ``k`` are length-10 scratch (P h^T, the gain); ``consider``: a bit mask of
+    states the row does not correct."""
+    dense_update(NX, x, P, h, y, r, 1.0, k, s, consider)
 
 
 @njit(cache=True)
@@ -630,9 +634,9 @@ def local_and_central_unit(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.
 @njit(cache=True)
 def local_and_central_row(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.ndarray,
                           central: bool, h: np.ndarray, y: float, r: float,
-                          s: np.ndarray, k: np.ndarray) -> None:
+                          s: np.ndarray, k: np.ndarray, consider: int = 0) -> None:
     """One local row (innovation y at the local x), and, when ``central``, the same row on
-    the running fused state (xc, Pc) first.
+    the running fused state (xc, Pc) first (``consider``: see :func:`update_row`).
 
     Information form of a row: ``P^-1 += h^T h / r``, ``P^-1 x += h^T z~ / r`` with the
     linearised measurement ``z~ = y + h x`` at the local state; on the fused state the
@@ -643,8 +647,8 @@ def local_and_central_row(x: np.ndarray, P: np.ndarray, xc: np.ndarray, Pc: np.n
         for i in range(NX):
             if h[i] != 0.0:
                 yc += h[i] * (x[i] - xc[i])
-        update_row(xc, Pc, h, yc, r, s, k)
-    update_row(x, P, h, y, r, s, k)
+        update_row(xc, Pc, h, yc, r, s, k, consider)
+    update_row(x, P, h, y, r, s, k, consider)
 
 
 @njit(cache=True)
@@ -1462,6 +1466,7 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                                                nis > chi2)
                         vel = verdict != GATE_FAIL
                     accept = True
+                    fix_consider = 0
                     a_rej = math.exp(-(t_now - t_last_fix) / tau_rej) if tau_rej > 0.0 else 0.0
                     t_last_fix = t_now
                     if chi2 > 0.0 and n_acc >= par[PAR_GATE_WARMUP]:
@@ -1472,6 +1477,11 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                                                a_rej * rej_share + (1.0 - a_rej) > 0.5)
                         if verdict == GATE_RESET:
                             p_counters[C_GATE_RESETS] += 1
+                            # the state, not the fix, is off, but where: the fix says its
+                            # position, not its velocity.  As a plain row a 75-m reflection
+                            # read after 3 s of gated fixes set 38 m/s on a car standing still
+                            # and fkf ran 300 m off (decisions/0080)
+                            fix_consider = RESET_CONSIDER
                         elif verdict == GATE_FAIL:
                             accept = False
                     rej_share = a_rej * rej_share + (0.0 if accept else 1.0 - a_rej)
@@ -1480,12 +1490,14 @@ def federated_pass(inp: FkfInputs, start: FkfStart, par: np.ndarray, flags: np.n
                         h[IE] = 1.0
                         h[IEPS_E] = 1.0
                         local_and_central_row(x1, P1, xg, Pg, central, h,
-                                              gnss_e[kx] - (x1[IE] + x1[IEPS_E]), re, s, kk)
+                                              gnss_e[kx] - (x1[IE] + x1[IEPS_E]), re, s, kk,
+                                              fix_consider)
                         h[:] = 0.0
                         h[IN] = 1.0
                         h[IEPS_N] = 1.0
                         local_and_central_row(x1, P1, xg, Pg, central, h,
-                                              gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk)
+                                              gnss_n[kx] - (x1[IN] + x1[IEPS_N]), rn, s, kk,
+                                              fix_consider)
                         if vel:
                             # receiver (Doppler) velocity with the accepted fix (our choice)
                             local_and_central_unit(x1, P1, xg, Pg, central, np.int64(IVE),

@@ -20,6 +20,7 @@ from gpsdr_cli.align import build_epochs
 from gpsdr_cli.filters import fkf, standstill
 from gpsdr_cli.filters.gnss_model import gnss_error_model
 from gpsdr_cli.simulate import simulate_drive
+from gpsdr_cli.testing.faults import gnss_jump, start_ns, window
 from gpsdr_cli.testing.sim import run_filter
 from tests.filters import test_fkf as fkf_tests
 from tests.filters.reference_fkf import run_reference, tiny_drive
@@ -171,3 +172,31 @@ def test_gnss_standstill_bridges_an_outage_at_a_stop():
     assert not standstill.gnss_standstill(ep, t, p, heading=turned)[gap].any()
     ep.gnss_e[t >= 9.0 - 1e-9] = 20.0                  # m: beyond 3 sigma of the two fixes (12 m)
     assert not standstill.gnss_standstill(ep, t, p, heading=straight)[gap].any()
+
+
+#: s: a 6-s reflection 75 m away while the car stands (the stop lasts from 29 to 221 s), the
+#: receiver's speed missing from 2 s before it to 2 s after, so nothing says the car stands
+REFLECTION_AT_S, REFLECTION_S = 32.0, 6.0
+
+
+@pytest.mark.parametrize("name", ["fkf", "fafkf"])
+def test_a_gate_reset_moves_the_position_not_the_velocity(stop_and_go_no_odo, name):
+    """The gate resets after 3 s of rejected fixes (``[fkf] no_odo_gate_reset_s``).  As a
+    plain row, the first fix taken then read the 75-m offset the model had predicted 3 s of
+    velocity variance for as velocity: fkf 47 m/s, fafkf 33 m/s on a car standing still,
+    tracks 12.79 and 16.48 m RMSE against the fixes' 10.87 m (decisions/0080).  The reset's
+    fix now corrects the position and eps only: 12 and 13 m/s, 7.72 and 9.95 m."""
+    sim, drive = stop_and_go_no_odo
+    jumped = gnss_jump(drive, REFLECTION_AT_S, distance_m=75.0, bearing_deg=50.0,
+                       duration_s=REFLECTION_S)
+    quiet = window(jumped.gnss.t_ns, start_ns(drive), REFLECTION_AT_S - 2.0, REFLECTION_S + 4.0)
+    jumped.gnss.speed_mps[quiet] = np.nan
+    jumped.gnss.course_deg[quiet] = np.nan
+    r = run_filter(sim, jumped, name, pipeline=True)
+    t_s = (r.epochs.t_ns - r.epochs.t_ns[0]) / 1e9
+    near = (t_s >= REFLECTION_AT_S) & (t_s <= REFLECTION_AT_S + REFLECTION_S + 10.0)
+    assert np.all(r.true_speed_mps[near] < 0.01)
+    assert r.result.info["gate_resets"] > 0
+    speed = np.hypot(r.result.v_e, r.result.v_n)[near]
+    assert speed.max() < 20.0, f"{name}: {speed.max():.1f} m/s while standing"
+    assert r.rmse_m < r.gnss_rmse_m, f"{name}: {r.rmse_m:.2f} m, fixes {r.gnss_rmse_m:.2f} m"

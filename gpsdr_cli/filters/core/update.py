@@ -107,8 +107,8 @@ def sparse_update(n: int, x: np.ndarray, P: np.ndarray, H: np.ndarray, nz: np.nd
 
 @njit(cache=True, error_model="numpy", inline="always")
 def dense_update(n: int, x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, R: float, w: float,
-                 K: np.ndarray, PHt: np.ndarray) -> bool:
-    """The update for a dense row h (its zeros skipped), no consider states."""
+                 K: np.ndarray, PHt: np.ndarray, consider: int = 0) -> bool:
+    """The update for a dense row h (its zeros skipped)."""
     for i in range(n):
         PHt[i] = 0.0
     for j in range(n):
@@ -120,4 +120,4 @@ def dense_update(n: int, x: np.ndarray, P: np.ndarray, h: np.ndarray, y: float, 
     for j in range(n):
         if h[j] != 0.0:
             HPHt += h[j] * PHt[j]
-    return gain_update(n, x, P, PHt, HPHt, y, R * w, K, 0, 0.0, 0.0)
+    return gain_update(n, x, P, PHt, HPHt, y, R * w, K, consider, 0.0, 0.0)
