@@ -310,8 +310,8 @@ def reflected_doppler(params: Params, has_odo: bool, dr_healthy: bool = True) ->
     odometer scale over ``nlos_odo_scale_window_s``.
     Without an odometer the receiver velocity's gate also resets after ``[fkf]
     no_odo_gate_reset_s`` (as the fixes'), not ``[gnss] velocity_gate_reset_s``, and
-    ekf/aekf's zero-velocity update never moves the position (``[gnss]
-    nlos_no_odo_zupt_keeps_position``).
+    ekf/aekf's zero-velocity update never moves the position in a pass no smoother follows
+    (``[gnss] nlos_no_odo_zupt_keeps_position``).
     Applied on the whole NLOS drive, also to the fixes the NLOS screen keeps (some of them
     are reflected as well)."""
     out = copy.deepcopy(params)
@@ -344,8 +344,10 @@ def reflected_doppler(params: Params, has_odo: bool, dr_healthy: bool = True) ->
         _at_least(a, "gnss_velocity_sd_mps", g["nlos_velocity_sd_mps"])
         # a stop says nothing about where the car is; without an odometer the velocity a
         # ZUPT zeroes is the filter's own guess (the Doppler at 5 m/s), and its correlation
-        # with the position moved a track 24 m off good fixes at one stop (decisions/0039)
-        if g["nlos_no_odo_zupt_keeps_position"]:
+        # with the position moved a track 24 m off good fixes at one stop (decisions/0039).
+        # Forward only: a smoother's gain takes the forward pass for the optimal one, and
+        # over those consider rows RTS ran 2 x its forward pass (decisions/0081)
+        if g["nlos_no_odo_zupt_keeps_position"] and not out["filter"]["smooth"]:
             out["standstill"]["zupt_keeps_position"] = "always"
     return out
 
