@@ -626,8 +626,8 @@ def linearise(x, key_ep, t_s, yaw, odo, gyro_ok, odo_ok, stopped, q, prm,
             if want:
                 J[0, V] = 1.0 / sd
                 if m == 2:
-                    J[1, PSI] = 1.0 / (sd / gspd[i])
-                    J[1, GC] = 1.0 / (sd / gspd[i])
+                    J[1, PSI] = 1.0 / sdc
+                    J[1, GC] = 1.0 / sdc
                 _add_block(ab, g, b0, J, r, m, N_X, robust_weight(r2, kernel, c), nz)
         if not math.isnan(seg_sd[i]):
             re = x[b0 + GE] / seg_sd[i]

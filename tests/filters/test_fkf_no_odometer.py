@@ -185,7 +185,7 @@ def test_a_gate_reset_moves_the_position_not_the_velocity(stop_and_go_no_odo, na
     plain row, the first fix taken then read the 75-m offset the model had predicted 3 s of
     velocity variance for as velocity: fkf 47 m/s, fafkf 33 m/s on a car standing still,
     tracks 12.79 and 16.48 m RMSE against the fixes' 10.87 m (decisions/0080).  The reset's
-    fix now corrects the position and eps only: 12 and 13 m/s, 7.72 and 9.95 m."""
+    fix no longer corrects the velocity and acceleration: 12 and 13 m/s, 7.72 and 9.95 m."""
     sim, drive = stop_and_go_no_odo
     jumped = gnss_jump(drive, REFLECTION_AT_S, distance_m=75.0, bearing_deg=50.0,
                        duration_s=REFLECTION_S)
