@@ -669,6 +669,16 @@ def test_banded_cholesky_solves_as_lapack_does() -> None:
     assert np.max(np.abs(x - ref)) < 1e-12 * np.max(np.abs(ref)) * n
     assert np.max(np.abs(x - solveh_banded(lower, rhs, lower=True))) > 1e-3
     assert gk.band_cholesky_damped(bad, 0.0, out) == 151
+    # drives shorter than the band, and at its edge (the factor's last BAND columns take
+    # their own loop): the same solution as LAPACK's
+    for m in (1, 3, kd, kd + 1, kd + 2):
+        small = lower[:, :m].copy(order="F")
+        for d in range(1, kd + 1):
+            small[d, max(m - d, 0):] = 0.0
+        b = rhs[:m]
+        want = solveh_banded(small[:min(kd + 1, m)], b, lower=True)
+        assert gk.band_cholesky(small) == 0
+        assert np.max(np.abs(gk.band_solve(small, b) - want)) < 1e-12 * np.max(np.abs(want)) * m
 
 
 def test_gyro_scale_sd_is_the_graphs_own() -> None:
