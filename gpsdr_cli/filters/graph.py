@@ -360,7 +360,8 @@ def smooth_graph(epochs: Epochs, init: FilterResult, params: Params,
 
 
 def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
-                      sigmas: bool = True, doppler: np.ndarray | None = None
+                      sigmas: bool = True, doppler: np.ndarray | None = None,
+                      basin_only: bool = False
                       ) -> tuple[GraphOutcome, np.ndarray, np.ndarray]:
     """The NLOS judgement the screen and the graph smoother share: the fixes cut into
     segments and runs against ``init``'s track (:mod:`.nlos_segments`), the drive solved
@@ -372,7 +373,9 @@ def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
     (all False if it failed).
     ``sigmas``: as :func:`smooth_graph`'s.  ``doppler``: per epoch, the receiver's Doppler
     speed minus the odometer's (m/s, :func:`.gnss_model.doppler_misfit`): each segment's vote
-    times its agreement (:func:`.nlos_segments.segment_trust`, ``[gnss] nlos_doppler_trust_mps``)."""
+    times its agreement (:func:`.nlos_segments.segment_trust`, ``[gnss] nlos_doppler_trust_mps``).
+    ``basin_only``: the last solve ends at ``[graph] gnc_stage_tolerance``, for a caller that
+    only starts another solve from it (without ``sigmas`` it always does)."""
     from .nlos_segments import fix_segments, segments_near
 
     own = own_sigmas(params)
@@ -387,7 +390,7 @@ def solve_by_segments(epochs: Epochs, init: FilterResult, params: Params, *,
         # fit stayed in a wrong basin it had left before (one drive 23 m, not 2.6 m).  The
         # screen (no sigmas) only weighs the fixes against the track: the basin will do
         freed = _solve(epochs, out.result, own, seg, sigmas, doppler, course_bias=True,
-                       basin_only=not sigmas)
+                       basin_only=not sigmas or basin_only)
         if freed.result is not None:
             out = freed
     if out.result is None:
@@ -410,9 +413,20 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
                  doppler: np.ndarray | None = None) -> GraphOutcome:
     """:func:`smooth_graph` of a screened NLOS drive: segment votes (each segment's weighed by
     its ``doppler`` agreement, as :func:`solve_by_segments`), then the kept fixes."""
-    by_seg, seg, near = solve_by_segments(epochs, init, params, doppler=doppler)
+    # the segment fit only starts the solve of the kept fixes and says which are kept: it
+    # ends in its basin, without the track's sigmas (an NLOS hour: 21 -> 11 iterations,
+    # the graph on simulated drives as close to the truth; decisions/0082), and is finished
+    # only where it is the answer
+    by_seg, seg, near = solve_by_segments(epochs, init, params, doppler=doppler, sigmas=False,
+                                          basin_only=True)
     if by_seg.result is None:
         return _solve(epochs, init, params, None)
+
+    def finished() -> GraphOutcome:
+        # solved again to the end from the same start: restarted from the basin instead,
+        # the segments' biases started again from their medians and the fit went elsewhere
+        done = solve_by_segments(epochs, init, params, doppler=doppler)[0]
+        return done if done.result is not None else by_seg
     fix = np.asarray(epochs.has_gnss, bool)
     kept = replace(epochs, has_gnss=fix & near)
     own = own_sigmas(params)
@@ -420,7 +434,7 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
     own["graph"]["gnc_stages"] = int(params["graph"]["nlos_kept_gnc_stages"])
     out = _solve(kept, by_seg.result, own, None)
     if out.result is None:
-        return by_seg
+        return finished()
     # ... a refinement: the kept fixes lie within keep_m of the segment fit's track, so a
     # solution of them that leaves it by twice that has walked off where none is kept (174
     # fixes kept of 1400, the gyro scale run to -8 %, a track 97 m from the segment fit's
@@ -432,6 +446,7 @@ def _by_segments(epochs: Epochs, init: FilterResult, params: Params,
         np.hypot(out.result.e - by_seg.result.e, out.result.n - by_seg.result.n),
         KEPT_APART_WINDOW_S)[0]
     if apart > 2.0 * float(params["graph"]["nlos_segment_keep_m"]):
+        by_seg = finished()
         by_seg.result.info["graph_kept_solve"] = (
             f"not taken: {apart:.0f} m from the segment fit's track")
         return by_seg
