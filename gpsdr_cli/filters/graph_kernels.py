@@ -138,26 +138,19 @@ def _add_row(ab, g, base, c0, v0, c1, v1, c2, v2, rk, w):
     same products in the same order, so the same sums to the bit; a factor's short rows
     spent most of a linearisation scanning 20 columns of J for their two or three entries."""
     wr = w * rk
-    if v0 != 0.0:
-        wa = w * v0
-        ra = base + c0
-        g[ra] += v0 * wr
-        ab[0, ra] += wa * v0
-        if v1 != 0.0:
-            ab[c1 - c0, ra] += wa * v1
-        if v2 != 0.0:
-            ab[c2 - c0, ra] += wa * v2
-    if v1 != 0.0:
-        wa = w * v1
-        ra = base + c1
-        g[ra] += v1 * wr
-        ab[0, ra] += wa * v1
-        if v2 != 0.0:
-            ab[c2 - c1, ra] += wa * v2
-    if v2 != 0.0:
-        ra = base + c2
-        g[ra] += v2 * wr
-        ab[0, ra] += w * v2 * v2
+    cols = (c0, c1, c2)
+    vals = (v0, v1, v2)
+    for a in range(3):
+        va = vals[a]
+        if va == 0.0:
+            continue
+        wa = w * va
+        ra = base + cols[a]
+        g[ra] += va * wr
+        ab[0, ra] += wa * va
+        for b in range(a + 1, 3):
+            if vals[b] != 0.0:
+                ab[cols[b] - cols[a], ra] += wa * vals[b]
 
 
 @njit(cache=True)
