@@ -17,8 +17,9 @@ sub-diagonals (the band of two whole keyframes, 19, carried seven that stay zero
 every factorisation), stored in LAPACK's lower form (``ab[r - c, c] = H[r, c]`` for
 r >= c; Fortran order, so each column's band is contiguous) and factored here
 (:func:`band_cholesky`): LAPACK's ``dpbtrf`` factors a band this narrow column by column
-with two BLAS calls each, and took 22 ms an NLOS hour where the compiled loop takes 9.5 ms
-(one core, OpenBLAS 0.3.30; nine unknowns a keyframe then).
+with two BLAS calls each, and took 22 ms on an NLOS hour's band where the compiled loop,
+its update unrolled over the band's fixed width, takes 7-8 ms (one core of a 2-vCPU AMD
+EPYC, OpenBLAS 0.3.30).
 
 Per epoch step (epoch j-1 -> j, length dt): the speed is ``s_i x odo[j-1]`` where the
 odometer is fresh (``odo_ok``), else the speed state interpolated linearly between the
