@@ -268,6 +268,37 @@ def test_the_backward_pass_is_given_the_forward_judgement(nlos, monkeypatch) -> 
     assert len(judged) == 3
 
 
+def test_the_backward_pass_hits_the_judgement_through_rounding(nlos, monkeypatch) -> None:
+    """The receiver-minus-odometer speeds the backward pass computes on the reversed clock
+    differed from the forward ones by 5.6e-17 m/s on a four-hour NLOS drive, and the drive
+    was screened twice (53 s, of which 36 s in the two screens).  Speeds that agree to
+    1e-9 m/s are the same drive's; 0.5 m/s apart, another judgement."""
+    from gpsdr_cli import config, filters
+    from gpsdr_cli.align import build_epochs
+    from gpsdr_cli.filters import nlos_screen
+    from gpsdr_cli.filters.gnss_model import doppler_misfit
+    from gpsdr_cli.qc import reverse_epochs
+
+    p = config.defaults()
+    ep = build_epochs(copy.deepcopy(nlos.drive), nlos.frame, p)
+    dop = doppler_misfit(ep, float(p["gnss"]["nlos_velocity_min_mps"]))
+    assert np.isfinite(dop).sum() > 1000
+    judged = []
+    real = nlos_screen._screen
+    monkeypatch.setattr(nlos_screen, "_screen", lambda *a: judged.append(1) or real(*a))
+    judge = filters.bare("ekf")
+
+    nlos_screen._LAST.clear()
+    rounded = dop[::-1] + 5.6e-17 * np.sign(dop[::-1])
+    assert not np.array_equal(rounded[::-1], dop, equal_nan=True)
+    back, _ = nlos_screen.screen(reverse_epochs(ep), p, True, judge, rounded)
+    fwd, _ = nlos_screen.screen(ep, p, True, judge, dop)
+    assert len(judged) == 1 and np.array_equal(back.has_gnss[::-1], fwd.has_gnss)
+    nlos_screen.screen(ep, p, True, judge, dop + 0.5)
+    assert len(judged) == 2
+    nlos_screen._LAST.clear()
+
+
 def test_the_fixes_kept_are_white_about_the_dead_reckoning() -> None:
     """A 283-s city drive (seed 21, fixes 37 m RMS, 5-Hz CAN): with GNSS error states for the
     fixes the screen kept, ekf's bias states took the dead reckoning's drift across the
