@@ -41,7 +41,8 @@ while the velocity is known apart from the fixes (receiver velocity, or a stands
 else it is a consider state; an estimate outside its stationary gate for
 ``gnss.gate_reset_s`` while moving goes into the position (the bias gate).  A receiver
 that gives positions only (velocity at fewer than ``gnss_err_min_velocity_share`` of the
-fixes: GGA without RMC/VTG, a ROS NavSatFix) runs without the states
+fixes: GGA without RMC/VTG, a ROS NavSatFix), or one whose velocity the filter is told not
+to take (``gnss_velocity = false``), runs without the states
 (:func:`gnss_err_states_on`, ``info["gnss_err_states_off"]`` says why): the forward pass
 then keeps b as a consider state throughout, which the RTS smoother, estimating b from
 both ends, does not follow -- it moved the open-sky track metres off at stops.
