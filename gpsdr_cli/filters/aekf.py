@@ -460,15 +460,13 @@ def gnss_err_states_on(epochs: Epochs, params: Params) -> bool:
     the position are told apart by dead reckoning alone; see the key's note).  With the
     velocity logged but not taken, comma2k19's ekf + RTS ran 3.06 m from the reference
     against fixes at 0.54 m."""
-    return gnss_err_states_off_why(epochs, params) == ""
+    return bool(params["aekf"]["gnss_err_states"]) and not gnss_err_states_off_why(epochs, params)
 
 
 def gnss_err_states_off_why(epochs: Epochs, params: Params) -> str:
-    """Why :func:`gnss_err_states_on` is False, in a phrase for ``info["gnss_err_states_off"]``
-    ("" when it is True)."""
+    """Why the receiver's velocity leaves the states off, in a phrase for
+    ``info["gnss_err_states_off"]`` ("" when it does not)."""
     a = params["aekf"]
-    if not bool(a["gnss_err_states"]):
-        return "aekf.gnss_err_states = false"
     if not bool(a["gnss_velocity"]):
         return "the receiver's velocity is not used (aekf.gnss_velocity = false)"
     if epochs.velocity_share < a["gnss_err_min_velocity_share"]:

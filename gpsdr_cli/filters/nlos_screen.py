@@ -95,25 +95,22 @@ def _fingerprint(epochs: Epochs, params: Params) -> tuple:
 FINGERPRINT_ATOL = 1e-9
 
 
-def _same(a: tuple, b: tuple) -> bool:
-    """Two fingerprints agree (arrays element by element, NaN equal to NaN; float arrays
-    within :data:`FINGERPRINT_ATOL`)."""
-    if len(a) != len(b):
+def _agree(x: object, y: object) -> bool:
+    """Two fingerprint entries agree: arrays element by element (NaN equal to NaN, float
+    arrays within :data:`FINGERPRINT_ATOL`), anything else by ``==``."""
+    if not (isinstance(x, np.ndarray) or isinstance(y, np.ndarray)):
+        return x == y
+    x, y = np.asarray(x), np.asarray(y)
+    if x.shape != y.shape:
         return False
-    for x, y in zip(a, b, strict=True):
-        if not (isinstance(x, np.ndarray) or isinstance(y, np.ndarray)):
-            if x != y:
-                return False
-            continue
-        x, y = np.asarray(x), np.asarray(y)
-        if x.shape != y.shape:
-            return False
-        if x.dtype.kind == "f" and y.dtype.kind == "f":
-            if not np.allclose(x, y, rtol=0.0, atol=FINGERPRINT_ATOL, equal_nan=True):
-                return False
-        elif not np.array_equal(x, y):
-            return False
-    return True
+    if x.dtype.kind == "f" and y.dtype.kind == "f":
+        return bool(np.allclose(x, y, rtol=0.0, atol=FINGERPRINT_ATOL, equal_nan=True))
+    return bool(np.array_equal(x, y))
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    """Two fingerprints agree, entry by entry (:func:`_agree`)."""
+    return len(a) == len(b) and all(_agree(x, y) for x, y in zip(a, b, strict=True))
 
 
 def _cached(epochs: Epochs, fp: tuple) -> tuple[Epochs, dict] | None:
