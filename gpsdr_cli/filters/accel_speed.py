@@ -40,8 +40,12 @@ accelerometer covers the outage, else :func:`held_speed`'s: the last fix's Doppl
 plus the acceleration the last second of fixes showed, decaying over a few seconds (a
 manoeuvre is short; what the current statistical model should predict with nothing
 measuring the speed).  The across-track variance stays the filter's, the along-track one is
-the fix's plus the distance's.  A smoothed track is bridged too, the misclosure at the
-outage's end spread back over it (``smoothed``).  The speed stays >= 0 (a braking car stops, it
+the fix's plus the distance's.  A smoothed track is bridged too (``smoothed``): the same
+[s, v, b, c] model is smoothed over the outage (Rauch-Tung-Striebel, :func:`_outage_rts`)
+with the distance to the outage's first fix along the track and that fix's Doppler speed
+as its last measurements, so an offset error shows in the speed profile it belongs to (a
+speed error growing in time), and what misclosure is left (across the track: the gyro's
+heading) is spread back over the outage.  The speed stays >= 0 (a braking car stops, it
 does not reverse).  The filters' own state is not touched: each resumes at the outage's
 first fix as before, so the bridge changes the track's outage epochs and nothing else.
 """
@@ -78,7 +82,8 @@ class SpeedTrack:
     """Per epoch (after the epoch's update): ``v_mps`` speed, ``v_var`` its variance (m^2/s^2),
     ``s_m`` distance since the last used fix, ``s_var`` its variance (m^2), ``b_mps2`` the
     offset (bias + g sin(pitch)) and ``covered`` (an accelerometer reading within
-    MAX_ACCEL_AGE_S)."""
+    MAX_ACCEL_AGE_S); ``x_keep``, ``P_keep``: the whole state [s, v, b, c] and its covariance
+    after each epoch :func:`speed_track` was asked to keep, in order."""
 
     v_mps: np.ndarray
     v_var: np.ndarray
@@ -86,18 +91,59 @@ class SpeedTrack:
     s_var: np.ndarray
     b_mps2: np.ndarray
     covered: np.ndarray
+    x_keep: np.ndarray
+    P_keep: np.ndarray
+
+
+@njit(cache=True, error_model="numpy")
+def _predict(x: np.ndarray, P: np.ndarray, F: np.ndarray, T: float, acc: float,
+             prm: np.ndarray, stop_jacobian: bool = False) -> np.ndarray:
+    """One step of T seconds of the [s, v, b, c] model in place (``acc`` the held reading, NaN:
+    none); ``F`` is set to the step's Jacobian.  Returns the new P (module docstring).
+    ``stop_jacobian``: where the speed stops at 0, F says so (the speed then depends on
+    neither the last speed nor the offset; the smoother's pass back must not move a stopped
+    car); the forward filter keeps the unclamped one."""
+    q_a, q_bt, q_bs, q_c = prm[3], prm[4], prm[5], prm[6]
+    a = acc if math.isfinite(acc) else x[2]  # no reading: no speed change
+    v0 = x[1]
+    v_free = v0 + (a - x[2]) * T
+    v1 = max(v_free, 0.0)
+    ds = 0.5 * (v0 + v1) * T
+    x[0] += ds
+    x[1] = v1
+    x[2] += x[3] * ds        # the grade changes along the road (a vertical curve)
+    if stop_jacobian and v_free < 0.0:
+        F[0, 1] = 0.5 * T
+        F[0, 2] = 0.0
+        F[1, 1] = 0.0
+        F[1, 2] = 0.0
+    else:
+        F[0, 1] = T
+        F[0, 2] = -0.5 * T * T
+        F[1, 2] = -T
+    F[2, 3] = ds
+    P = F @ P @ F.T
+    P[0, 0] += q_a * T * T * T / 3.0
+    P[0, 1] += q_a * T * T / 2.0
+    P[1, 0] += q_a * T * T / 2.0
+    P[1, 1] += q_a * T
+    P[2, 2] += q_bt * T + q_bs * ds
+    P[3, 3] += q_c * ds
+    return P
 
 
 @njit(cache=True, error_model="numpy")
 def _speed_kf(dt: np.ndarray, acc: np.ndarray, z: np.ndarray, anchor: np.ndarray,
               prm: np.ndarray, v_out: np.ndarray, vv_out: np.ndarray, s_out: np.ndarray,
-              ss_out: np.ndarray, b_out: np.ndarray) -> None:
+              ss_out: np.ndarray, b_out: np.ndarray, keep: np.ndarray, x_keep: np.ndarray,
+              P_keep: np.ndarray) -> None:
     """The [s, v, b, c] filter (module docstring): ``acc`` the held reading (NaN: none yet),
     ``z`` the Doppler speed (NaN: none), ``anchor`` where s restarts from 0 (used fixes).
     ``prm``: initial sds of the speed, the offset and the grade rate; the white-acceleration
     PSD (m^2/s^3); the offset's random walk per s and per m; the grade rate's per m; the
-    Doppler speed's variance (m^2/s^2)."""
-    q_a, q_bt, q_bs, q_c, r_v = prm[3], prm[4], prm[5], prm[6], prm[7]
+    Doppler speed's variance (m^2/s^2).  The whole state and covariance after the epochs
+    marked ``keep`` go to ``x_keep`` and ``P_keep`` in order (the smoothed outages start there)."""
+    r_v = prm[7]
     x = np.zeros(4)          # s, v, b, c
     P = np.zeros((4, 4))
     P[1, 1] = prm[0] * prm[0]
@@ -105,27 +151,11 @@ def _speed_kf(dt: np.ndarray, acc: np.ndarray, z: np.ndarray, anchor: np.ndarray
     P[3, 3] = prm[2] * prm[2]
     F = np.eye(4)
     started = False
+    i_keep = 0
     for k in range(len(dt)):
         T = dt[k]
         if started and T > 0.0:
-            a = acc[k] if math.isfinite(acc[k]) else x[2]  # no reading: no speed change
-            v0 = x[1]
-            v1 = max(v0 + (a - x[2]) * T, 0.0)
-            ds = 0.5 * (v0 + v1) * T
-            x[0] += ds
-            x[1] = v1
-            x[2] += x[3] * ds        # the grade changes along the road (a vertical curve)
-            F[0, 1] = T
-            F[0, 2] = -0.5 * T * T
-            F[1, 2] = -T
-            F[2, 3] = ds
-            P = F @ P @ F.T
-            P[0, 0] += q_a * T * T * T / 3.0
-            P[0, 1] += q_a * T * T / 2.0
-            P[1, 0] += q_a * T * T / 2.0
-            P[1, 1] += q_a * T
-            P[2, 2] += q_bt * T + q_bs * ds
-            P[3, 3] += q_c * ds
+            P = _predict(x, P, F, T, acc[k], prm)
         if math.isfinite(z[k]):
             if not started:  # the first Doppler speed starts the filter
                 x[1] = z[k]
@@ -148,26 +178,109 @@ def _speed_kf(dt: np.ndarray, acc: np.ndarray, z: np.ndarray, anchor: np.ndarray
         s_out[k] = x[0]
         ss_out[k] = P[0, 0]
         b_out[k] = x[2]
+        if keep[k]:
+            x_keep[i_keep] = x
+            P_keep[i_keep] = P
+            i_keep += 1
 
 
-def speed_track(epochs: Epochs, params: Params, anchor: np.ndarray | None = None) -> SpeedTrack:
+@njit(cache=True, error_model="numpy")
+def _measure(x: np.ndarray, P: np.ndarray, row: int, z: float, r: float) -> np.ndarray:
+    """State ``row`` measured as ``z`` with variance ``r`` (x in place; returns the new P)."""
+    if not (math.isfinite(z) and r > 0.0):
+        return P
+    K = P[:, row] / (P[row, row] + r)
+    x += K * (z - x[row])
+    P = P - np.outer(K, P[row, :])
+    return 0.5 * (P + P.T)
+
+
+#: the outage smoother relinearises about its own answer this many times at most, until its
+#: start moves less than OUTAGE_RTS_TOL (m, m/s, m/s^2): where the car stops inside the
+#: outage, the stop moves with the offset the end measurements reveal
+OUTAGE_RTS_ITERATIONS = 5
+OUTAGE_RTS_TOL = 1e-4
+
+
+@njit(cache=True, error_model="numpy")
+def _outage_rts(dt: np.ndarray, acc: np.ndarray, x0: np.ndarray, P0: np.ndarray,
+                prm: np.ndarray, z_s: float, r_s: float, z_v: float, r_v: float,
+                s_out: np.ndarray, v_out: np.ndarray) -> None:
+    """The [s, v, b, c] model smoothed over one outage: from ``x0``, ``P0`` (the forward filter
+    at the outage's last used fix, s = 0 there) through ``dt``/``acc`` of the epochs after it up
+    to the outage's first fix (the last entry), where the distance ``z_s`` (m, variance ``r_s``)
+    and the Doppler speed ``z_v`` (m/s, variance ``r_v``; NaN: none) are measured; then the
+    Rauch-Tung-Striebel pass back, about a nominal trajectory from the smoothed start of the
+    last pass (Gauss-Newton; the first pass's nominal starts at ``x0``).  ``s_out``, ``v_out``:
+    the smoothed distance and speed (>= 0) at every entry."""
+    n = len(dt)
+    xp = np.empty((n, 4))        # predicted = filtered: nothing is measured inside the outage
+    Pp = np.empty((n, 4, 4))
+    Fs = np.empty((n, 4, 4))
+    start = x0.copy()            # where the nominal trajectory starts
+    for _ in range(OUTAGE_RTS_ITERATIONS):
+        nom = start.copy()
+        x = x0.copy()
+        P = P0.copy()
+        for i in range(n):
+            F = np.eye(4)
+            before = nom.copy()
+            if dt[i] > 0.0:
+                P = _predict(nom, P, F, dt[i], acc[i], prm, True)
+            x = nom + F @ (x - before)
+            Fs[i] = F
+            Pp[i] = P
+            xp[i] = x
+        P = _measure(x, P, 0, z_s, r_s)
+        P = _measure(x, P, 1, z_v, r_v)
+        s_out[n - 1] = x[0]
+        v_out[n - 1] = max(x[1], 0.0)
+        for i in range(n - 2, -1, -1):
+            # pinv: a step of 0 s leaves P(i+1|i) = P(i), singular where s was just anchored
+            C = Pp[i] @ Fs[i + 1].T @ np.linalg.pinv(Pp[i + 1])
+            x = xp[i] + C @ (x - xp[i + 1])
+            s_out[i] = x[0]
+            v_out[i] = max(x[1], 0.0)
+        new_start = x0 + P0 @ Fs[0].T @ np.linalg.pinv(Pp[0]) @ (x - xp[0])
+        moved = np.max(np.abs(new_start - start))
+        start = new_start
+        if moved < OUTAGE_RTS_TOL:
+            break
+
+
+def speed_track(epochs: Epochs, params: Params, anchor: np.ndarray | None = None,
+                keep: np.ndarray | None = None) -> SpeedTrack:
     """The accelerometer's speed and distance per epoch (module docstring); ``anchor`` marks
-    the epochs where the distance restarts (default: every epoch with a fix)."""
-    p = params["accel"]
+    the epochs where the distance restarts (default: every epoch with a fix), ``keep`` those
+    whose whole state and covariance are kept (default: none)."""
     n = len(epochs)
     covered = accel_covered(epochs)
-    acc = np.where(covered, _ffill(np.where(epochs.has_accel, epochs.accel_mps2, np.nan)), np.nan)
+    acc = _held_readings(epochs, covered)
     z = np.where(epochs.has_gnss, epochs.gnss_speed_mps, np.nan)
     if anchor is None:
         anchor = epochs.has_gnss
-    prm = np.array([float(p["init_speed_sd_mps"]), float(p["bias_init_sd_mps2"]),
-                    float(p["grade_rate_init_sd_mps2_per_m"]), float(p["noise_psd_m2ps3"]),
-                    float(p["bias_rw_var_m2ps5"]), float(p["grade_rw_var_m2ps4_per_m"]),
-                    float(p["grade_rate_rw_var_per_m"]), float(p["gnss_speed_sd_mps"]) ** 2])
+    keep = np.zeros(n, np.bool_) if keep is None else np.ascontiguousarray(keep, np.bool_)
+    n_keep = int(np.count_nonzero(keep))
+    x_keep, P_keep = np.empty((n_keep, 4)), np.empty((n_keep, 4, 4))
     out = [np.empty(n) for _ in range(5)]
     _speed_kf(np.ascontiguousarray(epochs.dt_s, np.float64), acc, z,
-              np.ascontiguousarray(anchor, np.bool_), prm, *out)
-    return SpeedTrack(*out, covered=covered)
+              np.ascontiguousarray(anchor, np.bool_), _kf_params(params), *out, keep, x_keep,
+              P_keep)
+    return SpeedTrack(*out, covered=covered, x_keep=x_keep, P_keep=P_keep)
+
+
+def _kf_params(params: Params) -> np.ndarray:
+    """``prm`` of :func:`_speed_kf` from ``[accel]``."""
+    p = params["accel"]
+    return np.array([float(p["init_speed_sd_mps"]), float(p["bias_init_sd_mps2"]),
+                     float(p["grade_rate_init_sd_mps2_per_m"]), float(p["noise_psd_m2ps3"]),
+                     float(p["bias_rw_var_m2ps5"]), float(p["grade_rw_var_m2ps4_per_m"]),
+                     float(p["grade_rate_rw_var_per_m"]), float(p["gnss_speed_sd_mps"]) ** 2])
+
+
+def _held_readings(epochs: Epochs, covered: np.ndarray) -> np.ndarray:
+    """The accelerometer reading held at each epoch (NaN where none is within MAX_ACCEL_AGE_S)."""
+    return np.where(covered, _ffill(np.where(epochs.has_accel, epochs.accel_mps2, np.nan)), np.nan)
 
 
 def _gyro_bias(epochs: Epochs, result: FilterResult) -> np.ndarray:
@@ -307,7 +420,13 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
     if not spans:
         return result
     anchor = np.asarray(result.gnss_used, bool)
-    sp = speed_track(epochs, params, anchor) if any(acc for _, _, acc in spans) else None
+    # smoothed: each accelerometer outage is smoothed from the forward filter at its start
+    starts = np.zeros(len(epochs), bool)
+    if smoothed:
+        starts[[k for k, _, acc in spans if acc]] = True
+    sp = speed_track(epochs, params, anchor, starts) if any(acc for _, _, acc in spans) else None
+    start_row = np.cumsum(starts) - 1
+    held = _held_readings(epochs, accel_covered(epochs)) if starts.any() else None
     bias = _gyro_bias(epochs, result)
     yaw = np.where(epochs.has_gyro & np.isfinite(epochs.yaw_rate_radps), epochs.yaw_rate_radps,
                    np.nan)
@@ -344,6 +463,15 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
         ue, un = np.sin(psi), np.cos(psi)
         e = result.e[k] + np.cumsum(step * ue)
         n = result.n[k] + np.cumsum(step * un)
+        if acc and smoothed and m < len(result.e) and len(e):
+            v, step = _smoothed_outage(epochs, result, params, sp, held, int(start_row[k]), k, m,
+                                       e[-1] + v[-1] * dt[m] * ue[-1],
+                                       n[-1] + v[-1] * dt[m] * un[-1], ue[-1], un[-1])
+            psi = _closed_heading(epochs, result, psi, step, v[-1] * dt[m], k, m,
+                                  float(p["heading_min_speed_mps"]))
+            ue, un = np.sin(psi), np.cos(psi)
+            e = result.e[k] + np.cumsum(step * ue)
+            n = result.n[k] + np.cumsum(step * un)
         # along-track: the fix's variance plus the distance's; across: the filter's
         pe, pn, pen = result.var_e[k], result.var_n[k], result.cov_en[k]
         along0 = ue * ue * pe + 2 * ue * un * pen + un * un * pn
@@ -367,3 +495,60 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
         result.cov_en[sl] = along * ue * un + cross * ce * cn
         result.info["accel_bridged_outages" if acc else "gyro_only_bridged_outages"] += 1
     return result
+
+
+def _smoothed_outage(epochs: Epochs, result: FilterResult, params: Params, sp: SpeedTrack,
+                     held: np.ndarray, row: int, k: int, m: int, e_end: float, n_end: float,
+                     ue: float, un: float) -> tuple[np.ndarray, np.ndarray]:
+    """(speed m/s, distance step m) at epochs k+1 .. m-1 of an accelerometer outage of a
+    smoothed track: :func:`_outage_rts` from the forward filter's state at ``k`` (``sp``'s
+    kept ``row``; ``held``: the readings held per epoch), measured at ``m`` by the smoothed
+    track's fix there (the forward dead reckoning reaches (``e_end``, ``n_end``) heading
+    (``ue``, ``un``); the misclosure along that heading is the distance's, with the track's
+    own variance along it) and the fix's Doppler speed."""
+    p = params["accel"]
+    sl = slice(k + 1, m + 1)
+    s_fwd_end = float(sp.s_m[m - 1]) + float(sp.v_mps[m - 1]) * float(epochs.dt_s[m])
+    along = (result.e[m] - e_end) * ue + (result.n[m] - n_end) * un
+    r_s = max(ue * ue * result.var_e[m] + 2.0 * ue * un * result.cov_en[m]
+              + un * un * result.var_n[m], 1e-6)
+    z_v = float(epochs.gnss_speed_mps[m]) if epochs.has_gnss[m] else math.nan
+    s_sm, v_sm = np.empty(m - k), np.empty(m - k)
+    _outage_rts(np.ascontiguousarray(epochs.dt_s[sl], np.float64),
+                np.ascontiguousarray(held[sl]), sp.x_keep[row].copy(),
+                sp.P_keep[row].copy(), _kf_params(params), s_fwd_end + float(along), r_s, z_v,
+                float(p["gnss_speed_sd_mps"]) ** 2, s_sm, v_sm)
+    step = np.diff(np.concatenate(([0.0], s_sm[:-1])))
+    return v_sm[:-1], step
+
+
+#: rad: a heading correction larger than this at either end of an outage is not the gyro's
+#: drift (a reversal, a heading learnt at walking pace): the misclosure is spread instead
+MAX_HEADING_FIX_RAD = 0.35
+
+
+def _closed_heading(epochs: Epochs, result: FilterResult, psi: np.ndarray, step: np.ndarray,
+                    end_step: float, k: int, m: int, min_speed: float) -> np.ndarray:
+    """The gyro's heading ``psi`` (rad, clockwise from north) at epochs k+1 .. m-1 of a
+    smoothed track's outage, corrected by ``a + b t`` (t: s since epoch ``k``; a start heading
+    error and a gyro bias error) so that it meets the track's velocity heading at ``m`` and
+    the dead reckoning along it (distance steps ``step`` m, then ``end_step`` to ``m``) meets
+    the fix there across the track.  Unchanged where the track is slower than ``min_speed``
+    (m/s) at ``m`` (no heading to meet) or the correction exceeds MAX_HEADING_FIX_RAD."""
+    if len(psi) == 0 or math.hypot(result.v_e[m], result.v_n[m]) < min_speed:
+        return psi
+    t = (epochs.t_ns[k + 1:m + 1] - epochs.t_ns[k]) / NS_PER_S
+    psi_m = psi[-1]
+    d_end = math.remainder(math.atan2(result.v_e[m], result.v_n[m]) - psi_m, math.tau)
+    e_end = result.e[k] + float(np.sum(step * np.sin(psi))) + end_step * math.sin(psi_m)
+    n_end = result.n[k] + float(np.sum(step * np.cos(psi))) + end_step * math.cos(psi_m)
+    # right of the travel at m: a heading turned clockwise by d moves a step ds by d ds there
+    cross = (result.e[m] - e_end) * math.cos(psi_m) - (result.n[m] - n_end) * math.sin(psi_m)
+    ds = np.append(step, end_step)
+    A = np.array([[1.0, t[-1]], [float(np.sum(ds)), float(np.sum(ds * t))]])
+    if abs(np.linalg.det(A)) < 1e-9:
+        return psi
+    a, b = np.linalg.solve(A, np.array([d_end, cross]))
+    if max(abs(a), abs(a + b * t[-1])) > MAX_HEADING_FIX_RAD:
+        return psi
+    return psi + a + b * t[:-1]
