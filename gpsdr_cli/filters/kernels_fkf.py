@@ -315,10 +315,12 @@ N_SCALARS = 11
 #: Ceiling on each state's sigma after a prediction (m, m/s, m/s^2, m, m/s, m/s^2, m, m,
 #: rad, m): a logger pause of 50 min grows the white-jerk position variance to ~1e16 m^2,
 #: and the next fix's update cancelled it to rounding noise (a variance of -1, then a
-#: ZeroDivisionError; found by the fault tests).  At 1e14 m^2 the update keeps 1e-2 m^2
-#: accuracy; gaps under ~15 min never reach the ceiling (4 km/1e4 m caps broke the
-#: 10-min-gap smoother).  Applied as P <- D P D (a congruence: P stays SPD).
-SD_CEILING = np.array([1e7, 3e4, 100.0, 1e7, 3e4, 100.0, 100.0, 100.0, math.pi, 10.0])
+#: ZeroDivisionError; found by the fault tests).  The position's 1e5 m (1e10 m^2, beyond a
+#: car's reach in a gap of 27 min at 60 m/s) keeps the update of the next fix accurate to
+#: 2e-6 m^2: at 1e7 m an RTK fix (GST 1.5 cm) after a 10-min gap of a GNSS-only log left the
+#: fused P indefinite (eigenvalue -1e-4 m^2) and the smoother's variances negative.
+#: Applied by :func:`cap_variance` (P stays positive semi-definite).
+SD_CEILING = np.array([1e5, 3e4, 100.0, 1e5, 3e4, 100.0, 100.0, 100.0, math.pi, 10.0])
 
 
 @njit(cache=True)
@@ -569,21 +571,29 @@ def select_eps(par: np.ndarray, w: float) -> None:
 
 @njit(cache=True)
 def cap_variance(P: np.ndarray) -> bool:
-    """P <- D P D with D_ii = min(1, SD_CEILING_i / sigma_i): sigmas at most the ceiling.
+    """Sigmas at most SD_CEILING: for each state i above it, with ``f_i = (SD_CEILING_i /
+    sigma_i)^2``, its variance and its covariances are multiplied by ``f_i`` (so a pair of
+    capped states' covariance by ``f_i f_j``).
 
-    Returns True when P was scaled."""
+    Not the congruence D P D: that keeps the correlations, so it multiplies the regression of
+    every other state on a capped one by 1/d (an RTK fix after a 10-min gap turned the
+    velocity by 22 times the position innovation's share).  Scaling the covariances by the
+    variance's own factor keeps those regressions, the gain a fix gives the other states, as
+    they were, and P stays positive semi-definite (each step takes ``C - f b b^T / a`` for
+    the Schur complement ``C - b b^T / a``, f <= 1).  Returns True when P was scaled."""
     scaled = False
     for i in range(NX):
         if P[i, i] > SD_CEILING[i] ** 2:
             scaled = True
     if not scaled:
         return False
-    dsc = np.zeros(NX)
+    f = np.ones(NX)
     for i in range(NX):
-        dsc[i] = min(1.0, SD_CEILING[i] / math.sqrt(P[i, i])) if P[i, i] > 0.0 else 1.0
+        if P[i, i] > SD_CEILING[i] ** 2:
+            f[i] = SD_CEILING[i] ** 2 / P[i, i]
     for i in range(NX):
         for j in range(NX):
-            P[i, j] *= dsc[i] * dsc[j]
+            P[i, j] *= f[i] if i == j else f[i] * f[j]
     return True
 
 

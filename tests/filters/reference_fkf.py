@@ -84,12 +84,15 @@ def Q_of(T: float, static: bool, par: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def cap(P: np.ndarray) -> np.ndarray:
-    """Sigma ceiling after a prediction, as a congruence D P D (kernels_fkf.SD_CEILING)."""
+    """Sigma ceiling after a prediction (kernels_fkf.SD_CEILING, cap_variance): a capped
+    state's variance and covariances scaled by its factor f = (ceiling / sigma)^2."""
     sd = np.sqrt(np.diag(P))
     if np.all(sd <= kf.SD_CEILING):
         return P
-    D = np.minimum(1.0, kf.SD_CEILING / sd)
-    return P * np.outer(D, D)
+    f = np.minimum(1.0, (kf.SD_CEILING / sd) ** 2)
+    out = P * np.outer(f, f)
+    np.fill_diagonal(out, np.diag(P) * f)
+    return out
 
 
 def kf_update(x: np.ndarray, P: np.ndarray, H: np.ndarray, y: float, R: float,
