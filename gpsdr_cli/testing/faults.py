@@ -1072,6 +1072,28 @@ def _outage_long(duration_s: float) -> Callable[[Any, Any], CaseInputs]:
     return make
 
 
+def _rtk_after_long_gap(gap_s: float) -> Callable[[Any, Any], CaseInputs]:
+    """GNSS only, no fix for ``gap_s`` from 90 s on, then RTK fixed: the fixes after the gap
+    on the truth with a 1.5-cm sigma (gpsd's nmea-rtk.log: a 630-s gap of a Trimble log
+    ending in RTK fixes left fkf's covariance indefinite)."""
+    def make(_sim: Any, _out_dir: Any) -> CaseInputs:
+        sim = long_sim(gap_s + 180.0)
+        drive = drop_streams(gnss_outage(sim.drive, 90.0, gap_s, mode="drop"), "gyro", "odo")
+        g = drive.gnss
+        after = g.valid & (g.t_ns >= _rel_ns(sim, 90.0, gap_s)[1])
+        t_truth = sim.truth["t_ns"].to_numpy(np.int64)
+        for name, col in (("lat_deg", "lat"), ("lon_deg", "lon")):
+            values = getattr(g, name).copy()
+            values[after] = np.interp(g.t_ns[after], t_truth, sim.truth[col].to_numpy(float))
+            setattr(g, name, values)
+        g.fix_quality = np.where(after, 4, g.fix_quality).astype(g.fix_quality.dtype)
+        g.sigma_e_m = np.where(after, 0.015, g.sigma_e_m)
+        g.sigma_n_m = np.where(after, 0.015, g.sigma_n_m)
+        return CaseInputs(sim=with_drive(sim, drive), drive=drive,
+                          focus_ns=_rel_ns(sim, 90.0, gap_s))
+    return make
+
+
 def _standstill_long(duration_s: float, gnss: bool) -> Callable[[Any, Any], CaseInputs]:
     def make(_sim: Any, _out_dir: Any) -> CaseInputs:
         sim = long_sim(120.0)
@@ -1164,6 +1186,8 @@ CATALOGUE: tuple[FaultCase, ...] = (
               _drive_case(lambda d: gnss_outage(d, 30.0, 60.0, mode="drop"), (30.0, 60.0))),
     FaultCase("outage_10min", "GNSS outage 600 s, in memory, 10 Hz DR", "track",
               _outage_long(600.0), base="long"),
+    FaultCase("gap_rtk", "GNSS only, no fix for 1000 s, then RTK fixed (1.5 cm), in "
+              "memory", "track", _rtk_after_long_gap(1000.0), base="long"),
     FaultCase("standstill_30min", "30 min stop with GNSS, in memory, 10 Hz DR", "track",
               _standstill_long(1800.0, True), base="long"),
     FaultCase("standstill_30min_nognss", "30 min stop without GNSS (garage)", "track",
