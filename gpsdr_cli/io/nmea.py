@@ -1,5 +1,6 @@
 """NMEA 0183 reader: GGA, GNS, RMC, GLL, GSA, VTG, GST and ZDA from any talker, and the
-proprietary Trimble ``$PTNL,GGK`` and u-blox ``$PUBX,00`` positions -> :class:`GnssFixes`.
+proprietary Trimble ``$PTNL,GGK`` and u-blox ``$PUBX,00`` positions and ``$PUBX,04``
+dates -> :class:`GnssFixes`.
 
 Why hand-written instead of pynmea2 / pynmeagps: those parse one sentence at a
 time into Python objects (tens of microseconds per sentence), and they raise or
@@ -67,8 +68,11 @@ Field choices, documented here once:
   G2/G3/RK (RK: GNSS with dead reckoning) -> 1, D2/D3 -> 2.  hAcc is one radial
   1-sigma number: ``sigma_n_m = sigma_e_m = hAcc / sqrt(2)`` (as :mod:`gpsdr_cli.io.ubx`
   reads NAV-PVT's hAcc; GST's per-axis sigmas win in an epoch that has both).  It has no
-  date: its epochs are dated as GGA's are.  Other ``$PTNL`` and ``$PUBX`` messages are
-  counted as unknown proprietary sentences.
+  date: its epochs are dated as GGA's are.
+- u-blox ``$PUBX,04`` (field 2 time, 3 date ``ddmmyy``; the clock fields after them not
+  read): its date dates its epoch like RMC's (GGK, RMC and ZDA win where present), so a
+  log of PUBX,00 or GGA positions with PUBX,04 times needs no ``--date``.  Other
+  ``$PTNL`` and ``$PUBX`` messages are counted as unknown proprietary sentences.
 - Sentences of one epoch that disagree on the position (by more than 1e-7 deg
   and more than one unit of the last digit either prints) are counted in
   ``meta['position_disagreements']`` and a note, not as skipped records;
@@ -95,11 +99,11 @@ Field choices, documented here once:
   longitude error, metres).
 - ``speed_mps``/``course_deg``: RMC (status ``A``), else VTG (mode not ``N``), else
   PUBX,00 (with a fix); knots * 1852/3600, km/h / 3.6.
-- Date: RMC (``ddmmyy``; years 80-99 read as 19xx), ZDA or PTNL,GGK, per epoch; epochs
+- Date: RMC (``ddmmyy``; years 80-99 read as 19xx), ZDA, PTNL,GGK or PUBX,04, per epoch; epochs
   between dated ones take the previous date plus midnight rollovers (time of
   day decreasing by more than 12 h is the next day; an increase, however
   large, is a gap within the day).  The ``date`` argument is
-  only used when the log has no RMC/ZDA/GGK date at all: a date in the log always
+  only used when the log has no RMC/ZDA/GGK/PUBX,04 date at all: a date in the log always
   wins.  Dates before 1980 (GPS time began 1980-01-06) are malformed; before 2000
   or in the future (GPS week-rollover bugs) are kept
   as given, counted in ``meta['warning_counts']`` and explained in
@@ -150,11 +154,11 @@ _US_PER_DAY = 86_400_000_000
 _HALF_DAY_US = _US_PER_DAY // 2
 
 # kind codes of the sentences this reader uses
-_GGA, _RMC, _GSA, _VTG, _GST, _ZDA, _GNS, _GLL, _GGK, _PUBX = range(10)
+_GGA, _RMC, _GSA, _VTG, _GST, _ZDA, _GNS, _GLL, _GGK, _PUBX, _PUBX4 = range(11)
 _KNOWN = {b"GGA": _GGA, b"RMC": _RMC, b"GSA": _GSA, b"VTG": _VTG, b"GST": _GST, b"ZDA": _ZDA,
           b"GNS": _GNS, b"GLL": _GLL}
 #: Proprietary sentences read: (address, message id in field 1) -> kind.
-_PROPRIETARY = {(b"PTNL", b"GGK"): _GGK, (b"PUBX", b"00"): _PUBX}
+_PROPRIETARY = {(b"PTNL", b"GGK"): _GGK, (b"PUBX", b"00"): _PUBX, (b"PUBX", b"04"): _PUBX4}
 _TYPE_NAME = {v: k.decode() for k, v in _KNOWN.items()} | {
     v: f"{a.decode()},{m.decode()}" for (a, m), v in _PROPRIETARY.items()}
 #: Standard NMEA 0183 sentence types (any talker) this reader does not use, with a short
@@ -191,11 +195,11 @@ _NOT_USED = {
 #: proprietary addresses read, the message id and its comma too.
 _HEAD = 7
 _HEAD_PROPRIETARY = {b"$PTNL,": 10, b"$PUBX,": 9}
-_TIMED = (_GGA, _RMC, _GST, _ZDA, _GNS, _GLL, _GGK, _PUBX)
+_TIMED = (_GGA, _RMC, _GST, _ZDA, _GNS, _GLL, _GGK, _PUBX, _PUBX4)
 #: Sentences that carry a date: a log whose every one of them is damaged has no date.
-_DATED = (_RMC, _ZDA, _GGK)
+_DATED = (_RMC, _ZDA, _GGK, _PUBX4)
 #: field number of the time of day; 1 for the other timed sentences
-_TIME_FIELD = {_GLL: 5, _GGK: 2, _PUBX: 2}
+_TIME_FIELD = {_GLL: 5, _GGK: 2, _PUBX: 2, _PUBX4: 2}
 #: Position sentences, most informative first: the epoch's position comes from the first
 #: of these it has (GGA and GNS carry quality, satellites, HDOP and altitude; PTNL,GGK and
 #: PUBX,00 quality and ellipsoidal height; RMC a mode; GLL only a status).
@@ -701,7 +705,7 @@ def _complete_without_checksum(arr: np.ndarray, starts: np.ndarray, end: np.ndar
 
 def _count_damaged_dated(arr: np.ndarray, starts: np.ndarray, reason: str, stats: dict) -> None:
     """Count in ``stats['damaged_dated']`` by (type, "skipped: ``reason``") the skipped
-    sentences at ``starts`` whose address is a dated kind (RMC, ZDA, PTNL,GGK): they tell
+    sentences at ``starts`` whose address is a dated kind (RMC, ZDA, PTNL,GGK, PUBX,04): they tell
     why a log has no date."""
     if len(starts) == 0:
         return
@@ -815,7 +819,7 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         k = _classify(head[1:], head[:1] == b"!")
         if isinstance(k, int):
             kind_of_uniq[u] = k
-            talker = head[1:5] if k in (_GGK, _PUBX) else head[1:3]  # proprietary: PTNL, PUBX
+            talker = head[1:5] if k in (_GGK, _PUBX, _PUBX4) else head[1:3]  # PTNL, PUBX
             stats["talkers"][talker.decode("ascii", "replace")] += int(counts[u])
         else:
             kind_of_uniq[u] = -1
@@ -918,6 +922,11 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
             p.update(lat=np.where(fix, lat, np.nan), lon=np.where(fix, lon, np.nan), res=res,
                      alt=np.where(fix, alt, np.nan), q=np.where(fix, qi, 0).astype(np.float64),
                      nsat=_satellites(nsat), pdop=_dop(pdop), days=days)
+        elif kind == _PUBX4:
+            # u-blox's time of day and date (ddmmyy), beside PUBX,00 positions without one
+            days, bd = _rmc_date(s.f(3))
+            probs.add(f"malformed date in {tname} (field ignored)", s.pos[bd & keep])
+            p["days"] = days
         elif kind == _PUBX:
             lat, lon, res, badpos = _position(s, 3)
             qi = _mode_quality(s.f(8), _NAVSTAT_QUALITY)
@@ -1218,7 +1227,7 @@ def _epoch_days(parsed: dict[int, dict[str, np.ndarray]], epoch_sod: np.ndarray,
     """
     n_ep = len(epoch_sod)
     day_of_epoch = np.full(n_ep, np.nan)
-    for kind in (_GGK, _RMC, _ZDA):
+    for kind in (_PUBX4, _GGK, _RMC, _ZDA):
         if kind in parsed:
             g = parsed[kind]
             k_days = np.full(n_ep, np.nan)
@@ -1231,7 +1240,7 @@ def _epoch_days(parsed: dict[int, dict[str, np.ndarray]], epoch_sod: np.ndarray,
         offset = np.where(dated, day_of_epoch - roll, 0).astype(np.int64)
         src = np.maximum.accumulate(np.where(dated, np.arange(n_ep), -1))
         src[src < 0] = int(np.flatnonzero(dated)[0])  # before the first date: back-fill
-        return offset[src] + roll, "log (RMC/ZDA/GGK)"
+        return offset[src] + roll, "log (RMC/ZDA/GGK/PUBX,04)"
     if date is not None:
         return (date - datetime.date(1970, 1, 1)).days + roll, "argument"
     return None, "none"
@@ -1320,8 +1329,8 @@ def parse_nmea(data: bytes, *, name: str = "<nmea>", date: datetime.date | None 
     if day is None:
         why = _why_undated(report, stats["damaged_dated"])
         if (e["q"][row] > 0).any():
-            raise MissingDateError(name, "no date in the log (no RMC, ZDA or PTNL,GGK sentence with "
-                                         f"a date; {why}); "
+            raise MissingDateError(name, "no date in the log (no RMC, ZDA, PTNL,GGK or PUBX,04 "
+                                         f"sentence with a date; {why}); "
                                          "pass --date YYYY-MM-DD (the UTC date of the first fix)")
         raise NoDataError(name, "no fix and no date in the log (only no-fix epochs without "
                                 f"RMC/ZDA/PTNL,GGK dates; {why})")

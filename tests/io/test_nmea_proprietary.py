@@ -1,4 +1,5 @@
-"""Proprietary position sentences: Trimble ``$PTNL,GGK`` and u-blox ``$PUBX,00``.
+"""Proprietary sentences: Trimble ``$PTNL,GGK`` and u-blox ``$PUBX,00`` positions, and
+u-blox ``$PUBX,04`` dates.
 
 Logs are built here with their checksums computed (XOR of the bytes between ``$`` and
 ``*``); expected coordinates are hand-decoded (ddmm.mmmm / 60), tolerance 1e-9 deg.
@@ -207,7 +208,7 @@ def test_pubx00_dated_by_rmc_and_bad_fields_counted() -> None:
     data = log(rmc, pubx(), pubx(tod="081351.50", nav="XX"), pubx(tod="081352.50", hacc="2.8.1"),
                pubx(tod="081353.50", pos="4807.03812,N,01131.00099,X"))
     fixes, report, meta = parse_nmea(data, name="u.log")
-    assert meta["date_source"] == "log (RMC/ZDA/GGK)"
+    assert meta["date_source"] == "log (RMC/ZDA/GGK/PUBX,04)"
     assert report.counts["malformed navigation status in PUBX,00"] == 1
     assert report.first["malformed navigation status in PUBX,00"] == "u.log:3"
     assert report.counts["malformed horizontal accuracy in PUBX,00 (field ignored)"] == 1
@@ -232,9 +233,40 @@ def test_other_proprietary_messages_stay_unknown() -> None:
     data = log(ggk(),
                ck("PTNL,AVR,212405.20,+52.1531,Yaw,-0.0806,Tilt,,,12.575,3,1.4,16"),
                ck("PTNL,GGKX,102939.25,120524,4807.0,N,01131.0,W,3,14,1.7,EHT1.0,M"),
-               ck("PUBX,04,073731.00,091202,113851.00,1196,15D,1930035,-2660.664,43"),
+               ck("PUBX,03,23,1,-,014,06,08,000"),  # satellites, not read
                ck("PUBX,00"),  # a poll request, not a position
                ck("PUBX,000,081350.50,4807.0,N,01131.0,W,1.0,G3,2.8,3.9,0,0,0,,1,1,1,9,0,0"))
     fixes, report, meta = parse_nmea(data)
     assert report.counts["unknown sentence (proprietary $P...)"] == 5
     assert meta["sentences"] == {"PTNL,GGK": 1} and len(fixes) == 1
+
+
+# ---------------------------------------------------------------- u-blox PUBX,04
+def pubx04(tod: str = "081350.50", date: str = "170524") -> str:
+    """u-blox's time sentence: time, date ddmmyy, UTC TOW, week, leap seconds (``D``: the
+    receiver's default), clock bias and drift, time-pulse granularity."""
+    return ck(f"PUBX,04,{tod},{date},202430.50,2315,18D,-384839,-53.623,16")
+
+
+def test_pubx04_dates_pubx00_positions() -> None:
+    """A u-blox log of PUBX,00 positions and PUBX,04 times needs no --date; a day-first
+    date (170524: 17 May 2024), and the next day after midnight."""
+    data = log(pubx04(), pubx(), pubx04("235959.50", "170524"), pubx("235959.50"),
+               pubx04("000000.50", "180524"), pubx("000000.50"))
+    fixes, report, meta = parse_nmea(data, name="u.log")
+    assert report.total == 0
+    assert meta["sentences"] == {"PUBX,04": 3, "PUBX,00": 3}
+    assert meta["date_source"] == "log (RMC/ZDA/GGK/PUBX,04)"
+    assert fixes.t_ns.tolist() == [ns(2024, 5, 17, 8, 13, 50, 500_000),
+                                   ns(2024, 5, 17, 23, 59, 59, 500_000),
+                                   ns(2024, 5, 18, 0, 0, 0, 500_000)]
+
+
+def test_pubx04_date_loses_to_rmc_and_a_bad_one_is_counted() -> None:
+    rmc = ck("GPRMC,081350.50,A,4807.03812,N,01131.00099,W,19.4,077.5,170524,,,D")
+    data = log(pubx04(date="010199"), rmc, pubx04("081351.50", "32xx24"), pubx("081351.50"))
+    fixes, report, _ = parse_nmea(data, name="u.log")
+    assert report.counts["malformed date in PUBX,04 (field ignored)"] == 1
+    assert report.first["malformed date in PUBX,04 (field ignored)"] == "u.log:3"
+    assert fixes.t_ns.tolist() == [ns(2024, 5, 17, 8, 13, 50, 500_000),
+                                   ns(2024, 5, 17, 8, 13, 51, 500_000)]
