@@ -938,8 +938,11 @@ def _stream_row(name: str, t_ns: np.ndarray) -> dict[str, Any]:
     row: dict[str, Any] = {"stream": name, "records": len(t), "rate_hz": math.nan,
                            "start": _iso(t[0]) if len(t) else "", "end": _iso(t[-1]) if len(t) else "",
                            "duration_s": span}
-    if len(t) > 1 and span > 0:
-        row["rate_hz"] = (len(t) - 1) / span
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if len(steps):
+        # the median step: a 10-Hz log with a 10-min gap is 10 Hz, not its mean 0.06 Hz
+        row["rate_hz"] = NS_PER_S / float(np.median(steps))
     return row
 
 

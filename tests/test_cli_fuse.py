@@ -216,7 +216,8 @@ def test_info_json(gpsdr, sample_dir: Path) -> None:
     result = gpsdr(["info", "--json", sample_dir / "gps.nmea"])
     desc = json.loads(result.stdout)
     assert desc["gnss"]["valid"] == 579 and desc["gnss"]["outages"] == []
-    assert desc["streams"][0]["rate_hz"] == pytest.approx(9.7, abs=0.1)  # 10 Hz with holes
+    # 10 Hz with 0.2-s holes: the median step, not the mean rate (9.7 Hz)
+    assert desc["streams"][0]["rate_hz"] == pytest.approx(10.0, abs=0.01)
 
 
 def test_info_lists_outages(gpsdr, drive_dir: Path) -> None:
@@ -428,3 +429,14 @@ def test_the_calibration_line_leaves_out_what_the_drive_did_not_tell(gpsdr, tmp_
     assert result.exit_code == 0, result.output
     cal = [ln for ln in result.stderr.splitlines() if ln.startswith("calibration (graph")]
     assert len(cal) == 1 and "gyro bias" not in cal[0] and "odometer scale" in cal[0]
+
+
+def test_info_rate_is_the_median_step_across_a_long_gap(gpsdr) -> None:
+    """gpsd's nmea-rtk.log excerpt: 10-Hz fixes around a 630-s gap read 10 Hz (the mean over
+    the span, 37 fixes in 642 s, read 0.06 Hz)."""
+    import json
+
+    log = Path(__file__).resolve().parent / "data" / "nmea" / "gpsd-nmea-rtk-excerpt.log"
+    desc = json.loads(gpsdr(["info", "--json", log]).stdout)
+    assert desc["streams"][0]["rate_hz"] == pytest.approx(10.0, abs=0.01)
+    assert desc["streams"][0]["records"] == 37
