@@ -9,7 +9,8 @@ filter forward and smoothed through ``build_epochs`` + :func:`gpsdr_cli.pipeline
 :mod:`gpsdr_cli.filters.accel_speed`, as ``gpsdr fuse`` runs them); prints per scenario the range
 over the seeds of the RMSE (m, horizontal, every epoch, against the simulator's truth),
 next to the fixes alone, and for the scenarios with 15-s braking / drive-off outages
-(no_odometer) the median over the seeds' outages of the error at their end.
+(no_odometer) the median over the seeds' outages of the error at their end, and of the
+smoothed track's largest error inside each (and the worst).
 ``--positions-only`` also strips the receiver's speed and course; ``--no-accel`` the
 forward accelerometer (gyro only).
 
@@ -36,10 +37,11 @@ from gpsdr_cli.pipeline import run_filter
 from gpsdr_cli.simulate import SCENARIOS, simulate_drive
 
 
-def run(sim, drive, name: str, smooth: bool) -> tuple[float, float, list[float]]:
-    """RMSE (m) of ``name`` over ``drive`` against the truth, the fixes' RMSE (m), and the
+def run(sim, drive, name: str, smooth: bool
+        ) -> tuple[float, float, list[float], list[float]]:
+    """RMSE (m) of ``name`` over ``drive`` against the truth, the fixes' RMSE (m), the
     error (m) at the end of each of the scenario's 15-s outages (the last epoch before the
-    next fix)."""
+    next fix) and the largest error (m) inside each."""
     p = config.defaults()
     p["filter"]["name"] = name
     p["filter"]["smooth"] = smooth
@@ -52,12 +54,14 @@ def run(sim, drive, name: str, smooth: bool) -> tuple[float, float, list[float]]
     gnss = float(np.sqrt(np.mean((ep.gnss_e[f] - te[f]) ** 2 + (ep.gnss_n[f] - tn[f]) ** 2)))
     g = sim.drive.gnss
     tf = g.t_ns[g.valid]
-    ends = []
+    ends, worst = [], []
     for o in sim.noise.get("brake_outages", []):
         k = int(np.searchsorted(tf, int(tr.t_ns.iloc[0]) + int(o["start_s"] * 1e9))) - 1
         if 0 <= k < len(tf) - 1:
             ends.append(float(err[int(np.searchsorted(ep.t_ns, tf[k + 1])) - 1]))
-    return float(np.sqrt(np.mean(err ** 2))), gnss, ends
+            inside = (ep.t_ns > tf[k]) & (ep.t_ns < tf[k + 1])
+            worst.append(float(err[inside].max()))
+    return float(np.sqrt(np.mean(err ** 2))), gnss, ends, worst
 
 
 def span(values: list[float]) -> str:
@@ -82,6 +86,7 @@ def main() -> int:
         gnss: list[float] = []
         res: dict[tuple[str, bool], list[float]] = {}
         ends: dict[tuple[str, bool], list[float]] = {}
+        worst: dict[tuple[str, bool], list[float]] = {}
         for seed in seeds:
             sim = simulate_drive(scen, seed=seed)
             drive = copy.deepcopy(sim.drive)
@@ -93,21 +98,25 @@ def main() -> int:
                 drive.gnss.course_deg[:] = np.nan
             for name in names:
                 for smooth in (False, True):
-                    rmse, g, e = run(sim, drive, name, smooth)
+                    rmse, g, e, w = run(sim, drive, name, smooth)
                     res.setdefault((name, smooth), []).append(rmse)
                     ends.setdefault((name, smooth), []).extend(e)
+                    worst.setdefault((name, smooth), []).extend(w)
             gnss.append(g)
         cells = [f"{span(res[(n, False)])} / {span(res[(n, True)])}" for n in names]
         if ends[(names[0], False)]:
             cells = [c + f" (15-s outage ends {np.median(ends[(n, False)]):.2f} / "
-                         f"{np.median(ends[(n, True)]):.2f})" for c, n in zip(cells, names, strict=True)]
+                         f"{np.median(ends[(n, True)]):.2f}; inside, smoothed: "
+                         f"{np.median(worst[(n, True)]):.2f}, worst {max(worst[(n, True)]):.2f})"
+                     for c, n in zip(cells, names, strict=True)]
         rows.append(f"| {scen} | {span(gnss)} | " + " | ".join(cells) + " |")
     what = "positions only, no odometer" if args.positions_only else "no odometer"
     if args.no_accel:
         what += ", no accelerometer"
     print(f"{what}: RMSE m, forward / smoothed, range over seeds {args.seeds} "
           f"({time.perf_counter() - t0:.0f} s); (15-s outage ends: median end error m, "
-          "forward / smoothed)\n")
+          "forward / smoothed; inside: the smoothed track's largest error in each outage, "
+          "median and worst, m)\n")
     print("| scenario | GNSS alone | " + " | ".join(names) + " |")
     print("|---" * (len(names) + 2) + "|")
     print("\n".join(rows))
