@@ -576,8 +576,8 @@ def cap_variance(P: np.ndarray) -> bool:
     capped states' covariance by ``f_i f_j``).
 
     Not the congruence D P D: that keeps the correlations, so it multiplies the regression of
-    every other state on a capped one by 1/d (an RTK fix after a 10-min gap turned the
-    velocity by 22 times the position innovation's share).  Scaling the covariances by the
+    every other state on a capped one by 1/d (at 1e5 m after a 10-min gap, d = 1/22: the next
+    fix would move the velocity 22 times as far as the uncapped model does).  Scaling the covariances by the
     variance's own factor keeps those regressions, the gain a fix gives the other states, as
     they were, and P stays positive semi-definite (each step takes ``C - f b b^T / a`` for
     the Schur complement ``C - b b^T / a``, f <= 1).  Returns True when P was scaled."""
