@@ -130,18 +130,21 @@ def test_standard_sentences_not_used_are_told_apart_from_damage(gpsdr, tmp_path:
     assert report.counts["unknown sentence XYZ"] == 1 and report.counts["bad checksum"] == 1
     assert report.total == 20
     assert skipped_summary(report.counts) == (
-        "20 input records skipped (18 sentences not used: GSV, DTM; 2 damaged or unusable)")
+        "20 input records skipped (18 sentences not used: GSV, DTM; 1 unknown sentence; "
+        "1 damaged or unusable)")
     assert skipped_summary({}) == "0 input records skipped"
     assert skipped_summary({"bad checksum": 2}) == "2 input records skipped (2 damaged or unusable)"
     assert skipped_summary({"not used: TXT (text message)": 1}) == (
         "1 input records skipped (1 sentence not used: TXT)")
+    assert skipped_summary({"unknown sentence (proprietary $P...)": 5}) == (
+        "5 input records skipped (5 unknown sentences)")
 
     path = tmp_path / "u.nmea"
     path.write_bytes(data)
     result = gpsdr(["fuse", "--gps", path, "-o", tmp_path / "u.parquet"])
     assert result.exit_code == 0, result.stderr
     assert ("6 GNSS fixes used, 20 input records skipped (18 sentences not used: GSV, DTM; "
-            "2 damaged or unusable) -> ") in result.stderr
+            "1 unknown sentence; 1 damaged or unusable) -> ") in result.stderr
     info = gpsdr(["info", path])
     assert "not used: GSV (satellites in view)" in info.stdout
     assert "unknown sentence GSV" not in info.stdout

@@ -52,12 +52,15 @@ def stats_next_to(track: Path, fmt: str) -> Path:
 
 #: At most this many sentence types are named in the summary line.
 _NOT_USED_NAMED = 4
+#: the skip reason of a well-formed sentence of an unknown kind (gpsdr_cli.io.nmea)
+UNKNOWN = "unknown sentence"
 
 
 def skipped_summary(counts: Mapping[str, int]) -> str:
-    """``"56 input records skipped (42 sentences not used: GSV, DTM; 14 damaged or
-    unusable)"`` from the skip counts by reason; a part with no records is left out, and
-    with nothing skipped: ``"0 input records skipped"``."""
+    """``"56 input records skipped (42 sentences not used: GSV, DTM; 3 unknown sentences;
+    11 damaged or unusable)"`` from the skip counts by reason (unknown: well-formed sentences
+    of a kind the reader does not know, a receiver's proprietary ones mostly); a part with no
+    records is left out, and with nothing skipped: ``"0 input records skipped"``."""
     from ..io.drive import NOT_USED
 
     total = int(sum(counts.values()))
@@ -70,13 +73,16 @@ def skipped_summary(counts: Mapping[str, int]) -> str:
             kind = (reason[len(NOT_USED):].split() or ["?"])[0]  # "GSV"
             unused[kind] = unused.get(kind, 0) + int(n)
     n_unused = sum(unused.values())
+    n_unknown = sum(int(n) for reason, n in counts.items() if reason.startswith(UNKNOWN))
     parts = []
     if n_unused:
         kinds = sorted(unused, key=lambda k: -unused[k])  # most first; ties in report order
         names = ", ".join(kinds[:_NOT_USED_NAMED]) + (", ..." if len(kinds) > _NOT_USED_NAMED else "")
         parts.append(f"{n_unused} sentence{'s' if n_unused != 1 else ''} not used: {names}")
-    if total - n_unused:
-        parts.append(f"{total - n_unused} damaged or unusable")
+    if n_unknown:
+        parts.append(f"{n_unknown} unknown sentence{'s' if n_unknown != 1 else ''}")
+    if total - n_unused - n_unknown:
+        parts.append(f"{total - n_unused - n_unknown} damaged or unusable")
     return f"{text} ({'; '.join(parts)})"
 
 
