@@ -52,8 +52,6 @@ def stats_next_to(track: Path, fmt: str) -> Path:
 
 #: At most this many sentence types are named in the summary line.
 _NOT_USED_NAMED = 4
-#: the skip reason of a well-formed sentence of an unknown kind (gpsdr_cli.io.nmea)
-UNKNOWN = "unknown sentence"
 
 
 def skipped_summary(counts: Mapping[str, int]) -> str:
@@ -61,7 +59,7 @@ def skipped_summary(counts: Mapping[str, int]) -> str:
     11 damaged or unusable)"`` from the skip counts by reason (unknown: well-formed sentences
     of a kind the reader does not know, a receiver's proprietary ones mostly); a part with no
     records is left out, and with nothing skipped: ``"0 input records skipped"``."""
-    from ..io.drive import NOT_USED
+    from ..io.drive import NOT_USED, UNKNOWN
 
     total = int(sum(counts.values()))
     text = f"{total} input records skipped"

@@ -82,8 +82,9 @@ class SpeedTrack:
     """Per epoch (after the epoch's update): ``v_mps`` speed, ``v_var`` its variance (m^2/s^2),
     ``s_m`` distance since the last used fix, ``s_var`` its variance (m^2), ``b_mps2`` the
     offset (bias + g sin(pitch)) and ``covered`` (an accelerometer reading within
-    MAX_ACCEL_AGE_S); ``x_keep``, ``P_keep``: the whole state [s, v, b, c] and its covariance
-    after each epoch :func:`speed_track` was asked to keep, in order."""
+    MAX_ACCEL_AGE_S); ``acc_mps2``: the reading held at each epoch (NaN where none is that
+    recent); ``x_keep``, ``P_keep``: the whole state [s, v, b, c] and its covariance after
+    each epoch :func:`speed_track` was asked to keep, in order."""
 
     v_mps: np.ndarray
     v_var: np.ndarray
@@ -91,6 +92,7 @@ class SpeedTrack:
     s_var: np.ndarray
     b_mps2: np.ndarray
     covered: np.ndarray
+    acc_mps2: np.ndarray
     x_keep: np.ndarray
     P_keep: np.ndarray
 
@@ -255,7 +257,7 @@ def speed_track(epochs: Epochs, params: Params, anchor: np.ndarray | None = None
     whose whole state and covariance are kept (default: none)."""
     n = len(epochs)
     covered = accel_covered(epochs)
-    acc = _held_readings(epochs, covered)
+    acc = np.where(covered, _ffill(np.where(epochs.has_accel, epochs.accel_mps2, np.nan)), np.nan)
     z = np.where(epochs.has_gnss, epochs.gnss_speed_mps, np.nan)
     if anchor is None:
         anchor = epochs.has_gnss
@@ -266,7 +268,7 @@ def speed_track(epochs: Epochs, params: Params, anchor: np.ndarray | None = None
     _speed_kf(np.ascontiguousarray(epochs.dt_s, np.float64), acc, z,
               np.ascontiguousarray(anchor, np.bool_), _kf_params(params), *out, keep, x_keep,
               P_keep)
-    return SpeedTrack(*out, covered=covered, x_keep=x_keep, P_keep=P_keep)
+    return SpeedTrack(*out, covered=covered, acc_mps2=acc, x_keep=x_keep, P_keep=P_keep)
 
 
 def _kf_params(params: Params) -> np.ndarray:
@@ -277,10 +279,6 @@ def _kf_params(params: Params) -> np.ndarray:
                      float(p["bias_rw_var_m2ps5"]), float(p["grade_rw_var_m2ps4_per_m"]),
                      float(p["grade_rate_rw_var_per_m"]), float(p["gnss_speed_sd_mps"]) ** 2])
 
-
-def _held_readings(epochs: Epochs, covered: np.ndarray) -> np.ndarray:
-    """The accelerometer reading held at each epoch (NaN where none is within MAX_ACCEL_AGE_S)."""
-    return np.where(covered, _ffill(np.where(epochs.has_accel, epochs.accel_mps2, np.nan)), np.nan)
 
 
 def _gyro_bias(epochs: Epochs, result: FilterResult) -> np.ndarray:
@@ -426,7 +424,6 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
         starts[[k for k, _, acc in spans if acc]] = True
     sp = speed_track(epochs, params, anchor, starts) if any(acc for _, _, acc in spans) else None
     start_row = np.cumsum(starts) - 1
-    held = _held_readings(epochs, accel_covered(epochs)) if starts.any() else None
     bias = _gyro_bias(epochs, result)
     yaw = np.where(epochs.has_gyro & np.isfinite(epochs.yaw_rate_radps), epochs.yaw_rate_radps,
                    np.nan)
@@ -464,7 +461,7 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
         e = result.e[k] + np.cumsum(step * ue)
         n = result.n[k] + np.cumsum(step * un)
         if acc and smoothed and m < len(result.e) and len(e):
-            v, step = _smoothed_outage(epochs, result, params, sp, held, int(start_row[k]), k, m,
+            v, step = _smoothed_outage(epochs, result, params, sp, int(start_row[k]), k, m,
                                        e[-1] + v[-1] * dt[m] * ue[-1],
                                        n[-1] + v[-1] * dt[m] * un[-1], ue[-1], un[-1])
             psi = _closed_heading(epochs, result, psi, step, v[-1] * dt[m], k, m,
@@ -498,14 +495,14 @@ def bridge_outages(epochs: Epochs, result: FilterResult, params: Params, *,
 
 
 def _smoothed_outage(epochs: Epochs, result: FilterResult, params: Params, sp: SpeedTrack,
-                     held: np.ndarray, row: int, k: int, m: int, e_end: float, n_end: float,
+                     row: int, k: int, m: int, e_end: float, n_end: float,
                      ue: float, un: float) -> tuple[np.ndarray, np.ndarray]:
     """(speed m/s, distance step m) at epochs k+1 .. m-1 of an accelerometer outage of a
     smoothed track: :func:`_outage_rts` from the forward filter's state at ``k`` (``sp``'s
-    kept ``row``; ``held``: the readings held per epoch), measured at ``m`` by the smoothed
-    track's fix there (the forward dead reckoning reaches (``e_end``, ``n_end``) heading
-    (``ue``, ``un``); the misclosure along that heading is the distance's, with the track's
-    own variance along it) and the fix's Doppler speed."""
+    kept ``row``), measured at ``m`` by the smoothed track's fix there (the forward dead
+    reckoning reaches (``e_end``, ``n_end``) heading (``ue``, ``un``); the misclosure along
+    that heading is the distance's, with the track's own variance along it) and the fix's
+    Doppler speed."""
     p = params["accel"]
     sl = slice(k + 1, m + 1)
     s_fwd_end = float(sp.s_m[m - 1]) + float(sp.v_mps[m - 1]) * float(epochs.dt_s[m])
@@ -515,7 +512,7 @@ def _smoothed_outage(epochs: Epochs, result: FilterResult, params: Params, sp: S
     z_v = float(epochs.gnss_speed_mps[m]) if epochs.has_gnss[m] else math.nan
     s_sm, v_sm = np.empty(m - k), np.empty(m - k)
     _outage_rts(np.ascontiguousarray(epochs.dt_s[sl], np.float64),
-                np.ascontiguousarray(held[sl]), sp.x_keep[row].copy(),
+                np.ascontiguousarray(sp.acc_mps2[sl]), sp.x_keep[row].copy(),
                 sp.P_keep[row].copy(), _kf_params(params), s_fwd_end + float(along), r_s, z_v,
                 float(p["gnss_speed_sd_mps"]) ** 2, s_sm, v_sm)
     step = np.diff(np.concatenate(([0.0], s_sm[:-1])))

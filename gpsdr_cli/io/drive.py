@@ -105,6 +105,10 @@ class ForwardAccel:
 #: The reason prefix of records a reader left out on purpose (standard sentences it does not
 #: use: "not used: GSV (satellites in view)"), not because they were damaged.
 NOT_USED = "not used:"
+#: The reason prefix of well-formed records of a kind the reader does not know (a receiver's
+#: proprietary sentences mostly: "unknown sentence (proprietary $P...)"): neither damaged nor
+#: left out on purpose.
+UNKNOWN = "unknown sentence"
 
 
 @dataclass

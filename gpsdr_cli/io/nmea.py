@@ -145,7 +145,7 @@ from gpsdr_cli.conventions import (
     FIX_RTK,
 )
 from gpsdr_cli.errors import ChecksumError, InputError, MissingDateError, NoDataError, ParseError
-from gpsdr_cli.io.drive import NOT_USED, Drive, GnssFixes, SkipReport, Source
+from gpsdr_cli.io.drive import NOT_USED, UNKNOWN, Drive, GnssFixes, SkipReport, Source
 
 __all__ = ["looks_like_nmea", "parse_nmea", "read_nmea"]
 
@@ -551,29 +551,29 @@ def _classify(head: bytes, bang: bool) -> int | str:
     if len(parts) == 3 and (addr, parts[1]) in _PROPRIETARY and not bang:
         return _PROPRIETARY[(addr, parts[1])]  # a whole message id: a comma follows it
     if bang:
-        return "unknown sentence (encapsulated !" + addr[:5].decode("ascii", "replace") + ", e.g. AIS)"
+        return f"{UNKNOWN} (encapsulated !" + addr[:5].decode("ascii", "replace") + ", e.g. AIS)"
     if len(addr) == 5 and addr.isalpha() and addr.isupper():
         talker, typ = addr[:2], addr[2:]
         kind = _KNOWN.get(typ)
         if kind is not None and (talker[:1] != b"P" or (talker == b"PQ" and kind == _GSA)):
             return kind
         if talker[:1] == b"P":
-            return "unknown sentence (proprietary $P...)"
+            return f"{UNKNOWN} (proprietary $P...)"
         if typ in _NOT_USED:
             return f"{NOT_USED} {typ.decode()} ({_NOT_USED[typ]})"
-        return f"unknown sentence {typ.decode()}"
+        return f"{UNKNOWN} {typ.decode()}"
     if addr[:1] == b"P" and addr.isalnum():
-        return "unknown sentence (proprietary $P...)"
+        return f"{UNKNOWN} (proprietary $P...)"
     if addr[:2].isdigit():
-        return "unknown sentence (numeric talker)"
+        return f"{UNKNOWN} (numeric talker)"
     if len(addr) == 6 and addr.isalpha() and addr.isupper():
         if addr[5:] == b"H" and (addr[2:5] in _KNOWN or addr[2:5] in _NOT_USED):
             # Unicore's dual-antenna receivers: GGAH, RMCH, GSTH ... describe the secondary
             # (heading) antenna, a baseline away from the position the plain sentences give
             return f"{NOT_USED} {addr[2:].decode()} (the secondary antenna of a dual-antenna receiver)"
-        return "unknown sentence (six-letter address)"
+        return f"{UNKNOWN} (six-letter address)"
     label = "".join(chr(c) if 32 < c < 127 else "?" for c in addr[:6])
-    return f"unknown sentence {label!r}"
+    return f"{UNKNOWN} {label!r}"
 
 
 class _Sentences:
@@ -654,7 +654,7 @@ def _without_checksum_reasons(arr: np.ndarray, starts: np.ndarray) -> list[tuple
     for h in uniq.tolist():  # once per distinct address
         reason = _classify(h, False)
         why.append(reason if isinstance(reason, str) and reason.startswith(NOT_USED)
-                   else "unknown sentence without checksum")
+                   else f"{UNKNOWN} without checksum")
     by_reason = np.asarray(why)[inverse.ravel()]
     return [(r, starts[by_reason == r]) for r in sorted(set(why))]
 
