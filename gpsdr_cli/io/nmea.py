@@ -734,6 +734,13 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
         bang[:-1] &= (nxt >= 65) & (nxt <= 90)
     bang[-1:] = False
     starts = np.flatnonzero(is_start | bang)
+    # a '$' on a line that begins with '#' is a comment's text (gpsd's regression logs quote
+    # sentences in their headers), not a sentence cut short
+    line_first = np.r_[0, breaks + 1]
+    line_first = line_first[line_first < n]
+    if len(starts) and len(line_first):
+        on_line = line_first[np.searchsorted(line_first, starts, side="right") - 1]
+        starts = starts[arr[on_line] != 35]  # '#'
     eol = np.flatnonzero((arr == 10) | (arr == 13))
     stars = np.flatnonzero(arr == 42)
     next_start = np.r_[starts[1:], n]
@@ -788,15 +795,15 @@ def _scan_chunk(arr: np.ndarray, base: int, breaks: np.ndarray, probs: _Problems
     ok_s1_a = ok_start + 1
 
     # lines that hold no sentence start at all but are not blank: free text, JSON, comments
-    line_first = np.r_[0, breaks + 1]
-    line_first = line_first[line_first < n]
     if len(line_first):
         nonblank = np.logical_or.reduceat(
             ~((arr == 32) | (arr == 9) | (arr == 10) | (arr == 13)), line_first)
         with_start = np.zeros(len(line_first), bool)
         with_start[np.searchsorted(line_first, starts, side="right") - 1] = True
         text_lines = line_first[nonblank & ~with_start]
-        probs.add("not a sentence (no $ on the line)", text_lines + base)
+        comment = arr[text_lines] == 35  # '#'
+        probs.add("comment line (starts with #)", text_lines[comment] + base, fatal=False)
+        probs.add("not a sentence (no $ on the line)", text_lines[~comment] + base)
 
 
     # ---- 3. classify by the first 7 bytes ('$'/'!' + address + ','), once per distinct head;

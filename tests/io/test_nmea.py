@@ -340,8 +340,10 @@ def test_crlf_lf_and_cr_mixed_with_comments_json_text() -> None:
             + rmc("120001").encode() + b"\r" + gga("120001").encode() + b"\n")
     fixes, report, meta = parse_nmea(data, name="c.nmea")
     assert len(fixes) == 2
-    assert report.counts == {"not a sentence (no $ on the line)": 3}
-    assert report.first["not a sentence (no $ on the line)"] == "c.nmea:3"
+    assert report.counts == {"comment line (starts with #)": 1,
+                             "not a sentence (no $ on the line)": 2}
+    assert report.first["comment line (starts with #)"] == "c.nmea:3"
+    assert report.first["not a sentence (no $ on the line)"] == "c.nmea:4"
     assert meta["lines"] == 9
 
 
@@ -388,8 +390,9 @@ def test_bad_latitude_drops_the_sentence() -> None:
 
 # ------------------------------------------------------------------ strict mode
 def test_strict_raises_at_first_bad_line() -> None:
-    data = log(rmc("120000"), ck("GPGSV,1,1,00"), "# note", gga("120000"))
-    with pytest.raises(ParseError, match=r"^s\.nmea:3: not a sentence"):
+    data = log(rmc("120000"), ck("GPGSV,1,1,00"), "# a comment quoting $GPGGA", "note",
+               gga("120000"))
+    with pytest.raises(ParseError, match=r"^s\.nmea:4: not a sentence"):
         parse_nmea(data, name="s.nmea", strict=True)
     body = rmc("120001")
     data = log(rmc("120000"), body[:-2] + ("00" if body[-2:] != "00" else "11"))

@@ -188,7 +188,7 @@ def test_latin1_comment_is_named_and_binary_noise_still_counted() -> None:
              + TEXT.encode())
     fixes, report, meta = parse_nmea(latin)
     assert len(fixes) == 2 and meta["encoding"] == "Latin-1 (ISO 8859-1)"
-    assert report.counts["not a sentence (no $ on the line)"] == 1
+    assert report.counts["comment line (starts with #)"] == 1
     noisy = bytes(range(1, 9)) + b"\x81\x90\xb5\x62\x01\x07" + b"\r\n" + TEXT.encode()
     fixes2, report2, meta2 = parse_nmea(noisy)
     assert len(fixes2) == 2 and "encoding" not in meta2
@@ -224,9 +224,9 @@ def test_real_furuno_gns_agrees_with_its_gga_and_reads_alone() -> None:
     no_gga = b"".join(ln for ln in path.read_bytes().splitlines(keepends=True)
                       if b"GGA," not in ln)
     g, report, meta = parse_nmea(no_gga)
-    # the "#" header: 7 text lines and one naming "$PERD messages" (a start, no checksum)
-    assert report.counts["not a sentence (no $ on the line)"] == 7
-    assert report.counts["no checksum (truncated sentence)"] == 1
+    # the "#" header: 8 comment lines, one naming "$PERD messages" (not a sentence cut short)
+    assert report.counts["comment line (starts with #)"] == 8
+    assert "no checksum (truncated sentence)" not in report.counts
     assert "GGA" not in meta["sentences"] and meta["sentences"]["GNS"] == 3
     assert g.fix_quality.tolist() == [2, 2, 2]
     np.testing.assert_allclose(g.lat_deg, lat, atol=TOL_DEG, rtol=0)
