@@ -190,6 +190,19 @@ _NOT_USED = {
     b"APB": "autopilot sentence B",
     b"MSS": "beacon receiver status",
     b"ALM": "GPS almanac",
+    b"AAM": "waypoint arrival alarm",
+    b"GLC": "Loran-C geographic position",
+    b"XDR": "transducer measurements",
+    b"DPT": "water depth",
+    b"DBT": "water depth below transducer",
+    b"DBS": "water depth below surface",
+    b"MTW": "water temperature",
+    b"VHW": "water speed and heading",
+    b"VBW": "dual ground and water speed",
+    b"VDR": "set and drift",
+    b"MWV": "wind speed and angle",
+    b"MWD": "wind direction and speed",
+    b"RSA": "rudder sensor angle",
 }
 #: Bytes of a sentence's start that tell its kind: '$' + address + ','; for the
 #: proprietary addresses read, the message id and its comma too.

@@ -388,6 +388,21 @@ def test_bad_latitude_drops_the_sentence() -> None:
     assert report.counts == {"malformed position in GGA": 1}
 
 
+def test_instrument_sentences_of_a_boat_or_car_bus_are_not_used_not_unknown() -> None:
+    # pypilot's and Humminbird's logs (gpsd's regression suite) mix these standard NMEA 0183
+    # sentences with the fixes: they are named as not used, not counted as unknown or damaged
+    data = log(rmc("120000"), ck("IIXDR,C,19.5,C,AIRTEMP"), ck("SDDPT,4.5,0.3"),
+               ck("YXMTW,15.2,C"), ck("IIVHW,,T,,M,5.1,N,9.4,K"), ck("WIMWV,327.6,R,1.89,N,A"),
+               gga("120000"))
+    fixes, report, _ = parse_nmea(data, name="b.nmea")
+    assert len(fixes) == 1
+    assert report.counts == {"not used: XDR (transducer measurements)": 1,
+                             "not used: DPT (water depth)": 1,
+                             "not used: MTW (water temperature)": 1,
+                             "not used: VHW (water speed and heading)": 1,
+                             "not used: MWV (wind speed and angle)": 1}
+
+
 # ------------------------------------------------------------------ strict mode
 def test_strict_raises_at_first_bad_line() -> None:
     data = log(rmc("120000"), ck("GPGSV,1,1,00"), "# a comment quoting $GPGGA", "note",
