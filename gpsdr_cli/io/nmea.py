@@ -1071,7 +1071,8 @@ def _assign_epochs(parsed: dict[int, dict[str, np.ndarray]]) -> np.ndarray | Non
 
     A timed sentence (GGA, GNS, RMC, GLL, GST, ZDA, PTNL,GGK, PUBX,00) opens a new epoch
     when its time of day differs from the previous timed sentence's, or when its date
-    differs from the last date seen (a multi-day log sampled at the same time of day).
+    differs from a date already seen among the sentences of that time of day in a row (a
+    multi-day log sampled at the same time of day).
     Untimed sentences (GSA, VTG) join the epoch of the timed sentence before them; before
     the first one, the first epoch.
     Returns the epochs' times of day (us), or None when no sentence has a time.
@@ -1091,9 +1092,14 @@ def _assign_epochs(parsed: dict[int, dict[str, np.ndarray]]) -> np.ndarray | Non
         return None
     ts = s_sorted[t_mask]
     td = days_all[order][t_mask]
+    # the date seen so far among the sentences of the same time of day in a row: a GGA
+    # that comes before its epoch's RMC keeps that RMC even when the date it brings is not
+    # the last one seen (a receiver's first fix after its cold-start default date)
+    same = np.r_[False, ts[1:] == ts[:-1]]
+    run_start = np.maximum.accumulate(np.where(~same, np.arange(len(ts)), 0))
     last_d = np.maximum.accumulate(np.where(np.isfinite(td), np.arange(len(td)), -1))
-    d_ff = np.where(last_d >= 0, td[np.maximum(last_d, 0)], np.nan)
-    date_change = np.isfinite(td[1:]) & np.isfinite(d_ff[:-1]) & (td[1:] != d_ff[:-1])
+    d_run = np.where(last_d >= run_start, td[np.maximum(last_d, 0)], np.nan)
+    date_change = np.isfinite(td[1:]) & np.isfinite(d_run[:-1]) & (td[1:] != d_run[:-1])
     new = np.r_[True, (ts[1:] != ts[:-1]) | date_change]
     ep_timed = np.cumsum(new) - 1
     last_timed = np.maximum.accumulate(np.where(t_mask, np.arange(len(s_sorted)), -1))

@@ -242,6 +242,21 @@ def test_multi_day_log_with_dates() -> None:
     assert meta["dates"] == ["2024-05-17", "2024-05-18", "2024-05-19", "2024-05-20"]
 
 
+def test_gga_before_its_rmc_takes_the_rmc_date_after_a_default_date() -> None:
+    # gpsd's rgm3800.log: no-fix RMCs dated 050180 (the receiver's default), then the first
+    # fix's GGA and, after it, its RMC with the real date; the GGA belongs to that RMC's
+    # epoch, not to an epoch of its own on the default date (1980-01-06 after midnight)
+    data = log(rmc("235951.952", date="050180", status="V"), gga("102523.342"),
+               rmc("102523.342", date="210808"), gga("102524.342"),
+               rmc("102524.342", date="210808"))
+    fixes, _, _ = parse_nmea(data)
+    day = datetime.date(2008, 8, 21)
+    want = [t_ns(datetime.date(1980, 1, 5), 23, 59, 51.952), t_ns(day, 10, 25, 23.342),
+            t_ns(day, 10, 25, 24.342)]
+    assert fixes.t_ns.tolist() == want
+    assert fixes.fix_quality.tolist()[1:] == [1, 1]  # the GGAs' quality, in the RMC's epochs
+
+
 def test_zda_gives_the_date() -> None:
     data = log(gga("120000"), ck("GPZDA,120000.00,17,05,2024,00,00"))
     fixes, _, _ = parse_nmea(data)
