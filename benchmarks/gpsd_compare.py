@@ -20,6 +20,11 @@ day, no date): gpsdr then needs a date, as ``gpsdr extract --date``.  The script
 the UTC date of the first gpsd TPV of that log; a date in the log (RMC, ZDA) still wins
 inside gpsdr, so the date argument only fills logs that have none.
 
+gpsd's newer ``.chk`` files date an old receiver's fixes whole GPS week rollovers (1024
+weeks) later than the receiver does (a 2007 log reported in 2027); where gpsdr's first fix
+lies such a number of rollovers from gpsd's, gpsd's times are moved back by them first
+(the table says so).
+
 Matching: a gpsd fix is "matched" when gpsdr has a fix at the same epoch time (to the
 millisecond), or failing that in the same UTC second; "within 1e-6" when both lat and
 lon differ by at most 1e-6 deg.  "extra" counts gpsdr fixes at times gpsd reports no fix.
@@ -38,6 +43,8 @@ import traceback
 from pathlib import Path
 
 TOL_DEG = 1e-6
+#: one GPS week-number rollover, 1024 weeks (ms)
+ROLLOVER_MS = 1024 * 7 * 86_400_000
 
 
 def gpsd_fixes(chk: Path) -> dict[int, tuple[float, float]]:
@@ -104,6 +111,13 @@ def compare(log: Path, position_from: str, timeout_s: float) -> dict:
         row["error"] = res
         return row
     ours = {ms: (lat, lon) for ms, lat, lon in res}
+    if truth and ours:
+        # gpsd's newer .chk files move an old receiver's dates on by whole GPS week rollovers
+        # (1024 weeks: a 2007 log reported in 2027); the receiver's own date is gpsdr's
+        k = round((min(ours) - min(truth)) / ROLLOVER_MS)
+        if k:
+            truth = {ms + k * ROLLOVER_MS: pos for ms, pos in truth.items()}
+            row["rollovers"] = k
     by_sec: dict[int, list[int]] = {}
     for ms in ours:
         by_sec.setdefault(ms // 1000, []).append(ms)
@@ -152,8 +166,11 @@ def main(argv: list[str] | None = None) -> int:
         for k in tot:
             tot[k] += r[k]
         bad += r["status"] != "ok"
+        note = f" ({r['error']})" if "error" in r else ""
+        if r.get("rollovers"):
+            note += f" (gpsd's dates {-r['rollovers']:+d} x 1024 weeks)"
         print(f"{r['log']:<{w}}  {r['gpsd']:>5} {r['matched']:>6} {r['within']:>6} "
-              f"{r['extra']:>5}  {r['status']}" + (f" ({r['error']})" if "error" in r else ""))
+              f"{r['extra']:>5}  {r['status']}{note}")
         if a.verbose:
             for ms in r["misses"][:5]:
                 print(f"    missed {_iso(ms)}")
