@@ -122,6 +122,8 @@ standard NMEA 0183 types it does not use (GSV, DTM, TXT, ... listed in ``_NOT_US
 them (``$GNGGAH``, ``$GNRMCH`` ...: a dual-antenna receiver's heading antenna, not the
 position); unknown ones (other types, proprietary ``$P...`` other than the two above, AIS
 ``!AIVDM``, numeric talkers, other six-letter addresses) as ``"unknown sentence ..."``.
+Lines that begin with ``#`` are comments (``"comment line (starts with #)"``, never fatal),
+even when they quote a sentence.
 """
 
 from __future__ import annotations
