@@ -46,6 +46,11 @@ _HEAD_BYTES = 65536
 _NOVATEL_ASCII = re.compile(rb"(?m)^[#%]([A-Z][A-Z0-9_]*A),[^;\r\n]*;")
 
 
+#: A line that starts as an NMEA sentence does: '$', an address of 2-6 upper-case letters or
+#: digits, a comma.
+_NMEA_LINE = re.compile(rb"(?m)^\$[A-Z][A-Z0-9]{1,5},")
+
+
 def _head(path: str | Path) -> bytes:
     from .csv import read_bytes
 
@@ -83,8 +88,10 @@ def sniff(path: str | Path) -> str:
     if problem:
         raise InputError(path, f"{problem}; expected MCAP, a ROS bag, u-blox UBX, NMEA, "
                                "an RTKLIB .pos, CSV or Parquet")
-    if b"$GP" in head[:4096] or b"$GN" in head[:4096]:
-        return "nmea"  # NMEA whose first sentences are damaged: the NMEA reader counts them
+    if b"$GP" in head[:4096] or b"$GN" in head[:4096] or _NMEA_LINE.search(head[:4096]):
+        # NMEA whose first sentences are damaged or lack checksums: the NMEA reader counts
+        # them and says what it found
+        return "nmea"
     novatel = _NOVATEL_ASCII.search(head[:4096])
     if novatel:  # its comma-separated lines would pass for a CSV table
         raise InputError(path, f"NovAtel ASCII log ({novatel.group(1).decode()} messages) is not "

@@ -42,6 +42,17 @@ def test_sniff_by_content_not_name(tmp_path):
     assert sniff(q) == "nmea"
 
 
+def test_sentences_without_checksums_are_read_as_nmea_and_named(tmp_path):
+    # gpsd's skytraq-err.log: a '#' header, then a receiver's firmware-loader messages in
+    # sentence form without checksums: the NMEA reader's error says what it found there,
+    # not "unrecognised format"
+    p = tmp_path / "skytraq.log"
+    p.write_bytes(b"# Name: skytraq\n#\n" + b"$STI,IC,error=4\n" * 3 + b"$STI,IC,error=6\n")
+    assert sniff(p) == "nmea"
+    with pytest.raises(NoDataError, match="4 unknown sentence without checksum"):
+        read_drive(p, params=P)
+
+
 @pytest.mark.parametrize("content, match", [
     (b"", "empty file"),
     ("$GPGGA,1\n".encode("utf-16"), "UTF-16"),
