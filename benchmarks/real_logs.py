@@ -11,8 +11,10 @@ default run with an error asking for ``--date``; the runs are then repeated with
 
 Each cell is one of:
 
-- ``ok``: exit 0, a track with at least one row, no NaN or infinity in any float column
-  (empty cells are nulls, which are allowed), every sigma above zero;
+- ``ok``: exit 0 and a track that meets the fault suite's contract
+  (:func:`gpsdr_cli.testing.faults.track_problems`: the required columns, one row per epoch,
+  time increasing), with no NaN or infinity in any float column (empty cells are nulls,
+  which are allowed) and every sigma above zero;
 - ``err``: exit 1 and one line ``gpsdr: error: ...`` (a log without fixes, without a date,
   of a format the tool does not read);
 - ``BUG``: anything else: a traceback, another exit code, a timeout, a NaN, a sigma of zero
@@ -35,12 +37,15 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from gpsdr_cli.testing.faults import error_line_problems, run_cli, track_problems  # noqa: E402
+
 CONFIGS = "default,ekf:none,aekf:rts,fkf:rts,fafkf:rts,aekf:graph,fkf:graph,fafkf:graph"
 #: files that describe the data next to the logs, not logs
 SKIP_NAMES = ("README", "LICENSE", "ATTRIBUTION", "MANIFEST", "COPYING")
@@ -65,59 +70,52 @@ def find_logs(paths: list[Path]) -> list[Path]:
     return out
 
 
-def check_track(path: Path) -> str:
-    """``""`` for a good track, else what is wrong with it."""
+def nan_columns(path: Path) -> list[str]:
+    """The float columns of a track file holding NaN or infinity (nulls are allowed: an empty
+    cell, e.g. ``pdop`` at an epoch without a fix)."""
     t = pq.read_table(path)
-    if t.num_rows == 0:
-        return "no rows"
-    bad = []
-    for name in t.column_names:
-        col = t.column(name)
-        if pa.types.is_floating(col.type):
-            if pc.sum(pc.is_nan(col)).as_py() or pc.sum(pc.is_inf(col)).as_py():
-                bad.append(name)
-    for name in ("sigma_e", "sigma_n"):
-        if name in t.column_names:
-            s = t.column(name).to_numpy(zero_copy_only=False)
-            if np.any(s[np.isfinite(s)] <= 0.0):
-                bad.append(f"{name}<=0")
-    return ("NaN/inf or bad sigma in " + ",".join(bad)) if bad else ""
+    return [name for name in t.column_names if pa.types.is_floating(t.column(name).type)
+            and (pc.sum(pc.is_nan(t.column(name))).as_py() or pc.sum(pc.is_inf(t.column(name))).as_py())]
 
 
 def run_one(exe: str, log: Path, config: str, date: str, out_dir: Path,
             timeout_s: float) -> tuple[str, str]:
-    """(cell, detail) of one run."""
-    args = [exe, "fuse", str(log), "-q"]
+    """(cell, detail) of one run, judged by the fault suite's contract
+    (:func:`~gpsdr_cli.testing.faults.track_problems`, ``error_line_problems``) and with no
+    NaN in any float column and every sigma above zero."""
+    args: list[str] = [str(log)]
+    name = f"{config.replace(':', '-')}.parquet"
+    flt = None
     if config != "default":
         flt, smoother = config.split(":")
-        args += ["--filter", flt, "--smooth", smoother]
+        args += ["--smooth", smoother]
     if date:
         args += ["--date", date]
-    out = out_dir / f"{abs(hash((str(log), config)))}.parquet"
-    args += ["-o", str(out)]
     try:
-        p = subprocess.run(args, capture_output=True, text=True, timeout=timeout_s)
+        res = run_cli(args, out_dir, filter_name=flt, subprocess_exe=exe,
+                      track_name=name, timeout_s=timeout_s)
     except subprocess.TimeoutExpired:
         return "BUG", f"timeout after {timeout_s:.0f} s"
-    err = [ln for ln in p.stderr.splitlines() if ln.strip()]
-    if p.returncode == 0:
-        try:
-            problem = check_track(out)
-        except Exception as exc:  # an unreadable output is a bug too
-            problem = f"unreadable track: {exc}"
-        finally:
-            out.unlink(missing_ok=True)
-        return ("BUG", problem) if problem else ("ok", "")
-    if (p.returncode == 1 and err and err[-1].startswith("gpsdr: error:")
-            and not any("Traceback" in ln for ln in err)):
+    err = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    if res.escape:
+        return "BUG", f"escape {res.escape}: " + " | ".join(err[-3:])
+    if res.status == 0:
+        problems = track_problems(res.track, n_epochs=res.epochs)
+        problems += [f"{c}: NaN/inf" for c in nan_columns(out_dir / name)
+                     if not any(p.startswith(f"{c}:") for p in problems)]
+        problems += [f"{c}: zero" for c in ("sigma_e", "sigma_n")
+                     if c in res.track and (res.track[c] == 0.0).any()]
+        return ("BUG", "; ".join(problems)) if problems else ("ok", "")
+    if res.status == 1 and not error_line_problems(res.stderr) and err[-1].startswith("gpsdr: error:"):
         return "err", err[-1]
-    return "BUG", f"exit {p.returncode}: " + (" | ".join(err[-3:]) if err else "no message")
+    return "BUG", f"exit {res.status}: " + (" | ".join(err[-3:]) if err else "no message")
 
 
 def run_log(exe: str, log: Path, configs: list[str], out_dir: Path,
             timeout_s: float) -> tuple[str, list[tuple[str, str]]]:
     """(date used, cells) of one log: the default run first; a request for --date repeats
     every run with the fallback date."""
+    out_dir = Path(tempfile.mkdtemp(dir=out_dir))  # one folder per log: the runs' tracks
     date = ""
     first = run_one(exe, log, configs[0], date, out_dir, timeout_s)
     if first[0] == "err" and "--date" in first[1]:

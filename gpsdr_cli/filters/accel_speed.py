@@ -280,7 +280,6 @@ def _kf_params(params: Params) -> np.ndarray:
                      float(p["grade_rate_rw_var_per_m"]), float(p["gnss_speed_sd_mps"]) ** 2])
 
 
-
 def _gyro_bias(epochs: Epochs, result: FilterResult) -> np.ndarray:
     """The gyro bias per epoch (rad/s, in the yaw rate's sign: true rate = reading - bias):
     the filter's estimate when it has one, else the mean reading at the standstills so far

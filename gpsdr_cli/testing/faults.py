@@ -812,11 +812,13 @@ def stream_args(paths: dict[str, Any], *, mcap: bool = False) -> list[str]:
 
 
 def run_cli(args: Sequence[str], out_dir: Any, *, filter_name: str | None = None,
-            subprocess_exe: str | None = None, track_name: str = "track.parquet") -> Outcome:
+            subprocess_exe: str | None = None, track_name: str = "track.parquet",
+            timeout_s: float = 600.0) -> Outcome:
     """Run ``gpsdr fuse ARGS -o OUT_DIR/track.parquet --stats ...`` and read the track back.
 
     In process with click's CliRunner (fast), or as a real process when
-    ``subprocess_exe`` names the ``gpsdr`` executable.  A failed run's stderr
+    ``subprocess_exe`` names the ``gpsdr`` executable (stopped after ``timeout_s``:
+    ``subprocess.TimeoutExpired``).  A failed run's stderr
     holding "internal error" (an exception gpsdr did not raise on purpose) or a
     traceback is reported as an escape.
     """
@@ -832,7 +834,7 @@ def run_cli(args: Sequence[str], out_dir: Any, *, filter_name: str | None = None
         import subprocess
 
         proc = subprocess.run([subprocess_exe, *argv], capture_output=True, text=True,
-                              timeout=600, check=False)
+                              timeout=timeout_s, check=False)
         status, stderr = proc.returncode, proc.stderr
         escape = None
     else:
